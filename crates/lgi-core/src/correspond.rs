@@ -1,0 +1,1 @@
+//! correspond (to be implemented).

@@ -1,0 +1,1 @@
+//! glTF reader (to be implemented).

@@ -1,0 +1,4 @@
+//! Mesh readers and writers: OBJ (text) and glTF/GLB (gltf crate; morph targets are shapes).
+
+pub mod gltf;
+pub mod obj;

@@ -1,0 +1,1 @@
+//! OBJ reader/writer (to be implemented).

@@ -1,0 +1,25 @@
+//! lgi-core: Local Geometric Indexing (Cong, Lan & Fedkiw, IEEE TVCG 2023).
+//!
+//! Sparse facial markers ("bundles") index local geometry that really occurred in a dataset of
+//! facial shapes; the pieces are sewn together with natural-neighbour weights so the surface
+//! passes through every marker. Pure Rust: the Python binding lives in `lgi-python`.
+#![forbid(unsafe_code)]
+#![warn(missing_docs)]
+
+pub mod cloud;
+pub mod correspond;
+pub mod dataset;
+pub mod error;
+pub mod geom;
+pub mod grid;
+pub mod io;
+pub mod mesh;
+pub mod sibson;
+pub mod tets;
+
+pub use dataset::Dataset;
+pub use error::{LgiError, Result};
+pub use mesh::Mesh;
+
+/// Re-exported so users of the core need not pin glam themselves.
+pub use glam::{DVec2, DVec3};

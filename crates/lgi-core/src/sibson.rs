@@ -1,0 +1,1 @@
+//! sibson (to be implemented).

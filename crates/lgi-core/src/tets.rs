@@ -1,0 +1,1 @@
+//! tets (to be implemented).

@@ -1,0 +1,78 @@
+//! numpy <-> Rust conversions, with every shape, dtype and finiteness check at the boundary.
+//! No other module converts arrays by hand.
+
+use crate::error::input_error;
+use glam::DVec3;
+use numpy::ndarray::{ArrayD, IxDyn};
+use numpy::{IntoPyArray, PyArrayDyn, PyArrayMethods, PyUntypedArrayMethods};
+use pyo3::prelude::*;
+
+/// Reads any float32/float64 array-like of exactly `shape` (`None` = any length on that
+/// axis) into a contiguous f64 `ArrayD`. `name` appears in every error message.
+pub fn float_array(obj: &Bound<'_, PyAny>, name: &str, shape: &[Option<usize>]) -> PyResult<ArrayD<f64>> {
+    let py = obj.py();
+    let np = py.import("numpy")?;
+    // np.asarray does not copy arrays that are already ndarrays; it turns lists into arrays.
+    let arr = np.call_method1("asarray", (obj,))?;
+    let dtype: String = arr.getattr("dtype")?.getattr("name")?.extract()?;
+    if dtype != "float64" && dtype != "float32" {
+        return Err(input_error(format!(
+            "{name}: expected a float32 or float64 array, got dtype {dtype}"
+        )));
+    }
+    let arr = arr.call_method1("astype", ("float64",))?;
+    let arr = arr
+        .cast::<PyArrayDyn<f64>>()
+        .map_err(|_| input_error(format!("{name}: not a numeric array")))?;
+    let got: Vec<usize> = arr.shape().to_vec();
+    let ok = got.len() == shape.len()
+        && got.iter().zip(shape).all(|(g, want)| want.is_none_or(|w| w == *g));
+    if !ok {
+        let want: Vec<String> = shape
+            .iter()
+            .map(|d| d.map_or("N".to_string(), |w| w.to_string()))
+            .collect();
+        return Err(input_error(format!(
+            "{name}: expected shape ({}), got {:?}",
+            want.join(", "),
+            got
+        )));
+    }
+    Ok(arr.readonly().as_array().to_owned())
+}
+
+/// An `(N, 3)` float array as points; `allow_nan` lets NaN through (missing markers) but
+/// never infinities. `name` appears in error messages with the offending row.
+pub fn points(obj: &Bound<'_, PyAny>, name: &str, rows: Option<usize>, allow_nan: bool) -> PyResult<Vec<DVec3>> {
+    let a = float_array(obj, name, &[rows, Some(3)])?;
+    let mut out = Vec::with_capacity(a.shape()[0]);
+    for (i, r) in a.outer_iter().enumerate() {
+        let p = DVec3::new(r[0], r[1], r[2]);
+        let bad = if allow_nan { p.is_finite() || p.is_nan() } else { p.is_finite() };
+        if !bad {
+            return Err(input_error(format!(
+                "{name}: row {i} has a non-finite coordinate [{}, {}, {}]",
+                p.x, p.y, p.z
+            )));
+        }
+        out.push(p);
+    }
+    Ok(out)
+}
+
+/// Points as a new `(N, 3)` float64 array.
+pub fn points_to_array<'py>(py: Python<'py>, pts: &[DVec3]) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
+    let flat: Vec<f64> = pts.iter().flat_map(|p| [p.x, p.y, p.z]).collect();
+    flat_to_array(py, flat, &[pts.len(), 3])
+}
+
+/// A flat vector as a new array of `shape` (an internal size mismatch is a `RuntimeError`).
+pub fn flat_to_array<'py, T: numpy::Element>(
+    py: Python<'py>,
+    flat: Vec<T>,
+    shape: &[usize],
+) -> PyResult<Bound<'py, PyArrayDyn<T>>> {
+    ArrayD::from_shape_vec(IxDyn(shape), flat)
+        .map(|a| a.into_pyarray(py))
+        .map_err(|e| pyo3::exceptions::PyRuntimeError::new_err(format!("internal: {e}")))
+}

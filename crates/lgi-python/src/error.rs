@@ -1,0 +1,52 @@
+//! The one place where core errors become Python exceptions. Each `LgiError` variant maps to
+//! a class defined in `lgi/errors.py` (so classes can also derive from `ValueError` or
+//! `FileNotFoundError`); all derive from `lgi.LgiError`.
+
+use lgi_core::LgiError;
+use pyo3::exceptions::PyRuntimeError;
+use pyo3::prelude::*;
+
+/// Newtype so `?` converts core errors into the right Python exception.
+pub struct PyLgiError(pub LgiError);
+
+impl From<LgiError> for PyLgiError {
+    fn from(e: LgiError) -> Self {
+        PyLgiError(e)
+    }
+}
+
+/// Builds an instance of `lgi.errors.<class_name>(msg)`; falls back to `RuntimeError` only
+/// if the Python package is missing (the extension imported on its own).
+pub fn lgi_exception(class_name: &str, msg: String) -> PyErr {
+    Python::attach(|py| {
+        let made = py
+            .import("lgi.errors")
+            .and_then(|m| m.getattr(class_name))
+            .and_then(|cls| cls.call1((msg.clone(),)));
+        match made {
+            Ok(inst) => PyErr::from_value(inst),
+            Err(_) => PyRuntimeError::new_err(format!("{class_name}: {msg}")),
+        }
+    })
+}
+
+impl From<PyLgiError> for PyErr {
+    fn from(e: PyLgiError) -> PyErr {
+        let class = match &e.0 {
+            LgiError::Io { .. } => "DatasetFileError",
+            LgiError::Parse { .. } | LgiError::Dataset(_) => "DatasetError",
+            LgiError::Input(_) => "InputError",
+            LgiError::MarkerOffSurface { .. } => "MarkerError",
+            LgiError::ModelFormat { .. } => "ModelFormatError",
+        };
+        lgi_exception(class, e.0.to_string())
+    }
+}
+
+/// Result type of binding functions that call the core.
+pub type PyLgiResult<T> = Result<T, PyLgiError>;
+
+/// An `lgi.InputError` raised by the binding itself (shape and dtype checks).
+pub fn input_error(msg: impl Into<String>) -> PyErr {
+    lgi_exception("InputError", msg.into())
+}

@@ -1,0 +1,16 @@
+//! Python binding of lgi-core: numpy in, numpy out. Conversions live in `convert.rs`, the
+//! error mapping in `error.rs`; every heavy call releases the GIL with `py.detach`.
+
+mod convert;
+mod dataset;
+mod error;
+
+use pyo3::prelude::*;
+
+/// The compiled extension `lgi._lgi`. Users import `lgi`, which re-exports these names.
+#[pymodule]
+fn _lgi(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add("__version__", env!("CARGO_PKG_VERSION"))?;
+    m.add_class::<dataset::Dataset>()?;
+    Ok(())
+}

@@ -1,0 +1,26 @@
+"""lgi: Local Geometric Indexing of facial shapes from sparse motion-capture markers.
+
+Every marker ("bundle") looks up local geometry that really occurred in a dataset of facial
+shapes; the pieces are sewn so that the surface passes exactly through every marker.
+"""
+
+from lgi._lgi import Dataset, __version__
+from lgi.errors import (
+    DatasetError,
+    DatasetFileError,
+    InputError,
+    LgiError,
+    MarkerError,
+    ModelFormatError,
+)
+
+__all__ = [
+    "Dataset",
+    "DatasetError",
+    "DatasetFileError",
+    "InputError",
+    "LgiError",
+    "MarkerError",
+    "ModelFormatError",
+    "__version__",
+]
