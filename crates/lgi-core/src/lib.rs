@@ -6,6 +6,7 @@
 #![forbid(unsafe_code)]
 #![warn(missing_docs)]
 
+pub mod choose;
 pub mod cloud;
 pub mod correspond;
 pub mod dataset;
@@ -13,9 +14,13 @@ pub mod error;
 pub mod geom;
 pub mod grid;
 pub mod io;
+pub mod linalg;
 pub mod mesh;
+pub mod model;
+pub mod sew;
 pub mod sibson;
 pub mod tets;
+pub mod uvspace;
 
 pub use dataset::Dataset;
 pub use error::{LgiError, Result};

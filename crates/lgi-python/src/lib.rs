@@ -4,6 +4,7 @@
 mod convert;
 mod dataset;
 mod error;
+mod model;
 
 use pyo3::prelude::*;
 
@@ -12,5 +13,6 @@ use pyo3::prelude::*;
 fn _lgi(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     m.add_class::<dataset::Dataset>()?;
+    m.add_class::<model::Model>()?;
     Ok(())
 }

@@ -1,4 +1,5 @@
 //! Mesh readers and writers: OBJ (text) and glTF/GLB (gltf crate; morph targets are shapes).
 
 pub mod gltf;
+pub mod model_file;
 pub mod obj;

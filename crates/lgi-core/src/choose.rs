@@ -1,0 +1,249 @@
+//! Candidate choice for one bundle in one frame: among all local geometries that pass through
+//! the bundle (every tet containing its target), pick the one that best explains the bundle's
+//! natural neighbours; outside every tet, project onto the nearest tets and score the same way.
+//!
+//! A candidate is a convex combination of cloud points; each point may stand for several
+//! shapes (its aliases: shapes that do not move this bundle, or move it identically). Which
+//! alias is used does not change the bundle but does change its neighbours, so the best
+//! candidates also pick their aliases by the neighbour score.
+
+use crate::cloud::BundleCloud;
+use crate::grid::TetIndex;
+use glam::DVec3;
+
+/// Marks "no tet" in [`Choice::tet`] (the cloud had no tets, or a point/segment/triangle was used).
+pub const NO_TET: u32 = u32::MAX;
+
+/// The chosen local geometry of one bundle: `x = x0 + Σ weights[j] s_{shapes[j]}` with shape
+/// id 0 the neutral (zero displacement) and id k ≥ 1 the dataset's shape k − 1.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Choice {
+    /// Shape ids (0 = neutral); unused slots have weight 0.
+    pub shapes: [u32; 4],
+    /// Convex weights (≥ 0, sum 1).
+    pub weights: [f64; 4],
+    /// Tet of the bundle's index that was used, or [`NO_TET`].
+    pub tet: u32,
+    /// True when the target was outside every tet and was projected.
+    pub projected: bool,
+    /// Distance from the target to the chosen geometry's bundle position (0 inside).
+    pub distance: f64,
+}
+
+/// What the score of a candidate needs to know about the frame around the bundle.
+pub struct Scoring<'a> {
+    /// Bundle surface positions on every shape, `(S + 1) × B`, index `[k * B + n]`.
+    pub shape_positions: &'a [DVec3],
+    /// Number of bundles B.
+    pub num_bundles: usize,
+    /// The bundle's natural neighbours (bundle indices).
+    pub neighbours: &'a [u32],
+    /// The frame's targets for all bundles (NaN rows are missing and ignored).
+    pub targets: &'a [DVec3],
+    /// The previous frame's choice for this bundle, if any.
+    pub previous: Option<&'a Choice>,
+    /// Penalty per shape of a candidate that the previous choice did not use (data units²).
+    pub temporal_weight: f64,
+}
+
+impl Scoring<'_> {
+    /// Squared distances of the neighbours to their positions under the geometry.
+    fn neighbour_error(&self, shapes: &[u32; 4], weights: &[f64; 4]) -> f64 {
+        let b = self.num_bundles;
+        let mut err = 0.0;
+        for &n in self.neighbours {
+            let t = self.targets[n as usize];
+            if t.is_nan() {
+                continue;
+            }
+            let mut x = DVec3::ZERO;
+            for j in 0..4 {
+                if weights[j] != 0.0 {
+                    x += self.shape_positions[shapes[j] as usize * b + n as usize] * weights[j];
+                }
+            }
+            err += x.distance_squared(t);
+        }
+        err
+    }
+
+    fn temporal_penalty(&self, shapes: &[u32; 4], weights: &[f64; 4]) -> f64 {
+        let Some(prev) = self.previous else {
+            return 0.0;
+        };
+        let used = |s: u32| (0..4).any(|j| prev.weights[j] != 0.0 && prev.shapes[j] == s);
+        let fresh = (0..4)
+            .filter(|&j| weights[j] != 0.0 && !used(shapes[j]))
+            .count();
+        self.temporal_weight * fresh as f64
+    }
+
+    fn score(&self, shapes: &[u32; 4], weights: &[f64; 4], own_distance: f64) -> f64 {
+        self.neighbour_error(shapes, weights)
+            + own_distance * own_distance
+            + self.temporal_penalty(shapes, weights)
+    }
+}
+
+/// Tuning of the choice.
+#[derive(Debug, Clone, Copy)]
+pub struct ChoiceParams {
+    /// Containment tolerance on barycentric coordinates.
+    pub eps: f64,
+    /// Nearest tets considered when the target is outside every tet.
+    pub projection_candidates: usize,
+    /// Best candidates (by representative shapes) whose aliases are then optimised.
+    pub alias_refine: usize,
+}
+
+impl Default for ChoiceParams {
+    fn default() -> Self {
+        ChoiceParams {
+            eps: 1e-9,
+            projection_candidates: 8,
+            alias_refine: 4,
+        }
+    }
+}
+
+/// Reusable buffers of one worker.
+#[derive(Default)]
+pub struct Scratch {
+    inside: Vec<(u32, [f64; 4])>,
+    nearest: Vec<(u32, [f64; 4], f64)>,
+    scored: Vec<(f64, u32, [u32; 4], [f64; 4], f64)>,
+}
+
+fn clean_weights(l: [f64; 4]) -> [f64; 4] {
+    let mut w = l.map(|x| if x > 1e-12 { x } else { 0.0 });
+    let s: f64 = w.iter().sum();
+    if s > 0.0 {
+        for x in &mut w {
+            *x /= s;
+        }
+    }
+    w
+}
+
+/// Chooses the local geometry of one bundle for `target`.
+pub fn choose(
+    index: &TetIndex,
+    cloud: &BundleCloud,
+    target: DVec3,
+    scoring: &Scoring<'_>,
+    params: &ChoiceParams,
+    scratch: &mut Scratch,
+) -> Choice {
+    let reps = |tet: &[u32; 4]| tet.map(|p| cloud.aliases[p as usize][0]);
+    scratch.scored.clear();
+    scratch.inside.clear();
+    index.query(target, params.eps, &mut scratch.inside);
+    let projected = scratch.inside.is_empty();
+    if !projected {
+        for &(t, l) in &scratch.inside {
+            let tet = index.tets()[t as usize];
+            let w = clean_weights(l);
+            let shapes = reps(&tet);
+            let s = scoring.score(&shapes, &w, 0.0);
+            scratch.scored.push((s, t, tet, w, 0.0));
+        }
+    } else if index.num_tets() > 0 {
+        scratch.nearest.clear();
+        index.nearest(target, params.projection_candidates, &mut scratch.nearest);
+        for &(t, l, d) in &scratch.nearest {
+            let tet = index.tets()[t as usize];
+            let w = clean_weights(l);
+            let s = scoring.score(&reps(&tet), &w, d);
+            scratch.scored.push((s, t, tet, w, d));
+        }
+    } else {
+        lower_simplices(cloud, target, scoring, &mut scratch.scored);
+    }
+    scratch
+        .scored
+        .sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)).then(a.2.cmp(&b.2)));
+    let mut best: Option<(f64, Choice)> = None;
+    for &(_, t, tet, w, d) in scratch.scored.iter().take(params.alias_refine.max(1)) {
+        let shapes = refine_aliases(cloud, &tet, &w, scoring);
+        let s = scoring.score(&shapes, &w, d);
+        let choice = Choice {
+            shapes,
+            weights: w,
+            tet: t,
+            projected,
+            distance: d,
+        };
+        if best.as_ref().is_none_or(|(bs, _)| s < *bs) {
+            best = Some((s, choice));
+        }
+    }
+    best.map(|(_, c)| c).unwrap_or(Choice {
+        shapes: [0; 4],
+        weights: [1.0, 0.0, 0.0, 0.0],
+        tet: NO_TET,
+        projected: true,
+        distance: target.distance(cloud.points[0]),
+    })
+}
+
+/// Greedy per-vertex alias choice: each point with weight takes the alias that minimises the
+/// neighbour error with the others fixed. Ties keep the lowest shape id (deterministic).
+fn refine_aliases(cloud: &BundleCloud, tet: &[u32; 4], w: &[f64; 4], scoring: &Scoring<'_>) -> [u32; 4] {
+    let mut shapes = tet.map(|p| cloud.aliases[p as usize][0]);
+    for j in 0..4 {
+        let aliases = &cloud.aliases[tet[j] as usize];
+        if w[j] == 0.0 || aliases.len() < 2 {
+            continue;
+        }
+        let mut best = (scoring.neighbour_error(&shapes, w), shapes[j]);
+        for &a in aliases {
+            let mut trial = shapes;
+            trial[j] = a;
+            let e = scoring.neighbour_error(&trial, w);
+            if e < best.0 || (e == best.0 && a < best.1) {
+                best = (e, a);
+            }
+        }
+        shapes[j] = best.1;
+    }
+    shapes
+}
+
+/// Clouds with no tets (fewer than 4 points, or all coplanar): closest points of the cloud's
+/// points, segments and (for small clouds) triangles, scored like tets.
+fn lower_simplices(
+    cloud: &BundleCloud,
+    target: DVec3,
+    scoring: &Scoring<'_>,
+    out: &mut Vec<(f64, u32, [u32; 4], [f64; 4], f64)>,
+) {
+    let pts = &cloud.points;
+    let n = pts.len().min(24);
+    let mut push = |simplex: [u32; 4], w: [f64; 4], q: DVec3| {
+        let d = q.distance(target);
+        let shapes = simplex.map(|p| cloud.aliases[p as usize][0]);
+        let w = clean_weights(w);
+        out.push((scoring.score(&shapes, &w, d), NO_TET, simplex, w, d));
+    };
+    for a in 0..n {
+        push([a as u32; 4], [1.0, 0.0, 0.0, 0.0], pts[a]);
+        for b in (a + 1)..n {
+            let ab = pts[b] - pts[a];
+            let t = if ab.length_squared() > 0.0 {
+                ((target - pts[a]).dot(ab) / ab.length_squared()).clamp(0.0, 1.0)
+            } else {
+                0.0
+            };
+            push([a as u32, b as u32, b as u32, b as u32], [1.0 - t, t, 0.0, 0.0], pts[a] + ab * t);
+            for c in (b + 1)..n {
+                let (q, bary) =
+                    crate::geom::closest_point_on_triangle(target, pts[a], pts[b], pts[c]);
+                push(
+                    [a as u32, b as u32, c as u32, c as u32],
+                    [bary[0], bary[1], bary[2], 0.0],
+                    q,
+                );
+            }
+        }
+    }
+}

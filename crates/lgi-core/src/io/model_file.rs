@@ -1,0 +1,295 @@
+//! Saved models (`.lgi`): a versioned little-endian binary file holding what is expensive to
+//! rebuild (dataset, markers, config, per-bundle clouds and tets). Everything cheap (grid
+//! indices, correspondences, sewing weights) is recomputed on load. A checksum over the payload
+//! turns truncation and corruption into a clear error instead of a wrong model.
+
+use crate::cloud::BundleCloud;
+use crate::dataset::Dataset;
+use crate::error::{LgiError, Result};
+use crate::mesh::Mesh;
+use crate::model::{locate_bundles, BuildConfig, Model};
+use crate::tets::Tet;
+use glam::{DVec2, DVec3};
+use std::path::Path;
+use std::sync::Arc;
+
+const MAGIC: &[u8; 8] = b"LGIMODEL";
+/// Format version written by this build; readers accept exactly the versions they know.
+pub const FORMAT_VERSION: u32 = 1;
+const HEADER: usize = 8 + 4 + 8 + 8;
+
+/// FNV-1a 64: tiny, dependency-free, enough to catch truncation and bit rot.
+fn checksum(bytes: &[u8]) -> u64 {
+    bytes.iter().fold(0xcbf2_9ce4_8422_2325u64, |h, &b| {
+        (h ^ b as u64).wrapping_mul(0x0000_0100_0000_01b3)
+    })
+}
+
+#[derive(Default)]
+struct Writer(Vec<u8>);
+
+impl Writer {
+    fn u64(&mut self, v: u64) {
+        self.0.extend_from_slice(&v.to_le_bytes());
+    }
+    fn f64(&mut self, v: f64) {
+        self.0.extend_from_slice(&v.to_le_bytes());
+    }
+    fn u32s(&mut self, v: impl ExactSizeIterator<Item = u32>) {
+        self.u64(v.len() as u64);
+        for x in v {
+            self.0.extend_from_slice(&x.to_le_bytes());
+        }
+    }
+    fn f64s(&mut self, v: impl ExactSizeIterator<Item = f64>) {
+        self.u64(v.len() as u64);
+        for x in v {
+            self.f64(x);
+        }
+    }
+    fn f32s(&mut self, v: &[f32]) {
+        self.u64(v.len() as u64);
+        for x in v {
+            self.0.extend_from_slice(&x.to_le_bytes());
+        }
+    }
+    fn str(&mut self, s: &str) {
+        self.u64(s.len() as u64);
+        self.0.extend_from_slice(s.as_bytes());
+    }
+}
+
+struct Reader<'a> {
+    bytes: &'a [u8],
+    at: usize,
+    path: &'a Path,
+}
+
+impl<'a> Reader<'a> {
+    fn err(&self, what: &str) -> LgiError {
+        LgiError::ModelFormat {
+            path: self.path.to_path_buf(),
+            message: format!("{what} at byte {}", self.at + HEADER),
+        }
+    }
+    fn take(&mut self, n: usize) -> Result<&'a [u8]> {
+        let end = self.at.checked_add(n).filter(|&e| e <= self.bytes.len());
+        let Some(end) = end else {
+            return Err(self.err("unexpected end of data"));
+        };
+        let s = &self.bytes[self.at..end];
+        self.at = end;
+        Ok(s)
+    }
+    fn u64(&mut self) -> Result<u64> {
+        let b = self.take(8)?;
+        Ok(u64::from_le_bytes(b.try_into().map_err(|_| self.err("short u64"))?))
+    }
+    fn f64(&mut self) -> Result<f64> {
+        Ok(f64::from_bits(self.u64()?))
+    }
+    /// A length prefix, checked against the bytes left so a corrupt count cannot allocate.
+    fn len(&mut self, elem: usize) -> Result<usize> {
+        let n = self.u64()? as usize;
+        if n.checked_mul(elem).is_none_or(|b| b > self.bytes.len() - self.at) {
+            return Err(self.err(&format!("length {n} exceeds the file")));
+        }
+        Ok(n)
+    }
+    fn u32s(&mut self) -> Result<Vec<u32>> {
+        let n = self.len(4)?;
+        let b = self.take(n * 4)?;
+        Ok(b.chunks_exact(4)
+            .map(|c| u32::from_le_bytes([c[0], c[1], c[2], c[3]]))
+            .collect())
+    }
+    fn f64s(&mut self) -> Result<Vec<f64>> {
+        let n = self.len(8)?;
+        let b = self.take(n * 8)?;
+        Ok(b.chunks_exact(8)
+            .map(|c| f64::from_le_bytes([c[0], c[1], c[2], c[3], c[4], c[5], c[6], c[7]]))
+            .collect())
+    }
+    fn f32s(&mut self) -> Result<Vec<f32>> {
+        let n = self.len(4)?;
+        let b = self.take(n * 4)?;
+        Ok(b.chunks_exact(4)
+            .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]))
+            .collect())
+    }
+    fn str(&mut self) -> Result<String> {
+        let n = self.len(1)?;
+        let b = self.take(n)?;
+        String::from_utf8(b.to_vec()).map_err(|_| self.err("invalid UTF-8 string"))
+    }
+}
+
+fn vec3s(v: &[DVec3]) -> impl ExactSizeIterator<Item = f64> + '_ {
+    v.iter().flat_map(|p| [p.x, p.y, p.z]).collect::<Vec<_>>().into_iter()
+}
+
+fn to_vec3s(r: &Reader<'_>, v: Vec<f64>) -> Result<Vec<DVec3>> {
+    if v.len() % 3 != 0 {
+        return Err(r.err("3D point array length not a multiple of 3"));
+    }
+    Ok(v.chunks_exact(3).map(|c| DVec3::new(c[0], c[1], c[2])).collect())
+}
+
+fn to_tris(r: &Reader<'_>, v: Vec<u32>) -> Result<Vec<[u32; 3]>> {
+    if v.len() % 3 != 0 {
+        return Err(r.err("triangle array length not a multiple of 3"));
+    }
+    Ok(v.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect())
+}
+
+/// Writes `model` to `path` (overwrites).
+pub fn save(model: &Model, path: &Path) -> Result<()> {
+    let mut w = Writer::default();
+    let c = model.config();
+    for x in [
+        c.surface_tolerance,
+        c.prune_motion,
+        c.duplicate_distance,
+        c.min_quality,
+        c.max_edge,
+        c.containment_eps,
+        c.temporal_weight,
+    ] {
+        w.f64(x);
+    }
+    for n in [c.tet_neighbours, c.max_tets, c.projection_candidates] {
+        w.u64(n as u64);
+    }
+    let d = model.dataset();
+    let m = d.neutral();
+    w.f64s(vec3s(&m.positions));
+    w.u32s(m.triangles.iter().flatten().copied().collect::<Vec<_>>().into_iter());
+    w.f64s(m.uvs.iter().flat_map(|p| [p.x, p.y]).collect::<Vec<_>>().into_iter());
+    w.u32s(m.uv_triangles.iter().flatten().copied().collect::<Vec<_>>().into_iter());
+    w.u64(d.names().len() as u64);
+    for n in d.names() {
+        w.str(n);
+    }
+    w.f32s(d.displacements());
+    w.f64s(vec3s(model.markers_rest()));
+    for (cloud, index) in model.clouds().iter().zip(model.indices()) {
+        w.f64s(vec3s(&cloud.points));
+        w.u64(cloud.aliases.len() as u64);
+        for a in &cloud.aliases {
+            w.u32s(a.iter().copied());
+        }
+        w.u32s(index.tets().iter().flatten().copied().collect::<Vec<_>>().into_iter());
+    }
+    let payload = w.0;
+    let mut out = Vec::with_capacity(HEADER + payload.len());
+    out.extend_from_slice(MAGIC);
+    out.extend_from_slice(&FORMAT_VERSION.to_le_bytes());
+    out.extend_from_slice(&(payload.len() as u64).to_le_bytes());
+    out.extend_from_slice(&checksum(&payload).to_le_bytes());
+    out.extend_from_slice(&payload);
+    std::fs::write(path, out).map_err(|e| LgiError::io(path, &e))
+}
+
+/// Reads a model written by [`save`]; every inconsistency is `LgiError::ModelFormat`.
+pub fn load(path: &Path) -> Result<Model> {
+    let bytes = std::fs::read(path).map_err(|e| LgiError::io(path, &e))?;
+    let bad = |m: &str| LgiError::ModelFormat {
+        path: path.to_path_buf(),
+        message: m.to_string(),
+    };
+    if bytes.len() < HEADER || &bytes[..8] != MAGIC {
+        return Err(bad("not an lgi model file (bad magic)"));
+    }
+    let version = u32::from_le_bytes([bytes[8], bytes[9], bytes[10], bytes[11]]);
+    if version != FORMAT_VERSION {
+        return Err(bad(&format!(
+            "format version {version}; this lgi reads version {FORMAT_VERSION}: rebuild the model"
+        )));
+    }
+    let mut u = [0u8; 8];
+    u.copy_from_slice(&bytes[12..20]);
+    let len = u64::from_le_bytes(u) as usize;
+    u.copy_from_slice(&bytes[20..28]);
+    let sum = u64::from_le_bytes(u);
+    let payload = &bytes[HEADER..];
+    if payload.len() != len {
+        return Err(bad(&format!(
+            "truncated or padded: {} payload bytes, header says {len}",
+            payload.len()
+        )));
+    }
+    if checksum(payload) != sum {
+        return Err(bad("checksum mismatch: the file is corrupt"));
+    }
+    let mut r = Reader {
+        bytes: payload,
+        at: 0,
+        path,
+    };
+    let mut f = [0.0; 7];
+    for x in &mut f {
+        *x = r.f64()?;
+    }
+    let mut n = [0usize; 3];
+    for x in &mut n {
+        *x = r.u64()? as usize;
+    }
+    let config = BuildConfig {
+        surface_tolerance: f[0],
+        prune_motion: f[1],
+        duplicate_distance: f[2],
+        min_quality: f[3],
+        max_edge: f[4],
+        containment_eps: f[5],
+        temporal_weight: f[6],
+        tet_neighbours: n[0],
+        max_tets: n[1],
+        projection_candidates: n[2],
+    };
+    let positions = { let v = r.f64s()?; to_vec3s(&r, v)? };
+    let triangles = { let v = r.u32s()?; to_tris(&r, v)? };
+    let uvs = r.f64s()?;
+    if uvs.len() % 2 != 0 {
+        return Err(r.err("UV array length not a multiple of 2"));
+    }
+    let uvs = uvs.chunks_exact(2).map(|c| DVec2::new(c[0], c[1])).collect();
+    let uv_triangles = { let v = r.u32s()?; to_tris(&r, v)? };
+    let mesh = Mesh {
+        positions,
+        triangles,
+        uvs,
+        uv_triangles,
+    };
+    let num_names = r.len(8)?;
+    let names = (0..num_names).map(|_| r.str()).collect::<Result<Vec<_>>>()?;
+    let displacements = r.f32s()?;
+    let dataset = Dataset::new(mesh, displacements, names).map_err(|e| bad(&e.to_string()))?;
+    let markers = { let v = r.f64s()?; to_vec3s(&r, v)? };
+    let mut clouds = Vec::with_capacity(markers.len());
+    let mut tets = Vec::with_capacity(markers.len());
+    for i in 0..markers.len() {
+        let points = { let v = r.f64s()?; to_vec3s(&r, v)? };
+        let na = r.len(8)?;
+        let aliases = (0..na).map(|_| r.u32s()).collect::<Result<Vec<_>>>()?;
+        let t = r.u32s()?;
+        if aliases.len() != points.len() || t.len() % 4 != 0 {
+            return Err(bad(&format!("bundle {i}: inconsistent cloud or tets")));
+        }
+        let np = points.len() as u32;
+        let ns = dataset.num_shapes() as u32;
+        let t: Vec<Tet> = t.chunks_exact(4).map(|c| [c[0], c[1], c[2], c[3]]).collect();
+        if t.iter().flatten().any(|&p| p >= np)
+            || aliases.iter().any(|a| a.is_empty() || a.iter().any(|&s| s > ns))
+        {
+            return Err(bad(&format!("bundle {i}: index out of range")));
+        }
+        clouds.push(BundleCloud { points, aliases });
+        tets.push(t);
+    }
+    if r.at != payload.len() {
+        return Err(bad("trailing bytes after the last bundle"));
+    }
+    config.validate().map_err(|e| bad(&e.to_string()))?;
+    let located = locate_bundles(&dataset, &markers, &config)?;
+    Model::assemble(Arc::new(dataset), &markers, &config, located, clouds, tets)
+}

@@ -1,0 +1,553 @@
+//! The LGI model: everything precomputed from a dataset and a marker layout (bundle clouds,
+//! tets and their grid indices, UV sewing weights), immutable after build and `Send + Sync`,
+//! so frames are solved with `&self` in parallel (rayon over bundles, then over vertices).
+
+use crate::choose::{choose, Choice, ChoiceParams, Scoring, Scratch};
+use crate::cloud::{build_cloud, BundleCloud};
+use crate::correspond::{correspond, SurfacePoint};
+use crate::dataset::Dataset;
+use crate::error::{LgiError, Result};
+use crate::grid::TetIndex;
+use crate::sew::{blend, ResidualPass};
+use crate::sibson::{SibsonWeights, SparseWeights};
+use crate::tets::{generate_tets, Tet, TetConfig};
+use crate::uvspace::{self, SewingSpace};
+use glam::DVec3;
+use rayon::prelude::*;
+use std::collections::HashMap;
+use std::sync::{Arc, Mutex};
+
+/// Build parameters. Distances are relative to the neutral's bounding-box diagonal.
+#[derive(Debug, Clone, PartialEq)]
+pub struct BuildConfig {
+    /// Markers farther than this from the neutral surface are an error (relative).
+    pub surface_tolerance: f64,
+    /// Shapes moving a bundle less than this are aliases of the neutral point (relative).
+    pub prune_motion: f64,
+    /// Cloud points closer than this are merged as aliases (relative).
+    pub duplicate_distance: f64,
+    /// Nearest neighbours per cloud point for tet generation.
+    pub tet_neighbours: usize,
+    /// Tets kept per bundle, best quality first.
+    pub max_tets: usize,
+    /// Tets below this quality (1 = regular) are dropped.
+    pub min_quality: f64,
+    /// Tets with an edge longer than this are dropped (relative; infinity = no limit).
+    pub max_edge: f64,
+    /// Barycentric tolerance of "contains".
+    pub containment_eps: f64,
+    /// Nearest tets scored when a target is outside every tet.
+    pub projection_candidates: usize,
+    /// Penalty per shape not shared with the previous frame's choice (relative to diagonal²).
+    pub temporal_weight: f64,
+}
+
+impl Default for BuildConfig {
+    fn default() -> Self {
+        BuildConfig {
+            surface_tolerance: 0.02,
+            prune_motion: 1e-5,
+            duplicate_distance: 1e-7,
+            tet_neighbours: 10,
+            max_tets: 20_000,
+            min_quality: 0.02,
+            max_edge: f64::INFINITY,
+            containment_eps: 1e-9,
+            projection_candidates: 8,
+            temporal_weight: 1e-6,
+        }
+    }
+}
+
+impl BuildConfig {
+    /// Checks every field's domain.
+    pub fn validate(&self) -> Result<()> {
+        let pos = |name: &str, v: f64| {
+            if v.is_nan() || v <= 0.0 {
+                Err(LgiError::Input(format!("BuildConfig.{name} must be > 0, got {v}")))
+            } else {
+                Ok(())
+            }
+        };
+        pos("surface_tolerance", self.surface_tolerance)?;
+        pos("max_edge", self.max_edge)?;
+        for (name, v) in [
+            ("prune_motion", self.prune_motion),
+            ("duplicate_distance", self.duplicate_distance),
+            ("containment_eps", self.containment_eps),
+            ("temporal_weight", self.temporal_weight),
+            ("min_quality", self.min_quality),
+        ] {
+            if !v.is_finite() || v < 0.0 {
+                return Err(LgiError::Input(format!(
+                    "BuildConfig.{name} must be finite and >= 0, got {v}"
+                )));
+            }
+        }
+        if self.tet_neighbours < 3 || self.max_tets == 0 || self.projection_candidates == 0 {
+            return Err(LgiError::Input(
+                "BuildConfig.tet_neighbours must be >= 3, max_tets and projection_candidates >= 1"
+                    .into(),
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// Natural-neighbour weights and residual pass for one set of present bundles.
+#[derive(Debug)]
+pub struct SewPlan {
+    /// V × B weights (columns of missing bundles are empty).
+    pub weights: SparseWeights,
+    residual: ResidualPass,
+}
+
+/// One solved frame.
+#[derive(Debug, Clone)]
+pub struct Frame {
+    /// Reconstructed vertices (V).
+    pub vertices: Vec<DVec3>,
+    /// Per bundle: the chosen geometry (`None` for a missing bundle).
+    pub choices: Vec<Option<Choice>>,
+    /// Per bundle: distance from target to reconstructed surface point (0 for missing).
+    pub residuals: Vec<f64>,
+    /// Per bundle: the reconstructed surface position (for missing bundles, the estimate).
+    pub bundle_positions: Vec<DVec3>,
+}
+
+/// What the next frame needs from the previous one.
+#[derive(Debug, Clone, Default)]
+pub struct FrameState {
+    /// Previous choices per bundle.
+    pub choices: Vec<Option<Choice>>,
+}
+
+/// Per-bundle statistics of a built model.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct BundleStats {
+    /// Distinct points in the cloud.
+    pub points: usize,
+    /// Tets in the index.
+    pub tets: usize,
+    /// Bytes of the index.
+    pub index_bytes: usize,
+}
+
+/// A built model. See the module docs.
+#[derive(Debug)]
+pub struct Model {
+    dataset: Arc<Dataset>,
+    config: BuildConfig,
+    markers_rest: Vec<DVec3>,
+    bundles: Vec<SurfacePoint>,
+    diagonal: f64,
+    shape_positions: Vec<DVec3>,
+    clouds: Vec<BundleCloud>,
+    indices: Vec<TetIndex>,
+    space: SewingSpace,
+    neighbours: Vec<Vec<u32>>,
+    full_plan: Arc<SewPlan>,
+    plans: Mutex<HashMap<Vec<u32>, Arc<SewPlan>>>,
+}
+
+/// Plans kept for distinct sets of missing bundles before the cache is cleared.
+const PLAN_CACHE: usize = 64;
+
+impl Model {
+    /// Builds the model for `dataset` and marker rest positions `markers_rest` (B).
+    pub fn build(dataset: &Dataset, markers_rest: &[DVec3], config: &BuildConfig) -> Result<Model> {
+        Model::build_shared(Arc::new(dataset.clone()), markers_rest, config)
+    }
+
+    /// As [`Model::build`], sharing the dataset instead of copying it.
+    pub fn build_shared(
+        dataset: Arc<Dataset>,
+        markers_rest: &[DVec3],
+        config: &BuildConfig,
+    ) -> Result<Model> {
+        config.validate()?;
+        let dataset_arc = dataset.clone();
+        let dataset: &Dataset = &dataset_arc;
+        let mesh = dataset.neutral();
+        let b = markers_rest.len();
+        if b < 3 {
+            return Err(LgiError::Input(format!(
+                "need at least 3 markers to sew, got {b}"
+            )));
+        }
+        let diagonal = mesh.diagonal();
+        let (bundles, shape_positions) = locate_bundles(dataset, markers_rest, config)?;
+        let s1 = dataset.num_shapes() + 1;
+        let tet_cfg = TetConfig {
+            neighbours: config.tet_neighbours,
+            max_tets: config.max_tets,
+            min_quality: config.min_quality,
+            max_edge: config.max_edge * diagonal,
+        };
+        let built: Vec<(BundleCloud, Vec<Tet>)> = (0..b)
+            .into_par_iter()
+            .map(|i| {
+                let pos: Vec<DVec3> = (0..s1).map(|k| shape_positions[k * b + i]).collect();
+                let cloud = build_cloud(
+                    &pos,
+                    config.prune_motion * diagonal,
+                    config.duplicate_distance * diagonal,
+                )?;
+                let tets = generate_tets(&cloud.points, &tet_cfg);
+                Ok((cloud, tets))
+            })
+            .collect::<Result<_>>()?;
+        let (clouds, tets): (Vec<BundleCloud>, Vec<Vec<Tet>>) = built.into_iter().unzip();
+        Model::assemble(
+            dataset_arc,
+            markers_rest,
+            config,
+            (bundles, shape_positions),
+            clouds,
+            tets,
+        )
+    }
+
+    /// The cheap part of a build, shared with loading a saved model: everything derived from
+    /// the dataset, markers, clouds and tets (correspondences, grid indices, sewing weights).
+    pub(crate) fn assemble(
+        dataset: Arc<Dataset>,
+        markers_rest: &[DVec3],
+        config: &BuildConfig,
+        (bundles, shape_positions): (Vec<SurfacePoint>, Vec<DVec3>),
+        clouds: Vec<BundleCloud>,
+        tets: Vec<Vec<Tet>>,
+    ) -> Result<Model> {
+        let mesh = dataset.neutral();
+        let b = markers_rest.len();
+        let diagonal = mesh.diagonal();
+        let indices: Vec<TetIndex> = clouds
+            .par_iter()
+            .zip(tets)
+            .map(|(c, t)| TetIndex::new(c.points.clone(), t))
+            .collect();
+        let space = uvspace::build(mesh, &bundles)?;
+        let neighbours = SibsonWeights::new(&space.bundle_uv, &space.barriers)
+            .map_err(|e| bundle_context(e, "bundle UV layout"))?
+            .neighbours();
+        let all: Vec<u32> = (0..b as u32).collect();
+        let full_plan = Arc::new(make_plan(&dataset, &bundles, &space, &all)?);
+        Ok(Model {
+            dataset,
+            config: config.clone(),
+            markers_rest: markers_rest.to_vec(),
+            bundles,
+            diagonal,
+            shape_positions,
+            clouds,
+            indices,
+            space,
+            neighbours,
+            full_plan,
+            plans: Mutex::new(HashMap::new()),
+        })
+    }
+
+    fn plan_for(&self, present: &[u32]) -> Result<Arc<SewPlan>> {
+        if present.len() == self.bundles.len() {
+            return Ok(self.full_plan.clone());
+        }
+        let key = present.to_vec();
+        if let Ok(cache) = self.plans.lock() {
+            if let Some(p) = cache.get(&key) {
+                return Ok(p.clone());
+            }
+        }
+        let plan = Arc::new(make_plan(&self.dataset, &self.bundles, &self.space, present)?);
+        if let Ok(mut cache) = self.plans.lock() {
+            if cache.len() >= PLAN_CACHE {
+                cache.clear();
+            }
+            cache.insert(key, plan.clone());
+        }
+        Ok(plan)
+    }
+
+    /// Solves one frame. `targets` (B) are bundle positions; a row with a NaN is missing.
+    pub fn solve_frame(&self, targets: &[DVec3], previous: Option<&FrameState>) -> Result<Frame> {
+        let b = self.bundles.len();
+        if targets.len() != b {
+            return Err(LgiError::Input(format!(
+                "frame has {} bundles, the model has {b}",
+                targets.len()
+            )));
+        }
+        let mut present = Vec::with_capacity(b);
+        let mut targets_clean = targets.to_vec();
+        for (i, t) in targets.iter().enumerate() {
+            if t.is_nan() {
+                targets_clean[i] = DVec3::NAN;
+            } else if !t.is_finite() {
+                return Err(LgiError::Input(format!(
+                    "bundle {i} has an infinite coordinate {t:?}"
+                )));
+            } else {
+                present.push(i as u32);
+            }
+        }
+        if present.len() < 3 {
+            return Err(LgiError::Input(format!(
+                "only {} bundles present: at least 3 are needed",
+                present.len()
+            )));
+        }
+        let params = ChoiceParams {
+            eps: self.config.containment_eps,
+            projection_candidates: self.config.projection_candidates,
+            ..ChoiceParams::default()
+        };
+        let temporal_weight = self.config.temporal_weight * self.diagonal * self.diagonal;
+        let choices: Vec<Option<Choice>> = (0..b)
+            .into_par_iter()
+            .map_init(Scratch::default, |scratch, i| {
+                let t = targets_clean[i];
+                if t.is_nan() {
+                    return None;
+                }
+                let scoring = Scoring {
+                    shape_positions: &self.shape_positions,
+                    num_bundles: b,
+                    neighbours: &self.neighbours[i],
+                    targets: &targets_clean,
+                    previous: previous.and_then(|p| p.choices.get(i)).and_then(|c| c.as_ref()),
+                    temporal_weight,
+                };
+                Some(choose(&self.indices[i], &self.clouds[i], t, &scoring, &params, scratch))
+            })
+            .collect();
+        let plan = self.plan_for(&present)?;
+        let mesh = self.dataset.neutral();
+        let mut vertices = vec![DVec3::ZERO; mesh.num_vertices()];
+        blend(
+            &mesh.positions,
+            self.dataset.displacements(),
+            &plan.weights,
+            &choices,
+            &mut vertices,
+        );
+        plan.residual.apply(
+            &mesh.triangles,
+            &self.bundles,
+            &plan.weights,
+            &targets_clean,
+            &mut vertices,
+        );
+        if let Some(v) = vertices.iter().position(|p| !p.is_finite()) {
+            return Err(LgiError::Input(format!(
+                "the solve produced a non-finite vertex {v}: targets are probably far outside \
+                 the dataset's range"
+            )));
+        }
+        let bundle_positions: Vec<DVec3> = self
+            .bundles
+            .iter()
+            .map(|sp| sp.evaluate(&mesh.triangles, &vertices))
+            .collect();
+        let residuals = (0..b)
+            .map(|i| {
+                if targets_clean[i].is_nan() {
+                    0.0
+                } else {
+                    targets_clean[i].distance(bundle_positions[i])
+                }
+            })
+            .collect();
+        Ok(Frame {
+            vertices,
+            choices,
+            residuals,
+            bundle_positions,
+        })
+    }
+
+    /// Solves a sequence in order, each frame preferring tets that share shapes with the
+    /// previous frame's choice. `on_frame` is called after each frame (progress).
+    pub fn solve_sequence(
+        &self,
+        frames: &[Vec<DVec3>],
+        mut on_frame: impl FnMut(usize),
+    ) -> Result<Vec<Frame>> {
+        let mut out = Vec::with_capacity(frames.len());
+        let mut state: Option<FrameState> = None;
+        for (f, targets) in frames.iter().enumerate() {
+            let frame = self
+                .solve_frame(targets, state.as_ref())
+                .map_err(|e| frame_context(e, f))?;
+            state = Some(FrameState {
+                choices: frame.choices.clone(),
+            });
+            out.push(frame);
+            on_frame(f);
+        }
+        Ok(out)
+    }
+
+    /// Bundle surface positions on a mesh with the neutral's topology.
+    pub fn bundle_positions(&self, positions: &[DVec3]) -> Result<Vec<DVec3>> {
+        let nv = self.dataset.num_vertices();
+        if positions.len() != nv {
+            return Err(LgiError::Input(format!(
+                "mesh has {} vertices, the model's neutral has {nv}",
+                positions.len()
+            )));
+        }
+        let tris = &self.dataset.neutral().triangles;
+        Ok(self.bundles.iter().map(|sp| sp.evaluate(tris, positions)).collect())
+    }
+
+    /// The dataset the model was built from.
+    pub fn dataset(&self) -> &Dataset {
+        &self.dataset
+    }
+    /// The dataset, shared.
+    pub fn dataset_shared(&self) -> Arc<Dataset> {
+        self.dataset.clone()
+    }
+    /// The build configuration.
+    pub fn config(&self) -> &BuildConfig {
+        &self.config
+    }
+    /// Marker rest positions as given.
+    pub fn markers_rest(&self) -> &[DVec3] {
+        &self.markers_rest
+    }
+    /// Bundles' closest points on the neutral.
+    pub fn bundles(&self) -> &[SurfacePoint] {
+        &self.bundles
+    }
+    /// Number of bundles B.
+    pub fn num_bundles(&self) -> usize {
+        self.bundles.len()
+    }
+    /// Bounding-box diagonal of the neutral.
+    pub fn diagonal(&self) -> f64 {
+        self.diagonal
+    }
+    /// Natural neighbours of each bundle (UV Delaunay, not across holes).
+    pub fn neighbours(&self) -> &[Vec<u32>] {
+        &self.neighbours
+    }
+    /// Full sewing weights (V × B, every bundle present).
+    pub fn sew_weights(&self) -> &SparseWeights {
+        &self.full_plan.weights
+    }
+    /// The sewing space (chart UVs, proxies, barriers).
+    pub fn sewing_space(&self) -> &SewingSpace {
+        &self.space
+    }
+    /// Per-bundle cloud, tet and memory statistics.
+    pub fn bundle_stats(&self) -> Vec<BundleStats> {
+        self.clouds
+            .iter()
+            .zip(&self.indices)
+            .map(|(c, i)| BundleStats {
+                points: c.points.len(),
+                tets: i.num_tets(),
+                index_bytes: i.memory_bytes(),
+            })
+            .collect()
+    }
+    /// Clouds of all bundles.
+    pub fn clouds(&self) -> &[BundleCloud] {
+        &self.clouds
+    }
+    /// Tet indices of all bundles.
+    pub fn indices(&self) -> &[TetIndex] {
+        &self.indices
+    }
+}
+
+/// Sewing weights for the present bundles: Sibson weights in UV for sewn vertices, copied
+/// from the proxy for the others; plus the residual pass for that set.
+fn make_plan(
+    dataset: &Dataset,
+    bundles: &[SurfacePoint],
+    sp: &SewingSpace,
+    present: &[u32],
+) -> Result<SewPlan> {
+    let sites: Vec<_> = present.iter().map(|&i| sp.bundle_uv[i as usize]).collect();
+    let sib = SibsonWeights::new(&sites, &sp.barriers)?;
+    let nv = dataset.num_vertices();
+    let sewn: Vec<usize> = (0..nv).filter(|&v| sp.contains(v)).collect();
+    let queries: Vec<_> = sewn.iter().map(|&v| sp.vertex_uv[v]).collect();
+    let w_sewn = sib.weights(&queries);
+    let mut row_of = vec![usize::MAX; nv];
+    for (r, &v) in sewn.iter().enumerate() {
+        row_of[v] = r;
+    }
+    let mut weights = SparseWeights {
+        row_start: Vec::with_capacity(nv + 1),
+        cols: Vec::new(),
+        vals: Vec::new(),
+        num_cols: bundles.len(),
+    };
+    weights.row_start.push(0);
+    for v in 0..nv {
+        let (cols, vals) = w_sewn.row(row_of[sp.proxy[v] as usize]);
+        weights.cols.extend(cols.iter().map(|&c| present[c as usize]));
+        weights.vals.extend_from_slice(vals);
+        weights.row_start.push(weights.cols.len() as u32);
+    }
+    let residual = ResidualPass::new(&dataset.neutral().triangles, bundles, &weights, present)?;
+    Ok(SewPlan { weights, residual })
+}
+
+/// Bundles' closest points on the neutral and their positions on every shape.
+pub(crate) fn locate_bundles(
+    dataset: &Dataset,
+    markers_rest: &[DVec3],
+    config: &BuildConfig,
+) -> Result<(Vec<SurfacePoint>, Vec<DVec3>)> {
+    let mesh = dataset.neutral();
+    let bundles: Vec<SurfacePoint> =
+        correspond(mesh, markers_rest, config.surface_tolerance * mesh.diagonal())?
+            .into_iter()
+            .map(|(sp, _)| sp)
+            .collect();
+    let positions = shape_bundle_positions(dataset, &bundles);
+    Ok((bundles, positions))
+}
+
+/// Bundle positions on every shape, `(S + 1) × B` with shape id 0 the neutral.
+fn shape_bundle_positions(dataset: &Dataset, bundles: &[SurfacePoint]) -> Vec<DVec3> {
+    let mesh = dataset.neutral();
+    let b = bundles.len();
+    let s1 = dataset.num_shapes() + 1;
+    let mut out = vec![DVec3::ZERO; s1 * b];
+    out.par_chunks_mut(b).enumerate().for_each(|(k, row)| {
+        for (i, sp) in bundles.iter().enumerate() {
+            let tri = mesh.triangles[sp.triangle as usize];
+            let mut p = DVec3::ZERO;
+            for c in 0..3 {
+                let v = tri[c] as usize;
+                let d = if k == 0 {
+                    DVec3::ZERO
+                } else {
+                    dataset.displacement(k - 1, v)
+                };
+                p += (mesh.positions[v] + d) * sp.bary[c];
+            }
+            row[i] = p;
+        }
+    });
+    out
+}
+
+fn frame_context(e: LgiError, frame: usize) -> LgiError {
+    match e {
+        LgiError::Input(m) => LgiError::Input(format!("frame {frame}: {m}")),
+        other => other,
+    }
+}
+
+fn bundle_context(e: LgiError, what: &str) -> LgiError {
+    match e {
+        LgiError::Input(m) => LgiError::Input(format!("{what}: {m}")),
+        other => other,
+    }
+}

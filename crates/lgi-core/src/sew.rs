@@ -1,0 +1,135 @@
+//! Sewing: every vertex blends the bundles' chosen local geometries with its natural-neighbour
+//! weights, `x(v) = x0(v) + Σ_i W_vi Σ_j α_ij s_{k_ij}(v)`; then a residual pass spreads what
+//! is left at the bundles with the same weights, solving the small B×B system exactly so that
+//! every bundle's surface position matches its target.
+
+use crate::choose::Choice;
+use crate::correspond::SurfacePoint;
+use crate::error::Result;
+use crate::linalg::Lu;
+use crate::sibson::SparseWeights;
+use glam::DVec3;
+use rayon::prelude::*;
+
+/// Vertices per parallel task: large enough to amortise scheduling, small enough to balance.
+const CHUNK: usize = 2048;
+
+/// Blends the chosen geometries: writes `x0 + Σ_i W_vi Σ_j α_ij s_k(v)` into `out`.
+/// `displacements` is the dataset's `S × V × 3` (shape id k ≥ 1 reads shape k − 1).
+pub fn blend(
+    x0: &[DVec3],
+    displacements: &[f32],
+    weights: &SparseWeights,
+    choices: &[Option<Choice>],
+    out: &mut [DVec3],
+) {
+    let nv = x0.len();
+    out.par_chunks_mut(CHUNK).enumerate().for_each(|(c, chunk)| {
+        let base = c * CHUNK;
+        for (o, x) in chunk.iter_mut().enumerate() {
+            let v = base + o;
+            let (cols, vals) = weights.row(v);
+            let mut d = [0.0f64; 3];
+            for (&b, &w) in cols.iter().zip(vals) {
+                let Some(ch) = &choices[b as usize] else {
+                    continue;
+                };
+                for j in 0..4 {
+                    let k = ch.shapes[j] as usize;
+                    let a = ch.weights[j];
+                    if k == 0 || a == 0.0 {
+                        continue;
+                    }
+                    let s = &displacements[((k - 1) * nv + v) * 3..((k - 1) * nv + v) * 3 + 3];
+                    let f = w * a;
+                    d[0] += f * s[0] as f64;
+                    d[1] += f * s[1] as f64;
+                    d[2] += f * s[2] as f64;
+                }
+            }
+            *x = x0[v] + DVec3::from_array(d);
+        }
+    });
+}
+
+/// The exact residual correction for one set of present bundles.
+#[derive(Debug, Clone)]
+pub struct ResidualPass {
+    /// Present bundles, in the order of the system's rows.
+    present: Vec<u32>,
+    /// Position of each bundle in `present` (u32::MAX when missing).
+    slot: Vec<u32>,
+    lu: Lu,
+}
+
+impl ResidualPass {
+    /// Builds `M[a][b] = Σ_c bary_ac W[v_ac][b]` (how a unit correction at bundle b moves
+    /// bundle a's surface point) over the present bundles and factorises it.
+    pub fn new(
+        triangles: &[[u32; 3]],
+        bundles: &[SurfacePoint],
+        weights: &SparseWeights,
+        present: &[u32],
+    ) -> Result<Self> {
+        let n = present.len();
+        let mut slot = vec![u32::MAX; bundles.len()];
+        for (i, &b) in present.iter().enumerate() {
+            slot[b as usize] = i as u32;
+        }
+        let mut m = vec![0.0; n * n];
+        for (row, &a) in present.iter().enumerate() {
+            let sp = bundles[a as usize];
+            let tri = triangles[sp.triangle as usize];
+            for c in 0..3 {
+                let (cols, vals) = weights.row(tri[c] as usize);
+                for (&b, &w) in cols.iter().zip(vals) {
+                    let s = slot[b as usize];
+                    if s != u32::MAX {
+                        m[row * n + s as usize] += sp.bary[c] * w;
+                    }
+                }
+            }
+        }
+        let lu = Lu::factor(n, m)?;
+        Ok(ResidualPass {
+            present: present.to_vec(),
+            slot,
+            lu,
+        })
+    }
+
+    /// Moves `x` so that every present bundle's surface point equals its target.
+    pub fn apply(
+        &self,
+        triangles: &[[u32; 3]],
+        bundles: &[SurfacePoint],
+        weights: &SparseWeights,
+        targets: &[DVec3],
+        x: &mut [DVec3],
+    ) {
+        // Two rounds: the second mops up the round-off of the first (iterative refinement).
+        for _ in 0..2 {
+            let r: Vec<[f64; 3]> = self
+                .present
+                .iter()
+                .map(|&b| {
+                    let sp = bundles[b as usize];
+                    (targets[b as usize] - sp.evaluate(triangles, x)).to_array()
+                })
+                .collect();
+            let c = self.lu.solve3(&r);
+            let slot = &self.slot;
+            x.par_chunks_mut(CHUNK).enumerate().for_each(|(ci, chunk)| {
+                for (o, xv) in chunk.iter_mut().enumerate() {
+                    let (cols, vals) = weights.row(ci * CHUNK + o);
+                    for (&b, &w) in cols.iter().zip(vals) {
+                        let s = slot[b as usize];
+                        if s != u32::MAX {
+                            *xv += DVec3::from_array(c[s as usize]) * w;
+                        }
+                    }
+                }
+            });
+        }
+    }
+}

@@ -1,0 +1,280 @@
+//! `lgi._lgi.Model`: build and solve with the GIL released; the Python class `lgi.Model`
+//! (python/lgi/model.py) wraps it with progress bars and a typed result.
+
+use crate::convert::{flat_to_array, float_array, points, points_to_array};
+use crate::dataset::Dataset;
+use crate::error::{input_error, PyLgiError};
+use glam::DVec3;
+use lgi_core::model::{BuildConfig, Model as CoreModel};
+use numpy::PyArrayDyn;
+use pyo3::prelude::*;
+use pyo3::types::PyDict;
+use std::sync::Arc;
+
+/// A built LGI model (immutable, thread-safe).
+#[pyclass(frozen, module = "lgi._lgi")]
+pub struct Model {
+    pub inner: Arc<CoreModel>,
+}
+
+fn config_from_dict(d: Option<&Bound<'_, PyDict>>) -> PyResult<BuildConfig> {
+    let mut c = BuildConfig::default();
+    let Some(d) = d else { return Ok(c) };
+    for (k, v) in d.iter() {
+        let key: String = k.extract()?;
+        let f = |v: &Bound<'_, PyAny>| -> PyResult<f64> {
+            v.extract::<f64>()
+                .map_err(|_| input_error(format!("BuildConfig.{key}: expected a number, got {v}")))
+        };
+        let u = |v: &Bound<'_, PyAny>| -> PyResult<usize> {
+            v.extract::<usize>().map_err(|_| {
+                input_error(format!("BuildConfig.{key}: expected a non-negative integer, got {v}"))
+            })
+        };
+        match key.as_str() {
+            "surface_tolerance" => c.surface_tolerance = f(&v)?,
+            "prune_motion" => c.prune_motion = f(&v)?,
+            "duplicate_distance" => c.duplicate_distance = f(&v)?,
+            "tet_neighbours" => c.tet_neighbours = u(&v)?,
+            "max_tets" => c.max_tets = u(&v)?,
+            "min_quality" => c.min_quality = f(&v)?,
+            "max_edge" => c.max_edge = f(&v)?,
+            "containment_eps" => c.containment_eps = f(&v)?,
+            "projection_candidates" => c.projection_candidates = u(&v)?,
+            "temporal_weight" => c.temporal_weight = f(&v)?,
+            other => return Err(input_error(format!("BuildConfig has no field '{other}'"))),
+        }
+    }
+    Ok(c)
+}
+
+fn frames_from(obj: &Bound<'_, PyAny>, b: usize) -> PyResult<Vec<Vec<DVec3>>> {
+    let a = float_array(obj, "frames", &[None, Some(b), Some(3)])?;
+    let mut out = Vec::with_capacity(a.shape()[0]);
+    for (f, fr) in a.outer_iter().enumerate() {
+        let mut row = Vec::with_capacity(b);
+        for (i, r) in fr.outer_iter().enumerate() {
+            let p = DVec3::new(r[0], r[1], r[2]);
+            if p.is_nan() || p.is_finite() {
+                row.push(if p.is_nan() { DVec3::NAN } else { p });
+            } else {
+                return Err(input_error(format!(
+                    "frames: frame {f}, bundle {i} has an infinite coordinate"
+                )));
+            }
+        }
+        out.push(row);
+    }
+    Ok(out)
+}
+
+#[pymethods]
+impl Model {
+    /// Builds a model (GIL released). `config` is a dict of BuildConfig fields.
+    #[staticmethod]
+    #[pyo3(signature = (dataset, markers_rest, config=None))]
+    fn build(
+        py: Python<'_>,
+        dataset: &Dataset,
+        markers_rest: &Bound<'_, PyAny>,
+        config: Option<&Bound<'_, PyDict>>,
+    ) -> PyResult<Model> {
+        let markers = points(markers_rest, "markers_rest", None, false)?;
+        let cfg = config_from_dict(config)?;
+        let data = dataset.inner.clone();
+        let model = py
+            .detach(move || CoreModel::build_shared(data, &markers, &cfg))
+            .map_err(PyLgiError)?;
+        Ok(Model {
+            inner: Arc::new(model),
+        })
+    }
+
+    /// Loads a model written by `save` (GIL released).
+    #[staticmethod]
+    fn load(py: Python<'_>, path: std::path::PathBuf) -> PyResult<Model> {
+        let model = py
+            .detach(move || lgi_core::io::model_file::load(&path))
+            .map_err(PyLgiError)?;
+        Ok(Model {
+            inner: Arc::new(model),
+        })
+    }
+
+    /// Writes the model to `path` (GIL released).
+    fn save(&self, py: Python<'_>, path: std::path::PathBuf) -> PyResult<()> {
+        let model = self.inner.clone();
+        py.detach(move || lgi_core::io::model_file::save(&model, &path))
+            .map_err(PyLgiError)?;
+        Ok(())
+    }
+
+    /// Number of bundles B.
+    #[getter]
+    fn num_bundles(&self) -> usize {
+        self.inner.num_bundles()
+    }
+
+    /// Number of vertices V.
+    #[getter]
+    fn num_vertices(&self) -> usize {
+        self.inner.dataset().num_vertices()
+    }
+
+    /// Bounding-box diagonal of the neutral (the unit of every relative tolerance).
+    #[getter]
+    fn diagonal(&self) -> f64 {
+        self.inner.diagonal()
+    }
+
+    /// The dataset (shared, not copied).
+    #[getter]
+    fn dataset(&self) -> Dataset {
+        Dataset {
+            inner: self.inner.dataset_shared(),
+        }
+    }
+
+    /// Solves frames (F, B, 3) in order; returns a dict of arrays. `progress(f)` is called
+    /// after each frame with the GIL held.
+    #[pyo3(signature = (frames, progress=None))]
+    fn solve<'py>(
+        &self,
+        py: Python<'py>,
+        frames: &Bound<'py, PyAny>,
+        progress: Option<Py<PyAny>>,
+    ) -> PyResult<Bound<'py, PyDict>> {
+        let b = self.inner.num_bundles();
+        let frames = frames_from(frames, b)?;
+        let model = self.inner.clone();
+        let solved = py
+            .detach(move || {
+                model.solve_sequence(&frames, |f| {
+                    if let Some(cb) = &progress {
+                        Python::attach(|py| {
+                            let _ = cb.call1(py, (f,));
+                        });
+                    }
+                })
+            })
+            .map_err(PyLgiError)?;
+        let nf = solved.len();
+        let nv = self.inner.dataset().num_vertices();
+        let mut verts = Vec::with_capacity(nf * nv * 3);
+        let mut res = Vec::with_capacity(nf * b);
+        let mut pos = Vec::with_capacity(nf * b * 3);
+        let mut shapes = Vec::with_capacity(nf * b * 4);
+        let mut weights = Vec::with_capacity(nf * b * 4);
+        let mut tets = Vec::with_capacity(nf * b);
+        let mut projected = Vec::with_capacity(nf * b);
+        let mut missing = Vec::with_capacity(nf * b);
+        for fr in &solved {
+            verts.extend(fr.vertices.iter().flat_map(|p| [p.x, p.y, p.z]));
+            res.extend_from_slice(&fr.residuals);
+            pos.extend(fr.bundle_positions.iter().flat_map(|p| [p.x, p.y, p.z]));
+            for c in &fr.choices {
+                match c {
+                    Some(c) => {
+                        // Shape ids: 0 neutral, k >= 1 dataset shape k - 1 → Python: -1 neutral.
+                        shapes.extend(c.shapes.iter().map(|&s| s as i64 - 1));
+                        weights.extend_from_slice(&c.weights);
+                        tets.push(if c.tet == u32::MAX { -1 } else { c.tet as i64 });
+                        projected.push(c.projected);
+                        missing.push(false);
+                    }
+                    None => {
+                        shapes.extend([-1i64; 4]);
+                        weights.extend([0.0; 4]);
+                        tets.push(-1);
+                        projected.push(false);
+                        missing.push(true);
+                    }
+                }
+            }
+        }
+        let d = PyDict::new(py);
+        d.set_item("vertices", flat_to_array(py, verts, &[nf, nv, 3])?)?;
+        d.set_item("bundle_residuals", flat_to_array(py, res, &[nf, b])?)?;
+        d.set_item("bundle_positions", flat_to_array(py, pos, &[nf, b, 3])?)?;
+        d.set_item("choice_shapes", flat_to_array(py, shapes, &[nf, b, 4])?)?;
+        d.set_item("choice_weights", flat_to_array(py, weights, &[nf, b, 4])?)?;
+        d.set_item("choice_tets", flat_to_array(py, tets, &[nf, b])?)?;
+        d.set_item("choice_projected", flat_to_array(py, projected, &[nf, b])?)?;
+        d.set_item("missing", flat_to_array(py, missing, &[nf, b])?)?;
+        Ok(d)
+    }
+
+    /// Bundle surface positions (F, B, 3) of meshes (F, V, 3) with the neutral's topology.
+    fn bundle_positions<'py>(
+        &self,
+        py: Python<'py>,
+        meshes: &Bound<'py, PyAny>,
+    ) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
+        let nv = self.inner.dataset().num_vertices();
+        let a = float_array(meshes, "meshes", &[None, Some(nv), Some(3)])?;
+        let b = self.inner.num_bundles();
+        let mut out = Vec::with_capacity(a.shape()[0] * b * 3);
+        for m in a.outer_iter() {
+            let pts: Vec<DVec3> = m
+                .outer_iter()
+                .map(|r| DVec3::new(r[0], r[1], r[2]))
+                .collect();
+            let bp = self.inner.bundle_positions(&pts).map_err(PyLgiError)?;
+            out.extend(bp.iter().flat_map(|p| [p.x, p.y, p.z]));
+        }
+        flat_to_array(py, out, &[a.shape()[0], b, 3])
+    }
+
+    /// Per-bundle statistics: dict of arrays `points`, `tets`, `index_bytes` (B,).
+    fn bundle_stats<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        let st = self.inner.bundle_stats();
+        let d = PyDict::new(py);
+        let n = st.len();
+        d.set_item("points", flat_to_array(py, st.iter().map(|s| s.points as i64).collect(), &[n])?)?;
+        d.set_item("tets", flat_to_array(py, st.iter().map(|s| s.tets as i64).collect(), &[n])?)?;
+        d.set_item(
+            "index_bytes",
+            flat_to_array(py, st.iter().map(|s| s.index_bytes as i64).collect(), &[n])?,
+        )?;
+        Ok(d)
+    }
+
+    /// Sewing weights as CSR arrays: dict `indptr` (V+1,), `indices`, `data` (bundle columns).
+    fn sew_weights<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        let w = self.inner.sew_weights();
+        let d = PyDict::new(py);
+        let n = w.row_start.len();
+        d.set_item("indptr", flat_to_array(py, w.row_start.iter().map(|&x| x as i64).collect(), &[n])?)?;
+        d.set_item("indices", flat_to_array(py, w.cols.iter().map(|&x| x as i64).collect(), &[w.cols.len()])?)?;
+        d.set_item("data", flat_to_array(py, w.vals.clone(), &[w.vals.len()])?)?;
+        Ok(d)
+    }
+
+    /// Natural neighbours of each bundle (list of lists).
+    fn neighbours(&self) -> Vec<Vec<u32>> {
+        self.inner.neighbours().to_vec()
+    }
+
+    /// Bundles' closest points: (triangles (B,), barycentrics (B, 3)).
+    fn bundle_surface_points<'py>(
+        &self,
+        py: Python<'py>,
+    ) -> PyResult<(Bound<'py, PyArrayDyn<i64>>, Bound<'py, PyArrayDyn<f64>>)> {
+        let bs = self.inner.bundles();
+        let t = flat_to_array(py, bs.iter().map(|b| b.triangle as i64).collect(), &[bs.len()])?;
+        let w = flat_to_array(py, bs.iter().flat_map(|b| b.bary).collect(), &[bs.len(), 3])?;
+        Ok((t, w))
+    }
+
+    /// Bundles' UV positions (B, 2) in the sewing space.
+    fn bundle_uvs<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
+        let uv = &self.inner.sewing_space().bundle_uv;
+        flat_to_array(py, uv.iter().flat_map(|p| [p.x, p.y]).collect(), &[uv.len(), 2])
+    }
+
+    /// Marker rest positions (B, 3).
+    #[getter]
+    fn markers_rest<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
+        points_to_array(py, self.inner.markers_rest())
+    }
+}
