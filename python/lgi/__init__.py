@@ -13,14 +13,19 @@ from lgi.errors import (
     MarkerError,
     ModelFormatError,
 )
+from lgi.model import BuildConfig, Choices, Model, SolveResult
 
 __all__ = [
+    "BuildConfig",
+    "Choices",
     "Dataset",
     "DatasetError",
     "DatasetFileError",
     "InputError",
     "LgiError",
     "MarkerError",
+    "Model",
     "ModelFormatError",
+    "SolveResult",
     "__version__",
 ]

@@ -134,15 +134,21 @@ class Model:
         """The compiled model, for low-level inspection (weights, neighbours, statistics)."""
         return self._core
 
-    def solve(self, frames: ArrayLike, *, quiet: bool = False) -> SolveResult:
-        """Solves frames (F, B, 3) of marker positions, in order (each frame prefers the
-        previous frame's choices). NaN rows are missing markers."""
+    def solve(
+        self, frames: ArrayLike, *, temporal: bool = True, quiet: bool = False
+    ) -> SolveResult:
+        """Solves frames (F, B, 3) of marker positions (a single (B, 3) frame gives F = 1).
+        NaN rows are missing markers. With `temporal` (a performance), frames are solved in
+        order and each prefers the previous frame's choices; `temporal=False` treats frames as
+        independent (e.g. one frame per dataset shape) and solves them in parallel."""
         arr = np.asarray(frames)
         if arr.ndim == 2:
             arr = arr[None]
         total = int(arr.shape[0]) if arr.ndim == 3 else 0
         with _progress_bar(total, "lgi solve", quiet) as bar:
-            out = self._core.solve(arr, progress=lambda _f: bar.update(1))
+            out = self._core.solve(
+                arr, progress=lambda _f: bar.update(1), temporal=temporal
+            )
         return SolveResult(
             vertices=out["vertices"],
             bundle_residuals=out["bundle_residuals"],

@@ -365,13 +365,24 @@ impl Model {
         })
     }
 
-    /// Solves a sequence in order, each frame preferring tets that share shapes with the
-    /// previous frame's choice. `on_frame` is called after each frame (progress).
+    /// Solves a sequence. With `temporal`, frames are solved in order, each preferring tets
+    /// that share shapes with the previous frame's choice; without, frames are independent and
+    /// solved in parallel. `on_frame` is called after each frame in order (progress).
     pub fn solve_sequence(
         &self,
         frames: &[Vec<DVec3>],
+        temporal: bool,
         mut on_frame: impl FnMut(usize),
     ) -> Result<Vec<Frame>> {
+        if !temporal {
+            let out: Vec<Frame> = frames
+                .par_iter()
+                .enumerate()
+                .map(|(f, t)| self.solve_frame(t, None).map_err(|e| frame_context(e, f)))
+                .collect::<Result<_>>()?;
+            (0..out.len()).for_each(&mut on_frame);
+            return Ok(out);
+        }
         let mut out = Vec::with_capacity(frames.len());
         let mut state: Option<FrameState> = None;
         for (f, targets) in frames.iter().enumerate() {

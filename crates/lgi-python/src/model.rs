@@ -135,21 +135,22 @@ impl Model {
         }
     }
 
-    /// Solves frames (F, B, 3) in order; returns a dict of arrays. `progress(f)` is called
-    /// after each frame with the GIL held.
-    #[pyo3(signature = (frames, progress=None))]
+    /// Solves frames (F, B, 3); returns a dict of arrays. `progress(f)` is called after each
+    /// frame with the GIL held. `temporal=False` solves frames independently (in parallel).
+    #[pyo3(signature = (frames, progress=None, temporal=true))]
     fn solve<'py>(
         &self,
         py: Python<'py>,
         frames: &Bound<'py, PyAny>,
         progress: Option<Py<PyAny>>,
+        temporal: bool,
     ) -> PyResult<Bound<'py, PyDict>> {
         let b = self.inner.num_bundles();
         let frames = frames_from(frames, b)?;
         let model = self.inner.clone();
         let solved = py
             .detach(move || {
-                model.solve_sequence(&frames, |f| {
+                model.solve_sequence(&frames, temporal, |f| {
                     if let Some(cb) = &progress {
                         Python::attach(|py| {
                             let _ = cb.call1(py, (f,));

@@ -1,0 +1,125 @@
+"""The LGI model end to end on the built-in sample: exact interpolation of markers, missing
+markers, determinism, persistence, and every bad input as a clear exception."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import lgi
+
+
+@pytest.fixture(scope="module")
+def solved(sample, sample_model):  # type: ignore[no-untyped-def]
+    return sample_model.solve(sample.performance, quiet=True)
+
+
+def test_every_present_marker_is_interpolated_to_1e6_of_the_diagonal(sample_model, solved):  # type: ignore[no-untyped-def]
+    assert solved.bundle_residuals.max() <= 1e-6 * sample_model.diagonal
+    # The residual is measured independently of the core: barycentric evaluation on the output.
+    again = sample_model.bundle_positions(solved.vertices)
+    np.testing.assert_allclose(again, solved.bundle_positions, atol=1e-12)
+
+
+def test_missing_markers_give_finite_vertices_and_are_flagged(sample, solved):  # type: ignore[no-untyped-def]
+    nan_rows = np.isnan(sample.performance).any(axis=2)
+    assert nan_rows.any(), "the sample performance must contain dropouts"
+    np.testing.assert_array_equal(solved.missing, nan_rows)
+    assert np.isfinite(solved.vertices).all()
+    assert np.isfinite(solved.bundle_positions).all()
+    assert (solved.choices.weights[solved.missing] == 0).all()
+
+
+def test_choices_are_convex_combinations(solved):  # type: ignore[no-untyped-def]
+    w = solved.choices.weights[~solved.missing]
+    assert (w >= 0).all()
+    np.testing.assert_allclose(w.sum(axis=1), 1.0, atol=1e-12)
+
+
+def test_reconstruction_is_closer_to_truth_than_the_neutral(sample, sample_dataset, solved):  # type: ignore[no-untyped-def]
+    err = np.linalg.norm(solved.vertices - sample.truth, axis=2).mean()
+    base = np.linalg.norm(sample_dataset.neutral[None] - sample.truth, axis=2).mean()
+    assert err < 0.5 * base, (err, base)
+
+
+def test_solve_is_deterministic(sample, sample_model, solved):  # type: ignore[no-untyped-def]
+    again = sample_model.solve(sample.performance[:20], quiet=True)
+    np.testing.assert_array_equal(again.vertices, solved.vertices[:20])
+    np.testing.assert_array_equal(again.choices.shapes, solved.choices.shapes[:20])
+
+
+def test_dataset_shapes_are_reproduced_exactly_by_their_own_markers(sample_dataset, sample_model):  # type: ignore[no-untyped-def]
+    meshes = sample_dataset.neutral[None] + sample_dataset.shapes.astype(np.float64)
+    res = sample_model.solve(sample_model.bundle_positions(meshes), temporal=False, quiet=True)
+    err = np.linalg.norm(res.vertices - meshes, axis=2)
+    # Vertices whose sewing weights only involve bundles that chose the shape are exact.
+    assert np.median(err) < 1e-5, np.median(err)
+
+
+def test_save_load_round_trip_gives_identical_results(tmp_path: Path, sample, sample_model, solved):  # type: ignore[no-untyped-def]
+    path = tmp_path / "sample.lgi"
+    sample_model.save(path)
+    loaded = lgi.Model.load(path)
+    res = loaded.solve(sample.performance[:10], quiet=True)
+    np.testing.assert_array_equal(res.vertices, solved.vertices[:10])
+
+
+def test_corrupt_truncated_and_foreign_model_files_raise_model_format_error(tmp_path: Path, sample_model):  # type: ignore[no-untyped-def]
+    path = tmp_path / "m.lgi"
+    sample_model.save(path)
+    data = path.read_bytes()
+    bad = tmp_path / "bad.lgi"
+    bad.write_bytes(data[: len(data) // 2])
+    with pytest.raises(lgi.ModelFormatError, match="truncated"):
+        lgi.Model.load(bad)
+    flipped = bytearray(data)
+    flipped[len(data) // 2] ^= 0xFF
+    bad.write_bytes(bytes(flipped))
+    with pytest.raises(lgi.ModelFormatError, match="checksum"):
+        lgi.Model.load(bad)
+    bad.write_bytes(b"solid cube\nfacet normal 0 0 1\n")
+    with pytest.raises(lgi.ModelFormatError, match="not an lgi model"):
+        lgi.Model.load(bad)
+    with pytest.raises(lgi.DatasetFileError, match="nope.lgi"):
+        lgi.Model.load(tmp_path / "nope.lgi")
+
+
+def test_frames_of_wrong_shape_or_dtype_raise_input_error_naming_frames(sample, sample_model):  # type: ignore[no-untyped-def]
+    with pytest.raises(lgi.InputError, match="frames"):
+        sample_model.solve(np.zeros((3, 5, 3)))
+    with pytest.raises(lgi.InputError, match="dtype"):
+        sample_model.solve(np.zeros((3, sample_model.num_bundles, 3), dtype=np.int32))
+    inf = sample.performance[:2].copy()
+    inf[1, 4, 0] = np.inf
+    with pytest.raises(lgi.InputError, match=r"frame 1, bundle 4"):
+        sample_model.solve(inf)
+
+
+def test_too_many_missing_markers_raise_input_error_naming_the_frame(sample, sample_model):  # type: ignore[no-untyped-def]
+    frames = sample.performance[:3].copy()
+    frames[2, 2:] = np.nan
+    with pytest.raises(lgi.InputError, match="frame 2"):
+        sample_model.solve(frames)
+
+
+def test_marker_far_from_surface_raises_marker_error_naming_it(sample, sample_dataset):  # type: ignore[no-untyped-def]
+    markers = sample.markers_rest.copy()
+    markers[7] += np.array([0.0, 0.0, 5.0])
+    with pytest.raises(lgi.MarkerError, match="marker 7"):
+        lgi.Model.build(sample_dataset, markers)
+
+
+def test_bad_build_config_raises_input_error_naming_the_field(sample, sample_dataset):  # type: ignore[no-untyped-def]
+    with pytest.raises(lgi.InputError, match="surface_tolerance"):
+        lgi.Model.build(
+            sample_dataset, sample.markers_rest, lgi.BuildConfig(surface_tolerance=-1.0)
+        )
+
+
+def test_inputs_are_not_modified(sample, sample_model):  # type: ignore[no-untyped-def]
+    frames = sample.performance[:5].copy()
+    before = frames.copy()
+    sample_model.solve(frames, quiet=True)
+    np.testing.assert_array_equal(frames, before)
