@@ -9,7 +9,11 @@ use pyo3::prelude::*;
 
 /// Reads any float32/float64 array-like of exactly `shape` (`None` = any length on that
 /// axis) into a contiguous f64 `ArrayD`. `name` appears in every error message.
-pub fn float_array(obj: &Bound<'_, PyAny>, name: &str, shape: &[Option<usize>]) -> PyResult<ArrayD<f64>> {
+pub fn float_array(
+    obj: &Bound<'_, PyAny>,
+    name: &str,
+    shape: &[Option<usize>],
+) -> PyResult<ArrayD<f64>> {
     let py = obj.py();
     let np = py.import("numpy")?;
     // np.asarray does not copy arrays that are already ndarrays; it turns lists into arrays.
@@ -26,7 +30,10 @@ pub fn float_array(obj: &Bound<'_, PyAny>, name: &str, shape: &[Option<usize>]) 
         .map_err(|_| input_error(format!("{name}: not a numeric array")))?;
     let got: Vec<usize> = arr.shape().to_vec();
     let ok = got.len() == shape.len()
-        && got.iter().zip(shape).all(|(g, want)| want.is_none_or(|w| w == *g));
+        && got
+            .iter()
+            .zip(shape)
+            .all(|(g, want)| want.is_none_or(|w| w == *g));
     if !ok {
         let want: Vec<String> = shape
             .iter()
@@ -43,12 +50,21 @@ pub fn float_array(obj: &Bound<'_, PyAny>, name: &str, shape: &[Option<usize>]) 
 
 /// An `(N, 3)` float array as points; `allow_nan` lets NaN through (missing markers) but
 /// never infinities. `name` appears in error messages with the offending row.
-pub fn points(obj: &Bound<'_, PyAny>, name: &str, rows: Option<usize>, allow_nan: bool) -> PyResult<Vec<DVec3>> {
+pub fn points(
+    obj: &Bound<'_, PyAny>,
+    name: &str,
+    rows: Option<usize>,
+    allow_nan: bool,
+) -> PyResult<Vec<DVec3>> {
     let a = float_array(obj, name, &[rows, Some(3)])?;
     let mut out = Vec::with_capacity(a.shape()[0]);
     for (i, r) in a.outer_iter().enumerate() {
         let p = DVec3::new(r[0], r[1], r[2]);
-        let bad = if allow_nan { p.is_finite() || p.is_nan() } else { p.is_finite() };
+        let bad = if allow_nan {
+            p.is_finite() || p.is_nan()
+        } else {
+            p.is_finite()
+        };
         if !bad {
             return Err(input_error(format!(
                 "{name}: row {i} has a non-finite coordinate [{}, {}, {}]",
@@ -61,7 +77,10 @@ pub fn points(obj: &Bound<'_, PyAny>, name: &str, rows: Option<usize>, allow_nan
 }
 
 /// Points as a new `(N, 3)` float64 array.
-pub fn points_to_array<'py>(py: Python<'py>, pts: &[DVec3]) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
+pub fn points_to_array<'py>(
+    py: Python<'py>,
+    pts: &[DVec3],
+) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
     let flat: Vec<f64> = pts.iter().flat_map(|p| [p.x, p.y, p.z]).collect();
     flat_to_array(py, flat, &[pts.len(), 3])
 }
@@ -75,4 +94,60 @@ pub fn flat_to_array<'py, T: numpy::Element>(
     ArrayD::from_shape_vec(IxDyn(shape), flat)
         .map(|a| a.into_pyarray(py))
         .map_err(|e| pyo3::exceptions::PyRuntimeError::new_err(format!("internal: {e}")))
+}
+
+/// Reads an integer array-like of shape `(N, cols)` (any signed or unsigned integer dtype)
+/// into a flat row-major `Vec<u32>` of `N * cols` indices. Negative values and values above
+/// `u32::MAX` are errors naming `name` and the row; `name` appears in every message.
+pub fn index_array(obj: &Bound<'_, PyAny>, name: &str, cols: usize) -> PyResult<Vec<u32>> {
+    let py = obj.py();
+    let np = py.import("numpy")?;
+    let arr = np.call_method1("asarray", (obj,))?;
+    let kind: String = arr.getattr("dtype")?.getattr("kind")?.extract()?;
+    let dtype: String = arr.getattr("dtype")?.getattr("name")?.extract()?;
+    if kind != "i" && kind != "u" {
+        return Err(input_error(format!(
+            "{name}: expected an integer array, got dtype {dtype}"
+        )));
+    }
+    let shape: Vec<usize> = arr.getattr("shape")?.extract()?;
+    if shape.len() != 2 || shape[1] != cols {
+        return Err(input_error(format!(
+            "{name}: expected shape (N, {cols}), got {shape:?}"
+        )));
+    }
+    // uint64 does not fit int64: read it as such; every other integer dtype fits int64.
+    let wide: Vec<i128> = if dtype == "uint64" {
+        let a = arr.call_method1("astype", ("uint64",))?;
+        let a = a
+            .cast::<PyArrayDyn<u64>>()
+            .map_err(|_| input_error(format!("{name}: not a numeric array")))?;
+        a.readonly()
+            .as_array()
+            .iter()
+            .map(|&x| i128::from(x))
+            .collect()
+    } else {
+        let a = arr.call_method1("astype", ("int64",))?;
+        let a = a
+            .cast::<PyArrayDyn<i64>>()
+            .map_err(|_| input_error(format!("{name}: not a numeric array")))?;
+        a.readonly()
+            .as_array()
+            .iter()
+            .map(|&x| i128::from(x))
+            .collect()
+    };
+    wide.iter()
+        .enumerate()
+        .map(|(i, &x)| {
+            u32::try_from(x).map_err(|_| {
+                input_error(format!(
+                    "{name}: row {} has index {x}, outside [0, {}]",
+                    i / cols,
+                    u32::MAX
+                ))
+            })
+        })
+        .collect()
 }

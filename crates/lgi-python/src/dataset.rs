@@ -1,9 +1,24 @@
-//! `lgi.Dataset`: the neutral mesh and its shapes, loaded by the core's readers.
+//! `lgi.Dataset`: the neutral mesh and its shapes, loaded by the core's readers (OBJ, glTF),
+//! from numpy arrays, or from an `.npz` archive. File reading runs with the GIL released.
 
-use crate::convert::{flat_to_array, points_to_array};
+use crate::convert::{flat_to_array, float_array, index_array, points, points_to_array};
+use crate::error::{input_error, lgi_exception, PyLgiError, PyLgiResult};
+use lgi_core::{DVec2, LgiError, Mesh};
 use numpy::PyArrayDyn;
 use pyo3::prelude::*;
+use pyo3::types::{PyDict, PyString};
+use std::path::{Path, PathBuf};
 use std::sync::Arc;
+
+/// Keys of the `.npz` layout read by `from_npz` and written by `to_npz`.
+const NPZ_KEYS: [&str; 6] = [
+    "neutral",
+    "triangles",
+    "shapes",
+    "names",
+    "uvs",
+    "uv_triangles",
+];
 
 /// Neutral mesh plus S shapes (displacements). Immutable; cheap to share.
 #[pyclass(frozen, module = "lgi._lgi")]
@@ -13,6 +28,97 @@ pub struct Dataset {
 
 #[pymethods]
 impl Dataset {
+    /// Loads a neutral OBJ and shape OBJs (same vertex order as the neutral; only their
+    /// `v` lines are read). `shapes` is a glob pattern (str or path; matches are sorted), a
+    /// sequence of paths, or None for no shapes. Shapes are named after their file stems.
+    #[staticmethod]
+    #[pyo3(signature = (neutral, shapes = None))]
+    fn from_obj(
+        py: Python<'_>,
+        neutral: PathBuf,
+        shapes: Option<&Bound<'_, PyAny>>,
+    ) -> PyResult<Dataset> {
+        let shape_paths = match shapes {
+            None => Vec::new(),
+            Some(s) => shape_files(s)?,
+        };
+        let d: PyLgiResult<_> = py
+            .detach(|| lgi_core::Dataset::from_obj_files(&neutral, &shape_paths))
+            .map_err(PyLgiError);
+        let d = d?;
+        Ok(Dataset { inner: Arc::new(d) })
+    }
+
+    /// Loads the first mesh of a glTF/GLB file; its morph targets are the shapes.
+    #[staticmethod]
+    fn from_gltf(py: Python<'_>, path: PathBuf) -> PyResult<Dataset> {
+        let d = py
+            .detach(|| lgi_core::io::gltf::read_gltf(&path))
+            .map_err(PyLgiError)?;
+        Ok(Dataset { inner: Arc::new(d) })
+    }
+
+    /// A dataset from arrays: `neutral` (V, 3) float, `triangles` (T, 3) int, `shapes`
+    /// (S, V, 3) float displacements or None, `names` (S strings; default `shape{k}`),
+    /// `uvs` (U, 2) float with `uv_triangles` (T, 3) int indexing it (both or neither).
+    #[staticmethod]
+    #[pyo3(signature = (neutral, triangles, shapes = None, names = None, uvs = None, uv_triangles = None))]
+    fn from_arrays(
+        py: Python<'_>,
+        neutral: &Bound<'_, PyAny>,
+        triangles: &Bound<'_, PyAny>,
+        shapes: Option<&Bound<'_, PyAny>>,
+        names: Option<&Bound<'_, PyAny>>,
+        uvs: Option<&Bound<'_, PyAny>>,
+        uv_triangles: Option<&Bound<'_, PyAny>>,
+    ) -> PyResult<Dataset> {
+        build(py, neutral, triangles, shapes, names, uvs, uv_triangles)
+    }
+
+    /// Loads an `.npz` archive (read with `allow_pickle=False`) with the arrays `neutral`
+    /// (V, 3) float, `triangles` (T, 3) int, and optionally `shapes` (S, V, 3) float
+    /// displacements, `names` (S,) str, `uvs` (U, 2) float and `uv_triangles` (T, 3) int
+    /// (empty `uvs`/`uv_triangles` mean no UVs). The layout written by `to_npz`.
+    #[staticmethod]
+    fn from_npz(py: Python<'_>, path: PathBuf) -> PyResult<Dataset> {
+        let np = py.import("numpy")?;
+        let kwargs = PyDict::new(py);
+        kwargs.set_item("allow_pickle", false)?;
+        let npz = np
+            .call_method("load", (&path,), Some(&kwargs))
+            .map_err(|e| file_error(py, &path, &e))?;
+        if !npz.hasattr("files")? {
+            return Err(dataset_error(
+                &path,
+                "not an .npz archive (a single .npy array?)",
+            ));
+        }
+        let result = read_npz(py, &path, &npz);
+        // The archive holds an open file: close it whatever happened.
+        let closed = npz.call_method0("close");
+        let d = result?;
+        closed?;
+        Ok(d)
+    }
+
+    /// Writes the dataset as a compressed `.npz` archive with the keys read by `from_npz`
+    /// (numpy appends `.npz` to `path` when it has no such suffix).
+    fn to_npz(&self, py: Python<'_>, path: PathBuf) -> PyResult<()> {
+        let np = py.import("numpy")?;
+        let kwargs = PyDict::new(py);
+        kwargs.set_item("neutral", self.neutral(py)?)?;
+        kwargs.set_item("triangles", self.triangles(py)?)?;
+        kwargs.set_item("shapes", self.shapes(py)?)?;
+        let names = np.call_method1("array", (self.names(),))?;
+        let names = names.call_method1("astype", ("str",))?;
+        kwargs.set_item("names", names)?;
+        kwargs.set_item("uvs", self.uvs(py)?)?;
+        kwargs.set_item("uv_triangles", self.uv_triangles(py)?)?;
+        np.call_method("savez_compressed", (&path,), Some(&kwargs))
+            .map_err(|e| file_error(py, &path, &e))?;
+        Ok(())
+    }
+
     /// Number of vertices V.
     #[getter]
     fn num_vertices(&self) -> usize {
@@ -41,7 +147,11 @@ impl Dataset {
     #[getter]
     fn shapes<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArrayDyn<f32>>> {
         let d = &self.inner;
-        flat_to_array(py, d.displacements().to_vec(), &[d.num_shapes(), d.num_vertices(), 3])
+        flat_to_array(
+            py,
+            d.displacements().to_vec(),
+            &[d.num_shapes(), d.num_vertices(), 3],
+        )
     }
 
     /// Triangles, (T, 3) int64.
@@ -76,4 +186,262 @@ impl Dataset {
             self.inner.neutral().triangles.len()
         )
     }
+}
+
+/// Expands the `shapes` argument of `from_obj`: a glob pattern (str or path-like) or a
+/// sequence of paths.
+fn shape_files(shapes: &Bound<'_, PyAny>) -> PyResult<Vec<PathBuf>> {
+    let is_pattern = shapes.is_instance_of::<PyString>() || shapes.try_iter().is_err();
+    if !is_pattern {
+        let mut out = Vec::new();
+        for (i, item) in shapes.try_iter()?.enumerate() {
+            let item = item?;
+            out.push(item.extract::<PathBuf>().map_err(|_| {
+                input_error(format!(
+                    "shapes[{i}]: expected a str or os.PathLike, got {}",
+                    type_name(&item)
+                ))
+            })?);
+        }
+        return Ok(out);
+    }
+    let pattern: PathBuf = shapes.extract().map_err(|_| {
+        input_error(format!(
+            "shapes: expected a glob pattern, a sequence of paths or None, got {}",
+            type_name(shapes)
+        ))
+    })?;
+    let pattern = pattern.to_string_lossy().into_owned();
+    let entries = glob::glob(&pattern)
+        .map_err(|e| input_error(format!("shapes: bad glob pattern '{pattern}': {e}")))?;
+    let mut out = Vec::new();
+    for entry in entries {
+        out.push(entry.map_err(|e| {
+            lgi_exception(
+                "DatasetFileError",
+                format!("cannot read {}: {}", e.path().display(), e.error()),
+            )
+        })?);
+    }
+    if out.is_empty() {
+        return Err(lgi_exception(
+            "DatasetFileError",
+            format!("no shape file matches the pattern '{pattern}'"),
+        ));
+    }
+    out.sort();
+    Ok(out)
+}
+
+fn type_name(obj: &Bound<'_, PyAny>) -> String {
+    obj.get_type()
+        .name()
+        .map(|n| n.to_string())
+        .unwrap_or_else(|_| "?".into())
+}
+
+/// An `lgi.DatasetError` about `path`.
+fn dataset_error(path: &Path, msg: impl std::fmt::Display) -> PyErr {
+    lgi_exception("DatasetError", format!("{}: {msg}", path.display()))
+}
+
+/// Maps a numpy file error: OS errors become `lgi.DatasetFileError`, anything else (garbled
+/// archive, pickled data) `lgi.DatasetError`; both name the file.
+fn file_error(py: Python<'_>, path: &Path, e: &PyErr) -> PyErr {
+    let msg = e.value(py).to_string();
+    if e.is_instance_of::<pyo3::exceptions::PyOSError>(py) {
+        lgi_exception(
+            "DatasetFileError",
+            format!("cannot read {}: {msg}", path.display()),
+        )
+    } else {
+        dataset_error(path, format!("not a readable .npz archive: {msg}"))
+    }
+}
+
+fn read_npz(py: Python<'_>, path: &Path, npz: &Bound<'_, PyAny>) -> PyResult<Dataset> {
+    let files: Vec<String> = npz.getattr("files")?.extract()?;
+    let mut arrays: Vec<Option<Bound<'_, PyAny>>> = Vec::with_capacity(NPZ_KEYS.len());
+    for key in NPZ_KEYS {
+        if files.iter().any(|f| f == key) {
+            let a = npz
+                .get_item(key)
+                .map_err(|e| dataset_error(path, format!("array '{key}': {}", e.value(py))))?;
+            arrays.push(Some(a));
+        } else {
+            arrays.push(None);
+        }
+    }
+    for (key, a) in NPZ_KEYS.iter().zip(&arrays).take(2) {
+        if a.is_none() {
+            return Err(dataset_error(
+                path,
+                format!("missing array '{key}' (the archive has {files:?})"),
+            ));
+        }
+    }
+    let [neutral, triangles, shapes, names, mut uvs, mut uv_triangles]: [Option<Bound<'_, PyAny>>;
+        6] = arrays
+        .try_into()
+        .map_err(|_| pyo3::exceptions::PyRuntimeError::new_err("internal: npz keys"))?;
+    let empty = |a: &Option<Bound<'_, PyAny>>| -> PyResult<bool> {
+        Ok(match a {
+            Some(a) => a.getattr("size")?.extract::<usize>()? == 0,
+            None => true,
+        })
+    };
+    if empty(&uvs)? && empty(&uv_triangles)? {
+        uvs = None;
+        uv_triangles = None;
+    }
+    let (Some(neutral), Some(triangles)) = (neutral, triangles) else {
+        return Err(pyo3::exceptions::PyRuntimeError::new_err(
+            "internal: npz keys",
+        ));
+    };
+    let built = build(
+        py,
+        &neutral,
+        &triangles,
+        shapes.as_ref(),
+        names.as_ref(),
+        uvs.as_ref(),
+        uv_triangles.as_ref(),
+    );
+    // Bad content is a fault of the file, not of an argument: re-raise naming the file.
+    built.map_err(|e| {
+        let input = py
+            .import("lgi.errors")
+            .and_then(|m| m.getattr("InputError"))
+            .is_ok_and(|cls| e.is_instance(py, &cls));
+        if input {
+            dataset_error(path, e.value(py))
+        } else {
+            e
+        }
+    })
+}
+
+/// Checks and converts array arguments, then builds the core dataset with the GIL released.
+/// Every check failure is an `lgi.InputError` naming the argument.
+fn build(
+    py: Python<'_>,
+    neutral: &Bound<'_, PyAny>,
+    triangles: &Bound<'_, PyAny>,
+    shapes: Option<&Bound<'_, PyAny>>,
+    names: Option<&Bound<'_, PyAny>>,
+    uvs: Option<&Bound<'_, PyAny>>,
+    uv_triangles: Option<&Bound<'_, PyAny>>,
+) -> PyResult<Dataset> {
+    let positions = points(neutral, "neutral", None, false)?;
+    let v = positions.len();
+    let tris = triangle_rows(triangles, "triangles", v, "vertex")?;
+
+    let (displacements, s) = match shapes {
+        None => (Vec::new(), 0),
+        Some(obj) => {
+            let a = float_array(obj, "shapes", &[None, Some(v), Some(3)])?;
+            let s = a.shape()[0];
+            let flat: Vec<f32> = a.iter().map(|&x| x as f32).collect();
+            if let Some(i) = flat.iter().position(|x| !x.is_finite()) {
+                return Err(input_error(format!(
+                    "shapes: shape {}, vertex {} has a non-finite displacement (or one too \
+                     large for float32)",
+                    i / (3 * v.max(1)),
+                    (i / 3) % v.max(1)
+                )));
+            }
+            (flat, s)
+        }
+    };
+
+    let names: Vec<String> = match names {
+        None => (0..s).map(|k| format!("shape{k}")).collect(),
+        Some(obj) => {
+            let got: Vec<String> = if obj.is_instance_of::<PyString>() {
+                None
+            } else {
+                obj.call_method0("tolist")
+                    .ok()
+                    .unwrap_or_else(|| obj.clone())
+                    .extract()
+                    .ok()
+            }
+            .ok_or_else(|| {
+                input_error(format!(
+                    "names: expected a sequence of {s} strings, got {}",
+                    type_name(obj)
+                ))
+            })?;
+            if got.len() != s {
+                return Err(input_error(format!(
+                    "names: {} names for {s} shapes",
+                    got.len()
+                )));
+            }
+            got
+        }
+    };
+
+    let (uv_points, uv_tris) = match (uvs, uv_triangles) {
+        (None, None) => (Vec::new(), Vec::new()),
+        (Some(u), Some(ut)) => {
+            let a = float_array(u, "uvs", &[None, Some(2)])?;
+            let mut pts = Vec::with_capacity(a.shape()[0]);
+            for (i, r) in a.outer_iter().enumerate() {
+                let p = DVec2::new(r[0], r[1]);
+                if !p.is_finite() {
+                    return Err(input_error(format!(
+                        "uvs: row {i} has a non-finite coordinate [{}, {}]",
+                        p.x, p.y
+                    )));
+                }
+                pts.push(p);
+            }
+            let ut = triangle_rows(ut, "uv_triangles", pts.len(), "UV")?;
+            if ut.len() != tris.len() {
+                return Err(input_error(format!(
+                    "uv_triangles: {} rows for {} triangles",
+                    ut.len(),
+                    tris.len()
+                )));
+            }
+            (pts, ut)
+        }
+        (Some(_), None) => return Err(input_error("uvs given without uv_triangles")),
+        (None, Some(_)) => return Err(input_error("uv_triangles given without uvs")),
+    };
+
+    let mesh = Mesh {
+        positions,
+        triangles: tris,
+        uvs: uv_points,
+        uv_triangles: uv_tris,
+    };
+    let d = py
+        .detach(|| lgi_core::Dataset::new(mesh, displacements, names))
+        .map_err(|e| match e {
+            // Everything came from the arguments, so a dataset inconsistency is bad input.
+            LgiError::Dataset(m) => PyLgiError(LgiError::Input(m)),
+            other => PyLgiError(other),
+        })?;
+    Ok(Dataset { inner: Arc::new(d) })
+}
+
+/// `(T, 3)` index rows, each index below `count` (`what` names the indexed element).
+fn triangle_rows(
+    obj: &Bound<'_, PyAny>,
+    name: &str,
+    count: usize,
+    what: &str,
+) -> PyResult<Vec<[u32; 3]>> {
+    let flat = index_array(obj, name, 3)?;
+    if let Some(i) = flat.iter().position(|&x| x as usize >= count) {
+        return Err(input_error(format!(
+            "{name}: row {} refers to {what} {} but there are {count}",
+            i / 3,
+            flat[i]
+        )));
+    }
+    Ok(flat.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect())
 }

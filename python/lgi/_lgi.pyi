@@ -1,0 +1,62 @@
+"""Type stubs for the compiled extension ``lgi._lgi`` (users import ``lgi``)."""
+
+import os
+from collections.abc import Sequence
+from typing import final
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+__all__ = ["Dataset", "__version__"]
+
+__version__: str
+
+_Path = str | os.PathLike[str]
+
+@final
+class Dataset:
+    """Neutral mesh plus S shapes (displacements). Immutable; cheap to share."""
+
+    @staticmethod
+    def from_obj(neutral: _Path, shapes: _Path | Sequence[_Path] | None = None) -> Dataset:
+        """Neutral OBJ plus shape OBJs: a glob pattern (sorted matches), paths, or None."""
+    @staticmethod
+    def from_gltf(path: _Path) -> Dataset:
+        """First mesh of a glTF/GLB file; morph targets are the shapes."""
+    @staticmethod
+    def from_arrays(
+        neutral: ArrayLike,
+        triangles: ArrayLike,
+        shapes: ArrayLike | None = None,
+        names: Sequence[str] | None = None,
+        uvs: ArrayLike | None = None,
+        uv_triangles: ArrayLike | None = None,
+    ) -> Dataset:
+        """neutral (V, 3) float, triangles (T, 3) int, shapes (S, V, 3) float displacements,
+        names (S,), uvs (U, 2) float and uv_triangles (T, 3) int (both or neither)."""
+    @staticmethod
+    def from_npz(path: _Path) -> Dataset:
+        """An archive with keys neutral, triangles[, shapes, names, uvs, uv_triangles]."""
+    def to_npz(self, path: _Path) -> None:
+        """Writes the keys read by ``from_npz`` (numpy appends ``.npz`` if missing)."""
+    @property
+    def num_vertices(self) -> int: ...
+    @property
+    def num_shapes(self) -> int: ...
+    @property
+    def names(self) -> list[str]: ...
+    @property
+    def neutral(self) -> NDArray[np.float64]:
+        """(V, 3) neutral positions."""
+    @property
+    def shapes(self) -> NDArray[np.float32]:
+        """(S, V, 3) displacements."""
+    @property
+    def triangles(self) -> NDArray[np.int64]:
+        """(T, 3) vertex indices."""
+    @property
+    def uvs(self) -> NDArray[np.float64]:
+        """(U, 2) UV coordinates."""
+    @property
+    def uv_triangles(self) -> NDArray[np.int64]:
+        """(T, 3) UV indices (empty when the mesh has no UVs)."""
