@@ -280,12 +280,12 @@ impl Model {
         let mut present = Vec::with_capacity(b);
         let mut targets_clean = targets.to_vec();
         for (i, t) in targets.iter().enumerate() {
-            if t.is_nan() {
-                targets_clean[i] = DVec3::NAN;
-            } else if !t.is_finite() {
+            if t.to_array().iter().any(|x| x.is_infinite()) {
                 return Err(LgiError::Input(format!(
                     "bundle {i} has an infinite coordinate {t:?}"
                 )));
+            } else if t.is_nan() {
+                targets_clean[i] = DVec3::NAN;
             } else {
                 present.push(i as u32);
             }

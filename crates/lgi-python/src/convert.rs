@@ -60,12 +60,10 @@ pub fn points(
     let mut out = Vec::with_capacity(a.shape()[0]);
     for (i, r) in a.outer_iter().enumerate() {
         let p = DVec3::new(r[0], r[1], r[2]);
-        let bad = if allow_nan {
-            p.is_finite() || p.is_nan()
-        } else {
-            p.is_finite()
-        };
-        if !bad {
+        // NaN (a missing marker) is allowed only when asked; infinity never.
+        let has_inf = p.to_array().iter().any(|x| x.is_infinite());
+        let ok = !has_inf && (p.is_finite() || (allow_nan && p.is_nan()));
+        if !ok {
             return Err(input_error(format!(
                 "{name}: row {i} has a non-finite coordinate [{}, {}, {}]",
                 p.x, p.y, p.z

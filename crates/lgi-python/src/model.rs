@@ -55,7 +55,7 @@ fn frames_from(obj: &Bound<'_, PyAny>, b: usize) -> PyResult<Vec<Vec<DVec3>>> {
         let mut row = Vec::with_capacity(b);
         for (i, r) in fr.outer_iter().enumerate() {
             let p = DVec3::new(r[0], r[1], r[2]);
-            if p.is_nan() || p.is_finite() {
+            if !p.to_array().iter().any(|x| x.is_infinite()) {
                 row.push(if p.is_nan() { DVec3::NAN } else { p });
             } else {
                 return Err(input_error(format!(
