@@ -1,6 +1,6 @@
 //! The whole per-bundle indexing path (cloud → tets → grid) against brute force on clouds of
 //! realistic size, plus an ignored measurement run (`--ignored --nocapture`, release) that
-//! prints sizes and timings for a 300-point cloud.
+//! prints sizes and timings for 300-point clouds (and a 58-point one).
 
 use std::time::Instant;
 
@@ -166,6 +166,8 @@ fn measure_300_point_cloud() {
     for (name, positions) in [
         ("blend", blend_positions(300, 1)),
         ("uniform", uniform_positions(300, 2)),
+        // The size of an ICT-like dataset (57 shapes + neutral).
+        ("blend-58", blend_positions(58, 3)),
     ] {
         let cfg = TetConfig::default();
         let cloud = build_cloud(&positions, 1e-3, 1e-4).unwrap();
