@@ -225,7 +225,7 @@ impl Model {
             .par_iter()
             .zip(tets)
             .map(|(c, t)| TetIndex::new(c.points.clone(), t))
-            .collect();
+            .collect::<Result<_>>()?;
         let space = uvspace::build(mesh, &bundles)?;
         let neighbours = SibsonWeights::new(&space.bundle_uv, &space.barriers)
             .map_err(|e| bundle_context(e, "bundle UV layout"))?
