@@ -34,8 +34,12 @@ pub fn recipes(names: &[String], min_shapes: usize) -> Vec<Recipe> {
         }
     }
     let has = |n: &str, p: &[&str]| p.iter().any(|q| n.starts_with(q));
-    let upper: Vec<usize> = (0..names.len()).filter(|&k| has(&names[k], &UPPER)).collect();
-    let lower: Vec<usize> = (0..names.len()).filter(|&k| has(&names[k], &LOWER)).collect();
+    let upper: Vec<usize> = (0..names.len())
+        .filter(|&k| has(&names[k], &UPPER))
+        .collect();
+    let lower: Vec<usize> = (0..names.len())
+        .filter(|&k| has(&names[k], &LOWER))
+        .collect();
     // Interleave so a truncated list still spans many upper and lower shapes.
     let mut pairs: Vec<(usize, usize)> = Vec::new();
     for d in 0..lower.len() {
@@ -62,7 +66,9 @@ pub fn recipes(names: &[String], min_shapes: usize) -> Vec<Recipe> {
 /// enough pairs). The neutral and topology are shared with `dataset`.
 pub fn augment(dataset: &Dataset, min_shapes: usize) -> Result<Dataset> {
     if dataset.num_shapes() == 0 {
-        return Err(LgiError::Dataset("cannot augment a dataset without shapes".into()));
+        return Err(LgiError::Dataset(
+            "cannot augment a dataset without shapes".into(),
+        ));
     }
     let rec = recipes(dataset.names(), min_shapes);
     let n3 = dataset.num_vertices() * 3;
@@ -90,8 +96,12 @@ mod tests {
             .collect();
         let r = recipes(&names, 30);
         assert_eq!(r[0], ("browDown_L".to_string(), vec![(0, 1.0)]));
-        assert!(r.iter().any(|(n, t)| n == "jawOpen@0.5" && t == &vec![(2, 0.5)]));
-        assert!(r.iter().any(|(n, t)| n == "browDown_LR" && t == &vec![(0, 1.0), (1, 1.0)]));
+        assert!(r
+            .iter()
+            .any(|(n, t)| n == "jawOpen@0.5" && t == &vec![(2, 0.5)]));
+        assert!(r
+            .iter()
+            .any(|(n, t)| n == "browDown_LR" && t == &vec![(0, 1.0), (1, 1.0)]));
         assert!(r.iter().any(|(n, _)| n == "browDown_L+jawOpen"));
         // 4 + 12 + 1 + all 6 distinct pairs (one repeats the _LR sum under another name).
         assert_eq!(r.len(), 4 + 12 + 1 + 6);

@@ -106,12 +106,15 @@ impl Default for ChoiceParams {
     }
 }
 
+/// A scored candidate: (score, tet, cloud points, weights, distance to the target).
+type Scored = (f64, u32, [u32; 4], [f64; 4], f64);
+
 /// Reusable buffers of one worker.
 #[derive(Default)]
 pub struct Scratch {
     inside: Vec<(u32, [f64; 4])>,
     nearest: Vec<(u32, [f64; 4], f64)>,
-    scored: Vec<(f64, u32, [u32; 4], [f64; 4], f64)>,
+    scored: Vec<Scored>,
 }
 
 fn clean_weights(l: [f64; 4]) -> [f64; 4] {
@@ -188,7 +191,12 @@ pub fn choose(
 
 /// Greedy per-vertex alias choice: each point with weight takes the alias that minimises the
 /// neighbour error with the others fixed. Ties keep the lowest shape id (deterministic).
-fn refine_aliases(cloud: &BundleCloud, tet: &[u32; 4], w: &[f64; 4], scoring: &Scoring<'_>) -> [u32; 4] {
+fn refine_aliases(
+    cloud: &BundleCloud,
+    tet: &[u32; 4],
+    w: &[f64; 4],
+    scoring: &Scoring<'_>,
+) -> [u32; 4] {
     let mut shapes = tet.map(|p| cloud.aliases[p as usize][0]);
     for j in 0..4 {
         let aliases = &cloud.aliases[tet[j] as usize];
@@ -215,7 +223,7 @@ fn lower_simplices(
     cloud: &BundleCloud,
     target: DVec3,
     scoring: &Scoring<'_>,
-    out: &mut Vec<(f64, u32, [u32; 4], [f64; 4], f64)>,
+    out: &mut Vec<Scored>,
 ) {
     let pts = &cloud.points;
     let n = pts.len().min(24);
@@ -234,7 +242,11 @@ fn lower_simplices(
             } else {
                 0.0
             };
-            push([a as u32, b as u32, b as u32, b as u32], [1.0 - t, t, 0.0, 0.0], pts[a] + ab * t);
+            push(
+                [a as u32, b as u32, b as u32, b as u32],
+                [1.0 - t, t, 0.0, 0.0],
+                pts[a] + ab * t,
+            );
             for c in (b + 1)..n {
                 let (q, bary) =
                     crate::geom::closest_point_on_triangle(target, pts[a], pts[b], pts[c]);

@@ -22,7 +22,10 @@ impl Lu {
                 a.len()
             )));
         }
-        let scale = a.iter().fold(0.0f64, |m, x| m.max(x.abs())).max(f64::MIN_POSITIVE);
+        let scale = a
+            .iter()
+            .fold(0.0f64, |m, x| m.max(x.abs()))
+            .max(f64::MIN_POSITIVE);
         let mut perm: Vec<usize> = (0..n).collect();
         for k in 0..n {
             let (p, pv) = (k..n)
@@ -63,25 +66,25 @@ impl Lu {
         let n = self.n;
         let mut x: Vec<[f64; 3]> = self.perm.iter().map(|&p| b[p]).collect();
         for r in 0..n {
-            let mut acc = x[r];
-            for c in 0..r {
-                let f = self.lu[r * n + c];
+            let (done, rest) = x.split_at_mut(r);
+            let row = &self.lu[r * n..r * n + r];
+            for (f, xc) in row.iter().zip(done.iter()) {
                 for d in 0..3 {
-                    acc[d] -= f * x[c][d];
+                    rest[0][d] -= f * xc[d];
                 }
             }
-            x[r] = acc;
         }
         for r in (0..n).rev() {
-            let mut acc = x[r];
-            for c in (r + 1)..n {
-                let f = self.lu[r * n + c];
+            let (head, tail) = x.split_at_mut(r + 1);
+            let row = &self.lu[r * n + r + 1..(r + 1) * n];
+            let acc = &mut head[r];
+            for (f, xc) in row.iter().zip(tail.iter()) {
                 for d in 0..3 {
-                    acc[d] -= f * x[c][d];
+                    acc[d] -= f * xc[d];
                 }
             }
             let piv = self.lu[r * n + r];
-            x[r] = [acc[0] / piv, acc[1] / piv, acc[2] / piv];
+            *acc = [acc[0] / piv, acc[1] / piv, acc[2] / piv];
         }
         x
     }

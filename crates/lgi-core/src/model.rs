@@ -64,7 +64,9 @@ impl BuildConfig {
     pub fn validate(&self) -> Result<()> {
         let pos = |name: &str, v: f64| {
             if v.is_nan() || v <= 0.0 {
-                Err(LgiError::Input(format!("BuildConfig.{name} must be > 0, got {v}")))
+                Err(LgiError::Input(format!(
+                    "BuildConfig.{name} must be > 0, got {v}"
+                )))
             } else {
                 Ok(())
             }
@@ -258,7 +260,12 @@ impl Model {
                 return Ok(p.clone());
             }
         }
-        let plan = Arc::new(make_plan(&self.dataset, &self.bundles, &self.space, present)?);
+        let plan = Arc::new(make_plan(
+            &self.dataset,
+            &self.bundles,
+            &self.space,
+            present,
+        )?);
         if let Ok(mut cache) = self.plans.lock() {
             if cache.len() >= PLAN_CACHE {
                 cache.clear();
@@ -314,10 +321,19 @@ impl Model {
                     num_bundles: b,
                     neighbours: &self.neighbours[i],
                     targets: &targets_clean,
-                    previous: previous.and_then(|p| p.choices.get(i)).and_then(|c| c.as_ref()),
+                    previous: previous
+                        .and_then(|p| p.choices.get(i))
+                        .and_then(|c| c.as_ref()),
                     temporal_weight,
                 };
-                Some(choose(&self.indices[i], &self.clouds[i], t, &scoring, &params, scratch))
+                Some(choose(
+                    &self.indices[i],
+                    &self.clouds[i],
+                    t,
+                    &scoring,
+                    &params,
+                    scratch,
+                ))
             })
             .collect();
         let plan = self.plan_for(&present)?;
@@ -408,7 +424,11 @@ impl Model {
             )));
         }
         let tris = &self.dataset.neutral().triangles;
-        Ok(self.bundles.iter().map(|sp| sp.evaluate(tris, positions)).collect())
+        Ok(self
+            .bundles
+            .iter()
+            .map(|sp| sp.evaluate(tris, positions))
+            .collect())
     }
 
     /// The dataset the model was built from.
@@ -500,7 +520,9 @@ fn make_plan(
     weights.row_start.push(0);
     for v in 0..nv {
         let (cols, vals) = w_sewn.row(row_of[sp.proxy[v] as usize]);
-        weights.cols.extend(cols.iter().map(|&c| present[c as usize]));
+        weights
+            .cols
+            .extend(cols.iter().map(|&c| present[c as usize]));
         weights.vals.extend_from_slice(vals);
         weights.row_start.push(weights.cols.len() as u32);
     }
@@ -515,11 +537,14 @@ pub(crate) fn locate_bundles(
     config: &BuildConfig,
 ) -> Result<(Vec<SurfacePoint>, Vec<DVec3>)> {
     let mesh = dataset.neutral();
-    let bundles: Vec<SurfacePoint> =
-        correspond(mesh, markers_rest, config.surface_tolerance * mesh.diagonal())?
-            .into_iter()
-            .map(|(sp, _)| sp)
-            .collect();
+    let bundles: Vec<SurfacePoint> = correspond(
+        mesh,
+        markers_rest,
+        config.surface_tolerance * mesh.diagonal(),
+    )?
+    .into_iter()
+    .map(|(sp, _)| sp)
+    .collect();
     let positions = shape_bundle_positions(dataset, &bundles);
     Ok((bundles, positions))
 }
@@ -534,14 +559,14 @@ fn shape_bundle_positions(dataset: &Dataset, bundles: &[SurfacePoint]) -> Vec<DV
         for (i, sp) in bundles.iter().enumerate() {
             let tri = mesh.triangles[sp.triangle as usize];
             let mut p = DVec3::ZERO;
-            for c in 0..3 {
-                let v = tri[c] as usize;
+            for (&v, &w) in tri.iter().zip(&sp.bary) {
+                let v = v as usize;
                 let d = if k == 0 {
                     DVec3::ZERO
                 } else {
                     dataset.displacement(k - 1, v)
                 };
-                p += (mesh.positions[v] + d) * sp.bary[c];
+                p += (mesh.positions[v] + d) * w;
             }
             row[i] = p;
         }

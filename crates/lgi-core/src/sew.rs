@@ -24,32 +24,34 @@ pub fn blend(
     out: &mut [DVec3],
 ) {
     let nv = x0.len();
-    out.par_chunks_mut(CHUNK).enumerate().for_each(|(c, chunk)| {
-        let base = c * CHUNK;
-        for (o, x) in chunk.iter_mut().enumerate() {
-            let v = base + o;
-            let (cols, vals) = weights.row(v);
-            let mut d = [0.0f64; 3];
-            for (&b, &w) in cols.iter().zip(vals) {
-                let Some(ch) = &choices[b as usize] else {
-                    continue;
-                };
-                for j in 0..4 {
-                    let k = ch.shapes[j] as usize;
-                    let a = ch.weights[j];
-                    if k == 0 || a == 0.0 {
+    out.par_chunks_mut(CHUNK)
+        .enumerate()
+        .for_each(|(c, chunk)| {
+            let base = c * CHUNK;
+            for (o, x) in chunk.iter_mut().enumerate() {
+                let v = base + o;
+                let (cols, vals) = weights.row(v);
+                let mut d = [0.0f64; 3];
+                for (&b, &w) in cols.iter().zip(vals) {
+                    let Some(ch) = &choices[b as usize] else {
                         continue;
+                    };
+                    for j in 0..4 {
+                        let k = ch.shapes[j] as usize;
+                        let a = ch.weights[j];
+                        if k == 0 || a == 0.0 {
+                            continue;
+                        }
+                        let s = &displacements[((k - 1) * nv + v) * 3..((k - 1) * nv + v) * 3 + 3];
+                        let f = w * a;
+                        d[0] += f * s[0] as f64;
+                        d[1] += f * s[1] as f64;
+                        d[2] += f * s[2] as f64;
                     }
-                    let s = &displacements[((k - 1) * nv + v) * 3..((k - 1) * nv + v) * 3 + 3];
-                    let f = w * a;
-                    d[0] += f * s[0] as f64;
-                    d[1] += f * s[1] as f64;
-                    d[2] += f * s[2] as f64;
                 }
+                *x = x0[v] + DVec3::from_array(d);
             }
-            *x = x0[v] + DVec3::from_array(d);
-        }
-    });
+        });
 }
 
 /// The exact residual correction for one set of present bundles.
@@ -80,12 +82,12 @@ impl ResidualPass {
         for (row, &a) in present.iter().enumerate() {
             let sp = bundles[a as usize];
             let tri = triangles[sp.triangle as usize];
-            for c in 0..3 {
-                let (cols, vals) = weights.row(tri[c] as usize);
+            for (&v, &bary) in tri.iter().zip(&sp.bary) {
+                let (cols, vals) = weights.row(v as usize);
                 for (&b, &w) in cols.iter().zip(vals) {
                     let s = slot[b as usize];
                     if s != u32::MAX {
-                        m[row * n + s as usize] += sp.bary[c] * w;
+                        m[row * n + s as usize] += bary * w;
                     }
                 }
             }

@@ -83,7 +83,10 @@ pub fn build(mesh: &Mesh, bundles: &[SurfacePoint]) -> Result<SewingSpace> {
             }
             let (a, b) = (tri[c], tri[(c + 1) % 3]);
             let key = (a.min(b), a.max(b));
-            let seg = [mesh.uvs[uvt[c] as usize], mesh.uvs[uvt[(c + 1) % 3] as usize]];
+            let seg = [
+                mesh.uvs[uvt[c] as usize],
+                mesh.uvs[uvt[(c + 1) % 3] as usize],
+            ];
             edge_count.entry(key).or_insert((0, seg)).0 += 1;
         }
     }
@@ -191,10 +194,14 @@ mod tests {
     fn proxies_equal_brute_force_nearest() {
         let mut s = 7u64;
         let mut rnd = || {
-            s = s.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            s = s
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
             (s >> 11) as f64 / (1u64 << 53) as f64
         };
-        let pos: Vec<DVec3> = (0..600).map(|_| DVec3::new(rnd(), rnd(), rnd() * 0.3)).collect();
+        let pos: Vec<DVec3> = (0..600)
+            .map(|_| DVec3::new(rnd(), rnd(), rnd() * 0.3))
+            .collect();
         let in_space: Vec<bool> = pos.iter().map(|p| p.x < 0.6).collect();
         let inside: Vec<u32> = (0..600).filter(|&v| in_space[v as usize]).collect();
         let got = proxies(&pos, &in_space, &inside);
@@ -207,7 +214,8 @@ mod tests {
                 .iter()
                 .copied()
                 .min_by(|&a, &b| {
-                    pos[v].distance_squared(pos[a as usize])
+                    pos[v]
+                        .distance_squared(pos[a as usize])
                         .total_cmp(&pos[v].distance_squared(pos[b as usize]))
                         .then(a.cmp(&b))
                 })

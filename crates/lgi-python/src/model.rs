@@ -28,7 +28,9 @@ fn config_from_dict(d: Option<&Bound<'_, PyDict>>) -> PyResult<BuildConfig> {
         };
         let u = |v: &Bound<'_, PyAny>| -> PyResult<usize> {
             v.extract::<usize>().map_err(|_| {
-                input_error(format!("BuildConfig.{key}: expected a non-negative integer, got {v}"))
+                input_error(format!(
+                    "BuildConfig.{key}: expected a non-negative integer, got {v}"
+                ))
             })
         };
         match key.as_str() {
@@ -231,8 +233,14 @@ impl Model {
         let st = self.inner.bundle_stats();
         let d = PyDict::new(py);
         let n = st.len();
-        d.set_item("points", flat_to_array(py, st.iter().map(|s| s.points as i64).collect(), &[n])?)?;
-        d.set_item("tets", flat_to_array(py, st.iter().map(|s| s.tets as i64).collect(), &[n])?)?;
+        d.set_item(
+            "points",
+            flat_to_array(py, st.iter().map(|s| s.points as i64).collect(), &[n])?,
+        )?;
+        d.set_item(
+            "tets",
+            flat_to_array(py, st.iter().map(|s| s.tets as i64).collect(), &[n])?,
+        )?;
         d.set_item(
             "index_bytes",
             flat_to_array(py, st.iter().map(|s| s.index_bytes as i64).collect(), &[n])?,
@@ -245,8 +253,18 @@ impl Model {
         let w = self.inner.sew_weights();
         let d = PyDict::new(py);
         let n = w.row_start.len();
-        d.set_item("indptr", flat_to_array(py, w.row_start.iter().map(|&x| x as i64).collect(), &[n])?)?;
-        d.set_item("indices", flat_to_array(py, w.cols.iter().map(|&x| x as i64).collect(), &[w.cols.len()])?)?;
+        d.set_item(
+            "indptr",
+            flat_to_array(py, w.row_start.iter().map(|&x| x as i64).collect(), &[n])?,
+        )?;
+        d.set_item(
+            "indices",
+            flat_to_array(
+                py,
+                w.cols.iter().map(|&x| x as i64).collect(),
+                &[w.cols.len()],
+            )?,
+        )?;
         d.set_item("data", flat_to_array(py, w.vals.clone(), &[w.vals.len()])?)?;
         Ok(d)
     }
@@ -256,21 +274,25 @@ impl Model {
         self.inner.neighbours().to_vec()
     }
 
-    /// Bundles' closest points: (triangles (B,), barycentrics (B, 3)).
-    fn bundle_surface_points<'py>(
-        &self,
-        py: Python<'py>,
-    ) -> PyResult<(Bound<'py, PyArrayDyn<i64>>, Bound<'py, PyArrayDyn<f64>>)> {
+    /// Bundles' closest points: dict `triangles` (B,) and `barycentrics` (B, 3).
+    fn bundle_surface_points<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
         let bs = self.inner.bundles();
-        let t = flat_to_array(py, bs.iter().map(|b| b.triangle as i64).collect(), &[bs.len()])?;
-        let w = flat_to_array(py, bs.iter().flat_map(|b| b.bary).collect(), &[bs.len(), 3])?;
-        Ok((t, w))
+        let d = PyDict::new(py);
+        let t: Vec<i64> = bs.iter().map(|b| b.triangle as i64).collect();
+        d.set_item("triangles", flat_to_array(py, t, &[bs.len()])?)?;
+        let w: Vec<f64> = bs.iter().flat_map(|b| b.bary).collect();
+        d.set_item("barycentrics", flat_to_array(py, w, &[bs.len(), 3])?)?;
+        Ok(d)
     }
 
     /// Bundles' UV positions (B, 2) in the sewing space.
     fn bundle_uvs<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
         let uv = &self.inner.sewing_space().bundle_uv;
-        flat_to_array(py, uv.iter().flat_map(|p| [p.x, p.y]).collect(), &[uv.len(), 2])
+        flat_to_array(
+            py,
+            uv.iter().flat_map(|p| [p.x, p.y]).collect(),
+            &[uv.len(), 2],
+        )
     }
 
     /// Marker rest positions (B, 3).

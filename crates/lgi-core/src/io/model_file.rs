@@ -83,7 +83,9 @@ impl<'a> Reader<'a> {
     }
     fn u64(&mut self) -> Result<u64> {
         let b = self.take(8)?;
-        Ok(u64::from_le_bytes(b.try_into().map_err(|_| self.err("short u64"))?))
+        Ok(u64::from_le_bytes(
+            b.try_into().map_err(|_| self.err("short u64"))?,
+        ))
     }
     fn f64(&mut self) -> Result<f64> {
         Ok(f64::from_bits(self.u64()?))
@@ -91,7 +93,9 @@ impl<'a> Reader<'a> {
     /// A length prefix, checked against the bytes left so a corrupt count cannot allocate.
     fn len(&mut self, elem: usize) -> Result<usize> {
         let n = self.u64()? as usize;
-        if n.checked_mul(elem).is_none_or(|b| b > self.bytes.len() - self.at) {
+        if n.checked_mul(elem)
+            .is_none_or(|b| b > self.bytes.len() - self.at)
+        {
             return Err(self.err(&format!("length {n} exceeds the file")));
         }
         Ok(n)
@@ -125,14 +129,19 @@ impl<'a> Reader<'a> {
 }
 
 fn vec3s(v: &[DVec3]) -> impl ExactSizeIterator<Item = f64> + '_ {
-    v.iter().flat_map(|p| [p.x, p.y, p.z]).collect::<Vec<_>>().into_iter()
+    v.iter()
+        .flat_map(|p| [p.x, p.y, p.z])
+        .collect::<Vec<_>>()
+        .into_iter()
 }
 
 fn to_vec3s(r: &Reader<'_>, v: Vec<f64>) -> Result<Vec<DVec3>> {
     if v.len() % 3 != 0 {
         return Err(r.err("3D point array length not a multiple of 3"));
     }
-    Ok(v.chunks_exact(3).map(|c| DVec3::new(c[0], c[1], c[2])).collect())
+    Ok(v.chunks_exact(3)
+        .map(|c| DVec3::new(c[0], c[1], c[2]))
+        .collect())
 }
 
 fn to_tris(r: &Reader<'_>, v: Vec<u32>) -> Result<Vec<[u32; 3]>> {
@@ -163,9 +172,29 @@ pub fn save(model: &Model, path: &Path) -> Result<()> {
     let d = model.dataset();
     let m = d.neutral();
     w.f64s(vec3s(&m.positions));
-    w.u32s(m.triangles.iter().flatten().copied().collect::<Vec<_>>().into_iter());
-    w.f64s(m.uvs.iter().flat_map(|p| [p.x, p.y]).collect::<Vec<_>>().into_iter());
-    w.u32s(m.uv_triangles.iter().flatten().copied().collect::<Vec<_>>().into_iter());
+    w.u32s(
+        m.triangles
+            .iter()
+            .flatten()
+            .copied()
+            .collect::<Vec<_>>()
+            .into_iter(),
+    );
+    w.f64s(
+        m.uvs
+            .iter()
+            .flat_map(|p| [p.x, p.y])
+            .collect::<Vec<_>>()
+            .into_iter(),
+    );
+    w.u32s(
+        m.uv_triangles
+            .iter()
+            .flatten()
+            .copied()
+            .collect::<Vec<_>>()
+            .into_iter(),
+    );
     w.u64(d.names().len() as u64);
     for n in d.names() {
         w.str(n);
@@ -178,7 +207,15 @@ pub fn save(model: &Model, path: &Path) -> Result<()> {
         for a in &cloud.aliases {
             w.u32s(a.iter().copied());
         }
-        w.u32s(index.tets().iter().flatten().copied().collect::<Vec<_>>().into_iter());
+        w.u32s(
+            index
+                .tets()
+                .iter()
+                .flatten()
+                .copied()
+                .collect::<Vec<_>>()
+                .into_iter(),
+        );
     }
     let payload = w.0;
     let mut out = Vec::with_capacity(HEADER + payload.len());
@@ -246,14 +283,26 @@ pub fn load(path: &Path) -> Result<Model> {
         max_tets: n[1],
         projection_candidates: n[2],
     };
-    let positions = { let v = r.f64s()?; to_vec3s(&r, v)? };
-    let triangles = { let v = r.u32s()?; to_tris(&r, v)? };
+    let positions = {
+        let v = r.f64s()?;
+        to_vec3s(&r, v)?
+    };
+    let triangles = {
+        let v = r.u32s()?;
+        to_tris(&r, v)?
+    };
     let uvs = r.f64s()?;
     if uvs.len() % 2 != 0 {
         return Err(r.err("UV array length not a multiple of 2"));
     }
-    let uvs = uvs.chunks_exact(2).map(|c| DVec2::new(c[0], c[1])).collect();
-    let uv_triangles = { let v = r.u32s()?; to_tris(&r, v)? };
+    let uvs = uvs
+        .chunks_exact(2)
+        .map(|c| DVec2::new(c[0], c[1]))
+        .collect();
+    let uv_triangles = {
+        let v = r.u32s()?;
+        to_tris(&r, v)?
+    };
     let mesh = Mesh {
         positions,
         triangles,
@@ -261,14 +310,22 @@ pub fn load(path: &Path) -> Result<Model> {
         uv_triangles,
     };
     let num_names = r.len(8)?;
-    let names = (0..num_names).map(|_| r.str()).collect::<Result<Vec<_>>>()?;
+    let names = (0..num_names)
+        .map(|_| r.str())
+        .collect::<Result<Vec<_>>>()?;
     let displacements = r.f32s()?;
     let dataset = Dataset::new(mesh, displacements, names).map_err(|e| bad(&e.to_string()))?;
-    let markers = { let v = r.f64s()?; to_vec3s(&r, v)? };
+    let markers = {
+        let v = r.f64s()?;
+        to_vec3s(&r, v)?
+    };
     let mut clouds = Vec::with_capacity(markers.len());
     let mut tets = Vec::with_capacity(markers.len());
     for i in 0..markers.len() {
-        let points = { let v = r.f64s()?; to_vec3s(&r, v)? };
+        let points = {
+            let v = r.f64s()?;
+            to_vec3s(&r, v)?
+        };
         let na = r.len(8)?;
         let aliases = (0..na).map(|_| r.u32s()).collect::<Result<Vec<_>>>()?;
         let t = r.u32s()?;
@@ -277,9 +334,14 @@ pub fn load(path: &Path) -> Result<Model> {
         }
         let np = points.len() as u32;
         let ns = dataset.num_shapes() as u32;
-        let t: Vec<Tet> = t.chunks_exact(4).map(|c| [c[0], c[1], c[2], c[3]]).collect();
+        let t: Vec<Tet> = t
+            .chunks_exact(4)
+            .map(|c| [c[0], c[1], c[2], c[3]])
+            .collect();
         if t.iter().flatten().any(|&p| p >= np)
-            || aliases.iter().any(|a| a.is_empty() || a.iter().any(|&s| s > ns))
+            || aliases
+                .iter()
+                .any(|a| a.is_empty() || a.iter().any(|&s| s > ns))
         {
             return Err(bad(&format!("bundle {i}: index out of range")));
         }
