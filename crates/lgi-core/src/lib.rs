@@ -13,6 +13,7 @@ pub mod error;
 pub mod geom;
 pub mod grid;
 pub mod io;
+pub mod jaw;
 pub mod mesh;
 pub mod sibson;
 pub mod tets;
