@@ -47,9 +47,7 @@ def ict_dataset(ict_path: Path):  # type: ignore[no-untyped-def]
 
 @pytest.fixture(scope="session")
 def ict_markers(ict_path: Path) -> np.ndarray:
-    return np.loadtxt(
-        ict_path / "markers_120.csv", delimiter=",", skiprows=1, usecols=(1, 2, 3)
-    )
+    return np.loadtxt(ict_path / "markers_120.csv", delimiter=",", skiprows=1, usecols=(1, 2, 3))
 
 
 @pytest.fixture(scope="session")

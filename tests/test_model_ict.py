@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+
 from conftest import ICT_SKIN
 
 MOVED = 1e-3  # cm: a bundle "moved" by a shape (issue acceptance)
@@ -21,7 +22,7 @@ def verification(ict_dataset, ict_model):  # type: ignore[no-untyped-def]
 def test_verification_moved_bundles_select_their_own_shape_alone(
     ict_dataset, ict_model, verification
 ):  # type: ignore[no-untyped-def]
-    meshes, frames, result = verification
+    _meshes, frames, result = verification
     rest = ict_model.bundle_positions(ict_dataset.neutral)
     moved = np.linalg.norm(frames - rest[None], axis=2) > MOVED  # (S, B)
     assert moved.sum() > 0
@@ -48,11 +49,7 @@ def test_verification_reproduces_shape_where_all_natural_neighbours_chose_it(
             result.choices.weights[k].sum(axis=1) > 0
         )
         sel = np.array(
-            [
-                v
-                for v in range(ICT_SKIN)
-                if chose_k[indices[indptr[v] : indptr[v + 1]]].all()
-            ]
+            [v for v in range(ICT_SKIN) if chose_k[indices[indptr[v] : indptr[v + 1]]].all()]
         )
         if sel.size == 0:
             continue

@@ -66,7 +66,9 @@ def test_save_load_round_trip_gives_identical_results(tmp_path: Path, sample, sa
     np.testing.assert_array_equal(res.vertices, solved.vertices[:10])
 
 
-def test_corrupt_truncated_and_foreign_model_files_raise_model_format_error(tmp_path: Path, sample_model):  # type: ignore[no-untyped-def]
+def test_corrupt_truncated_and_foreign_model_files_raise_model_format_error(
+    tmp_path: Path, sample_model
+):  # type: ignore[no-untyped-def]
     path = tmp_path / "m.lgi"
     sample_model.save(path)
     data = path.read_bytes()
@@ -82,7 +84,7 @@ def test_corrupt_truncated_and_foreign_model_files_raise_model_format_error(tmp_
     bad.write_bytes(b"solid cube\nfacet normal 0 0 1\n")
     with pytest.raises(lgi.ModelFormatError, match="not an lgi model"):
         lgi.Model.load(bad)
-    with pytest.raises(lgi.DatasetFileError, match="nope.lgi"):
+    with pytest.raises(lgi.DatasetFileError, match=r"nope\.lgi"):
         lgi.Model.load(tmp_path / "nope.lgi")
 
 

@@ -23,9 +23,7 @@ def write_obj(
     if uvs is not None and uv_triangles is not None and len(uv_triangles) == len(t):
         lines += (f"vt {a:.9g} {b:.9g}" for a, b in np.asarray(uvs))
         ut = np.asarray(uv_triangles, dtype=np.int64) + 1
-        lines += (
-            f"f {a}/{d} {b}/{e} {c}/{f}" for (a, b, c), (d, e, f) in zip(t, ut, strict=True)
-        )
+        lines += (f"f {a}/{d} {b}/{e} {c}/{f}" for (a, b, c), (d, e, f) in zip(t, ut, strict=True))
     else:
         lines += (f"f {a} {b} {c}" for a, b, c in t)
     Path(path).write_text("\n".join(lines) + "\n")

@@ -146,9 +146,7 @@ class Model:
             arr = arr[None]
         total = int(arr.shape[0]) if arr.ndim == 3 else 0
         with _progress_bar(total, "lgi solve", quiet) as bar:
-            out = self._core.solve(
-                arr, progress=lambda _f: bar.update(1), temporal=temporal
-            )
+            out = self._core.solve(arr, progress=lambda _f: bar.update(1), temporal=temporal)
         return SolveResult(
             vertices=out["vertices"],
             bundle_residuals=out["bundle_residuals"],

@@ -15,6 +15,7 @@ pub mod error;
 pub mod geom;
 pub mod grid;
 pub mod io;
+pub mod jaw;
 pub mod linalg;
 pub mod mesh;
 pub mod model;

@@ -1,0 +1,534 @@
+//! Jaw skinning (the paper's Eq. 2): two-bone linear blend skinning with the skull fixed and the
+//! jaw a rigid motion about a pivot. Dataset shapes and captured bundles are unskinned before
+//! indexing so the index sees no jaw rotation, and the result is reskinned afterwards.
+//!
+//! Conventions match `python/lgi/sample.py`: θ = (open, lateral, forward) maps `p` to
+//! `R (p − pivot) + pivot + t` with `R = R_y(lateral) · R_x(open)` and `t = (0, 0, forward)`.
+
+use glam::{DAffine3, DMat3, DVec3};
+use rayon::prelude::*;
+
+use crate::error::{LgiError, Result};
+
+/// Jaw pose θ: open angle (radians, about x; positive moves the chin down and back), lateral
+/// angle (radians, about y; positive moves the chin towards +x) and forward translation along
+/// +z (data units).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct JawParams {
+    /// Opening angle about the x axis through the pivot, radians.
+    pub open: f64,
+    /// Lateral angle about the y axis through the pivot, radians.
+    pub lateral: f64,
+    /// Forward translation along +z, in the data's units.
+    pub forward: f64,
+}
+
+impl JawParams {
+    /// The rest pose (all zero): skinning with it is the identity.
+    pub const ZERO: JawParams = JawParams {
+        open: 0.0,
+        lateral: 0.0,
+        forward: 0.0,
+    };
+
+    /// θ from `[open, lateral, forward]`.
+    pub fn from_array(a: [f64; 3]) -> Self {
+        JawParams {
+            open: a[0],
+            lateral: a[1],
+            forward: a[2],
+        }
+    }
+
+    /// `[open, lateral, forward]`.
+    pub fn to_array(self) -> [f64; 3] {
+        [self.open, self.lateral, self.forward]
+    }
+
+    /// Checks that θ is finite and both angles are below 180° in magnitude. Below 180° the
+    /// blended matrix `(1 − w) I + w R` is invertible for every weight in [0, 1], so unskinning
+    /// is well defined.
+    pub fn validate(&self) -> Result<()> {
+        let ok = self.open.is_finite()
+            && self.lateral.is_finite()
+            && self.forward.is_finite()
+            && self.open.abs() < std::f64::consts::PI
+            && self.lateral.abs() < std::f64::consts::PI;
+        if ok {
+            Ok(())
+        } else {
+            Err(LgiError::Input(format!(
+                "jaw parameters must be finite with |open|, |lateral| < pi, got {self:?}"
+            )))
+        }
+    }
+
+    /// The jaw's rotation `R_y(lateral) · R_x(open)`.
+    pub fn rotation(&self) -> DMat3 {
+        DMat3::from_rotation_y(self.lateral) * DMat3::from_rotation_x(self.open)
+    }
+
+    /// The jaw's translation `(0, 0, forward)`.
+    pub fn translation(&self) -> DVec3 {
+        DVec3::new(0.0, 0.0, self.forward)
+    }
+}
+
+/// A two-bone jaw rig: the pivot of the jaw rotation and one jaw weight per vertex
+/// (0 = follows the skull, 1 = follows the jaw).
+#[derive(Debug, Clone, PartialEq)]
+pub struct JawRig {
+    /// Centre of the jaw rotation.
+    pub pivot: DVec3,
+    /// Per-vertex jaw weight in [0, 1].
+    pub weights: Vec<f64>,
+}
+
+/// The blended skinning map of one vertex, `p ↦ p + w ((R − I)(p − pivot) + t)`, kept as its
+/// pieces so the inverse can be applied exactly.
+#[derive(Debug, Clone, Copy)]
+struct Blend {
+    rot_minus_id: DMat3,
+    translation: DVec3,
+    pivot: DVec3,
+}
+
+impl Blend {
+    fn new(theta: JawParams, pivot: DVec3) -> Self {
+        Blend {
+            rot_minus_id: theta.rotation() - DMat3::IDENTITY,
+            translation: theta.translation(),
+            pivot,
+        }
+    }
+
+    /// Written as `p + w · moved` (not `(1 − w) p + w T p`) so that θ = 0 or w = 0 returns `p`
+    /// bit for bit, like the sample generator.
+    #[inline]
+    fn skin(&self, p: DVec3, w: f64) -> DVec3 {
+        let moved = self.rot_minus_id * (p - self.pivot) + self.translation;
+        p + w * moved
+    }
+
+    /// Solves `M q = y − pivot − w t` with `M = I + w (R − I)` and returns `pivot + q`.
+    #[inline]
+    fn unskin(&self, y: DVec3, w: f64) -> DVec3 {
+        if w == 0.0 {
+            return y;
+        }
+        let m = DMat3::IDENTITY + self.rot_minus_id * w;
+        let rhs = y - self.pivot - w * self.translation;
+        let inv = m.inverse();
+        let mut q = inv * rhs;
+        // One step of iterative refinement: the cofactor inverse is accurate to a few ulps of
+        // cond(M); the correction brings the round trip to the rounding of the forward map.
+        q += inv * (rhs - m * q);
+        self.pivot + q
+    }
+}
+
+impl JawRig {
+    /// A rig from its pivot and per-vertex weights; every value must be finite and every weight
+    /// in [0, 1] (the error names the first offending vertex).
+    pub fn new(pivot: DVec3, weights: Vec<f64>) -> Result<Self> {
+        if !pivot.is_finite() {
+            return Err(LgiError::Input(format!(
+                "jaw pivot must be finite, got {pivot:?}"
+            )));
+        }
+        if let Some((v, w)) = weights
+            .iter()
+            .enumerate()
+            .find(|(_, w)| !(w.is_finite() && (0.0..=1.0).contains(*w)))
+        {
+            return Err(LgiError::Input(format!(
+                "jaw weight of vertex {v} must be finite and in [0, 1], got {w}"
+            )));
+        }
+        Ok(JawRig { pivot, weights })
+    }
+
+    /// Number of vertices the rig has weights for.
+    pub fn num_vertices(&self) -> usize {
+        self.weights.len()
+    }
+
+    /// The rigid jaw transform for `theta` about `pivot`: `p ↦ R (p − pivot) + pivot + t`.
+    pub fn transform(theta: JawParams, pivot: DVec3) -> DAffine3 {
+        let r = theta.rotation();
+        DAffine3::from_mat3_translation(r, pivot - r * pivot + theta.translation())
+    }
+
+    /// Skins one point with jaw weight `w`: `p + w (T(θ) p − p)`.
+    pub fn skin_point(&self, p: DVec3, w: f64, theta: JawParams) -> DVec3 {
+        Blend::new(theta, self.pivot).skin(p, w)
+    }
+
+    /// The exact inverse of [`JawRig::skin_point`] (the blended affine map inverted in f64).
+    /// θ should satisfy [`JawParams::validate`]; otherwise the result may not be finite.
+    pub fn unskin_point(&self, p: DVec3, w: f64, theta: JawParams) -> DVec3 {
+        Blend::new(theta, self.pivot).unskin(p, w)
+    }
+
+    /// Jaw weight at a point given by barycentric coordinates in a triangle of the mesh the rig
+    /// belongs to (how bundles get their weight).
+    pub fn interpolate_weight(&self, triangle: [u32; 3], barycentric: [f64; 3]) -> Result<f64> {
+        let mut w = 0.0;
+        for (&v, &b) in triangle.iter().zip(barycentric.iter()) {
+            let wv = self.weights.get(v as usize).ok_or_else(|| {
+                LgiError::Input(format!(
+                    "triangle vertex {v} out of range (rig has {} vertices)",
+                    self.weights.len()
+                ))
+            })?;
+            w += b * wv;
+        }
+        Ok(w.clamp(0.0, 1.0))
+    }
+
+    /// Skins every vertex with its own weight into `out`.
+    pub fn skin(&self, positions: &[DVec3], theta: JawParams, out: &mut [DVec3]) -> Result<()> {
+        self.apply(positions, theta, out, Blend::skin)
+    }
+
+    /// Unskins every vertex with its own weight into `out` (inverse of [`JawRig::skin`]).
+    pub fn unskin(&self, positions: &[DVec3], theta: JawParams, out: &mut [DVec3]) -> Result<()> {
+        self.apply(positions, theta, out, Blend::unskin)
+    }
+
+    /// Skins arbitrary points (e.g. bundles) each with its own weight from `weights`.
+    pub fn skin_weighted(
+        &self,
+        positions: &[DVec3],
+        weights: &[f64],
+        theta: JawParams,
+        out: &mut [DVec3],
+    ) -> Result<()> {
+        apply_weighted(self.pivot, positions, weights, theta, out, Blend::skin)
+    }
+
+    /// Unskins arbitrary points (e.g. bundles) each with its own weight from `weights`.
+    pub fn unskin_weighted(
+        &self,
+        positions: &[DVec3],
+        weights: &[f64],
+        theta: JawParams,
+        out: &mut [DVec3],
+    ) -> Result<()> {
+        apply_weighted(self.pivot, positions, weights, theta, out, Blend::unskin)
+    }
+
+    /// Unskins one dataset shape: `s*_k = T_v(θ_k)⁻¹ (x0 + s_k) − x0`, with `disp` the V·3
+    /// displacements of the shape. Computed in f64, returned as f32 like the dataset stores it.
+    pub fn unskin_displacements(
+        &self,
+        neutral: &[DVec3],
+        disp: &[f32],
+        theta: JawParams,
+    ) -> Result<Vec<f32>> {
+        theta.validate()?;
+        let v = self.weights.len();
+        if neutral.len() != v {
+            return Err(LgiError::Input(format!(
+                "neutral has {} vertices, jaw rig has {v} weights",
+                neutral.len()
+            )));
+        }
+        if disp.len() != 3 * v {
+            return Err(LgiError::Input(format!(
+                "displacements have {} values, expected {} (3 per vertex)",
+                disp.len(),
+                3 * v
+            )));
+        }
+        let blend = Blend::new(theta, self.pivot);
+        let mut out = vec![0.0f32; 3 * v];
+        out.par_chunks_mut(3)
+            .zip(disp.par_chunks(3))
+            .zip(neutral.par_iter().zip(self.weights.par_iter()))
+            .for_each(|((o, s), (&x0, &w))| {
+                let s = DVec3::new(f64::from(s[0]), f64::from(s[1]), f64::from(s[2]));
+                let d = blend.unskin(x0 + s, w) - x0;
+                o[0] = d.x as f32;
+                o[1] = d.y as f32;
+                o[2] = d.z as f32;
+            });
+        Ok(out)
+    }
+
+    /// Unskins all S shapes of a dataset (`displacements` shape-major, S·V·3) with their θ_k.
+    pub fn unskin_shapes(
+        &self,
+        neutral: &[DVec3],
+        displacements: &[f32],
+        thetas: &[JawParams],
+    ) -> Result<Vec<f32>> {
+        let stride = 3 * self.weights.len();
+        if displacements.len() != thetas.len() * stride {
+            return Err(LgiError::Input(format!(
+                "displacements have {} values, expected {} shapes x {stride}",
+                displacements.len(),
+                thetas.len()
+            )));
+        }
+        let mut out = Vec::with_capacity(displacements.len());
+        for (k, theta) in thetas.iter().enumerate() {
+            let shape = &displacements[k * stride..(k + 1) * stride];
+            out.extend(self.unskin_displacements(neutral, shape, *theta)?);
+        }
+        Ok(out)
+    }
+
+    fn apply(
+        &self,
+        positions: &[DVec3],
+        theta: JawParams,
+        out: &mut [DVec3],
+        f: fn(&Blend, DVec3, f64) -> DVec3,
+    ) -> Result<()> {
+        apply_weighted(self.pivot, positions, &self.weights, theta, out, f)
+    }
+}
+
+fn apply_weighted(
+    pivot: DVec3,
+    positions: &[DVec3],
+    weights: &[f64],
+    theta: JawParams,
+    out: &mut [DVec3],
+    f: fn(&Blend, DVec3, f64) -> DVec3,
+) -> Result<()> {
+    theta.validate()?;
+    if positions.len() != weights.len() || out.len() != weights.len() {
+        return Err(LgiError::Input(format!(
+            "jaw skinning needs one weight per point: {} points, {} weights, {} outputs",
+            positions.len(),
+            weights.len(),
+            out.len()
+        )));
+    }
+    let blend = Blend::new(theta, pivot);
+    out.par_iter_mut()
+        .zip(positions.par_iter().zip(weights.par_iter()))
+        .for_each(|(o, (&p, &w))| *o = f(&blend, p, w));
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+
+    /// Rodrigues' formula, written out independently of glam's rotation constructors.
+    fn axis_angle(axis: [f64; 3], angle: f64) -> [[f64; 3]; 3] {
+        let n = (axis[0] * axis[0] + axis[1] * axis[1] + axis[2] * axis[2]).sqrt();
+        let (x, y, z) = (axis[0] / n, axis[1] / n, axis[2] / n);
+        let (s, c) = angle.sin_cos();
+        let t = 1.0 - c;
+        [
+            [t * x * x + c, t * x * y - s * z, t * x * z + s * y],
+            [t * x * y + s * z, t * y * y + c, t * y * z - s * x],
+            [t * x * z - s * y, t * y * z + s * x, t * z * z + c],
+        ]
+    }
+
+    fn matmul(a: [[f64; 3]; 3], b: [[f64; 3]; 3]) -> [[f64; 3]; 3] {
+        let mut m = [[0.0; 3]; 3];
+        for (i, row) in m.iter_mut().enumerate() {
+            for (j, e) in row.iter_mut().enumerate() {
+                *e = (0..3).map(|k| a[i][k] * b[k][j]).sum();
+            }
+        }
+        m
+    }
+
+    fn apply(m: [[f64; 3]; 3], p: DVec3) -> DVec3 {
+        let p = [p.x, p.y, p.z];
+        let r: Vec<f64> = m
+            .iter()
+            .map(|row| row[0] * p[0] + row[1] * p[1] + row[2] * p[2])
+            .collect();
+        DVec3::new(r[0], r[1], r[2])
+    }
+
+    fn rig(weights: Vec<f64>) -> JawRig {
+        JawRig::new(DVec3::new(0.0, -1.5, 3.0), weights).unwrap()
+    }
+
+    #[test]
+    fn weight_one_vertices_move_by_the_closed_form_rigid_motion() {
+        let r = rig(vec![1.0; 4]);
+        let pts = [
+            DVec3::new(0.0, -6.0, 9.0),
+            DVec3::new(3.0, -4.0, 8.0),
+            DVec3::new(-2.5, -2.0, 7.5),
+            DVec3::new(1.0, 2.0, -3.0),
+        ];
+        for (open, lateral, forward) in [(0.4, 0.0, 0.0), (0.0, -0.2, 0.0), (0.3, 0.15, 0.7)] {
+            let theta = JawParams {
+                open,
+                lateral,
+                forward,
+            };
+            let m = matmul(
+                axis_angle([0.0, 1.0, 0.0], lateral),
+                axis_angle([1.0, 0.0, 0.0], open),
+            );
+            let mut out = vec![DVec3::ZERO; pts.len()];
+            r.skin(&pts, theta, &mut out).unwrap();
+            let affine = JawRig::transform(theta, r.pivot);
+            for (p, q) in pts.iter().zip(&out) {
+                let expected = apply(m, *p - r.pivot) + r.pivot + DVec3::new(0.0, 0.0, forward);
+                assert!((*q - expected).length() < 1e-12, "{q} vs {expected}");
+                assert!((affine.transform_point3(*p) - expected).length() < 1e-12);
+            }
+        }
+    }
+
+    #[test]
+    fn positive_open_moves_the_chin_down_and_back_and_positive_lateral_towards_plus_x() {
+        let r = rig(vec![1.0]);
+        let chin = DVec3::new(0.0, -6.0, 8.0);
+        let opened = r.skin_point(chin, 1.0, JawParams::from_array([0.3, 0.0, 0.0]));
+        assert!(opened.y < chin.y && opened.z < chin.z);
+        let lateral = r.skin_point(chin, 1.0, JawParams::from_array([0.0, 0.1, 0.0]));
+        assert!(lateral.x > chin.x);
+        let forward = r.skin_point(chin, 1.0, JawParams::from_array([0.0, 0.0, 0.5]));
+        assert!((forward - chin - DVec3::new(0.0, 0.0, 0.5)).length() < 1e-15);
+    }
+
+    #[test]
+    fn weight_zero_and_rest_pose_leave_points_bit_identical() {
+        let r = rig(vec![0.0, 0.7]);
+        let pts = [DVec3::new(1.3, -4.1, 7.7), DVec3::new(-0.3, -5.9, 8.2)];
+        let mut out = vec![DVec3::ZERO; 2];
+        r.skin(&pts, JawParams::from_array([0.4, 0.1, 0.3]), &mut out)
+            .unwrap();
+        assert_eq!(out[0], pts[0]);
+        assert_ne!(out[1], pts[1]);
+        r.skin(&pts, JawParams::ZERO, &mut out).unwrap();
+        assert_eq!(out, pts.to_vec());
+        r.unskin(&pts, JawParams::ZERO, &mut out).unwrap();
+        assert_eq!(out, pts.to_vec());
+    }
+
+    #[test]
+    fn partial_weight_is_the_linear_blend_of_skull_and_jaw() {
+        let r = rig(vec![0.3]);
+        let p = DVec3::new(0.5, -5.0, 8.0);
+        let theta = JawParams::from_array([0.35, -0.1, 0.4]);
+        let jaw = JawRig::transform(theta, r.pivot).transform_point3(p);
+        let expected = 0.7 * p + 0.3 * jaw;
+        assert!((r.skin_point(p, 0.3, theta) - expected).length() < 1e-12);
+    }
+
+    #[test]
+    fn unskinned_displacements_reskin_to_the_shape() {
+        let weights = vec![0.0, 0.25, 0.5, 1.0];
+        let r = rig(weights);
+        let neutral = vec![
+            DVec3::new(0.0, 2.0, 9.0),
+            DVec3::new(1.0, -3.0, 9.5),
+            DVec3::new(-1.0, -4.0, 9.0),
+            DVec3::new(0.0, -6.0, 8.5),
+        ];
+        let theta = JawParams::from_array([0.4, 0.05, 0.2]);
+        let disp: Vec<f32> = vec![
+            0.1, 0.0, 0.0, 0.0, -0.5, -0.2, 0.02, -1.0, -0.4, 0.0, -2.0, -1.2,
+        ];
+        let star = r.unskin_displacements(&neutral, &disp, theta).unwrap();
+        for v in 0..4 {
+            let s = DVec3::new(
+                f64::from(star[3 * v]),
+                f64::from(star[3 * v + 1]),
+                f64::from(star[3 * v + 2]),
+            );
+            let back = r.skin_point(neutral[v] + s, r.weights[v], theta) - neutral[v];
+            let d = DVec3::new(
+                f64::from(disp[3 * v]),
+                f64::from(disp[3 * v + 1]),
+                f64::from(disp[3 * v + 2]),
+            );
+            // f32 storage of s* bounds the error, not the inversion.
+            assert!((back - d).length() < 1e-5, "vertex {v}: {back} vs {d}");
+        }
+        let all = r
+            .unskin_shapes(&neutral, &[disp.clone(), disp].concat(), &[theta; 2])
+            .unwrap();
+        assert_eq!(&all[..12], &star[..]);
+        assert_eq!(&all[12..], &star[..]);
+    }
+
+    #[test]
+    fn a_pure_jaw_shape_unskins_to_zero_on_fully_weighted_vertices() {
+        let r = rig(vec![1.0, 1.0]);
+        let neutral = vec![DVec3::new(0.0, -6.0, 8.5), DVec3::new(2.0, -5.0, 8.0)];
+        let theta = JawParams::from_array([0.43, 0.0, 0.0]);
+        let mut skinned = vec![DVec3::ZERO; 2];
+        r.skin(&neutral, theta, &mut skinned).unwrap();
+        let disp: Vec<f32> = skinned
+            .iter()
+            .zip(&neutral)
+            .flat_map(|(s, n)| {
+                let d = *s - *n;
+                [d.x as f32, d.y as f32, d.z as f32]
+            })
+            .collect();
+        let star = r.unskin_displacements(&neutral, &disp, theta).unwrap();
+        assert!(star.iter().all(|x| x.abs() < 1e-5), "{star:?}");
+    }
+
+    #[test]
+    fn invalid_rigs_and_inputs_are_rejected_with_a_named_element() {
+        let err = JawRig::new(DVec3::ZERO, vec![0.0, 1.2]).unwrap_err();
+        assert!(err.to_string().contains("vertex 1"), "{err}");
+        let err = JawRig::new(DVec3::ZERO, vec![f64::NAN]).unwrap_err();
+        assert!(err.to_string().contains("vertex 0"), "{err}");
+        assert!(JawRig::new(DVec3::new(f64::NAN, 0.0, 0.0), vec![]).is_err());
+        let r = rig(vec![0.5, 0.5]);
+        let mut out = vec![DVec3::ZERO; 1];
+        assert!(r.skin(&[DVec3::ZERO], JawParams::ZERO, &mut out).is_err());
+        let mut out = vec![DVec3::ZERO; 2];
+        let bad = JawParams::from_array([4.0, 0.0, 0.0]);
+        assert!(r.skin(&[DVec3::ZERO; 2], bad, &mut out).is_err());
+        let nan = JawParams::from_array([0.0, f64::NAN, 0.0]);
+        assert!(r.unskin(&[DVec3::ZERO; 2], nan, &mut out).is_err());
+        assert!(r
+            .unskin_displacements(&[DVec3::ZERO; 2], &[0.0; 5], JawParams::ZERO)
+            .is_err());
+        assert!(r.interpolate_weight([0, 1, 2], [0.2, 0.3, 0.5]).is_err());
+    }
+
+    #[test]
+    fn bundle_weight_is_the_barycentric_blend_of_vertex_weights() {
+        let r = rig(vec![0.0, 0.5, 1.0]);
+        let w = r.interpolate_weight([0, 1, 2], [0.2, 0.3, 0.5]).unwrap();
+        assert!((w - (0.15 + 0.5)).abs() < 1e-15);
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig { cases: 2000, rng_seed: proptest::test_runner::RngSeed::Fixed(0x1a3), ..ProptestConfig::default() })]
+        #[test]
+        fn unskin_inverts_skin_to_1e12_relative(
+            open in -40f64..40.0,
+            lateral in -15f64..15.0,
+            forward in -2f64..2.0,
+            w in 0f64..=1.0,
+            x in -8f64..8.0, y in -9f64..9.0, z in -2f64..12.0,
+        ) {
+            let theta = JawParams { open: open.to_radians(), lateral: lateral.to_radians(), forward };
+            let r = rig(vec![w]);
+            let p = DVec3::new(x, y, z);
+            let scale = 1.0 + p.length() + r.pivot.length();
+            let back = r.unskin_point(r.skin_point(p, w, theta), w, theta);
+            prop_assert!((back - p).length() <= 1e-12 * scale, "{back} vs {p}");
+            let fwd = r.skin_point(r.unskin_point(p, w, theta), w, theta);
+            prop_assert!((fwd - p).length() <= 1e-12 * scale, "{fwd} vs {p}");
+            let mut out = [DVec3::ZERO];
+            r.skin_weighted(&[p], &[w], theta, &mut out).unwrap();
+            let mut back2 = [DVec3::ZERO];
+            r.unskin_weighted(&out, &[w], theta, &mut back2).unwrap();
+            prop_assert!((back2[0] - p).length() <= 1e-12 * scale);
+        }
+    }
+}

@@ -1,0 +1,579 @@
+"""Jaw rig tooling: two-bone skinning (skull fixed, jaw rigid about a pivot), rig estimation from a
+dataset's jaw shapes, and per-frame jaw tracking from bundles.
+
+The conventions are those of `lgi.sample` and of the Rust core (`lgi_core::jaw`): theta =
+(open angle rad, lateral angle rad, forward translation) maps p to
+
+    T(theta)(p) = F R(theta) F^T (p - pivot) + pivot + F (0, 0, forward),
+    R(theta) = R_y(lateral) @ R_x(open),
+
+with F the rig's `frame` (identity by default, which is what the Rust core implements). A vertex
+with jaw weight w is skinned to p + w (T(theta)(p) - p) (linear blend skinning, Eq. 2 of the
+paper); `unskin` inverts that blended affine map exactly. numpy only.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from lgi.errors import InputError
+
+F64 = NDArray[np.float64]
+
+__all__ = [
+    "JawRig",
+    "RigReport",
+    "estimate_rig",
+    "fit_rigid",
+    "fit_theta",
+    "rotation_axis_angle",
+    "track_jaw",
+]
+
+# Lower teeth of the ICT-FaceKit model (0-based, inclusive): the jaw's only truly rigid part.
+ICT_LOWER_TEETH = (19247, 21450)
+
+
+def _rx(a: float) -> F64:
+    c, s = np.cos(a), np.sin(a)
+    return np.array([[1.0, 0.0, 0.0], [0.0, c, -s], [0.0, s, c]])
+
+
+def _ry(b: float) -> F64:
+    c, s = np.cos(b), np.sin(b)
+    return np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
+
+
+def _drx(a: float) -> F64:
+    c, s = np.cos(a), np.sin(a)
+    return np.array([[0.0, 0.0, 0.0], [0.0, -s, -c], [0.0, c, -s]])
+
+
+def _dry(b: float) -> F64:
+    c, s = np.cos(b), np.sin(b)
+    return np.array([[-s, 0.0, c], [0.0, 0.0, 0.0], [-c, 0.0, -s]])
+
+
+def _theta(theta: ArrayLike) -> F64:
+    th = np.asarray(theta, dtype=np.float64)
+    if th.shape != (3,):
+        raise InputError(f"theta must have shape (3,), got {th.shape}")
+    if not np.all(np.isfinite(th)) or abs(th[0]) >= np.pi or abs(th[1]) >= np.pi:
+        raise InputError(f"theta must be finite with |open|, |lateral| < pi, got {th}")
+    return th
+
+
+def _points(points: ArrayLike, what: str = "points") -> F64:
+    p = np.asarray(points, dtype=np.float64)
+    if p.ndim != 2 or p.shape[1] != 3:
+        raise InputError(f"{what} must have shape (N, 3), got {p.shape}")
+    return p
+
+
+@dataclass(eq=False)
+class JawRig:
+    """Pivot, per-vertex jaw weights and the jaw's axes (`frame` columns: open axis, lateral
+    axis, forward direction; identity means x, y, z as in `lgi.sample` and the Rust core)."""
+
+    pivot: F64
+    """(3,) centre of the jaw rotation."""
+    weights: F64
+    """(V,) jaw weight of each vertex in [0, 1]."""
+    frame: F64 = field(default_factory=lambda: np.eye(3))
+    """(3, 3) rotation whose columns are the open, lateral and forward axes."""
+
+    def __post_init__(self) -> None:
+        self.pivot = np.asarray(self.pivot, dtype=np.float64)
+        self.weights = np.asarray(self.weights, dtype=np.float64)
+        self.frame = np.asarray(self.frame, dtype=np.float64)
+        if self.pivot.shape != (3,) or not np.all(np.isfinite(self.pivot)):
+            raise InputError(f"pivot must be a finite (3,) vector, got {self.pivot!r}")
+        if self.weights.ndim != 1:
+            raise InputError(f"weights must have shape (V,), got {self.weights.shape}")
+        bad = np.flatnonzero(
+            ~(np.isfinite(self.weights) & (self.weights >= 0) & (self.weights <= 1))
+        )
+        if bad.size:
+            raise InputError(
+                f"jaw weight of vertex {bad[0]} must be finite and in [0, 1], "
+                f"got {self.weights[bad[0]]}"
+            )
+        f = self.frame
+        if (
+            f.shape != (3, 3)
+            or not np.all(np.isfinite(f))
+            or not np.allclose(f.T @ f, np.eye(3), atol=1e-9)
+            or np.linalg.det(f) < 0
+        ):
+            raise InputError("frame must be a (3, 3) rotation matrix")
+
+    @property
+    def num_vertices(self) -> int:
+        """Number of vertices V the rig has weights for."""
+        return int(self.weights.shape[0])
+
+    def transform(self, theta: ArrayLike) -> tuple[F64, F64]:
+        """World rotation R and translation t of the rigid jaw: T(p) = R (p - pivot) + pivot + t."""
+        th = _theta(theta)
+        f = self.frame
+        r = f @ _ry(th[1]) @ _rx(th[0]) @ f.T
+        return r, f[:, 2] * th[2]
+
+    def _weights_for(self, n: int, weights: ArrayLike | None) -> F64:
+        w = self.weights if weights is None else np.asarray(weights, dtype=np.float64)
+        if w.shape != (n,):
+            raise InputError(f"weights must have shape ({n},), got {w.shape}")
+        return w
+
+    def skin(self, points: ArrayLike, theta: ArrayLike, weights: ArrayLike | None = None) -> F64:
+        """Skin (N, 3) points with their jaw weights (default: the rig's, N = V).
+
+        Written as p + w (T(p) - p) so that theta = 0 or w = 0 returns the points bit for bit.
+        """
+        p = _points(points)
+        w = self._weights_for(p.shape[0], weights)
+        r, t = self.transform(theta)
+        moved = (p - self.pivot) @ (r - np.eye(3)).T + t
+        return p + w[:, None] * moved
+
+    def unskin(self, points: ArrayLike, theta: ArrayLike, weights: ArrayLike | None = None) -> F64:
+        """Exact inverse of `skin`: solves ((1 - w) I + w R) q = y - pivot - w t per point."""
+        y = _points(points)
+        w = self._weights_for(y.shape[0], weights)
+        r, t = self.transform(theta)
+        m = np.eye(3)[None] + w[:, None, None] * (r - np.eye(3))[None]
+        rhs = y - self.pivot - w[:, None] * t
+        q = np.linalg.solve(m, rhs[:, :, None])[:, :, 0]
+        # One step of iterative refinement brings the round trip to the forward map's rounding.
+        q += np.linalg.solve(m, (rhs - np.einsum("nij,nj->ni", m, q))[:, :, None])[:, :, 0]
+        out = self.pivot + q
+        still = w == 0
+        out[still] = y[still]
+        return out
+
+    def unskin_displacements(
+        self, neutral: ArrayLike, displacements: ArrayLike, theta: ArrayLike
+    ) -> F64:
+        """s* = T_v(theta)^-1 (x0 + s) - x0 for one (V, 3) shape displacement."""
+        x0 = _points(neutral, "neutral")
+        s = _points(displacements, "displacements")
+        if s.shape != x0.shape:
+            raise InputError(f"displacements {s.shape} do not match neutral {x0.shape}")
+        return self.unskin(x0 + s, theta) - x0
+
+    def bundle_weights(
+        self, triangles: ArrayLike, bundle_triangles: ArrayLike, barycentrics: ArrayLike
+    ) -> F64:
+        """Jaw weight of each bundle: barycentric blend of its triangle's vertex weights."""
+        tri = np.asarray(triangles, dtype=np.int64)
+        bt = np.asarray(bundle_triangles, dtype=np.int64)
+        bc = np.asarray(barycentrics, dtype=np.float64)
+        if tri.ndim != 2 or tri.shape[1] != 3:
+            raise InputError(f"triangles must have shape (T, 3), got {tri.shape}")
+        if bc.shape != (bt.shape[0], 3):
+            raise InputError(f"barycentrics must have shape ({bt.shape[0]}, 3), got {bc.shape}")
+        if bt.size and (bt.min() < 0 or bt.max() >= tri.shape[0]):
+            raise InputError("bundle triangle index out of range")
+        corners = tri[bt]
+        if corners.size and corners.max() >= self.num_vertices:
+            raise InputError("triangle vertex index out of range of the rig's weights")
+        return np.clip(np.einsum("bc,bc->b", bc, self.weights[corners]), 0.0, 1.0)
+
+    def to_dict(self) -> dict[str, F64]:
+        """Arrays for `np.savez` (keys `jaw_pivot`, `jaw_weights`, `jaw_frame`)."""
+        return {
+            "jaw_pivot": self.pivot.copy(),
+            "jaw_weights": self.weights.copy(),
+            "jaw_frame": self.frame.copy(),
+        }
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any]) -> JawRig:
+        """Inverse of `to_dict` (accepts a loaded `.npz`); `jaw_frame` is optional."""
+        missing = [k for k in ("jaw_pivot", "jaw_weights") if k not in d]
+        if missing:
+            raise InputError(f"jaw rig is missing {', '.join(missing)}")
+        frame = d["jaw_frame"] if "jaw_frame" in d else np.eye(3)
+        return cls(
+            pivot=np.array(d["jaw_pivot"]),
+            weights=np.array(d["jaw_weights"]),
+            frame=np.array(frame),
+        )
+
+
+# --------------------------------------------------------------------------------------------
+# Rigid fits.
+
+
+def fit_rigid(source: ArrayLike, target: ArrayLike) -> tuple[F64, F64]:
+    """Least-squares rigid motion (Kabsch): R, t minimising sum |R source + t - target|^2."""
+    a = _points(source, "source")
+    b = _points(target, "target")
+    if a.shape != b.shape or a.shape[0] < 3:
+        raise InputError(f"rigid fit needs two matching (N>=3, 3) arrays, got {a.shape}, {b.shape}")
+    ca, cb = a.mean(axis=0), b.mean(axis=0)
+    h = (a - ca).T @ (b - cb)
+    u, _, vt = np.linalg.svd(h)
+    d = np.sign(np.linalg.det(vt.T @ u.T)) or 1.0
+    r = vt.T @ np.diag([1.0, 1.0, d]) @ u.T
+    return r, cb - r @ ca
+
+
+def rotation_axis_angle(r: ArrayLike) -> tuple[F64, float]:
+    """Unit axis and angle in [0, pi] of a rotation matrix (axis arbitrary for the identity)."""
+    m = np.asarray(r, dtype=np.float64)
+    skew = np.array([m[2, 1] - m[1, 2], m[0, 2] - m[2, 0], m[1, 0] - m[0, 1]])
+    s = 0.5 * np.linalg.norm(skew)
+    c = 0.5 * (np.trace(m) - 1.0)
+    angle = float(np.arctan2(s, c))
+    if s > 1e-12:
+        return skew / (2.0 * s), angle
+    if c > 0:
+        return np.array([1.0, 0.0, 0.0]), 0.0
+    # Half-turn: the axis is the dominant column of (R + I) / 2.
+    sym = 0.5 * (m + np.eye(3))
+    col = sym[:, int(np.argmax(np.diag(sym)))]
+    return col / np.linalg.norm(col), angle
+
+
+def _robust_weights(norms: F64, huber: float | None) -> F64:
+    """Huber IRLS weights on per-point residual norms, scale from the median absolute residual."""
+    if huber is None or norms.size == 0:
+        return np.ones_like(norms)
+    sigma = 1.4826 * float(np.median(norms))
+    delta = huber * sigma
+    if delta <= 0 or not np.isfinite(delta):
+        return np.ones_like(norms)
+    return np.where(norms <= delta, 1.0, delta / np.maximum(norms, 1e-300))
+
+
+def fit_theta(
+    rig: JawRig,
+    rest: ArrayLike,
+    target: ArrayLike,
+    weights: ArrayLike | None = None,
+    theta0: ArrayLike | None = None,
+    huber: float | None = None,
+    iterations: int = 50,
+) -> F64:
+    """theta minimising sum_i rho(|skin(rest_i, theta, w_i) - target_i|) by Gauss-Newton.
+
+    `weights` are the points' jaw weights (default 1: a rigid fit); `huber` (in units of the
+    robust residual scale, e.g. 1.345) turns on iteratively reweighted least squares.
+    """
+    p = _points(rest, "rest")
+    y = _points(target, "target")
+    if y.shape != p.shape:
+        raise InputError(f"target {y.shape} does not match rest {p.shape}")
+    w = np.ones(p.shape[0]) if weights is None else np.asarray(weights, dtype=np.float64)
+    if w.shape != (p.shape[0],):
+        raise InputError(f"weights must have shape ({p.shape[0]},), got {w.shape}")
+    th = np.zeros(3) if theta0 is None else _theta(theta0).copy()
+    f = rig.frame
+    local = (p - rig.pivot) @ f  # points in the jaw frame, relative to the pivot
+    scale = 1.0 + float(np.max(np.abs(local))) if local.size else 1.0
+    for _ in range(max(1, iterations)):
+        rx, ry = _rx(th[0]), _ry(th[1])
+        pred = rig.skin(p, th, w)
+        res = (pred - y).ravel()
+        # d skin / d theta = w * F dR F^T (p - pivot), and w * F e_z for the translation.
+        j_open = (local @ (ry @ _drx(th[0])).T) @ f.T
+        j_lat = (local @ (_dry(th[1]) @ rx).T) @ f.T
+        j_fwd = np.broadcast_to(f[:, 2], p.shape)
+        jac = np.stack([j_open, j_lat, j_fwd], axis=2) * w[:, None, None]
+        jac = jac.reshape(-1, 3)
+        rw = np.repeat(_robust_weights(np.linalg.norm((pred - y), axis=1), huber), 3)
+        jtj = jac.T @ (jac * rw[:, None])
+        jtr = jac.T @ (rw * res)
+        try:
+            step = np.linalg.solve(jtj + 1e-12 * np.trace(jtj) * np.eye(3), -jtr)
+        except np.linalg.LinAlgError:
+            break
+        th = th + step
+        th[:2] = np.clip(th[:2], -0.5 * np.pi, 0.5 * np.pi)
+        if np.abs(step[:2]).max() * scale + abs(step[2]) <= 1e-13 * scale:
+            break
+    return th
+
+
+# --------------------------------------------------------------------------------------------
+# Rig estimation from the dataset's jaw shapes.
+
+
+def _find_rigid_set(x0: F64, disp: F64, iterations: int = 8) -> NDArray[np.int64]:
+    """Vertices that jawOpen moves rigidly: start from the largest displacements, then keep the
+    vertices consistent with the fitted rigid motion (trimmed refits)."""
+    mag = np.linalg.norm(disp, axis=1)
+    top = float(mag.max())
+    moving = mag >= 0.2 * top
+    n0 = max(10, int(0.02 * mag.size))
+    idx = np.argsort(-mag)[: min(n0, int(moving.sum()))]
+    if idx.size < 3:
+        raise InputError("the jaw-open shape moves fewer than 3 vertices")
+    for _ in range(iterations):
+        r, t = fit_rigid(x0[idx], x0[idx] + disp[idx])
+        res = np.linalg.norm(x0 @ r.T + t - (x0 + disp), axis=1)
+        tol = max(3.0 * float(np.median(res[idx])), 1e-5 * top)
+        new = np.flatnonzero(moving & (res <= tol))
+        if new.size < 3 or np.array_equal(new, idx):
+            break
+        idx = new
+    return idx
+
+
+def _screw_pivot(r: F64, t: F64, axis: F64, near: F64) -> F64:
+    """Point of the rotation axis of x -> R x + t closest to `near`."""
+    # On the axis c: (I - R) c = t - (t . a) a; (I - R) is singular along a, so least squares.
+    perp = t - (t @ axis) * axis
+    c, *_ = np.linalg.lstsq(np.eye(3) - r, perp, rcond=None)
+    return c + ((near - c) @ axis) * axis
+
+
+def _closest_along(c: F64, a: F64, q: F64, b: F64) -> float | None:
+    """Parameter s of the point c + s a of line (c, a) closest to line (q, b); None if parallel."""
+    ab = float(a @ b)
+    den = 1.0 - ab * ab
+    if den < 1e-8:
+        return None
+    r = q - c
+    return float((r @ a - ab * (r @ b)) / den)
+
+
+def _laplacian_smooth(w: F64, triangles: NDArray[np.int64], iterations: int) -> F64:
+    """Average each weight with its edge neighbours' mean, `iterations` times (alpha = 0.5)."""
+    v = w.shape[0]
+    e = np.concatenate([triangles[:, [0, 1]], triangles[:, [1, 2]], triangles[:, [2, 0]]])
+    e = np.unique(np.sort(e, axis=1), axis=0)
+    deg = np.bincount(e.ravel(), minlength=v).astype(np.float64)
+    out = w.copy()
+    for _ in range(iterations):
+        acc = np.bincount(e[:, 0], weights=out[e[:, 1]], minlength=v) + np.bincount(
+            e[:, 1], weights=out[e[:, 0]], minlength=v
+        )
+        mean = np.where(deg > 0, acc / np.maximum(deg, 1.0), out)
+        out = 0.5 * out + 0.5 * mean
+    return np.clip(out, 0.0, 1.0)
+
+
+def _orthonormal_frame(open_axis: F64, lateral_hint: F64) -> F64:
+    a = open_axis / np.linalg.norm(open_axis)
+    b = lateral_hint - (lateral_hint @ a) * a
+    nb = np.linalg.norm(b)
+    if nb < 1e-6:
+        b = np.array([0.0, 1.0, 0.0]) - a[1] * a
+        nb = np.linalg.norm(b)
+    b = b / nb
+    return np.stack([a, b, np.cross(a, b)], axis=1)
+
+
+@dataclass(frozen=True)
+class RigReport:
+    """Diagnostics of `estimate_rig`, returned with `return_report=True`."""
+
+    rigid_vertices: NDArray[np.int64]
+    """Vertices treated as rigidly attached to the jaw."""
+    open_axis: F64
+    """Hinge axis of the jaw-open shape (unit, oriented towards +x)."""
+    open_angle: float
+    """Rotation angle of the jaw-open shape's rigid fit, radians."""
+    rigid_rms: float
+    """RMS residual of the jaw-open rigid fit over the rigid vertices."""
+    jaw_theta: dict[str, F64]
+    """Fitted theta of each named jaw shape present (open, left, right, forward)."""
+    explained: F64
+    """(S,) fraction of each shape's squared rigid-vertex displacement its theta fit explains."""
+
+
+def estimate_rig(
+    neutral: ArrayLike,
+    shapes: ArrayLike,
+    names: Sequence[str],
+    jaw_open: str = "jawOpen",
+    jaw_left: str = "jawLeft",
+    jaw_right: str = "jawRight",
+    jaw_forward: str = "jawForward",
+    rigid_vertices: ArrayLike | None = None,
+    triangles: ArrayLike | None = None,
+    smooth_iterations: int = 1,
+    estimate_frame: bool = False,
+    huber: float | None = 1.345,
+    min_explained: float = 0.8,
+    return_report: bool = False,
+) -> Any:
+    """Estimate the jaw rig and every shape's theta from a dataset's jaw shapes.
+
+    `shapes` are (S, V, 3) displacements from `neutral`. The jaw-open shape's rigid part (the
+    `rigid_vertices`, e.g. the lower teeth; found automatically when None) gives the hinge axis,
+    the pivot (the point of the hinge closest to the jawLeft/jawRight rotation axes, or to the
+    rigid part's centroid when there are none) and per-vertex weights
+    (projection of each vertex's displacement onto the rigid displacement field, clipped to
+    [0, 1] and smoothed `smooth_iterations` times over the mesh edges when `triangles` is
+    given). Each shape's theta is a robust Gauss-Newton fit of the rigid vertices, kept only when
+    the fitted rigid motion explains at least `min_explained` of the squared displacement of the
+    rigid vertices (otherwise the shape deforms them non-rigidly and gets theta = 0).
+
+    With `estimate_frame`, the rig's axes follow the estimated hinge (and the jawLeft/jawRight
+    rotation axis for the lateral axis); by default they are x, y, z as in the Rust core.
+    Returns (JawRig, shape_theta (S, 3)), plus a `RigReport` when `return_report`.
+    """
+    x0 = _points(neutral, "neutral")
+    s = np.asarray(shapes, dtype=np.float64)
+    if s.ndim != 3 or s.shape[1:] != x0.shape:
+        raise InputError(f"shapes must have shape (S, {x0.shape[0]}, 3), got {s.shape}")
+    names = list(names)
+    if len(names) != s.shape[0]:
+        raise InputError(f"{len(names)} names for {s.shape[0]} shapes")
+    if jaw_open not in names:
+        raise InputError(f"no jaw-open shape named {jaw_open!r} in the dataset")
+    if not np.all(np.isfinite(s)) or not np.all(np.isfinite(x0)):
+        raise InputError("neutral and shapes must be finite")
+    d_open = s[names.index(jaw_open)]
+    if rigid_vertices is None:
+        rigid = _find_rigid_set(x0, d_open)
+    else:
+        rigid = np.unique(np.asarray(rigid_vertices, dtype=np.int64))
+        if rigid.size < 3 or rigid.min() < 0 or rigid.max() >= x0.shape[0]:
+            raise InputError("rigid_vertices must hold at least 3 valid vertex indices")
+    r_open, t_open = fit_rigid(x0[rigid], x0[rigid] + d_open[rigid])
+    fit_miss = x0[rigid] @ r_open.T + t_open - x0[rigid] - d_open[rigid]
+    rms = float(np.sqrt(np.mean(np.sum(fit_miss**2, axis=1))))
+    axis, angle = rotation_axis_angle(r_open)
+    if axis[0] < 0:
+        axis, angle = -axis, -angle
+    if abs(angle) < 1e-9:
+        raise InputError(f"the {jaw_open!r} shape does not rotate its rigid part")
+    pivot = _screw_pivot(r_open, t_open, axis, x0[rigid].mean(axis=0))
+
+    # The lateral shapes pin where along the hinge the pivot sits (the hinge alone cannot): the
+    # pivot is the point of the hinge closest to the lateral rotation axes (averaged, so a
+    # left/right pair stays symmetric). Their axes also give the frame's lateral direction.
+    lateral_axes = []
+    shifts = []
+    for name in (jaw_left, jaw_right):
+        if name not in names:
+            continue
+        d = s[names.index(name)]
+        r_lat, t_lat = fit_rigid(x0[rigid], x0[rigid] + d[rigid])
+        ax, ang = rotation_axis_angle(r_lat)
+        if ang < 1e-6:
+            continue
+        ax = ax if ax[1] >= 0 else -ax
+        lateral_axes.append(ax)
+        on_axis = _screw_pivot(r_lat, t_lat, ax, pivot)
+        shift = _closest_along(pivot, axis, on_axis, ax)
+        if shift is not None:
+            shifts.append(shift)
+    if shifts:
+        pivot = pivot + float(np.mean(shifts)) * axis
+
+    frame = np.eye(3)
+    if estimate_frame:
+        hint = lateral_axes[0] if lateral_axes else np.array([0.0, 1.0, 0.0])
+        frame = _orthonormal_frame(axis, hint)
+
+    # Weights: project the jaw-open displacement onto the rigid field d_v = T(p_v) - p_v.
+    field_ = x0 @ r_open.T + t_open - x0
+    den = np.einsum("vi,vi->v", field_, field_)
+    num = np.einsum("vi,vi->v", d_open, field_)
+    tiny = den <= (1e-12 * float(den.max()) if den.size else 0.0)
+    w = np.where(tiny, 0.0, num / np.where(tiny, 1.0, den))
+    w = np.clip(w, 0.0, 1.0)
+    if triangles is not None and smooth_iterations > 0:
+        tri = np.asarray(triangles, dtype=np.int64)
+        if tri.ndim != 2 or tri.shape[1] != 3 or tri.min() < 0 or tri.max() >= x0.shape[0]:
+            raise InputError("triangles must be (T, 3) valid vertex indices")
+        w = _laplacian_smooth(w, tri, smooth_iterations)
+    w[rigid] = 1.0
+    rig = JawRig(pivot=pivot, weights=w, frame=frame)
+
+    shape_theta = np.zeros((s.shape[0], 3))
+    ones = np.ones(rigid.size)
+    explained = np.zeros(s.shape[0])
+    for k in range(s.shape[0]):
+        d = s[k][rigid]
+        total = float(np.sum(d * d))
+        if total == 0.0:
+            continue
+        th = fit_theta(rig, x0[rigid], x0[rigid] + d, huber=huber)
+        miss = rig.skin(x0[rigid], th, ones) - x0[rigid] - d
+        # A shape that deforms the rigid part non-rigidly (an expression pulling the chin skin)
+        # has no jaw motion of its own; a rigid motion that explains little of it is spurious.
+        explained[k] = 1.0 - float(np.sum(miss * miss)) / total
+        if explained[k] >= min_explained:
+            shape_theta[k] = th
+    if return_report:
+        named = {
+            n: shape_theta[names.index(n)]
+            for n in (jaw_open, jaw_left, jaw_right, jaw_forward)
+            if n in names
+        }
+        return rig, shape_theta, RigReport(rigid, axis, float(angle), rms, named, explained)
+    return rig, shape_theta
+
+
+# --------------------------------------------------------------------------------------------
+# Tracking.
+
+
+def _moving_average(x: F64, window: int) -> F64:
+    """Centered moving average along axis 0; near the ends the window shrinks symmetrically."""
+    half = max(0, int(window) // 2)
+    if half == 0 or x.shape[0] < 2:
+        return x.copy()
+    c = np.concatenate([np.zeros((1, *x.shape[1:])), np.cumsum(x, axis=0)])
+    n = x.shape[0]
+    i = np.arange(n)
+    h = np.minimum(half, np.minimum(i, n - 1 - i))
+    return (c[i + h + 1] - c[i - h]) / (2 * h + 1)[:, None]
+
+
+def track_jaw(
+    rig: JawRig,
+    bundle_rest: ArrayLike,
+    bundle_weights: ArrayLike,
+    frames: ArrayLike,
+    smooth_window: int = 5,
+    min_weight: float = 0.5,
+    huber: float | None = 1.345,
+) -> F64:
+    """Per-frame jaw theta (F, 3) from bundle positions (F, B, 3).
+
+    Bundles with jaw weight > `min_weight` are fitted (skin(rest, theta) ~ frame) by robust
+    Gauss-Newton (Huber IRLS), NaN bundles ignored, each frame started from the previous one;
+    frames with fewer than 3 usable bundles are interpolated from their neighbours. Then a
+    centered moving average over `smooth_window` frames.
+    """
+    rest = _points(bundle_rest, "bundle_rest")
+    bw = np.asarray(bundle_weights, dtype=np.float64)
+    fr = np.asarray(frames, dtype=np.float64)
+    b = rest.shape[0]
+    if bw.shape != (b,):
+        raise InputError(f"bundle_weights must have shape ({b},), got {bw.shape}")
+    if fr.ndim != 3 or fr.shape[1:] != (b, 3):
+        raise InputError(f"frames must have shape (F, {b}, 3), got {fr.shape}")
+    use = bw > min_weight
+    if int(use.sum()) < 3:
+        raise InputError(
+            f"only {int(use.sum())} bundles have a jaw weight above {min_weight}; need 3"
+        )
+    theta = np.full((fr.shape[0], 3), np.nan)
+    prev = np.zeros(3)
+    for i in range(fr.shape[0]):
+        ok = use & np.all(np.isfinite(fr[i]), axis=1)
+        if int(ok.sum()) < 3:
+            continue
+        prev = fit_theta(rig, rest[ok], fr[i, ok], bw[ok], theta0=prev, huber=huber)
+        theta[i] = prev
+    valid = np.all(np.isfinite(theta), axis=1)
+    if not valid.any():
+        raise InputError("no frame has 3 usable jaw bundles")
+    if not valid.all():
+        t = np.arange(fr.shape[0])
+        for c in range(3):
+            theta[:, c] = np.interp(t, t[valid], theta[valid, c])
+    return _moving_average(theta, smooth_window)

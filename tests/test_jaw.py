@@ -1,0 +1,329 @@
+"""Jaw rig tooling (lgi.jaw): skinning against lgi.sample's reference, exact unskinning, rig and
+theta estimation from synthetic and sample shapes, tracking on the sample performance, and the
+ICT-FaceKit jaw (skipped when the shared data is absent)."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from lgi import jaw
+from lgi.errors import InputError
+from lgi.sample import jaw_transform, make_sample, skin_jaw
+
+PIVOT = np.array([0.3, -1.2, 2.5])
+
+
+def _rodrigues(axis: np.ndarray, angle: float) -> np.ndarray:
+    a = np.asarray(axis, dtype=np.float64) / np.linalg.norm(axis)
+    k = np.array([[0, -a[2], a[1]], [a[2], 0, -a[0]], [-a[1], a[0], 0]])
+    return np.eye(3) + np.sin(angle) * k + (1 - np.cos(angle)) * (k @ k)
+
+
+def _synthetic(seed: int = 3, frame: np.ndarray | None = None):
+    """A blob of points: 150 rigidly on the jaw (w = 1), 150 partial, 100 on the skull."""
+    rng = np.random.default_rng(seed)
+    x0 = rng.uniform([-5, -8, 5], [5, 2, 10], size=(400, 3))
+    w = np.concatenate([np.ones(150), rng.uniform(0.05, 0.95, 150), np.zeros(100)])
+    rig = jaw.JawRig(PIVOT, w, np.eye(3) if frame is None else frame)
+    thetas = {
+        "jawOpen": [0.41, 0.0, 0.0],
+        "jawLeft": [0.0, 0.11, 0.0],
+        "jawRight": [0.0, -0.11, 0.0],
+        "jawForward": [0.0, 0.0, 0.55],
+        "mixed": [0.2, -0.07, 0.3],
+    }
+    names = [*thetas, "browUp"]
+    shapes = [rig.skin(x0, th) - x0 for th in thetas.values()]
+    brow = np.zeros_like(x0)
+    brow[300:, 1] = rng.uniform(0.1, 0.3, 100)  # moves skull vertices only
+    shapes.append(brow)
+    truth = np.array([*thetas.values(), [0.0, 0.0, 0.0]])
+    return rig, x0, np.stack(shapes), names, truth
+
+
+def _deg(x: np.ndarray) -> np.ndarray:
+    return np.rad2deg(x)
+
+
+# --------------------------------------------------------------------------------------------
+# Skinning.
+
+
+def test_identity_frame_skin_matches_the_sample_generator_bit_for_bit() -> None:
+    rng = np.random.default_rng(0)
+    p = rng.normal(size=(200, 3)) * 4
+    w = rng.uniform(0, 1, 200)
+    rig = jaw.JawRig(PIVOT, w)
+    for th in ([0.4, 0.1, 0.3], [-0.2, -0.25, -1.0], [0.0, 0.0, 0.0]):
+        np.testing.assert_array_equal(rig.skin(p, th), skin_jaw(p, np.array(th), PIVOT, w))
+        r, t = rig.transform(th)
+        r_ref, t_ref = jaw_transform(np.array(th))
+        np.testing.assert_array_equal(r, r_ref)
+        np.testing.assert_array_equal(t, t_ref)
+
+
+def test_weight_one_points_follow_the_closed_form_rotation_about_the_pivot() -> None:
+    rng = np.random.default_rng(1)
+    p = rng.normal(size=(50, 3)) * 5
+    rig = jaw.JawRig(PIVOT, np.ones(50))
+    th = np.array([0.35, -0.12, 0.4])
+    r = _rodrigues([0, 1, 0], th[1]) @ _rodrigues([1, 0, 0], th[0])
+    expected = (p - PIVOT) @ r.T + PIVOT + [0, 0, th[2]]
+    np.testing.assert_allclose(rig.skin(p, th), expected, atol=1e-12)
+
+
+def test_weight_zero_points_and_the_rest_pose_are_untouched() -> None:
+    p = np.array([[1.0, -5.0, 8.0], [0.5, -6.0, 9.0]])
+    rig = jaw.JawRig(PIVOT, np.array([0.0, 0.6]))
+    out = rig.skin(p, [0.4, 0.1, 0.2])
+    np.testing.assert_array_equal(out[0], p[0])
+    np.testing.assert_array_equal(rig.skin(p, [0, 0, 0]), p)
+    np.testing.assert_array_equal(rig.unskin(p, [0, 0, 0]), p)
+
+
+@settings(max_examples=200, deadline=None, derandomize=True)
+@given(
+    open_deg=st.floats(-40, 40),
+    lateral_deg=st.floats(-15, 15),
+    forward=st.floats(-2, 2),
+    w=st.floats(0, 1),
+    seed=st.integers(0, 2**16),
+)
+def test_unskin_inverts_skin_to_1e12_relative(
+    open_deg: float, lateral_deg: float, forward: float, w: float, seed: int
+) -> None:
+    rng = np.random.default_rng(seed)
+    p = rng.uniform(-10, 10, size=(20, 3))
+    frame = _rodrigues(rng.normal(size=3), rng.uniform(0, 0.3))
+    rig = jaw.JawRig(PIVOT, np.full(20, w), frame)
+    th = [np.deg2rad(open_deg), np.deg2rad(lateral_deg), forward]
+    scale = 1 + np.linalg.norm(p, axis=1).max() + np.linalg.norm(PIVOT)
+    assert np.abs(rig.unskin(rig.skin(p, th), th) - p).max() <= 1e-12 * scale
+    assert np.abs(rig.skin(rig.unskin(p, th), th) - p).max() <= 1e-12 * scale
+
+
+def test_rig_round_trips_through_npz(tmp_path: Path) -> None:
+    rig = jaw.JawRig(PIVOT, np.linspace(0, 1, 7), _rodrigues([1, 2, 3], 0.2))
+    np.savez(tmp_path / "rig.npz", **rig.to_dict())
+    with np.load(tmp_path / "rig.npz") as z:
+        back = jaw.JawRig.from_dict(z)
+    np.testing.assert_array_equal(back.pivot, rig.pivot)
+    np.testing.assert_array_equal(back.weights, rig.weights)
+    np.testing.assert_array_equal(back.frame, rig.frame)
+
+
+def test_invalid_rigs_and_arguments_raise_input_error_naming_the_problem() -> None:
+    with pytest.raises(InputError, match="vertex 2"):
+        jaw.JawRig(PIVOT, np.array([0.0, 1.0, 1.5]))
+    with pytest.raises(InputError, match="rotation"):
+        jaw.JawRig(PIVOT, np.ones(2), np.diag([1.0, 1.0, -1.0]))
+    rig = jaw.JawRig(PIVOT, np.ones(2))
+    with pytest.raises(InputError, match="weights"):
+        rig.skin(np.zeros((3, 3)), [0, 0, 0])
+    with pytest.raises(InputError, match="theta"):
+        rig.skin(np.zeros((2, 3)), [np.nan, 0, 0])
+    with pytest.raises(InputError, match="missing"):
+        jaw.JawRig.from_dict({"jaw_pivot": PIVOT})
+    _, x0, shapes, names, _ = _synthetic()
+    with pytest.raises(InputError, match="jawOpen"):
+        jaw.estimate_rig(x0, shapes, [n.replace("jawOpen", "open") for n in names])
+
+
+# --------------------------------------------------------------------------------------------
+# Estimation.
+
+
+def test_estimate_rig_recovers_known_theta_pivot_and_weights_from_synthetic_shapes() -> None:
+    rig, x0, shapes, names, truth = _synthetic()
+    est, theta, rep = jaw.estimate_rig(x0, shapes, names, return_report=True)
+    err = np.abs(theta - truth).max()
+    print(
+        f"\nsynthetic: theta max error {err:.2e}, pivot error "
+        f"{np.linalg.norm(est.pivot - PIVOT):.2e}, rigid set {rep.rigid_vertices.size}"
+    )
+    assert err <= 1e-6
+    np.testing.assert_allclose(est.pivot, PIVOT, atol=1e-6)
+    np.testing.assert_allclose(rep.open_axis, [1, 0, 0], atol=1e-9)
+    np.testing.assert_allclose(est.weights, rig.weights, atol=1e-6)
+    assert set(rep.rigid_vertices.tolist()) == set(range(150))
+
+
+def test_estimate_rig_with_given_rigid_vertices_and_tilted_axes_recovers_the_frame() -> None:
+    frame = _rodrigues([0.3, -0.5, 1.0], 0.15)
+    _, x0, shapes, names, truth = _synthetic(seed=5, frame=frame)
+    est, theta = jaw.estimate_rig(
+        x0, shapes, names, rigid_vertices=np.arange(150), estimate_frame=True
+    )
+    np.testing.assert_allclose(est.frame, frame, atol=1e-9)
+    np.testing.assert_allclose(est.pivot, PIVOT, atol=1e-6)
+    assert np.abs(theta - truth).max() <= 1e-6
+
+
+def test_fit_theta_recovers_theta_from_partially_weighted_points() -> None:
+    rig, x0, *_ = _synthetic()
+    th = np.array([0.3, 0.08, -0.4])
+    target = rig.skin(x0, th)
+    got = jaw.fit_theta(rig, x0[150:300], target[150:300], rig.weights[150:300])
+    np.testing.assert_allclose(got, th, atol=1e-10)
+
+
+@pytest.fixture(scope="module")
+def sample():
+    return make_sample()
+
+
+def test_estimate_rig_on_the_sample_matches_its_true_jaw(sample) -> None:
+    s = sample
+    est, theta, rep = jaw.estimate_rig(s.neutral, s.shapes, s.names, return_report=True)
+    smoothed, _ = jaw.estimate_rig(s.neutral, s.shapes, s.names, triangles=s.triangles)
+    pivot_err = np.linalg.norm(est.pivot - s.jaw_pivot)
+    axis_err = np.degrees(np.arcsin(min(1.0, np.linalg.norm(rep.open_axis[1:]))))
+    theta_err = np.abs(theta - s.shape_jaw_theta)
+    w_err = np.abs(est.weights - s.jaw_weights).max()
+    ws_err = np.abs(smoothed.weights - s.jaw_weights)
+    print(
+        f"\nsample rig: pivot error {pivot_err:.2e} cm, axis error {axis_err:.2e} deg, "
+        f"open {np.degrees(rep.open_angle):.6f} deg, shape theta max error "
+        f"{_deg(theta_err[:, :2]).max():.2e} deg / {theta_err[:, 2].max():.2e} cm, "
+        f"weights max error {w_err:.2e} (smoothed: max {ws_err.max():.3f}, "
+        f"mean {ws_err.mean():.1e})"
+    )
+    assert pivot_err < 1e-5
+    assert axis_err < 1e-5
+    assert _deg(theta_err[:, :2]).max() < 1e-5 and theta_err[:, 2].max() < 1e-5
+    assert w_err < 1e-5
+    assert ws_err.max() < 0.05
+    # Expressions that pull the chin skin are not jaw motion.
+    jaw_shapes = np.abs(s.shape_jaw_theta).max(axis=1) > 0
+    assert np.all(theta[~jaw_shapes] == 0)
+    assert np.all(rep.explained[jaw_shapes] > 0.999999)
+
+
+def test_track_jaw_follows_the_sample_performance(sample) -> None:
+    s = sample
+    rig, _ = jaw.estimate_rig(s.neutral, s.shapes, s.names, triangles=s.triangles)
+    bw = rig.bundle_weights(s.triangles, s.marker_triangles, s.marker_barycentrics)
+    errs = {}
+    for window in (1, 5):
+        theta = jaw.track_jaw(rig, s.markers_rest, bw, s.performance, smooth_window=window)
+        e = np.abs(theta - s.jaw_theta)
+        errs[window] = e
+        print(
+            f"\nsample tracking (window {window}, {int((bw > 0.5).sum())} jaw bundles): "
+            f"open mean {_deg(e[:, 0]).mean():.3f} max {_deg(e[:, 0]).max():.3f} deg, "
+            f"lateral mean {_deg(e[:, 1]).mean():.3f} max {_deg(e[:, 1]).max():.3f} deg, "
+            f"forward mean {e[:, 2].mean():.4f} max {e[:, 2].max():.4f} cm"
+        )
+    for e in errs.values():
+        assert _deg(e[:, :2]).mean() < 0.5
+        assert _deg(e[:, :2]).max() < 3.0
+        assert e[:, 2].max() < 0.2
+
+
+def test_track_jaw_is_exact_on_clean_pure_jaw_frames_with_dropouts() -> None:
+    rig, x0, *_ = _synthetic()
+    rest = x0[100:250]
+    bw = rig.weights[100:250]
+    t = np.linspace(0, 1, 30)
+    truth = np.stack([0.4 * np.sin(3 * t), 0.1 * np.cos(2 * t), 0.3 * t], axis=1)
+    frames = np.stack([rig.skin(rest, th, bw) for th in truth])
+    frames[3, :, :] = np.nan  # a frame with every bundle lost
+    frames[5:9, ::3] = np.nan
+    theta = jaw.track_jaw(rig, rest, bw, frames, smooth_window=1)
+    ok = np.ones(30, dtype=bool)
+    ok[3] = False
+    np.testing.assert_allclose(theta[ok], truth[ok], atol=1e-9)
+    np.testing.assert_allclose(theta[3], 0.5 * (truth[2] + truth[4]), atol=1e-9)
+    smoothed = jaw.track_jaw(rig, rest, bw, frames, smooth_window=5)
+    np.testing.assert_allclose(smoothed[0], theta[0], atol=1e-12)  # the window shrinks at ends
+    np.testing.assert_allclose(smoothed[10], theta[8:13].mean(axis=0), atol=1e-12)
+
+
+# --------------------------------------------------------------------------------------------
+# ICT-FaceKit (real data, optional).
+
+
+def _ict_root() -> Path | None:
+    candidates = []
+    if os.environ.get("LGI_SHARED_DATA"):
+        candidates.append(Path(os.environ["LGI_SHARED_DATA"]))
+    candidates += [
+        Path(__file__).resolve().parents[2] / "shared" / "data",
+        Path("/work/shared/data"),
+    ]
+    for c in candidates:
+        if (c / "ict-facekit" / "generic_neutral_mesh.obj").is_file():
+            return c / "ict-facekit"
+    return None
+
+
+def _obj_vertices(path: Path) -> np.ndarray:
+    with open(path) as f:
+        coords = [line[2:] for line in f if line.startswith("v ")]
+    return np.array(" ".join(coords).split(), dtype=np.float64).reshape(-1, 3)
+
+
+@pytest.fixture(scope="module")
+def ict():
+    root = _ict_root()
+    if root is None:
+        pytest.skip("ICT-FaceKit data not found (set LGI_SHARED_DATA)")
+    x0 = _obj_vertices(root / "generic_neutral_mesh.obj")
+    names = sorted(p.stem for p in (root / "shapes").glob("*.obj"))
+    shapes = np.stack([_obj_vertices(root / "shapes" / f"{n}.obj") - x0 for n in names])
+    return x0, shapes, names
+
+
+def test_ict_jaw_open_is_a_25_degree_hinge_near_the_documented_pivot(ict) -> None:
+    x0, shapes, names = ict
+    lo, hi = jaw.ICT_LOWER_TEETH
+    rig, theta, rep = jaw.estimate_rig(
+        x0, shapes, names, rigid_vertices=np.arange(lo, hi + 1), return_report=True
+    )
+    axis_dev = np.degrees(np.arcsin(min(1.0, np.linalg.norm(rep.open_axis[1:]))))
+    lines = [
+        f"\nICT: jawOpen {np.degrees(rep.open_angle):.3f} deg about {np.round(rep.open_axis, 6)} "
+        f"(off x by {axis_dev:.2e} deg), pivot {np.round(rig.pivot, 4)}, teeth rigid-fit RMS "
+        f"{rep.rigid_rms:.4f} cm"
+    ]
+    for n, th in rep.jaw_theta.items():
+        k = names.index(n)
+        lines.append(
+            f"  {n}: open {np.degrees(th[0]):.3f} deg, lateral {np.degrees(th[1]):.3f} deg, "
+            f"forward {th[2]:.4f} cm, explained {rep.explained[k]:.5f}"
+        )
+    moved = [
+        n for n, th in zip(names, theta, strict=True) if np.any(th != 0) and n not in rep.jaw_theta
+    ]
+    lines.append(f"  other shapes with jaw motion: {moved}")
+    lines.append(f"  vertices with weight > 0.5: {int((rig.weights > 0.5).sum())}")
+    print("\n".join(lines))
+    assert 23.0 < np.degrees(rep.open_angle) < 27.0
+    assert axis_dev < 1.0
+    assert abs(rig.pivot[0]) < 0.05
+    assert abs(rig.pivot[1] + 0.55) < 0.1 and abs(rig.pivot[2] - 1.82) < 0.1
+    assert rep.rigid_rms < 0.05
+    assert theta[names.index("jawForward"), 2] > 0.5
+    assert theta[names.index("jawLeft"), 1] > 0 > theta[names.index("jawRight"), 1]
+    np.testing.assert_array_equal(rig.weights[lo : hi + 1], 1.0)
+    np.testing.assert_array_equal(rig.weights[17039:19247], 0.0)  # upper teeth stay on the skull
+
+
+def test_ict_every_shape_unskins_and_reskins_exactly(ict) -> None:
+    x0, shapes, names = ict
+    lo, hi = jaw.ICT_LOWER_TEETH
+    rig, theta = jaw.estimate_rig(x0, shapes, names, rigid_vertices=np.arange(lo, hi + 1))
+    diag = np.linalg.norm(x0.max(axis=0) - x0.min(axis=0))
+    worst = 0.0
+    for k in range(len(names)):
+        star = rig.unskin_displacements(x0, shapes[k], theta[k])
+        back = rig.skin(x0 + star, theta[k]) - x0
+        worst = max(worst, float(np.abs(back - shapes[k]).max()))
+    print(f"\nICT round trip unskin -> reskin: max error {worst / diag:.2e} of the diagonal")
+    assert worst <= 1e-9 * diag
