@@ -729,7 +729,7 @@ impl UvIslands {
     /// Boundary of one island in its own UVs: the UV edges used by exactly one triangle of the
     /// island. This is what a query in that chart must not see across: 3D holes inside the
     /// island *and* seams to other islands (e.g. ICT's mouth and eyes are seams to the mouth
-    /// and eye-socket islands, not 3D boundaries).
+    /// and eye-socket islands, not 3D boundaries). `self` must come from `mesh`.
     pub fn island_barriers(&self, mesh: &Mesh, island: u32) -> Vec<Barrier> {
         let mut count: HashMap<(u32, u32), u32> = HashMap::new();
         let mut order = Vec::new();
@@ -750,7 +750,8 @@ impl UvIslands {
         order
             .into_iter()
             .filter(|key| count.get(key) == Some(&1))
-            .map(|(a, b)| [mesh.uvs[a as usize], mesh.uvs[b as usize]])
+            // `get`: `self` may have been computed from another mesh.
+            .filter_map(|(a, b)| Some([*mesh.uvs.get(a as usize)?, *mesh.uvs.get(b as usize)?]))
             .collect()
     }
 }
