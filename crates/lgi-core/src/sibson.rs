@@ -48,6 +48,10 @@ pub type Barrier = [DVec2; 2];
 /// densify the matrix.
 const DROP_BELOW: f64 = 1e-14;
 
+/// Largest acceptable |Σ w_i s_i - q| in the internal unit frame before spade's weights are
+/// distrusted (they are normally exact to ~1e-15).
+const RESIDUAL_TOL: f64 = 1e-11;
+
 /// Query coordinates are clamped to ±FAR in the internal unit frame (where every site has
 /// |coordinates| < 1): such queries are far outside the hull, clamping barely moves their
 /// nearest hull point, and squared distances of huge coordinates would lose all precision.
@@ -78,7 +82,9 @@ impl HasPosition for Site {
 ///   Voronoi cell by q's cell);
 /// - outside: the weights of the closest point of the hull boundary, i.e. linear interpolation
 ///   of the two endpoints of the nearest hull edge (Sibson weights on a hull edge are exactly
-///   that, so the rule is continuous across the hull);
+///   that, so the rule is continuous across the hull). Inside but on (or within rounding of) a
+///   hull edge next to a sliver triangle, where spade's weights lose all precision (detected as
+///   `Σ w_i s_i != q`), the same projection is used;
 /// - barriers: a site whose straight segment from q crosses a barrier gets weight 0 and the
 ///   others are renormalised. If every natural neighbour is hidden, q takes weight 1 on the
 ///   nearest visible site (ties: lowest index); if no site at all is visible (q enclosed by
@@ -299,6 +305,20 @@ impl SibsonWeights {
                     .iter()
                     .map(|&(h, w)| (self.tri.vertex(h).data().index, w.max(0.0))),
             );
+            normalise(out);
+            // Sibson weights reproduce the position exactly. Spade's circumcentres lose all
+            // precision when q is (nearly) on the hull next to a sliver triangle (near-collinear
+            // hull sites); there the hull projection is the right answer, so keep whichever
+            // reproduces q better.
+            let residual = self.residual(q, out);
+            if residual > RESIDUAL_TOL {
+                s.unfiltered.clear();
+                self.hull_weights(q, &mut s.unfiltered);
+                if self.residual(q, &s.unfiltered) < residual {
+                    out.clear();
+                    out.extend_from_slice(&s.unfiltered);
+                }
+            }
         } else {
             // Outside the hull (spade gives nothing), or so close to a hull edge that spade's
             // circumcentres overflowed: either way the nearest hull point is the answer.
@@ -312,6 +332,12 @@ impl SibsonWeights {
         out.retain(|&(_, w)| w >= DROP_BELOW);
         normalise(out);
         out.sort_unstable_by_key(|&(c, _)| c);
+    }
+
+    /// |Σ w_i s_i - q|: how far the weights are from reproducing q (0 for exact Sibson weights).
+    fn residual(&self, q: DVec2, row: &[(u32, f64)]) -> f64 {
+        let p: DVec2 = row.iter().map(|&(i, w)| self.sites[i as usize] * w).sum();
+        (p - q).length()
     }
 
     /// Linear interpolation of the endpoints of the hull edge nearest to `q` (the Sibson weights
@@ -703,7 +729,7 @@ impl UvIslands {
     /// Boundary of one island in its own UVs: the UV edges used by exactly one triangle of the
     /// island. This is what a query in that chart must not see across: 3D holes inside the
     /// island *and* seams to other islands (e.g. ICT's mouth and eyes are seams to the mouth
-    /// and eye-socket islands, not 3D boundaries).
+    /// and eye-socket islands, not 3D boundaries). `self` must come from `mesh`.
     pub fn island_barriers(&self, mesh: &Mesh, island: u32) -> Vec<Barrier> {
         let mut count: HashMap<(u32, u32), u32> = HashMap::new();
         let mut order = Vec::new();
@@ -724,7 +750,8 @@ impl UvIslands {
         order
             .into_iter()
             .filter(|key| count.get(key) == Some(&1))
-            .map(|(a, b)| [mesh.uvs[a as usize], mesh.uvs[b as usize]])
+            // `get`: `self` may have been computed from another mesh.
+            .filter_map(|(a, b)| Some([*mesh.uvs.get(a as usize)?, *mesh.uvs.get(b as usize)?]))
             .collect()
     }
 }
@@ -1045,6 +1072,22 @@ mod tests {
     }
 
     #[test]
+    fn queries_on_the_hull_beside_a_sliver_reproduce_their_position() {
+        // 0.2 + 0.4 != 0.6 in f64: site 2 is inside the hull by a rounding error, so (0, 2, 3)
+        // is a sliver whose circumcentres make spade's weights garbage on its edges.
+        let s = pts(&[(0.0, 0.4), (0.2, 0.2), (0.2, 0.6), (0.4, 0.8)]);
+        let sw = SibsonWeights::new(&s, &[]).unwrap();
+        let q = pts(&[(0.1, 0.5), (0.3, 0.7), (0.05, 0.45), (0.2, 0.6)]);
+        let w = sw.weights(&q);
+        for (r, &p) in q.iter().enumerate() {
+            let (c, v) = w.row(r);
+            let at: DVec2 = c.iter().zip(v).map(|(&i, &x)| s[i as usize] * x).sum();
+            assert!((at - p).length() < 1e-12, "{p} -> {at}: {:?}", w.row(r));
+            assert!((v.iter().sum::<f64>() - 1.0).abs() < 1e-12);
+        }
+    }
+
+    #[test]
     fn non_finite_query_gets_an_empty_row_and_far_queries_are_projected() {
         let s = pts(&[(0.0, 0.0), (1.0, 0.0), (0.0, 1.0), (1.0, 1.0)]);
         let sw = SibsonWeights::new(&s, &[]).unwrap();
@@ -1088,17 +1131,45 @@ mod tests {
         }
     }
 
-    fn site_sets() -> impl Strategy<Value = Vec<DVec2>> {
-        prop_oneof![
-            prop::collection::vec((0.0..1.0f64, 0.0..1.0f64), 3..40),
-            // Integer grid points: many cocircular quadruples (Delaunay degeneracies).
-            prop::collection::vec((0..6i32, 0..6i32), 3..30).prop_map(|v| v
-                .iter()
-                .map(|&(x, y)| (x as f64 / 5.0, y as f64 / 5.0))
-                .collect()),
-        ]
-        .prop_map(|v| to_points(&v))
-        .prop_filter("needs a 2D spread", |p| SibsonWeights::new(p, &[]).is_ok())
+    /// Random and grid site sets; with `clusters`, also sets with sites 1e-6 apart.
+    fn site_sets_with(clusters: bool) -> BoxedStrategy<Vec<DVec2>> {
+        let random = prop::collection::vec((0.0..1.0f64, 0.0..1.0f64), 3..40).boxed();
+        // Integer grid points: many cocircular quadruples (Delaunay degeneracies). Dyadic
+        // steps keep collinearity exact, so the tests' plain f64 hull agrees with spade's
+        // exact predicates.
+        let grid = prop::collection::vec((0..6i32, 0..6i32), 3..30)
+            .prop_map(|v| {
+                v.iter()
+                    .map(|&(x, y)| (x as f64 / 8.0, y as f64 / 8.0))
+                    .collect()
+            })
+            .boxed();
+        // Tight clusters next to sites far apart (extreme aspect ratios).
+        let cluster = prop::collection::vec(((0.0..1.0f64, 0.0..1.0f64), 0..3usize), 2..12)
+            .prop_map(|v| {
+                v.iter()
+                    .flat_map(|&((x, y), n)| {
+                        (0..=n).map(move |k| (x + 1e-6 * k as f64, y + 3e-7 * (k * k) as f64))
+                    })
+                    .collect()
+            })
+            .boxed();
+        let sets = if clusters {
+            prop_oneof![random, grid, cluster].boxed()
+        } else {
+            prop_oneof![random, grid].boxed()
+        };
+        sets.prop_map(|v| to_points(&v))
+            // Hull area: nearly collinear sets are valid input but make the tests' own
+            // (non-robust) hull and their fixed steps across it meaningless.
+            .prop_filter("needs a 2D spread", |p| {
+                SibsonWeights::new(p, &[]).is_ok() && area(&hull_ccw(p)) > 1e-3
+            })
+            .boxed()
+    }
+
+    fn site_sets() -> BoxedStrategy<Vec<DVec2>> {
+        site_sets_with(true)
     }
 
     fn queries(n: usize) -> impl Strategy<Value = Vec<DVec2>> {
@@ -1107,14 +1178,14 @@ mod tests {
             // On grid lines and grid points: queries on Delaunay edges and sites.
             prop::collection::vec((0..11i32, -1..12i32), n).prop_map(|v| v
                 .iter()
-                .map(|&(x, y)| (x as f64 / 10.0, y as f64 / 10.0))
+                .map(|&(x, y)| (x as f64 / 16.0, y as f64 / 16.0))
                 .collect()),
         ]
         .prop_map(|v: Vec<(f64, f64)>| pts(&v))
     }
 
     proptest! {
-        #![proptest_config(config(96, 0x5eed_0001))]
+        #![proptest_config(config(128, 0x5eed_0001))]
 
         #[test]
         fn rows_are_sorted_positive_and_sum_to_one(s in site_sets(), q in queries(40)) {
@@ -1194,17 +1265,25 @@ mod tests {
             let h = hull_ccw(&s);
             let (a, b) = (h[k % h.len()], h[(k + 1) % h.len()]);
             let p = a + (b - a) * t;
+            // The jump across the edge is about step / feature size, the feature size being how
+            // close the other sites come to the edge, and how close p is to its ends.
+            let feature = s
+                .iter()
+                .filter(|&&x| x != a && x != b)
+                .map(|&x| {
+                    let u = ((x - a).dot(b - a) / (b - a).length_squared()).clamp(0.0, 1.0);
+                    (a + (b - a) * u - x).length()
+                })
+                .fold((p - a).length().min((p - b).length()), f64::min);
             let out = DVec2::new(b.y - a.y, a.x - b.x).normalize();
             let sw = SibsonWeights::new(&s, &[]).unwrap();
-            let mut last = f64::INFINITY;
-            for delta in [1e-4, 1e-6, 1e-8, 1e-10] {
+            for delta in [1e-4, 1e-6, 1e-8, 1e-10, 1e-12] {
                 let w = sw.weights(&[p + out * delta, p - out * delta]);
                 let d = max_diff(&dense(&w, 0), &dense(&w, 1));
-                // The jump shrinks with the step (Sibson weights approach the edge's linear
-                // interpolation linearly in the distance).
-                prop_assert!(d <= 1e4 * delta, "delta {} jump {}", delta, d);
-                prop_assert!(d <= last + 1e-15);
-                last = d;
+                prop_assert!(
+                    d <= 100.0 * delta / feature + 1e-13,
+                    "delta {} jump {} feature {}", delta, d, feature
+                );
             }
         }
     }
