@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
 
 from conftest import ICT_SKIN
 
@@ -65,31 +67,58 @@ def test_verification_bundle_residuals_below_1e6_of_diagonal(ict_model, verifica
     assert result.bundle_residuals.max() <= 1e-6 * ict_model.diagonal
 
 
+def _mouth_loop(dataset) -> np.ndarray:  # type: ignore[no-untyped-def]
+    """Vertices of the mouth hole: the boundary loop of the face skin around x = 0."""
+    tris = dataset.triangles[(dataset.triangles < ICT_SKIN).all(axis=1)]
+    edges = np.sort(np.concatenate([tris[:, [0, 1]], tris[:, [1, 2]], tris[:, [2, 0]]]), axis=1)
+    uniq, count = np.unique(edges, axis=0, return_counts=True)
+    boundary = uniq[count == 1]
+    graph = coo_matrix(
+        (np.ones(len(boundary)), (boundary[:, 0], boundary[:, 1])), shape=(ICT_SKIN, ICT_SKIN)
+    )
+    n, labels = connected_components(graph, directed=False)
+    on_boundary = np.zeros(ICT_SKIN, bool)
+    on_boundary[boundary.ravel()] = True
+    x = dataset.neutral
+    loops = [np.flatnonzero((labels == c) & on_boundary) for c in range(n)]
+    loops = [lp for lp in loops if lp.size > 2]
+    return min(loops, key=lambda lp: abs(x[lp, 0].mean()) + np.ptp(x[lp], axis=0).sum())
+
+
 def test_jaw_open_lips_separate_and_take_no_cross_lip_weight(ict_dataset, ict_model, verification):  # type: ignore[no-untyped-def]
     meshes, frames, result = verification
     k = ict_dataset.names.index("jawOpen")
-    rest = ict_model.bundle_positions(ict_dataset.neutral)
-    # Lip bundles: within 1.5 cm of the mouth centre; upper/lower by jawOpen's motion.
-    motion = np.linalg.norm(frames[k] - rest, axis=1)
-    mouth = rest[motion > 0].mean(axis=0)
-    tri, _bary = ict_model.core.bundle_surface_points()
-    lips = np.flatnonzero(
-        (np.abs(rest[:, 0]) < 2.5)
-        & (np.abs(rest[:, 1] - mouth[1]) < 1.5)
-        & (rest[:, 2] > mouth[2] - 1.0)
-    )
-    del tri
-    assert lips.size >= 2
-    drop = frames[k, lips, 1] - rest[lips, 1]
-    lower = lips[drop < -0.3]
-    upper = lips[drop > -0.05]
-    assert lower.size and upper.size
-    # Vertices that move down with the jaw by more than 3 mm are lower lip/chin.
-    vmove = meshes[k, :ICT_SKIN, 1] - ict_dataset.neutral[:ICT_SKIN, 1]
-    low_v = np.flatnonzero(vmove < -0.3)
+    x = ict_dataset.neutral
+    loop = _mouth_loop(ict_dataset)
+    assert 40 < loop.size < 150  # ICT's mouth slit has 74 boundary vertices
+    corners = loop[[np.argmin(x[loop, 0]), np.argmax(x[loop, 0])]]
+    rest = ict_model.bundle_positions(x)
+    bundle_motion = np.linalg.norm(frames[k] - rest, axis=1)
+    near_mouth = np.linalg.norm(rest[:, None] - x[loop][None], axis=2).min(axis=1) < 2.0
+    # The lips join at the corners: only markers and vertices 1.5 cm or more from a corner
+    # belong to one lip.
+    near_mouth &= np.linalg.norm(rest[:, None] - x[corners][None], axis=2).min(axis=1) > 1.5
+    upper_b = np.flatnonzero(near_mouth & (bundle_motion < 1.0))  # lips the jaw does not carry
+    lower_b = np.flatnonzero(near_mouth & (bundle_motion > 2.5))  # lips the jaw carries
+    assert upper_b.size >= 2 and lower_b.size >= 2
+    skin = np.arange(ICT_SKIN)
+    to_loop = np.linalg.norm(x[skin, None] - x[loop][None], axis=2).min(axis=1)
+    to_corner = np.linalg.norm(x[skin, None] - x[corners][None], axis=2).min(axis=1)
+    motion = np.linalg.norm(ict_dataset.shapes[k, :ICT_SKIN], axis=1)
+    lips = (to_loop < 1.0) & (to_corner > 1.5)
+    lower_v = skin[lips & (motion > 2.5)]
+    upper_v = skin[lips & (motion < 1.0)]
+    assert lower_v.size > 50 and upper_v.size > 50
     w = ict_model.core.sew_weights()
-    for v in low_v:
-        cols = w["indices"][w["indptr"][v] : w["indptr"][v + 1]]
-        assert not np.isin(cols, upper).any(), f"lower vertex {v} takes weight from {cols}"
-    err = np.linalg.norm(result.vertices[k, low_v] - meshes[k, low_v], axis=1)
+    ip, ix, val = w["indptr"], w["indices"], w["data"]
+
+    def cross_weight(vertices: np.ndarray, bundles: np.ndarray) -> float:
+        return max(
+            val[ip[v] : ip[v + 1]][np.isin(ix[ip[v] : ip[v + 1]], bundles)].sum() for v in vertices
+        )
+
+    assert cross_weight(lower_v, upper_b) == 0.0
+    assert cross_weight(upper_v, lower_b) == 0.0
+    lip_v = skin[(to_loop < 1.0)]
+    err = np.linalg.norm(result.vertices[k, lip_v] - meshes[k, lip_v], axis=1)
     assert err.max() <= 1e-4

@@ -40,6 +40,9 @@ class BuildConfig:
     """Nearest tets scored when a marker is outside every tet."""
     temporal_weight: float = 1e-6
     """Penalty per shape not shared with the previous frame's choice (relative to diagonal²)."""
+    detour_ratio: float = 1.4
+    """No weight between a bundle and a vertex whose surface path is this many times longer
+    than the straight line (it goes around a hole: the mouth, an eye). inf disables."""
 
 
 @dataclass(frozen=True)

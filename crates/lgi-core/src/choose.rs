@@ -49,9 +49,24 @@ pub struct Scoring<'a> {
 impl Scoring<'_> {
     /// Squared distances of the neighbours to their positions under the geometry.
     fn neighbour_error(&self, shapes: &[u32; 4], weights: &[f64; 4]) -> f64 {
+        self.error_over(self.neighbours.iter().copied(), shapes, weights)
+    }
+
+    /// The same error over every bundle: breaks exact ties between aliases that no
+    /// neighbour can tell apart (shapes identical around this bundle but not elsewhere).
+    fn global_error(&self, shapes: &[u32; 4], weights: &[f64; 4]) -> f64 {
+        self.error_over(0..self.num_bundles as u32, shapes, weights)
+    }
+
+    fn error_over(
+        &self,
+        bundles: impl Iterator<Item = u32>,
+        shapes: &[u32; 4],
+        weights: &[f64; 4],
+    ) -> f64 {
         let b = self.num_bundles;
         let mut err = 0.0;
-        for &n in self.neighbours {
+        for n in bundles {
             let t = self.targets[n as usize];
             if t.is_nan() {
                 continue;
@@ -94,6 +109,8 @@ pub struct ChoiceParams {
     pub projection_candidates: usize,
     /// Best candidates (by representative shapes) whose aliases are then optimised.
     pub alias_refine: usize,
+    /// A target this close to a cloud point is a hit on that point (absolute).
+    pub hit_distance: f64,
 }
 
 impl Default for ChoiceParams {
@@ -102,6 +119,7 @@ impl Default for ChoiceParams {
             eps: 1e-9,
             projection_candidates: 8,
             alias_refine: 4,
+            hit_distance: 0.0,
         }
     }
 }
@@ -150,6 +168,18 @@ pub fn choose(
             let s = scoring.score(&shapes, &w, 0.0);
             scratch.scored.push((s, t, tet, w, 0.0));
         }
+        // A target on a cloud point is that shape exactly, even where every tet at the point
+        // was too thin to keep and the target only lies inside other tets.
+        for (p, &q) in cloud.points.iter().enumerate() {
+            let d = q.distance(target);
+            if d <= params.hit_distance {
+                let tet = [p as u32; 4];
+                let w = [1.0, 0.0, 0.0, 0.0];
+                scratch
+                    .scored
+                    .push((scoring.score(&reps(&tet), &w, d), NO_TET, tet, w, d));
+            }
+        }
     } else if index.num_tets() > 0 {
         scratch.nearest.clear();
         index.nearest(target, params.projection_candidates, &mut scratch.nearest);
@@ -159,6 +189,16 @@ pub fn choose(
             let s = scoring.score(&reps(&tet), &w, d);
             scratch.scored.push((s, t, tet, w, d));
         }
+        // Cloud points themselves: a point whose every tet was too thin to keep is still
+        // real geometry, and a target on it must find it exactly.
+        for (p, &q) in cloud.points.iter().enumerate() {
+            let tet = [p as u32; 4];
+            let w = [1.0, 0.0, 0.0, 0.0];
+            let d = q.distance(target);
+            scratch
+                .scored
+                .push((scoring.score(&reps(&tet), &w, d), NO_TET, tet, w, d));
+        }
     } else {
         lower_simplices(cloud, target, scoring, &mut scratch.scored);
     }
@@ -166,7 +206,16 @@ pub fn choose(
         .scored
         .sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)).then(a.2.cmp(&b.2)));
     let mut best: Option<(f64, Choice)> = None;
-    for &(_, t, tet, w, d) in scratch.scored.iter().take(params.alias_refine.max(1)) {
+    // Refine the best few, and every exact hit on a cloud point: a hit's representative may
+    // score badly (the neutral standing for every shape that does not move this bundle) while
+    // one of its aliases is exactly right.
+    let refine = params.alias_refine.max(1);
+    let candidates = scratch
+        .scored
+        .iter()
+        .enumerate()
+        .filter(|(r, c)| *r < refine || (c.1 == NO_TET && c.4 <= params.hit_distance));
+    for (_, &(_, t, tet, w, d)) in candidates {
         let shapes = refine_aliases(cloud, &tet, &w, scoring);
         let s = scoring.score(&shapes, &w, d);
         let choice = Choice {
@@ -190,7 +239,8 @@ pub fn choose(
 }
 
 /// Greedy per-vertex alias choice: each point with weight takes the alias that minimises the
-/// neighbour error with the others fixed. Ties keep the lowest shape id (deterministic).
+/// neighbour error with the others fixed. Exact ties go to the alias with the lower error over
+/// all bundles, then to the lowest shape id (deterministic).
 fn refine_aliases(
     cloud: &BundleCloud,
     tet: &[u32; 4],
@@ -203,13 +253,29 @@ fn refine_aliases(
         if w[j] == 0.0 || aliases.len() < 2 {
             continue;
         }
-        let mut best = (scoring.neighbour_error(&shapes, w), shapes[j]);
+        let mut best = (scoring.neighbour_error(&shapes, w), shapes[j], None);
         for &a in aliases {
+            if a == best.1 {
+                continue;
+            }
             let mut trial = shapes;
             trial[j] = a;
             let e = scoring.neighbour_error(&trial, w);
-            if e < best.0 || (e == best.0 && a < best.1) {
-                best = (e, a);
+            if e < best.0 {
+                best = (e, a, None);
+            } else if e == best.0 {
+                // Exact tie: let the whole face decide, then the lower shape id.
+                let mut incumbent = shapes;
+                incumbent[j] = best.1;
+                let g_best = best
+                    .2
+                    .unwrap_or_else(|| scoring.global_error(&incumbent, w));
+                let g = scoring.global_error(&trial, w);
+                if g < g_best || (g == g_best && a < best.1) {
+                    best = (e, a, Some(g));
+                } else {
+                    best.2 = Some(g_best);
+                }
             }
         }
         shapes[j] = best.1;

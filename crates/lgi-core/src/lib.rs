@@ -12,6 +12,7 @@ pub mod cloud;
 pub mod correspond;
 pub mod dataset;
 pub mod error;
+pub mod geodesic;
 pub mod geom;
 pub mod grid;
 pub mod io;

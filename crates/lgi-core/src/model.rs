@@ -7,6 +7,7 @@ use crate::cloud::{build_cloud, BundleCloud};
 use crate::correspond::{correspond, SurfacePoint};
 use crate::dataset::Dataset;
 use crate::error::{LgiError, Result};
+use crate::geodesic::{is_detour, EdgeGraph};
 use crate::grid::TetIndex;
 use crate::sew::{blend, ResidualPass};
 use crate::sibson::{SibsonWeights, SparseWeights};
@@ -40,6 +41,10 @@ pub struct BuildConfig {
     pub projection_candidates: usize,
     /// Penalty per shape not shared with the previous frame's choice (relative to diagonal²).
     pub temporal_weight: f64,
+    /// A bundle gives no weight to a vertex (and is no neighbour of another bundle) when the
+    /// surface path between them is longer than this many times the straight line: that path
+    /// goes around a hole (the mouth slit, an eye). Infinity disables the rule.
+    pub detour_ratio: f64,
 }
 
 impl Default for BuildConfig {
@@ -55,6 +60,7 @@ impl Default for BuildConfig {
             containment_eps: 1e-9,
             projection_candidates: 8,
             temporal_weight: 1e-6,
+            detour_ratio: 1.4,
         }
     }
 }
@@ -73,6 +79,12 @@ impl BuildConfig {
         };
         pos("surface_tolerance", self.surface_tolerance)?;
         pos("max_edge", self.max_edge)?;
+        if self.detour_ratio.is_nan() || self.detour_ratio < 1.0 {
+            return Err(LgiError::Input(format!(
+                "BuildConfig.detour_ratio must be >= 1, got {}",
+                self.detour_ratio
+            )));
+        }
         for (name, v) in [
             ("prune_motion", self.prune_motion),
             ("duplicate_distance", self.duplicate_distance),
@@ -147,6 +159,7 @@ pub struct Model {
     clouds: Vec<BundleCloud>,
     indices: Vec<TetIndex>,
     space: SewingSpace,
+    graph: EdgeGraph,
     neighbours: Vec<Vec<u32>>,
     full_plan: Arc<SewPlan>,
     plans: Mutex<HashMap<Vec<u32>, Arc<SewPlan>>>,
@@ -229,11 +242,25 @@ impl Model {
             .map(|(c, t)| TetIndex::new(c.points.clone(), t))
             .collect::<Result<_>>()?;
         let space = uvspace::build(mesh, &bundles)?;
-        let neighbours = SibsonWeights::new(&space.bundle_uv, &space.barriers)
+        let graph = EdgeGraph::new(mesh, |t| {
+            mesh.triangles[t]
+                .iter()
+                .all(|&v| space.contains(v as usize))
+        });
+        let uv_neighbours = SibsonWeights::new(&space.bundle_uv, &space.barriers)
             .map_err(|e| bundle_context(e, "bundle UV layout"))?
             .neighbours();
+        let sew = SewContext {
+            dataset: &dataset,
+            bundles: &bundles,
+            space: &space,
+            graph: &graph,
+            detour_ratio: config.detour_ratio,
+            slack: DETOUR_SLACK * diagonal,
+        };
+        let neighbours = sew.filter_neighbours(uv_neighbours);
         let all: Vec<u32> = (0..b as u32).collect();
-        let full_plan = Arc::new(make_plan(&dataset, &bundles, &space, &all)?);
+        let full_plan = Arc::new(sew.plan(&all)?);
         Ok(Model {
             dataset,
             config: config.clone(),
@@ -244,6 +271,7 @@ impl Model {
             clouds,
             indices,
             space,
+            graph,
             neighbours,
             full_plan,
             plans: Mutex::new(HashMap::new()),
@@ -260,12 +288,7 @@ impl Model {
                 return Ok(p.clone());
             }
         }
-        let plan = Arc::new(make_plan(
-            &self.dataset,
-            &self.bundles,
-            &self.space,
-            present,
-        )?);
+        let plan = Arc::new(self.sew_context().plan(present)?);
         if let Ok(mut cache) = self.plans.lock() {
             if cache.len() >= PLAN_CACHE {
                 cache.clear();
@@ -306,6 +329,8 @@ impl Model {
         let params = ChoiceParams {
             eps: self.config.containment_eps,
             projection_candidates: self.config.projection_candidates,
+            hit_distance: self.config.prune_motion.max(self.config.duplicate_distance)
+                * self.diagonal,
             ..ChoiceParams::default()
         };
         let temporal_weight = self.config.temporal_weight * self.diagonal * self.diagonal;
@@ -414,6 +439,17 @@ impl Model {
         Ok(out)
     }
 
+    fn sew_context(&self) -> SewContext<'_> {
+        SewContext {
+            dataset: &self.dataset,
+            bundles: &self.bundles,
+            space: &self.space,
+            graph: &self.graph,
+            detour_ratio: self.config.detour_ratio,
+            slack: DETOUR_SLACK * self.diagonal,
+        }
+    }
+
     /// Bundle surface positions on a mesh with the neutral's topology.
     pub fn bundle_positions(&self, positions: &[DVec3]) -> Result<Vec<DVec3>> {
         let nv = self.dataset.num_vertices();
@@ -493,41 +529,163 @@ impl Model {
     }
 }
 
-/// Sewing weights for the present bundles: Sibson weights in UV for sewn vertices, copied
-/// from the proxy for the others; plus the residual pass for that set.
-fn make_plan(
-    dataset: &Dataset,
-    bundles: &[SurfacePoint],
-    sp: &SewingSpace,
-    present: &[u32],
-) -> Result<SewPlan> {
-    let sites: Vec<_> = present.iter().map(|&i| sp.bundle_uv[i as usize]).collect();
-    let sib = SibsonWeights::new(&sites, &sp.barriers)?;
-    let nv = dataset.num_vertices();
-    let sewn: Vec<usize> = (0..nv).filter(|&v| sp.contains(v)).collect();
-    let queries: Vec<_> = sewn.iter().map(|&v| sp.vertex_uv[v]).collect();
-    let w_sewn = sib.weights(&queries);
-    let mut row_of = vec![usize::MAX; nv];
-    for (r, &v) in sewn.iter().enumerate() {
-        row_of[v] = r;
+/// Zig-zag allowance of mesh-edge paths at short range (relative to the diagonal).
+const DETOUR_SLACK: f64 = 2e-3;
+
+/// What computing sewing weights needs from a model.
+struct SewContext<'a> {
+    dataset: &'a Dataset,
+    bundles: &'a [SurfacePoint],
+    space: &'a SewingSpace,
+    graph: &'a EdgeGraph,
+    detour_ratio: f64,
+    slack: f64,
+}
+
+impl SewContext<'_> {
+    /// Sewing weights for the present bundles: Sibson weights in UV for sewn vertices (minus
+    /// detours around holes), copied from the proxy for the others; plus the residual pass.
+    fn plan(&self, present: &[u32]) -> Result<SewPlan> {
+        let (dataset, sp) = (self.dataset, self.space);
+        let sites: Vec<_> = present.iter().map(|&i| sp.bundle_uv[i as usize]).collect();
+        let sib = SibsonWeights::new(&sites, &sp.barriers)?;
+        let nv = dataset.num_vertices();
+        let sewn: Vec<usize> = (0..nv).filter(|&v| sp.contains(v)).collect();
+        let queries: Vec<_> = sewn.iter().map(|&v| sp.vertex_uv[v]).collect();
+        let w_sewn = self.drop_detours(sib.weights(&queries), &sewn, present);
+        let mut row_of = vec![usize::MAX; nv];
+        for (r, &v) in sewn.iter().enumerate() {
+            row_of[v] = r;
+        }
+        let mut weights = SparseWeights {
+            row_start: Vec::with_capacity(nv + 1),
+            cols: Vec::new(),
+            vals: Vec::new(),
+            num_cols: self.bundles.len(),
+        };
+        weights.row_start.push(0);
+        for v in 0..nv {
+            let (cols, vals) = w_sewn.row(row_of[sp.proxy[v] as usize]);
+            weights
+                .cols
+                .extend(cols.iter().map(|&c| present[c as usize]));
+            weights.vals.extend_from_slice(vals);
+            weights.row_start.push(weights.cols.len() as u32);
+        }
+        let tris = &dataset.neutral().triangles;
+        let residual = ResidualPass::new(tris, self.bundles, &weights, present)?;
+        Ok(SewPlan { weights, residual })
     }
-    let mut weights = SparseWeights {
-        row_start: Vec::with_capacity(nv + 1),
-        cols: Vec::new(),
-        vals: Vec::new(),
-        num_cols: bundles.len(),
-    };
-    weights.row_start.push(0);
-    for v in 0..nv {
-        let (cols, vals) = w_sewn.row(row_of[sp.proxy[v] as usize]);
-        weights
-            .cols
-            .extend(cols.iter().map(|&c| present[c as usize]));
-        weights.vals.extend_from_slice(vals);
-        weights.row_start.push(weights.cols.len() as u32);
+
+    /// Removes the weights whose surface path detours around a hole; rows renormalised (a
+    /// row that would lose everything keeps its weights).
+    fn drop_detours(&self, w: SparseWeights, sewn: &[usize], present: &[u32]) -> SparseWeights {
+        if !self.detour_ratio.is_finite() {
+            return w;
+        }
+        let mesh = self.dataset.neutral();
+        let pos = &mesh.positions;
+        // Column-wise: the sewn rows that each site touches.
+        let mut by_site: Vec<Vec<usize>> = vec![Vec::new(); present.len()];
+        for r in 0..w.num_rows() {
+            for &c in w.row(r).0 {
+                by_site[c as usize].push(r);
+            }
+        }
+        let dropped: Vec<Vec<usize>> = by_site
+            .par_iter()
+            .enumerate()
+            .map(|(c, rows)| {
+                let b = &self.bundles[present[c] as usize];
+                let origin = b.position(mesh);
+                let reach = rows
+                    .iter()
+                    .map(|&r| origin.distance(pos[sewn[r]]))
+                    .fold(0.0, f64::max);
+                let radius = self.detour_ratio * reach + self.slack;
+                let dist = self.graph.distances_from(mesh, b, radius);
+                rows.iter()
+                    .copied()
+                    .filter(|&r| {
+                        let v = sewn[r];
+                        let straight = origin.distance(pos[v]);
+                        dist.get(&(v as u32))
+                            .is_none_or(|&d| is_detour(d, straight, self.detour_ratio, self.slack))
+                    })
+                    .collect()
+            })
+            .collect();
+        let mut drop_set: Vec<Vec<u32>> = vec![Vec::new(); w.num_rows()];
+        for (c, rows) in dropped.iter().enumerate() {
+            for &r in rows {
+                drop_set[r].push(c as u32);
+            }
+        }
+        let mut out = SparseWeights {
+            row_start: vec![0],
+            cols: Vec::with_capacity(w.cols.len()),
+            vals: Vec::with_capacity(w.vals.len()),
+            num_cols: w.num_cols,
+        };
+        for (r, drops) in drop_set.iter().enumerate() {
+            let (cols, vals) = w.row(r);
+            let kept: f64 = cols
+                .iter()
+                .zip(vals)
+                .filter(|(c, _)| !drops.contains(c))
+                .map(|(_, v)| v)
+                .sum();
+            if drops.is_empty() || kept <= 0.0 {
+                out.cols.extend_from_slice(cols);
+                out.vals.extend_from_slice(vals);
+            } else {
+                for (&c, &v) in cols.iter().zip(vals) {
+                    if !drops.contains(&c) {
+                        out.cols.push(c);
+                        out.vals.push(v / kept);
+                    }
+                }
+            }
+            out.row_start.push(out.cols.len() as u32);
+        }
+        out
     }
-    let residual = ResidualPass::new(&dataset.neutral().triangles, bundles, &weights, present)?;
-    Ok(SewPlan { weights, residual })
+
+    /// Drops neighbour pairs whose surface path detours around a hole.
+    fn filter_neighbours(&self, neighbours: Vec<Vec<u32>>) -> Vec<Vec<u32>> {
+        if !self.detour_ratio.is_finite() {
+            return neighbours;
+        }
+        let mesh = self.dataset.neutral();
+        neighbours
+            .into_par_iter()
+            .enumerate()
+            .map(|(i, nb)| {
+                let b = &self.bundles[i];
+                let origin = b.position(mesh);
+                let reach = nb
+                    .iter()
+                    .map(|&j| origin.distance(self.bundles[j as usize].position(mesh)))
+                    .fold(0.0, f64::max);
+                let radius = self.detour_ratio * reach + self.slack;
+                let dist = self.graph.distances_from(mesh, b, radius);
+                nb.into_iter()
+                    .filter(|&j| {
+                        let bj = &self.bundles[j as usize];
+                        let pj = bj.position(mesh);
+                        let path = mesh.triangles[bj.triangle as usize]
+                            .iter()
+                            .filter_map(|v| {
+                                dist.get(v)
+                                    .map(|d| d + mesh.positions[*v as usize].distance(pj))
+                            })
+                            .fold(f64::INFINITY, f64::min);
+                        !is_detour(path, origin.distance(pj), self.detour_ratio, self.slack)
+                    })
+                    .collect()
+            })
+            .collect()
+    }
 }
 
 /// Bundles' closest points on the neutral and their positions on every shape.

@@ -44,6 +44,7 @@ fn config_from_dict(d: Option<&Bound<'_, PyDict>>) -> PyResult<BuildConfig> {
             "containment_eps" => c.containment_eps = f(&v)?,
             "projection_candidates" => c.projection_candidates = u(&v)?,
             "temporal_weight" => c.temporal_weight = f(&v)?,
+            "detour_ratio" => c.detour_ratio = f(&v)?,
             other => return Err(input_error(format!("BuildConfig has no field '{other}'"))),
         }
     }

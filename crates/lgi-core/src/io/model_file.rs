@@ -163,6 +163,7 @@ pub fn save(model: &Model, path: &Path) -> Result<()> {
         c.max_edge,
         c.containment_eps,
         c.temporal_weight,
+        c.detour_ratio,
     ] {
         w.f64(x);
     }
@@ -263,7 +264,7 @@ pub fn load(path: &Path) -> Result<Model> {
         at: 0,
         path,
     };
-    let mut f = [0.0; 7];
+    let mut f = [0.0; 8];
     for x in &mut f {
         *x = r.f64()?;
     }
@@ -279,6 +280,7 @@ pub fn load(path: &Path) -> Result<Model> {
         max_edge: f[4],
         containment_eps: f[5],
         temporal_weight: f[6],
+        detour_ratio: f[7],
         tet_neighbours: n[0],
         max_tets: n[1],
         projection_candidates: n[2],
