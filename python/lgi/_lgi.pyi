@@ -2,12 +2,13 @@
 
 import os
 from collections.abc import Sequence
-from typing import final
+from collections.abc import Callable
+from typing import Any, final
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-__all__ = ["Dataset", "__version__"]
+__all__ = ["Dataset", "Model", "__version__"]
 
 __version__: str
 
@@ -60,3 +61,47 @@ class Dataset:
     @property
     def uv_triangles(self) -> NDArray[np.int64]:
         """(T, 3) UV indices (empty when the mesh has no UVs)."""
+
+@final
+class Model:
+    """A built LGI model (immutable, thread-safe). Use ``lgi.Model``, which wraps this."""
+
+    @staticmethod
+    def build(
+        dataset: Dataset, markers_rest: ArrayLike, config: dict[str, Any] | None = None
+    ) -> Model:
+        """Builds a model; ``config`` holds ``lgi.BuildConfig`` fields."""
+    @staticmethod
+    def load(path: _Path) -> Model:
+        """Loads a model written by ``save``."""
+    def save(self, path: _Path) -> None:
+        """Writes the model (versioned binary file)."""
+    @property
+    def num_bundles(self) -> int: ...
+    @property
+    def num_vertices(self) -> int: ...
+    @property
+    def diagonal(self) -> float: ...
+    @property
+    def dataset(self) -> Dataset: ...
+    @property
+    def markers_rest(self) -> NDArray[np.float64]: ...
+    def solve(
+        self,
+        frames: ArrayLike,
+        progress: Callable[[int], object] | None = None,
+        temporal: bool = True,
+    ) -> dict[str, NDArray[Any]]:
+        """Solves (F, B, 3) frames; returns arrays keyed by name."""
+    def bundle_positions(self, meshes: ArrayLike) -> NDArray[np.float64]:
+        """(F, V, 3) meshes -> (F, B, 3) bundle surface positions."""
+    def bundle_stats(self) -> dict[str, NDArray[np.int64]]:
+        """Per bundle: ``points``, ``tets``, ``index_bytes``."""
+    def sew_weights(self) -> dict[str, NDArray[Any]]:
+        """CSR sewing weights: ``indptr``, ``indices``, ``data``."""
+    def neighbours(self) -> list[list[int]]:
+        """Natural neighbours of each bundle."""
+    def bundle_surface_points(self) -> dict[str, NDArray[Any]]:
+        """``triangles`` (B,) and ``barycentrics`` (B, 3)."""
+    def bundle_uvs(self) -> NDArray[np.float64]:
+        """(B, 2) bundle positions in UV."""
