@@ -67,7 +67,12 @@ class Model:
 
     @staticmethod
     def build(
-        dataset: Dataset, markers_rest: ArrayLike, config: dict[str, Any] | None = None
+        dataset: Dataset,
+        markers_rest: ArrayLike,
+        config: dict[str, Any] | None = None,
+        jaw_pivot: ArrayLike | None = None,
+        jaw_weights: ArrayLike | None = None,
+        shape_theta: ArrayLike | None = None,
     ) -> Model:
         """Builds a model; ``config`` holds ``lgi.BuildConfig`` fields."""
     @staticmethod
@@ -90,6 +95,7 @@ class Model:
         frames: ArrayLike,
         progress: Callable[[int], object] | None = None,
         temporal: bool = True,
+        jaw_theta: ArrayLike | None = None,
     ) -> dict[str, NDArray[Any]]:
         """Solves (F, B, 3) frames; returns arrays keyed by name."""
     def bundle_positions(self, meshes: ArrayLike) -> NDArray[np.float64]:
@@ -102,5 +108,7 @@ class Model:
         """Natural neighbours of each bundle."""
     def bundle_surface_points(self) -> dict[str, NDArray[Any]]:
         """``triangles`` (B,) and ``barycentrics`` (B, 3)."""
+    def jaw(self) -> dict[str, NDArray[np.float64]] | None:
+        """``pivot``, ``weights``, ``shape_theta``, ``bundle_weights``; None without a jaw."""
     def bundle_uvs(self) -> NDArray[np.float64]:
         """(B, 2) bundle positions in UV."""

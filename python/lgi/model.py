@@ -14,6 +14,8 @@ from numpy.typing import ArrayLike, NDArray
 
 from lgi import _lgi
 from lgi._lgi import Dataset
+from lgi.errors import InputError
+from lgi.jaw import JawRig, track_jaw
 
 
 @dataclass(frozen=True)
@@ -77,6 +79,8 @@ class SolveResult:
     missing: NDArray[np.bool_]
     """(F, B) markers that were NaN in the input."""
     choices: Choices
+    jaw_theta: NDArray[np.float64] | None = None
+    """(F, 3) jaw poses used (open, lateral, forward), None when solved without a jaw."""
 
 
 def _progress_bar(total: int, desc: str, quiet: bool) -> Any:
@@ -97,10 +101,33 @@ class Model:
         dataset: Dataset,
         markers_rest: ArrayLike,
         config: BuildConfig | None = None,
+        *,
+        jaw: JawRig | None = None,
+        shape_theta: ArrayLike | None = None,
     ) -> Model:
-        """Builds the model for `dataset` and marker rest positions `markers_rest` (B, 3)."""
+        """Builds the model for `dataset` and marker rest positions `markers_rest` (B, 3).
+
+        With a jaw rig (`lgi.jaw.estimate_rig` gives one and `shape_theta`, the jaw pose
+        (open, lateral, forward) of every dataset shape), shapes are unskinned before indexing
+        (paper Eq. 2) and `solve(frames, jaw=...)` unskins and reskins each frame."""
         cfg = dataclasses.asdict(config or BuildConfig())
-        return cls(_lgi.Model.build(dataset, markers_rest, cfg))
+        if jaw is None:
+            if shape_theta is not None:
+                raise InputError("shape_theta was given without a jaw rig")
+            return cls(_lgi.Model.build(dataset, markers_rest, cfg))
+        if shape_theta is None:
+            raise InputError("a jaw rig needs shape_theta: the jaw pose of every dataset shape")
+        if not np.allclose(jaw.frame, np.eye(3)):
+            raise InputError("the core supports jaw rigs with the identity frame (x, y, z axes)")
+        core = _lgi.Model.build(
+            dataset,
+            markers_rest,
+            cfg,
+            jaw_pivot=jaw.pivot,
+            jaw_weights=jaw.weights,
+            shape_theta=np.asarray(shape_theta, dtype=np.float64),
+        )
+        return cls(core)
 
     @classmethod
     def load(cls, path: str | os.PathLike[str]) -> Model:
@@ -133,28 +160,47 @@ class Model:
         return self._core.markers_rest
 
     @property
+    def jaw_rig(self) -> JawRig | None:
+        """The jaw rig the model was built with (None without one)."""
+        j = self._core.jaw()
+        return None if j is None else JawRig(pivot=j["pivot"], weights=j["weights"])
+
+    @property
     def core(self) -> _lgi.Model:
         """The compiled model, for low-level inspection (weights, neighbours, statistics)."""
         return self._core
 
     def solve(
-        self, frames: ArrayLike, *, temporal: bool = True, quiet: bool = False
+        self,
+        frames: ArrayLike,
+        *,
+        temporal: bool = True,
+        jaw: str | ArrayLike | None = None,
+        quiet: bool = False,
     ) -> SolveResult:
         """Solves frames (F, B, 3) of marker positions (a single (B, 3) frame gives F = 1).
         NaN rows are missing markers. With `temporal` (a performance), frames are solved in
         order and each prefers the previous frame's choices; `temporal=False` treats frames as
-        independent (e.g. one frame per dataset shape) and solves them in parallel."""
+        independent (e.g. one frame per dataset shape) and solves them in parallel.
+
+        `jaw` (models built with a jaw rig): `"track"` estimates each frame's jaw pose from the
+        markers the jaw carries (`lgi.jaw.track_jaw`), an (F, 3) array gives the poses, None
+        solves at the rest pose. The poses used are in `result.jaw_theta`."""
         arr = np.asarray(frames)
         if arr.ndim == 2:
             arr = arr[None]
+        theta = self._jaw_theta(arr, jaw)
         total = int(arr.shape[0]) if arr.ndim == 3 else 0
         with _progress_bar(total, "lgi solve", quiet) as bar:
-            out = self._core.solve(arr, progress=lambda _f: bar.update(1), temporal=temporal)
+            out = self._core.solve(
+                arr, progress=lambda _f: bar.update(1), temporal=temporal, jaw_theta=theta
+            )
         return SolveResult(
             vertices=out["vertices"],
             bundle_residuals=out["bundle_residuals"],
             bundle_positions=out["bundle_positions"],
             missing=out["missing"],
+            jaw_theta=theta,
             choices=Choices(
                 shapes=out["choice_shapes"],
                 weights=out["choice_weights"],
@@ -162,6 +208,25 @@ class Model:
                 projected=out["choice_projected"],
             ),
         )
+
+    def _jaw_theta(
+        self, frames: NDArray[Any], jaw: str | ArrayLike | None
+    ) -> NDArray[np.float64] | None:
+        if jaw is None:
+            return None
+        j = self._core.jaw()
+        if j is None:
+            raise InputError("jaw: this model was built without a jaw rig")
+        if isinstance(jaw, str):
+            if jaw != "track":
+                raise InputError(f"jaw must be 'track', an (F, 3) array or None, got {jaw!r}")
+            rig = JawRig(pivot=j["pivot"], weights=j["weights"])
+            rest = self.bundle_positions(self.dataset.neutral)
+            return track_jaw(rig, rest, j["bundle_weights"], frames)
+        theta = np.asarray(jaw, dtype=np.float64)
+        if theta.shape != (frames.shape[0], 3):
+            raise InputError(f"jaw: expected shape ({frames.shape[0]}, 3), got {theta.shape}")
+        return theta
 
     def bundle_positions(self, meshes: ArrayLike) -> NDArray[np.float64]:
         """Marker surface positions (F, B, 3) on meshes (F, V, 3) or (V, 3) -> (B, 3)."""

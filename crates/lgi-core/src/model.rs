@@ -9,6 +9,7 @@ use crate::dataset::Dataset;
 use crate::error::{LgiError, Result};
 use crate::geodesic::{is_detour, EdgeGraph};
 use crate::grid::TetIndex;
+use crate::jaw::{JawParams, JawRig};
 use crate::sew::{blend, ResidualPass};
 use crate::sibson::{SibsonWeights, SparseWeights};
 use crate::tets::{generate_tets, Tet, TetConfig};
@@ -136,6 +137,18 @@ pub struct FrameState {
     pub choices: Vec<Option<Choice>>,
 }
 
+/// Jaw articulation of a model (paper Eq. 2): the rig, each dataset shape's jaw parameters
+/// (its jaw motion is unskinned before indexing) and each bundle's jaw weight.
+#[derive(Debug, Clone)]
+pub struct JawSetup {
+    /// Two-bone skinning rig (skull fixed, jaw rigid about a pivot).
+    pub rig: JawRig,
+    /// Jaw parameters θ_k of every dataset shape.
+    pub shape_thetas: Vec<JawParams>,
+    /// Jaw weight of every bundle (barycentric blend of its triangle's vertex weights).
+    pub bundle_weights: Vec<f64>,
+}
+
 /// Per-bundle statistics of a built model.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct BundleStats {
@@ -150,7 +163,12 @@ pub struct BundleStats {
 /// A built model. See the module docs.
 #[derive(Debug)]
 pub struct Model {
+    /// The dataset as given (what `dataset()` returns and what is saved).
     dataset: Arc<Dataset>,
+    /// The dataset the pieces come from: `dataset` with its jaw unskinned when a jaw rig is
+    /// used (the same `Arc` otherwise).
+    sew_dataset: Arc<Dataset>,
+    jaw: Option<JawSetup>,
     config: BuildConfig,
     markers_rest: Vec<DVec3>,
     bundles: Vec<SurfacePoint>,
@@ -171,17 +189,21 @@ const PLAN_CACHE: usize = 64;
 impl Model {
     /// Builds the model for `dataset` and marker rest positions `markers_rest` (B).
     pub fn build(dataset: &Dataset, markers_rest: &[DVec3], config: &BuildConfig) -> Result<Model> {
-        Model::build_shared(Arc::new(dataset.clone()), markers_rest, config)
+        Model::build_shared(Arc::new(dataset.clone()), markers_rest, config, None)
     }
 
-    /// As [`Model::build`], sharing the dataset instead of copying it.
+    /// As [`Model::build`], sharing the dataset instead of copying it, with an optional jaw
+    /// rig and the dataset shapes' jaw parameters (their jaw motion is unskinned first).
     pub fn build_shared(
         dataset: Arc<Dataset>,
         markers_rest: &[DVec3],
         config: &BuildConfig,
+        jaw: Option<(JawRig, Vec<JawParams>)>,
     ) -> Result<Model> {
         config.validate()?;
-        let dataset_arc = dataset.clone();
+        let dataset_given = dataset;
+        let sew_dataset = unskinned_dataset(&dataset_given, jaw.as_ref())?;
+        let dataset_arc = sew_dataset.clone();
         let dataset: &Dataset = &dataset_arc;
         let mesh = dataset.neutral();
         let b = markers_rest.len();
@@ -213,8 +235,14 @@ impl Model {
             })
             .collect::<Result<_>>()?;
         let (clouds, tets): (Vec<BundleCloud>, Vec<Vec<Tet>>) = built.into_iter().unzip();
+        let given = if jaw.is_some() {
+            dataset_given
+        } else {
+            sew_dataset
+        };
         Model::assemble(
-            dataset_arc,
+            (given, dataset_arc),
+            jaw,
             markers_rest,
             config,
             (bundles, shape_positions),
@@ -226,7 +254,8 @@ impl Model {
     /// The cheap part of a build, shared with loading a saved model: everything derived from
     /// the dataset, markers, clouds and tets (correspondences, grid indices, sewing weights).
     pub(crate) fn assemble(
-        dataset: Arc<Dataset>,
+        (given, dataset): (Arc<Dataset>, Arc<Dataset>),
+        jaw: Option<(JawRig, Vec<JawParams>)>,
         markers_rest: &[DVec3],
         config: &BuildConfig,
         (bundles, shape_positions): (Vec<SurfacePoint>, Vec<DVec3>),
@@ -261,8 +290,24 @@ impl Model {
         let neighbours = sew.filter_neighbours(uv_neighbours);
         let all: Vec<u32> = (0..b as u32).collect();
         let full_plan = Arc::new(sew.plan(&all)?);
+        let jaw = match jaw {
+            None => None,
+            Some((rig, shape_thetas)) => {
+                let bundle_weights = bundles
+                    .iter()
+                    .map(|b| rig.interpolate_weight(mesh.triangles[b.triangle as usize], b.bary))
+                    .collect::<Result<_>>()?;
+                Some(JawSetup {
+                    rig,
+                    shape_thetas,
+                    bundle_weights,
+                })
+            }
+        };
         Ok(Model {
-            dataset,
+            dataset: given,
+            sew_dataset: dataset,
+            jaw,
             config: config.clone(),
             markers_rest: markers_rest.to_vec(),
             bundles,
@@ -299,7 +344,13 @@ impl Model {
     }
 
     /// Solves one frame. `targets` (B) are bundle positions; a row with a NaN is missing.
-    pub fn solve_frame(&self, targets: &[DVec3], previous: Option<&FrameState>) -> Result<Frame> {
+    /// `jaw` is the frame's jaw pose for a model built with a jaw rig (`None` = rest).
+    pub fn solve_frame(
+        &self,
+        targets: &[DVec3],
+        previous: Option<&FrameState>,
+        jaw: Option<JawParams>,
+    ) -> Result<Frame> {
         let b = self.bundles.len();
         if targets.len() != b {
             return Err(LgiError::Input(format!(
@@ -326,6 +377,28 @@ impl Model {
                 present.len()
             )));
         }
+        // With a jaw, bundles are indexed in the unskinned space of the dataset's pieces.
+        let theta = match (&self.jaw, jaw) {
+            (None, Some(_)) => {
+                return Err(LgiError::Input(
+                    "a jaw pose was given but the model was built without a jaw rig".into(),
+                ))
+            }
+            (Some(_), Some(t)) => {
+                t.validate()?;
+                Some(t)
+            }
+            _ => None,
+        };
+        let lookup_targets = match (&self.jaw, theta) {
+            (Some(j), Some(t)) => {
+                let mut out = targets_clean.clone();
+                j.rig
+                    .unskin_weighted(&targets_clean, &j.bundle_weights, t, &mut out)?;
+                out
+            }
+            _ => targets_clean.clone(),
+        };
         let params = ChoiceParams {
             eps: self.config.containment_eps,
             projection_candidates: self.config.projection_candidates,
@@ -337,7 +410,7 @@ impl Model {
         let choices: Vec<Option<Choice>> = (0..b)
             .into_par_iter()
             .map_init(Scratch::default, |scratch, i| {
-                let t = targets_clean[i];
+                let t = lookup_targets[i];
                 if t.is_nan() {
                     return None;
                 }
@@ -345,7 +418,7 @@ impl Model {
                     shape_positions: &self.shape_positions,
                     num_bundles: b,
                     neighbours: &self.neighbours[i],
-                    targets: &targets_clean,
+                    targets: &lookup_targets,
                     previous: previous
                         .and_then(|p| p.choices.get(i))
                         .and_then(|c| c.as_ref()),
@@ -366,11 +439,15 @@ impl Model {
         let mut vertices = vec![DVec3::ZERO; mesh.num_vertices()];
         blend(
             &mesh.positions,
-            self.dataset.displacements(),
+            self.sew_dataset.displacements(),
             &plan.weights,
             &choices,
             &mut vertices,
         );
+        if let (Some(j), Some(t)) = (&self.jaw, theta) {
+            let unskinned = vertices.clone();
+            j.rig.skin(&unskinned, t, &mut vertices)?;
+        }
         plan.residual.apply(
             &mesh.triangles,
             &self.bundles,
@@ -412,14 +489,28 @@ impl Model {
     pub fn solve_sequence(
         &self,
         frames: &[Vec<DVec3>],
+        jaw: Option<&[JawParams]>,
         temporal: bool,
         mut on_frame: impl FnMut(usize),
     ) -> Result<Vec<Frame>> {
+        if let Some(j) = jaw {
+            if j.len() != frames.len() {
+                return Err(LgiError::Input(format!(
+                    "{} jaw poses for {} frames",
+                    j.len(),
+                    frames.len()
+                )));
+            }
+        }
+        let theta = |f: usize| jaw.map(|j| j[f]);
         if !temporal {
             let out: Vec<Frame> = frames
                 .par_iter()
                 .enumerate()
-                .map(|(f, t)| self.solve_frame(t, None).map_err(|e| frame_context(e, f)))
+                .map(|(f, t)| {
+                    self.solve_frame(t, None, theta(f))
+                        .map_err(|e| frame_context(e, f))
+                })
                 .collect::<Result<_>>()?;
             (0..out.len()).for_each(&mut on_frame);
             return Ok(out);
@@ -428,7 +519,7 @@ impl Model {
         let mut state: Option<FrameState> = None;
         for (f, targets) in frames.iter().enumerate() {
             let frame = self
-                .solve_frame(targets, state.as_ref())
+                .solve_frame(targets, state.as_ref(), theta(f))
                 .map_err(|e| frame_context(e, f))?;
             state = Some(FrameState {
                 choices: frame.choices.clone(),
@@ -441,7 +532,7 @@ impl Model {
 
     fn sew_context(&self) -> SewContext<'_> {
         SewContext {
-            dataset: &self.dataset,
+            dataset: &self.sew_dataset,
             bundles: &self.bundles,
             space: &self.space,
             graph: &self.graph,
@@ -470,6 +561,10 @@ impl Model {
     /// The dataset the model was built from.
     pub fn dataset(&self) -> &Dataset {
         &self.dataset
+    }
+    /// The jaw setup, when the model was built with a jaw rig.
+    pub fn jaw(&self) -> Option<&JawSetup> {
+        self.jaw.as_ref()
     }
     /// The dataset, shared.
     pub fn dataset_shared(&self) -> Arc<Dataset> {
@@ -686,6 +781,38 @@ impl SewContext<'_> {
             })
             .collect()
     }
+}
+
+/// The dataset whose pieces are indexed: with a jaw, every shape's jaw motion is unskinned,
+/// `s*_k = T(θ_k)⁻¹ (x0 + s_k) − x0` (Eq. 2), so clouds hold expression without jaw rotation.
+pub(crate) fn unskinned_dataset(
+    dataset: &Arc<Dataset>,
+    jaw: Option<&(JawRig, Vec<JawParams>)>,
+) -> Result<Arc<Dataset>> {
+    let Some((rig, thetas)) = jaw else {
+        return Ok(dataset.clone());
+    };
+    if rig.num_vertices() != dataset.num_vertices() {
+        return Err(LgiError::Input(format!(
+            "jaw rig has {} weights, the dataset {} vertices",
+            rig.num_vertices(),
+            dataset.num_vertices()
+        )));
+    }
+    if thetas.len() != dataset.num_shapes() {
+        return Err(LgiError::Input(format!(
+            "{} shape jaw poses for {} shapes",
+            thetas.len(),
+            dataset.num_shapes()
+        )));
+    }
+    let mesh = dataset.neutral();
+    let disp = rig.unskin_shapes(&mesh.positions, dataset.displacements(), thetas)?;
+    Ok(Arc::new(Dataset::new(
+        mesh.clone(),
+        disp,
+        dataset.names().to_vec(),
+    )?))
 }
 
 /// Bundles' closest points on the neutral and their positions on every shape.

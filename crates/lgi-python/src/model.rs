@@ -5,6 +5,7 @@ use crate::convert::{flat_to_array, float_array, points, points_to_array};
 use crate::dataset::Dataset;
 use crate::error::{input_error, PyLgiError};
 use glam::DVec3;
+use lgi_core::jaw::{JawParams, JawRig};
 use lgi_core::model::{BuildConfig, Model as CoreModel};
 use numpy::PyArrayDyn;
 use pyo3::prelude::*;
@@ -75,18 +76,46 @@ fn frames_from(obj: &Bound<'_, PyAny>, b: usize) -> PyResult<Vec<Vec<DVec3>>> {
 impl Model {
     /// Builds a model (GIL released). `config` is a dict of BuildConfig fields.
     #[staticmethod]
-    #[pyo3(signature = (dataset, markers_rest, config=None))]
+    #[pyo3(signature = (dataset, markers_rest, config=None, jaw_pivot=None, jaw_weights=None, shape_theta=None))]
     fn build(
         py: Python<'_>,
         dataset: &Dataset,
         markers_rest: &Bound<'_, PyAny>,
         config: Option<&Bound<'_, PyDict>>,
+        jaw_pivot: Option<&Bound<'_, PyAny>>,
+        jaw_weights: Option<&Bound<'_, PyAny>>,
+        shape_theta: Option<&Bound<'_, PyAny>>,
     ) -> PyResult<Model> {
         let markers = points(markers_rest, "markers_rest", None, false)?;
         let cfg = config_from_dict(config)?;
         let data = dataset.inner.clone();
+        let jaw = match (jaw_pivot, jaw_weights, shape_theta) {
+            (None, None, None) => None,
+            (Some(p), Some(w), Some(t)) => {
+                let pivot = float_array(p, "jaw_pivot", &[Some(3)])?;
+                let nv = data.num_vertices();
+                let weights = float_array(w, "jaw_weights", &[Some(nv)])?;
+                let ns = data.num_shapes();
+                let thetas = float_array(t, "shape_theta", &[Some(ns), Some(3)])?;
+                let rig = JawRig::new(
+                    DVec3::new(pivot[0], pivot[1], pivot[2]),
+                    weights.iter().copied().collect(),
+                )
+                .map_err(PyLgiError)?;
+                let th = thetas
+                    .outer_iter()
+                    .map(|r| JawParams::from_array([r[0], r[1], r[2]]))
+                    .collect();
+                Some((rig, th))
+            }
+            _ => {
+                return Err(input_error(
+                    "jaw: give jaw_pivot, jaw_weights and shape_theta together (or none)",
+                ))
+            }
+        };
         let model = py
-            .detach(move || CoreModel::build_shared(data, &markers, &cfg))
+            .detach(move || CoreModel::build_shared(data, &markers, &cfg, jaw))
             .map_err(PyLgiError)?;
         Ok(Model {
             inner: Arc::new(model),
@@ -140,20 +169,30 @@ impl Model {
 
     /// Solves frames (F, B, 3); returns a dict of arrays. `progress(f)` is called after each
     /// frame with the GIL held. `temporal=False` solves frames independently (in parallel).
-    #[pyo3(signature = (frames, progress=None, temporal=true))]
+    #[pyo3(signature = (frames, progress=None, temporal=true, jaw_theta=None))]
     fn solve<'py>(
         &self,
         py: Python<'py>,
         frames: &Bound<'py, PyAny>,
         progress: Option<Py<PyAny>>,
         temporal: bool,
+        jaw_theta: Option<&Bound<'py, PyAny>>,
     ) -> PyResult<Bound<'py, PyDict>> {
         let b = self.inner.num_bundles();
         let frames = frames_from(frames, b)?;
+        let thetas: Option<Vec<JawParams>> = match jaw_theta {
+            None => None,
+            Some(t) => Some(
+                float_array(t, "jaw", &[Some(frames.len()), Some(3)])?
+                    .outer_iter()
+                    .map(|r| JawParams::from_array([r[0], r[1], r[2]]))
+                    .collect(),
+            ),
+        };
         let model = self.inner.clone();
         let solved = py
             .detach(move || {
-                model.solve_sequence(&frames, temporal, |f| {
+                model.solve_sequence(&frames, thetas.as_deref(), temporal, |f| {
                     if let Some(cb) = &progress {
                         Python::attach(|py| {
                             let _ = cb.call1(py, (f,));
@@ -294,6 +333,32 @@ impl Model {
             uv.iter().flat_map(|p| [p.x, p.y]).collect(),
             &[uv.len(), 2],
         )
+    }
+
+    /// The jaw setup as a dict (`pivot` (3,), `weights` (V,), `shape_theta` (S, 3),
+    /// `bundle_weights` (B,)), or None for a model without a jaw rig.
+    fn jaw<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyDict>>> {
+        let Some(j) = self.inner.jaw() else {
+            return Ok(None);
+        };
+        let d = PyDict::new(py);
+        d.set_item(
+            "pivot",
+            flat_to_array(py, j.rig.pivot.to_array().to_vec(), &[3])?,
+        )?;
+        let nv = j.rig.weights.len();
+        d.set_item("weights", flat_to_array(py, j.rig.weights.clone(), &[nv])?)?;
+        let t: Vec<f64> = j.shape_thetas.iter().flat_map(|t| t.to_array()).collect();
+        d.set_item(
+            "shape_theta",
+            flat_to_array(py, t, &[j.shape_thetas.len(), 3])?,
+        )?;
+        let bw = j.bundle_weights.clone();
+        d.set_item(
+            "bundle_weights",
+            flat_to_array(py, bw, &[j.bundle_weights.len()])?,
+        )?;
+        Ok(Some(d))
     }
 
     /// Marker rest positions (B, 3).

@@ -6,8 +6,9 @@
 use crate::cloud::BundleCloud;
 use crate::dataset::Dataset;
 use crate::error::{LgiError, Result};
+use crate::jaw::{JawParams, JawRig};
 use crate::mesh::Mesh;
-use crate::model::{locate_bundles, BuildConfig, Model};
+use crate::model::{locate_bundles, unskinned_dataset, BuildConfig, Model};
 use crate::tets::Tet;
 use glam::{DVec2, DVec3};
 use std::path::Path;
@@ -15,7 +16,7 @@ use std::sync::Arc;
 
 const MAGIC: &[u8; 8] = b"LGIMODEL";
 /// Format version written by this build; readers accept exactly the versions they know.
-pub const FORMAT_VERSION: u32 = 1;
+pub const FORMAT_VERSION: u32 = 2;
 const HEADER: usize = 8 + 4 + 8 + 8;
 
 /// FNV-1a 64: tiny, dependency-free, enough to catch truncation and bit rot.
@@ -218,6 +219,24 @@ pub fn save(model: &Model, path: &Path) -> Result<()> {
                 .into_iter(),
         );
     }
+    // Version 2: the jaw section (0 = none; 1 = pivot, vertex weights, shape poses).
+    match model.jaw() {
+        None => w.u64(0),
+        Some(j) => {
+            w.u64(1);
+            for x in j.rig.pivot.to_array() {
+                w.f64(x);
+            }
+            w.f64s(j.rig.weights.clone().into_iter());
+            w.f64s(
+                j.shape_thetas
+                    .iter()
+                    .flat_map(|t| t.to_array())
+                    .collect::<Vec<_>>()
+                    .into_iter(),
+            );
+        }
+    }
     let payload = w.0;
     let mut out = Vec::with_capacity(HEADER + payload.len());
     out.extend_from_slice(MAGIC);
@@ -350,10 +369,30 @@ pub fn load(path: &Path) -> Result<Model> {
         clouds.push(BundleCloud { points, aliases });
         tets.push(t);
     }
+    let jaw = match r.u64()? {
+        0 => None,
+        1 => {
+            let pivot = DVec3::new(r.f64()?, r.f64()?, r.f64()?);
+            let weights = r.f64s()?;
+            let t = r.f64s()?;
+            if t.len() != 3 * dataset.num_shapes() {
+                return Err(bad("jaw section: wrong number of shape poses"));
+            }
+            let thetas = t
+                .chunks_exact(3)
+                .map(|c| JawParams::from_array([c[0], c[1], c[2]]))
+                .collect();
+            let rig = JawRig::new(pivot, weights).map_err(|e| bad(&e.to_string()))?;
+            Some((rig, thetas))
+        }
+        _ => return Err(r.err("unknown jaw section")),
+    };
     if r.at != payload.len() {
-        return Err(bad("trailing bytes after the last bundle"));
+        return Err(bad("trailing bytes after the jaw section"));
     }
     config.validate().map_err(|e| bad(&e.to_string()))?;
-    let located = locate_bundles(&dataset, &markers, &config)?;
-    Model::assemble(Arc::new(dataset), &markers, &config, located, clouds, tets)
+    let given = Arc::new(dataset);
+    let sew = unskinned_dataset(&given, jaw.as_ref()).map_err(|e| bad(&e.to_string()))?;
+    let located = locate_bundles(&sew, &markers, &config)?;
+    Model::assemble((given, sew), jaw, &markers, &config, located, clouds, tets)
 }
