@@ -79,3 +79,15 @@ def test_jaw_arguments_are_checked(sample, sample_dataset, sample_model, jaw_mod
         )
     with pytest.raises(lgi.InputError, match="jaw"):
         jaw_model.solve(sample.performance[:2], jaw=np.zeros((3, 3)))
+
+
+def test_smoothing_reduces_jitter_and_keeps_markers_exact(sample, jaw_model):  # type: ignore[no-untyped-def]
+    def jitter(v: np.ndarray) -> float:
+        return float(np.linalg.norm(v[2:] - 2 * v[1:-1] + v[:-2], axis=2).mean())
+
+    raw = jaw_model.solve(sample.performance, jaw=sample.jaw_theta, quiet=True)
+    smooth = jaw_model.solve(sample.performance, jaw=sample.jaw_theta, smooth_window=5, quiet=True)
+    assert jitter(smooth.vertices) < jitter(raw.vertices)
+    assert smooth.bundle_residuals.max() <= 1e-6 * jaw_model.diagonal
+    with pytest.raises(lgi.InputError, match="smooth_window"):
+        jaw_model.solve(sample.performance[:3], smooth_window=-1)

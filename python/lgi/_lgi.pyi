@@ -96,6 +96,7 @@ class Model:
         progress: Callable[[int], object] | None = None,
         temporal: bool = True,
         jaw_theta: ArrayLike | None = None,
+        smooth_window: int = 0,
     ) -> dict[str, NDArray[Any]]:
         """Solves (F, B, 3) frames; returns arrays keyed by name."""
     def bundle_positions(self, meshes: ArrayLike) -> NDArray[np.float64]:

@@ -176,6 +176,7 @@ class Model:
         *,
         temporal: bool = True,
         jaw: str | ArrayLike | None = None,
+        smooth_window: int = 0,
         quiet: bool = False,
     ) -> SolveResult:
         """Solves frames (F, B, 3) of marker positions (a single (B, 3) frame gives F = 1).
@@ -185,7 +186,13 @@ class Model:
 
         `jaw` (models built with a jaw rig): `"track"` estimates each frame's jaw pose from the
         markers the jaw carries (`lgi.jaw.track_jaw`), an (F, 3) array gives the poses, None
-        solves at the rest pose. The poses used are in `result.jaw_theta`."""
+        solves at the rest pose. The poses used are in `result.jaw_theta`.
+
+        `smooth_window` > 1 averages each marker's shape weights over that many frames
+        (centred) before sewing, in the jaw-unskinned space so jaw motion is kept; markers are
+        still interpolated exactly. `result.choices` are the choices before smoothing."""
+        if smooth_window < 0:
+            raise InputError(f"smooth_window must be >= 0, got {smooth_window}")
         arr = np.asarray(frames)
         if arr.ndim == 2:
             arr = arr[None]
@@ -193,7 +200,11 @@ class Model:
         total = int(arr.shape[0]) if arr.ndim == 3 else 0
         with _progress_bar(total, "lgi solve", quiet) as bar:
             out = self._core.solve(
-                arr, progress=lambda _f: bar.update(1), temporal=temporal, jaw_theta=theta
+                arr,
+                progress=lambda _f: bar.update(1),
+                temporal=temporal,
+                jaw_theta=theta,
+                smooth_window=smooth_window,
             )
         return SolveResult(
             vertices=out["vertices"],

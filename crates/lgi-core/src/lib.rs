@@ -22,6 +22,7 @@ pub mod mesh;
 pub mod model;
 pub mod sew;
 pub mod sibson;
+pub mod smooth;
 pub mod tets;
 pub mod uvspace;
 

@@ -10,8 +10,9 @@ use crate::error::{LgiError, Result};
 use crate::geodesic::{is_detour, EdgeGraph};
 use crate::grid::TetIndex;
 use crate::jaw::{JawParams, JawRig};
-use crate::sew::{blend, ResidualPass};
+use crate::sew::{blend, Pieces, ResidualPass};
 use crate::sibson::{SibsonWeights, SparseWeights};
+use crate::smooth::smooth_choices;
 use crate::tets::{generate_tets, Tet, TetConfig};
 use crate::uvspace::{self, SewingSpace};
 use glam::DVec3;
@@ -147,6 +148,15 @@ pub struct JawSetup {
     pub shape_thetas: Vec<JawParams>,
     /// Jaw weight of every bundle (barycentric blend of its triangle's vertex weights).
     pub bundle_weights: Vec<f64>,
+}
+
+/// A frame's targets after the checks: as given (NaN rows missing) and as looked up (jaw
+/// unskinned), with the present bundles and the jaw pose.
+struct Prepared {
+    targets: Vec<DVec3>,
+    lookup: Vec<DVec3>,
+    present: Vec<u32>,
+    theta: Option<JawParams>,
 }
 
 /// Per-bundle statistics of a built model.
@@ -351,6 +361,14 @@ impl Model {
         previous: Option<&FrameState>,
         jaw: Option<JawParams>,
     ) -> Result<Frame> {
+        let prep = self.prepare(targets, jaw)?;
+        let choices = self.choose_all(&prep, previous);
+        let pieces = Pieces::from_choices(&choices);
+        self.sew_frame(&prep, choices, &pieces)
+    }
+
+    /// Checks a frame's targets and, with a jaw, unskins them for the lookup.
+    fn prepare(&self, targets: &[DVec3], jaw: Option<JawParams>) -> Result<Prepared> {
         let b = self.bundles.len();
         if targets.len() != b {
             return Err(LgiError::Input(format!(
@@ -399,6 +417,18 @@ impl Model {
             }
             _ => targets_clean.clone(),
         };
+        Ok(Prepared {
+            targets: targets_clean,
+            lookup: lookup_targets,
+            present,
+            theta,
+        })
+    }
+
+    /// Every present bundle's choice (rayon over bundles).
+    fn choose_all(&self, prep: &Prepared, previous: Option<&FrameState>) -> Vec<Option<Choice>> {
+        let b = self.bundles.len();
+        let lookup_targets = &prep.lookup;
         let params = ChoiceParams {
             eps: self.config.containment_eps,
             projection_candidates: self.config.projection_candidates,
@@ -407,7 +437,7 @@ impl Model {
             ..ChoiceParams::default()
         };
         let temporal_weight = self.config.temporal_weight * self.diagonal * self.diagonal;
-        let choices: Vec<Option<Choice>> = (0..b)
+        (0..b)
             .into_par_iter()
             .map_init(Scratch::default, |scratch, i| {
                 let t = lookup_targets[i];
@@ -418,7 +448,7 @@ impl Model {
                     shape_positions: &self.shape_positions,
                     num_bundles: b,
                     neighbours: &self.neighbours[i],
-                    targets: &lookup_targets,
+                    targets: lookup_targets,
                     previous: previous
                         .and_then(|p| p.choices.get(i))
                         .and_then(|c| c.as_ref()),
@@ -433,15 +463,26 @@ impl Model {
                     scratch,
                 ))
             })
-            .collect();
-        let plan = self.plan_for(&present)?;
+            .collect()
+    }
+
+    /// Blends `pieces`, reskins the jaw, and runs the residual pass.
+    fn sew_frame(
+        &self,
+        prep: &Prepared,
+        choices: Vec<Option<Choice>>,
+        pieces: &Pieces,
+    ) -> Result<Frame> {
+        let b = self.bundles.len();
+        let (targets_clean, theta) = (&prep.targets, prep.theta);
+        let plan = self.plan_for(&prep.present)?;
         let mesh = self.dataset.neutral();
         let mut vertices = vec![DVec3::ZERO; mesh.num_vertices()];
         blend(
             &mesh.positions,
             self.sew_dataset.displacements(),
             &plan.weights,
-            &choices,
+            pieces,
             &mut vertices,
         );
         if let (Some(j), Some(t)) = (&self.jaw, theta) {
@@ -452,7 +493,7 @@ impl Model {
             &mesh.triangles,
             &self.bundles,
             &plan.weights,
-            &targets_clean,
+            targets_clean,
             &mut vertices,
         );
         if let Some(v) = vertices.iter().position(|p| !p.is_finite()) {
@@ -485,12 +526,16 @@ impl Model {
 
     /// Solves a sequence. With `temporal`, frames are solved in order, each preferring tets
     /// that share shapes with the previous frame's choice; without, frames are independent and
-    /// solved in parallel. `on_frame` is called after each frame in order (progress).
+    /// solved in parallel. `smooth_window` > 1 averages each bundle's shape weights over that
+    /// many frames (centred) before sewing, in the jaw-unskinned space so jaw motion is not
+    /// smoothed; the residual pass still interpolates every marker. `jaw` gives each frame's
+    /// jaw pose for a model with a jaw rig. `on_frame` is called as frames finish (progress).
     pub fn solve_sequence(
         &self,
         frames: &[Vec<DVec3>],
         jaw: Option<&[JawParams]>,
         temporal: bool,
+        smooth_window: usize,
         mut on_frame: impl FnMut(usize),
     ) -> Result<Vec<Frame>> {
         if let Some(j) = jaw {
@@ -503,28 +548,39 @@ impl Model {
             }
         }
         let theta = |f: usize| jaw.map(|j| j[f]);
-        if !temporal {
-            let out: Vec<Frame> = frames
+        let prepared: Vec<Prepared> = frames
+            .iter()
+            .enumerate()
+            .map(|(f, t)| self.prepare(t, theta(f)).map_err(|e| frame_context(e, f)))
+            .collect::<Result<_>>()?;
+        let choices: Vec<Vec<Option<Choice>>> = if temporal {
+            let mut out: Vec<Vec<Option<Choice>>> = Vec::with_capacity(frames.len());
+            for prep in &prepared {
+                let previous = out.last().map(|c| FrameState { choices: c.clone() });
+                out.push(self.choose_all(prep, previous.as_ref()));
+            }
+            out
+        } else {
+            prepared
                 .par_iter()
-                .enumerate()
-                .map(|(f, t)| {
-                    self.solve_frame(t, None, theta(f))
-                        .map_err(|e| frame_context(e, f))
-                })
-                .collect::<Result<_>>()?;
-            (0..out.len()).for_each(&mut on_frame);
-            return Ok(out);
-        }
+                .map(|p| self.choose_all(p, None))
+                .collect()
+        };
+        let pieces: Vec<Pieces> = if smooth_window > 1 {
+            smooth_choices(&choices, smooth_window)
+        } else {
+            choices.iter().map(|c| Pieces::from_choices(c)).collect()
+        };
         let mut out = Vec::with_capacity(frames.len());
-        let mut state: Option<FrameState> = None;
-        for (f, targets) in frames.iter().enumerate() {
-            let frame = self
-                .solve_frame(targets, state.as_ref(), theta(f))
-                .map_err(|e| frame_context(e, f))?;
-            state = Some(FrameState {
-                choices: frame.choices.clone(),
-            });
-            out.push(frame);
+        for (f, (prep, (ch, pc))) in prepared
+            .iter()
+            .zip(choices.into_iter().zip(&pieces))
+            .enumerate()
+        {
+            out.push(
+                self.sew_frame(prep, ch, pc)
+                    .map_err(|e| frame_context(e, f))?,
+            );
             on_frame(f);
         }
         Ok(out)

@@ -14,13 +14,53 @@ use rayon::prelude::*;
 /// Vertices per parallel task: large enough to amortise scheduling, small enough to balance.
 const CHUNK: usize = 2048;
 
-/// Blends the chosen geometries: writes `x0 + Σ_i W_vi Σ_j α_ij s_k(v)` into `out`.
+/// Each bundle's piece of geometry as a sparse shape-weight vector (shape id 0 = neutral):
+/// a choice's 4 weights, or more after temporal smoothing.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Pieces {
+    /// Bundle b's entries are `start[b]..start[b + 1]`.
+    pub start: Vec<u32>,
+    /// Shape ids.
+    pub shapes: Vec<u32>,
+    /// Weights (convex per bundle).
+    pub weights: Vec<f64>,
+}
+
+impl Pieces {
+    /// One bundle's entries.
+    pub fn bundle(&self, b: usize) -> (&[u32], &[f64]) {
+        let (s, e) = (self.start[b] as usize, self.start[b + 1] as usize);
+        (&self.shapes[s..e], &self.weights[s..e])
+    }
+
+    /// The pieces of per-bundle choices (a missing bundle has no entries).
+    pub fn from_choices(choices: &[Option<Choice>]) -> Pieces {
+        let mut p = Pieces {
+            start: vec![0],
+            ..Pieces::default()
+        };
+        for c in choices {
+            if let Some(c) = c {
+                for j in 0..4 {
+                    if c.weights[j] != 0.0 {
+                        p.shapes.push(c.shapes[j]);
+                        p.weights.push(c.weights[j]);
+                    }
+                }
+            }
+            p.start.push(p.shapes.len() as u32);
+        }
+        p
+    }
+}
+
+/// Blends the pieces: writes `x0 + Σ_i W_vi Σ_j α_ij s_k(v)` into `out`.
 /// `displacements` is the dataset's `S × V × 3` (shape id k ≥ 1 reads shape k − 1).
 pub fn blend(
     x0: &[DVec3],
     displacements: &[f32],
     weights: &SparseWeights,
-    choices: &[Option<Choice>],
+    pieces: &Pieces,
     out: &mut [DVec3],
 ) {
     let nv = x0.len();
@@ -33,13 +73,10 @@ pub fn blend(
                 let (cols, vals) = weights.row(v);
                 let mut d = [0.0f64; 3];
                 for (&b, &w) in cols.iter().zip(vals) {
-                    let Some(ch) = &choices[b as usize] else {
-                        continue;
-                    };
-                    for j in 0..4 {
-                        let k = ch.shapes[j] as usize;
-                        let a = ch.weights[j];
-                        if k == 0 || a == 0.0 {
+                    let (shapes, alphas) = pieces.bundle(b as usize);
+                    for (&k, &a) in shapes.iter().zip(alphas) {
+                        let k = k as usize;
+                        if k == 0 {
                             continue;
                         }
                         let s = &displacements[((k - 1) * nv + v) * 3..((k - 1) * nv + v) * 3 + 3];

@@ -169,7 +169,7 @@ impl Model {
 
     /// Solves frames (F, B, 3); returns a dict of arrays. `progress(f)` is called after each
     /// frame with the GIL held. `temporal=False` solves frames independently (in parallel).
-    #[pyo3(signature = (frames, progress=None, temporal=true, jaw_theta=None))]
+    #[pyo3(signature = (frames, progress=None, temporal=true, jaw_theta=None, smooth_window=0))]
     fn solve<'py>(
         &self,
         py: Python<'py>,
@@ -177,6 +177,7 @@ impl Model {
         progress: Option<Py<PyAny>>,
         temporal: bool,
         jaw_theta: Option<&Bound<'py, PyAny>>,
+        smooth_window: usize,
     ) -> PyResult<Bound<'py, PyDict>> {
         let b = self.inner.num_bundles();
         let frames = frames_from(frames, b)?;
@@ -192,7 +193,7 @@ impl Model {
         let model = self.inner.clone();
         let solved = py
             .detach(move || {
-                model.solve_sequence(&frames, thetas.as_deref(), temporal, |f| {
+                model.solve_sequence(&frames, thetas.as_deref(), temporal, smooth_window, |f| {
                     if let Some(cb) = &progress {
                         Python::attach(|py| {
                             let _ = cb.call1(py, (f,));

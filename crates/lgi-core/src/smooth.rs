@@ -1,0 +1,93 @@
+//! Temporal smoothing: a centred moving average of each bundle's shape weights over a window
+//! of frames. Choices are made in the jaw-unskinned space, so averaging them does not smooth
+//! the jaw's motion; the residual pass afterwards still puts every marker on its target.
+
+use crate::choose::Choice;
+use crate::sew::Pieces;
+
+/// Averages each bundle's sparse shape weights over `window` frames centred on each frame
+/// (shrinking at the ends; frames where the bundle is missing are skipped). A bundle missing
+/// in a frame stays missing there.
+pub fn smooth_choices(choices: &[Vec<Option<Choice>>], window: usize) -> Vec<Pieces> {
+    let nf = choices.len();
+    let half = window / 2;
+    let mut out = Vec::with_capacity(nf);
+    let mut acc: Vec<(u32, f64)> = Vec::new();
+    for f in 0..nf {
+        let nb = choices[f].len();
+        let mut p = Pieces {
+            start: vec![0],
+            ..Pieces::default()
+        };
+        for b in 0..nb {
+            if choices[f][b].is_some() {
+                acc.clear();
+                let mut count = 0.0;
+                for frame in &choices[f.saturating_sub(half)..(f + half + 1).min(nf)] {
+                    let Some(c) = frame.get(b).and_then(|c| c.as_ref()) else {
+                        continue;
+                    };
+                    count += 1.0;
+                    for j in 0..4 {
+                        if c.weights[j] != 0.0 {
+                            match acc.iter_mut().find(|(s, _)| *s == c.shapes[j]) {
+                                Some(e) => e.1 += c.weights[j],
+                                None => acc.push((c.shapes[j], c.weights[j])),
+                            }
+                        }
+                    }
+                }
+                acc.sort_by_key(|e| e.0);
+                for &(s, w) in &acc {
+                    p.shapes.push(s);
+                    p.weights.push(w / count);
+                }
+            }
+            p.start.push(p.shapes.len() as u32);
+        }
+        out.push(p);
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::choose::NO_TET;
+
+    fn pure(shape: u32) -> Option<Choice> {
+        Some(Choice {
+            shapes: [shape, 0, 0, 0],
+            weights: [1.0, 0.0, 0.0, 0.0],
+            tet: NO_TET,
+            projected: false,
+            distance: 0.0,
+        })
+    }
+
+    #[test]
+    fn window_three_averages_neighbouring_frames_and_shrinks_at_the_ends() {
+        let frames = vec![vec![pure(1)], vec![pure(2)], vec![pure(2)], vec![None]];
+        let p = smooth_choices(&frames, 3);
+        assert_eq!(p[0].bundle(0), (&[1u32, 2][..], &[0.5, 0.5][..]));
+        let (s, w) = p[1].bundle(0);
+        assert_eq!(s, &[1, 2]);
+        assert!((w[0] - 1.0 / 3.0).abs() < 1e-15 && (w[1] - 2.0 / 3.0).abs() < 1e-15);
+        // Frame 2's window holds frame 3, where the bundle is missing: it is skipped.
+        assert_eq!(p[2].bundle(0), (&[2u32][..], &[1.0][..]));
+        assert_eq!(p[3].bundle(0).0.len(), 0);
+    }
+
+    #[test]
+    fn smoothed_weights_stay_convex() {
+        let frames: Vec<Vec<Option<Choice>>> =
+            (0..9).map(|f| vec![pure(f % 3 + 1), pure(7)]).collect();
+        for p in smooth_choices(&frames, 5) {
+            for b in 0..2 {
+                let (_, w) = p.bundle(b);
+                assert!((w.iter().sum::<f64>() - 1.0).abs() < 1e-12);
+                assert!(w.iter().all(|&x| x > 0.0));
+            }
+        }
+    }
+}
