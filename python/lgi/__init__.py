@@ -4,6 +4,7 @@ Every marker ("bundle") looks up local geometry that really occurred in a datase
 shapes; the pieces are sewn so that the surface passes exactly through every marker.
 """
 
+from lgi import jaw
 from lgi._lgi import Dataset, __version__
 from lgi.errors import (
     DatasetError,
@@ -28,4 +29,5 @@ __all__ = [
     "ModelFormatError",
     "SolveResult",
     "__version__",
+    "jaw",
 ]
