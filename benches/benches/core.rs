@@ -1,6 +1,6 @@
 //! Criterion benches of the core's per-frame stages on one workload (ICT-300 when the data is
 //! present): grid query, candidate choice, outside projection, Sibson weights, sewing, the full
-//! solve, and (opt-in, `LGI_BENCH_BUILD=1`, since one build can take many seconds) the build.
+//! solve, and the model build.
 
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};
 use glam::DVec3;
@@ -201,16 +201,15 @@ fn stages(c: &mut Criterion) {
     });
     g.finish();
 
-    if std::env::var_os("LGI_BENCH_BUILD").is_some() {
-        let mut g = c.benchmark_group("build");
-        g.sample_size(10)
-            .measurement_time(Duration::from_secs(5))
-            .warm_up_time(Duration::from_millis(1));
-        g.bench_function("model_build", |bench| {
-            bench.iter(|| black_box(build_model(&fx.workload).map(|m| m.num_bundles())))
-        });
-        g.finish();
-    }
+    // Each build is seconds: criterion's minimum of 10 samples, no warm-up to speak of.
+    let mut g = c.benchmark_group("build");
+    g.sample_size(10)
+        .measurement_time(Duration::from_secs(5))
+        .warm_up_time(Duration::from_millis(1));
+    g.bench_function("model_build", |bench| {
+        bench.iter(|| black_box(build_model(&fx.workload).map(|m| m.num_bundles())))
+    });
+    g.finish();
 }
 
 criterion_group!(benches, stages);

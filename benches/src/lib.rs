@@ -56,12 +56,17 @@ impl Rng {
     }
 }
 
-/// Root of the shared data: `$LGI_SHARED_DATA`, else `../../shared/data` from this crate.
+/// Root of the shared data: `$LGI_SHARED_DATA`, else `../../shared/data` from this crate, or
+/// the first `shared/data` holding ICT above it (git worktrees sit deeper than the checkout).
 pub fn shared_data() -> PathBuf {
-    match std::env::var_os("LGI_SHARED_DATA") {
-        Some(d) => PathBuf::from(d),
-        None => Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/data"),
+    if let Some(d) = std::env::var_os("LGI_SHARED_DATA") {
+        return PathBuf::from(d);
     }
+    let here = Path::new(env!("CARGO_MANIFEST_DIR"));
+    here.ancestors()
+        .map(|a| a.join("shared/data"))
+        .find(|d| d.join("ict-facekit/generic_neutral_mesh.obj").is_file())
+        .unwrap_or_else(|| here.join("../../shared/data"))
 }
 
 /// Loads ICT-300 when the data is present, else the procedural workload. Prints which.
