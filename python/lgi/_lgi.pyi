@@ -1,8 +1,7 @@
 """Type stubs for the compiled extension ``lgi._lgi`` (users import ``lgi``)."""
 
 import os
-from collections.abc import Sequence
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from typing import Any, final
 
 import numpy as np
