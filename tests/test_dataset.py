@@ -227,3 +227,30 @@ def test_shapes_argument_of_wrong_type_raises_input_error(tmp_path):
         lgi.Dataset.from_obj(neutral, [neutral, 3])
     with pytest.raises(lgi.InputError, match="shapes: expected a glob pattern"):
         lgi.Dataset.from_obj(neutral, 3)
+
+
+def test_augmented_keeps_originals_and_adds_inbetweens_and_pair_sums():
+    d = _square()
+    a = d.augmented(10)
+    # originals first, unchanged; the neutral and topology are shared
+    assert a.names[:2] == ["up", "eye"]
+    np.testing.assert_array_equal(a.shapes[:2], d.shapes)
+    np.testing.assert_array_equal(a.neutral, d.neutral)
+    np.testing.assert_array_equal(a.triangles, d.triangles)
+    # independent reference: each added shape is the recipe its name spells
+    by_name = dict(zip(d.names, d.shapes, strict=True))
+    for name, shape in zip(a.names, a.shapes, strict=True):
+        if "@" in name:
+            base, w = name.split("@")
+            np.testing.assert_allclose(shape, float(w) * by_name[base], atol=1e-6)
+        elif "+" in name:
+            x, y = name.split("+")
+            np.testing.assert_allclose(shape, by_name[x] + by_name[y], atol=1e-6)
+    assert "up@0.5" in a.names and "up+eye" in a.names
+    assert a.num_shapes == 2 + 6 + 1
+
+
+def test_augmented_without_shapes_raises_dataset_error():
+    d = lgi.Dataset.from_arrays(NEUTRAL, TRIS)
+    with pytest.raises(lgi.errors.DatasetError):
+        d.augmented(10)

@@ -1,7 +1,216 @@
-//! Criterion benches of the core (filled in by the speed work).
-use criterion::{criterion_group, criterion_main, Criterion};
+//! Criterion benches of the core's per-frame stages on one workload (ICT-300 when the data is
+//! present): grid query, candidate choice, outside projection, Sibson weights, sewing, the full
+//! solve, and the model build.
 
-fn placeholder(_c: &mut Criterion) {}
+use criterion::{criterion_group, criterion_main, Criterion, Throughput};
+use glam::DVec3;
+use lgi_benches::{build_model, load_workload, make_frames, Workload};
+use lgi_core::choose::{choose, Choice, ChoiceParams, Scoring, Scratch};
+use lgi_core::model::{FrameState, Model};
+use lgi_core::sew::blend;
+use lgi_core::sibson::SibsonWeights;
+use std::hint::black_box;
+use std::time::{Duration, Instant};
 
-criterion_group!(benches, placeholder);
+/// Frames cycled through by the per-frame benches (generating 500 costs more than it measures).
+const BENCH_FRAMES: usize = 100;
+
+struct Fixture {
+    workload: Workload,
+    model: Model,
+    frames: Vec<Vec<DVec3>>,
+    choices: Vec<Vec<Option<Choice>>>,
+}
+
+fn fixture() -> Fixture {
+    let workload = load_workload().unwrap_or_else(|e| panic!("cannot load the workload: {e}"));
+    let t = Instant::now();
+    let model = build_model(&workload).unwrap_or_else(|e| panic!("build failed: {e}"));
+    eprintln!("model build (one run): {:.2} s", t.elapsed().as_secs_f64());
+    let frames = make_frames(&model, BENCH_FRAMES, 1).unwrap_or_else(|e| panic!("frames: {e}"));
+    let mut state: Option<FrameState> = None;
+    let mut choices = Vec::new();
+    for f in &frames {
+        let frame = model
+            .solve_frame(f, state.as_ref())
+            .unwrap_or_else(|e| panic!("solve failed: {e}"));
+        choices.push(frame.choices.clone());
+        state = Some(FrameState {
+            choices: frame.choices,
+        });
+    }
+    Fixture {
+        workload,
+        model,
+        frames,
+        choices,
+    }
+}
+
+fn params(model: &Model) -> ChoiceParams {
+    let c = model.config();
+    ChoiceParams {
+        eps: c.containment_eps,
+        projection_candidates: c.projection_candidates,
+        hit_distance: c.prune_motion.max(c.duplicate_distance) * model.diagonal(),
+        ..ChoiceParams::default()
+    }
+}
+
+fn stages(c: &mut Criterion) {
+    let fx = fixture();
+    let model = &fx.model;
+    let b = model.num_bundles();
+    let eps = model.config().containment_eps;
+    let mut g = c.benchmark_group("stages");
+    g.sample_size(10)
+        .measurement_time(Duration::from_secs(3))
+        .warm_up_time(Duration::from_millis(500));
+
+    // Per bundle: one iteration is every bundle of one frame, so time/B is per bundle.
+    g.throughput(Throughput::Elements(b as u64));
+    let mut f = 0;
+    let mut out = Vec::new();
+    g.bench_function("grid_query_all_bundles", |bench| {
+        bench.iter(|| {
+            f = (f + 1) % fx.frames.len();
+            let mut n = 0;
+            for (i, &t) in fx.frames[f].iter().enumerate() {
+                out.clear();
+                model.indices()[i].query(t, eps, &mut out);
+                n += out.len();
+            }
+            black_box(n)
+        })
+    });
+
+    let p = params(model);
+    let tw = model.config().temporal_weight * model.diagonal() * model.diagonal();
+    let mut scratch = Scratch::default();
+    let mut f = 0;
+    g.bench_function("choose_all_bundles", |bench| {
+        bench.iter(|| {
+            f = (f + 1) % fx.frames.len();
+            let prev = &fx.choices[(f + fx.frames.len() - 1) % fx.frames.len()];
+            let targets = &fx.frames[f];
+            let mut acc = 0.0;
+            for (i, &t) in targets.iter().enumerate() {
+                let scoring = Scoring {
+                    shape_positions: model.shape_positions(),
+                    num_bundles: b,
+                    neighbours: &model.neighbours()[i],
+                    targets,
+                    previous: prev[i].as_ref(),
+                    temporal_weight: tw,
+                };
+                let ch = choose(
+                    &model.indices()[i],
+                    &model.clouds()[i],
+                    t,
+                    &scoring,
+                    &p,
+                    &mut scratch,
+                );
+                acc += ch.distance;
+            }
+            black_box(acc)
+        })
+    });
+
+    // Outside projection: only the (bundle, target) pairs outside every tet.
+    let mut outside = Vec::new();
+    for fr in &fx.frames {
+        for (i, &t) in fr.iter().enumerate() {
+            out.clear();
+            model.indices()[i].query(t, eps, &mut out);
+            if out.is_empty() && model.indices()[i].num_tets() > 0 {
+                outside.push((i, t));
+            }
+        }
+    }
+    let total = fx.frames.len() * b;
+    eprintln!(
+        "targets outside every tet: {} of {} ({:.1} %)",
+        outside.len(),
+        total,
+        100.0 * outside.len() as f64 / total as f64
+    );
+    if !outside.is_empty() {
+        g.throughput(Throughput::Elements(outside.len() as u64));
+        let mut near = Vec::new();
+        let k = model.config().projection_candidates;
+        g.bench_function("nearest_outside_targets", |bench| {
+            bench.iter(|| {
+                let mut n = 0;
+                for &(i, t) in &outside {
+                    near.clear();
+                    model.indices()[i].nearest(t, k, &mut near);
+                    n += near.len();
+                }
+                black_box(n)
+            })
+        });
+    }
+
+    // Per frame.
+    g.throughput(Throughput::Elements(1));
+    let space = model.sewing_space();
+    let nv = fx.workload.dataset.num_vertices();
+    let queries: Vec<_> = (0..nv)
+        .filter(|&v| space.contains(v))
+        .map(|v| space.vertex_uv[v])
+        .collect();
+    eprintln!("sewn vertices: {} of {nv}", queries.len());
+    g.bench_function("sibson_precompute", |bench| {
+        bench.iter(|| {
+            let sib = SibsonWeights::new(&space.bundle_uv, &space.barriers)
+                .unwrap_or_else(|e| panic!("sibson: {e}"));
+            black_box(sib.weights(&queries).num_rows())
+        })
+    });
+
+    let mesh = fx.workload.dataset.neutral();
+    let mut verts = vec![DVec3::ZERO; nv];
+    let mut f = 0;
+    g.bench_function("sew_blend_frame", |bench| {
+        bench.iter(|| {
+            f = (f + 1) % fx.frames.len();
+            blend(
+                &mesh.positions,
+                model.dataset().displacements(),
+                model.sew_weights(),
+                &fx.choices[f],
+                &mut verts,
+            );
+            black_box(verts[0])
+        })
+    });
+
+    let mut f = 0;
+    g.bench_function("solve_frame_with_previous", |bench| {
+        bench.iter(|| {
+            f = (f + 1) % fx.frames.len();
+            let prev = FrameState {
+                choices: fx.choices[(f + fx.frames.len() - 1) % fx.frames.len()].clone(),
+            };
+            let r = model
+                .solve_frame(&fx.frames[f], Some(&prev))
+                .unwrap_or_else(|e| panic!("solve: {e}"));
+            black_box(r.vertices.len())
+        })
+    });
+    g.finish();
+
+    // Each build is seconds: criterion's minimum of 10 samples, no warm-up to speak of.
+    let mut g = c.benchmark_group("build");
+    g.sample_size(10)
+        .measurement_time(Duration::from_secs(5))
+        .warm_up_time(Duration::from_millis(1));
+    g.bench_function("model_build", |bench| {
+        bench.iter(|| black_box(build_model(&fx.workload).map(|m| m.num_bundles())))
+    });
+    g.finish();
+}
+
+criterion_group!(benches, stages);
 criterion_main!(benches);

@@ -39,6 +39,8 @@ class Dataset:
         """An archive with keys neutral, triangles[, shapes, names, uvs, uv_triangles]."""
     def to_npz(self, path: _Path) -> None:
         """Writes the keys read by ``from_npz`` (numpy appends ``.npz`` if missing)."""
+    def augmented(self, min_shapes: int) -> Dataset:
+        """Adds in-betweens (``name@0.5``) and pairwise sums, to at least ``min_shapes``."""
     @property
     def num_vertices(self) -> int: ...
     @property

@@ -678,6 +678,11 @@ impl Model {
     pub fn indices(&self) -> &[TetIndex] {
         &self.indices
     }
+    /// Bundle surface positions on every shape, `(S + 1) × B` (index `[k * B + n]`, shape id
+    /// 0 the neutral): what [`Scoring`] needs to score candidates outside a full solve.
+    pub fn shape_positions(&self) -> &[DVec3] {
+        &self.shape_positions
+    }
 }
 
 /// Zig-zag allowance of mesh-edge paths at short range (relative to the diagonal).

@@ -119,6 +119,17 @@ impl Dataset {
         Ok(())
     }
 
+    /// A new dataset with in-between shapes (`name@0.5`, …) and pairwise sums added to the
+    /// shapes, at least `min_shapes` when there are enough pairs (the neutral is shared).
+    /// Runs with the GIL released.
+    fn augmented(&self, py: Python<'_>, min_shapes: usize) -> PyResult<Dataset> {
+        let inner = self.inner.clone();
+        let d = py
+            .detach(|| lgi_core::augment::augment(&inner, min_shapes))
+            .map_err(PyLgiError)?;
+        Ok(Dataset { inner: Arc::new(d) })
+    }
+
     /// Number of vertices V.
     #[getter]
     fn num_vertices(&self) -> usize {

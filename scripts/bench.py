@@ -1,0 +1,313 @@
+#!/usr/bin/env python3
+"""End-to-end benchmark of lgi through its Python API: build, per-frame solve at 1 and 2 rayon
+threads (one subprocess each: rayon reads RAYON_NUM_THREADS once), peak RSS, model save size and
+load time, and a dense-numpy reference of the sewing step. Prints a markdown table.
+
+Workload: ICT-300 (ICT-FaceKit neutral + 57 shapes augmented to 300, markers_120) when the data
+is found ($LGI_SHARED_DATA, else ../shared/data beside the checkout); else the shipped sample.
+Frames: bundle positions of seeded random convex combinations of 1-4 dataset shapes plus
+Gaussian marker noise (0.05 data units), so some targets fall outside every tet.
+
+    python scripts/bench.py [--frames N] [--quick] [--out docs/performance.md]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import resource
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+ICT_SHAPES = 300
+NOISE = 0.05
+SEED = 1
+
+
+def shared_data() -> Path:
+    env = os.environ.get("LGI_SHARED_DATA")
+    if env:
+        return Path(env)
+    for p in [ROOT, *ROOT.parents]:
+        c = p / "shared" / "data"
+        if (c / "ict-facekit" / "generic_neutral_mesh.obj").is_file():
+            return c
+    return ROOT.parent / "shared" / "data"
+
+
+def load_workload() -> tuple[str, Any, np.ndarray]:
+    import lgi
+
+    ict = shared_data() / "ict-facekit"
+    if (ict / "generic_neutral_mesh.obj").is_file():
+        base = lgi.Dataset.from_obj(ict / "generic_neutral_mesh.obj", str(ict / "shapes" / "*.obj"))
+        data = base.augmented(ICT_SHAPES)
+        markers = np.loadtxt(
+            ict / "markers_120.csv", delimiter=",", skiprows=1, usecols=(1, 2, 3)
+        ).reshape(-1, 3)
+        name = (
+            f"ICT-{ICT_SHAPES}: ICT-FaceKit neutral ({data.num_vertices} vertices) + "
+            f"{base.num_shapes} shapes augmented to {data.num_shapes}, {len(markers)} markers"
+        )
+        return name, data, markers
+    from lgi.sample import make_sample
+
+    s = make_sample(0)
+    data = lgi.Dataset.from_arrays(
+        s.neutral, s.triangles, s.shapes, names=s.names, uvs=s.uvs, uv_triangles=s.uv_triangles
+    )
+    name = (
+        f"sample (ICT data not found): synthetic face ({data.num_vertices} vertices), "
+        f"{data.num_shapes} shapes, {len(s.markers_rest)} markers"
+    )
+    return name, data, np.asarray(s.markers_rest)
+
+
+def make_frames(model: Any, data: Any, n: int, seed: int = SEED) -> np.ndarray:
+    """Bundle positions of random convex combinations of 1-4 shapes, plus marker noise."""
+    rng = np.random.default_rng(seed)
+    x0 = data.neutral
+    shapes = data.shapes
+    out = []
+    chunk = 25
+    for start in range(0, n, chunk):
+        m = min(chunk, n - start)
+        meshes = np.repeat(x0[None], m, axis=0)
+        for f in range(m):
+            k = rng.integers(1, 5)
+            ids = rng.integers(0, data.num_shapes, size=k)
+            w = rng.random(k) + 1e-3
+            w /= w.sum()
+            for i, wi in zip(ids, w, strict=True):
+                meshes[f] += wi * shapes[i]
+        out.append(model.bundle_positions(meshes))
+    frames = np.concatenate(out)
+    return frames + rng.normal(0.0, NOISE, size=frames.shape)
+
+
+def numpy_sew(
+    x0: np.ndarray,
+    shapes0: np.ndarray,
+    csr: dict[str, np.ndarray],
+    ch_s: np.ndarray,
+    ch_w: np.ndarray,
+) -> np.ndarray:
+    """Dense numpy sewing: x0 + sum_i W_vi sum_j a_ij s_k(v), with shapes0[0] = 0 (neutral)."""
+    indptr, cols, vals = csr["indptr"], csr["indices"], csr["data"]
+    rows = csr["rows"]
+    k = ch_s[cols]  # (nnz, 4) shape ids, 0 = neutral
+    f = vals[:, None] * ch_w[cols]  # (nnz, 4)
+    contrib = np.einsum("nj,njc->nc", f, shapes0[k, rows[:, None]])
+    d = np.zeros_like(x0)
+    # Rows are contiguous in CSR: a segmented sum (empty rows keep 0).
+    nonempty = indptr[:-1] < indptr[1:]
+    d[nonempty] = np.add.reduceat(contrib, indptr[:-1][nonempty], axis=0)
+    return x0 + d
+
+
+def memcpy_bandwidth(mb: int = 256, reps: int = 5) -> float:
+    """Read + write bytes per second of np.copyto on large arrays (best of reps)."""
+    src = np.ones(mb * (1 << 20) // 8)
+    dst = np.empty_like(src)
+    best = float("inf")
+    for _ in range(reps):
+        t = time.perf_counter()
+        np.copyto(dst, src)
+        best = min(best, time.perf_counter() - t)
+    return 2 * src.nbytes / best
+
+
+def worker(args: argparse.Namespace) -> dict[str, Any]:
+    import lgi
+
+    out: dict[str, Any] = {"threads": os.environ.get("RAYON_NUM_THREADS")}
+    name, data, markers = load_workload()
+    out["workload"] = name
+    t = time.perf_counter()
+    model = lgi.Model.build(data, markers)
+    out["build_s"] = time.perf_counter() - t
+    frames = make_frames(model, data, args.frames)
+    stamps: list[float] = []
+    t0 = time.perf_counter()
+    res = model.core.solve(
+        frames, progress=lambda _f: stamps.append(time.perf_counter()), temporal=True
+    )
+    total = time.perf_counter() - t0
+    per = np.diff(np.array([t0, *stamps])) * 1e3
+    out["solve_ms_median"] = float(np.median(per))
+    out["solve_ms_p95"] = float(np.percentile(per, 95))
+    out["solve_ms_mean"] = float(per.mean())
+    out["fps"] = len(frames) / total
+    out["frames"] = len(frames)
+    out["projected_fraction"] = float(np.asarray(res["choice_projected"]).mean())
+    out["peak_rss_mib"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+    if not args.reference:
+        return out
+
+    with tempfile.TemporaryDirectory() as d:
+        p = Path(d) / "model.lgi"
+        t = time.perf_counter()
+        model.save(p)
+        out["save_s"] = time.perf_counter() - t
+        out["save_mib"] = p.stat().st_size / (1 << 20)
+        t = time.perf_counter()
+        lgi.Model.load(p)
+        out["load_s"] = time.perf_counter() - t
+
+    # Numpy reference of the sewing step on the frames just solved.
+    w = model.core.sew_weights()
+    indptr = np.asarray(w["indptr"], dtype=np.int64)
+    csr = {
+        "indptr": indptr,
+        "indices": np.asarray(w["indices"], dtype=np.int64),
+        "data": np.asarray(w["data"], dtype=np.float64),
+        "rows": np.repeat(np.arange(len(indptr) - 1), np.diff(indptr)),
+    }
+    x0 = data.neutral
+    shapes0 = np.concatenate([np.zeros((1, *x0.shape), np.float32), data.shapes])
+    ch_s = np.asarray(res["choice_shapes"], dtype=np.int64)
+    ch_w = np.asarray(res["choice_weights"], dtype=np.float64)
+    nref = min(len(frames), 20 if args.quick else 50)
+    times = []
+    touched = []
+    for f in range(nref):
+        t = time.perf_counter()
+        numpy_sew(x0, shapes0, csr, ch_s[f], ch_w[f])
+        times.append(time.perf_counter() - t)
+        active = ((ch_w[f] != 0) & (ch_s[f] != 0)).sum(axis=1)  # shapes read per bundle
+        touched.append(int(active[csr["indices"]].sum()))
+    out["numpy_sew_ms_median"] = float(np.median(times) * 1e3)
+    out["sew_nnz"] = len(csr["indices"])
+    v = x0.shape[0]
+    out["vertices"] = v
+    out["sew_bytes_per_frame"] = float(v * 24 + np.mean(touched) * 12 + v * 24)
+    out["memcpy_gbps"] = memcpy_bandwidth() / 1e9
+    return out
+
+
+def run_threads(threads: int, args: argparse.Namespace, reference: bool) -> dict[str, Any]:
+    env = dict(os.environ, RAYON_NUM_THREADS=str(threads))
+    cmd = [sys.executable, __file__, "--worker", "--frames", str(args.frames)]
+    if args.quick:
+        cmd.append("--quick")
+    if reference:
+        cmd.append("--reference")
+    p = subprocess.run(cmd, env=env, capture_output=True, text=True, check=False)
+    if p.returncode != 0:
+        sys.stderr.write(p.stderr)
+        raise SystemExit(f"worker with {threads} thread(s) failed ({p.returncode})")
+    return json.loads(p.stdout.strip().splitlines()[-1])
+
+
+def machine() -> str:
+    model = platform.processor() or "unknown"
+    try:
+        for line in subprocess.run(["lscpu"], capture_output=True, text=True).stdout.splitlines():
+            if line.startswith("Model name:"):
+                model = line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    ram = "unknown"
+    try:
+        for line in Path("/proc/meminfo").read_text().splitlines():
+            if line.startswith("MemTotal:"):
+                ram = f"{int(line.split()[1]) / (1 << 20):.1f} GiB"
+    except OSError:
+        pass
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
+    return f"{model}; {cores} cores available; {ram} RAM; Python {platform.python_version()}"
+
+
+def table(r1: dict[str, Any], r2: dict[str, Any]) -> str:
+    rows = [
+        ("Workload", r1["workload"]),
+        (
+            "Frames solved (temporal)",
+            f"{r1['frames']} ({100 * r1['projected_fraction']:.1f} % of targets projected)",
+        ),
+        ("Build time", f"{r1['build_s']:.2f} s (1 thread), {r2['build_s']:.2f} s (2 threads)"),
+    ]
+    for r in (r1, r2):
+        rows.append(
+            (
+                f"Solve per frame, {r['threads']} thread(s)",
+                f"median {r['solve_ms_median']:.2f} ms, p95 {r['solve_ms_p95']:.2f} ms, "
+                f"{r['fps']:.0f} frames/s",
+            )
+        )
+    rows += [
+        (
+            "Peak RSS (build + solve)",
+            f"{r1['peak_rss_mib']:.0f} MiB (1 thread), {r2['peak_rss_mib']:.0f} MiB (2 threads)",
+        ),
+        ("Model file", f"{r1['save_mib']:.1f} MiB, saved in {r1['save_s']:.2f} s"),
+        ("Model load", f"{r1['load_s']:.3f} s"),
+        (
+            "Numpy sewing reference (per frame)",
+            f"{r1['numpy_sew_ms_median']:.2f} ms = "
+            f"{r1['numpy_sew_ms_median'] / r1['solve_ms_median']:.1f} x "
+            f"lgi's full 1-thread solve "
+            f"({r1['numpy_sew_ms_median'] / r2['solve_ms_median']:.1f} x 2-thread)",
+        ),
+        (
+            "Sewing memory traffic (lower bound)",
+            f"{r1['sew_bytes_per_frame'] / 1e6:.2f} MB/frame ({r1['sew_nnz']} weights); "
+            f"at the numpy memcpy bandwidth {r1['memcpy_gbps']:.1f} GB/s: "
+            f"{r1['sew_bytes_per_frame'] / (r1['memcpy_gbps'] * 1e9) * 1e3:.3f} ms",
+        ),
+    ]
+    lines = ["| Measure | Value |", "|---|---|"]
+    lines += [f"| {a} | {b} |" for a, b in rows]
+    return "\n".join(lines)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--frames", type=int, default=500)
+    ap.add_argument("--quick", action="store_true", help="100 frames, shorter numpy reference")
+    ap.add_argument("--out", type=Path, help="write the table and machine to this markdown file")
+    ap.add_argument("--worker", action="store_true", help=argparse.SUPPRESS)
+    ap.add_argument("--reference", action="store_true", help=argparse.SUPPRESS)
+    args = ap.parse_args()
+    if args.quick:
+        args.frames = min(args.frames, 100)
+    if args.worker:
+        print(json.dumps(worker(args)))
+        return
+    r1 = run_threads(1, args, reference=True)
+    r2 = run_threads(2, args, reference=False)
+    text = table(r1, r2)
+    desc = machine()
+    print(f"Machine: {desc}\n\n{text}")
+    if args.out:
+        write_out(args.out, f"Machine: {desc}\n\n{text}\n")
+
+
+BEGIN, END = "<!-- bench.py:begin -->", "<!-- bench.py:end -->"
+
+
+def write_out(path: Path, block: str) -> None:
+    """Replaces the block between the bench.py markers (keeping hand-written notes around it),
+    or writes a new file with just the block."""
+    block = f"{BEGIN}\n{block}{END}"
+    old = path.read_text() if path.is_file() else ""
+    if BEGIN in old and END in old:
+        head, rest = old.split(BEGIN, 1)
+        text = head + block + rest.split(END, 1)[1]
+    else:
+        text = "# Performance\n\n" + block + "\n"
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(text)
+
+
+if __name__ == "__main__":
+    main()
