@@ -7,7 +7,7 @@ use glam::DVec3;
 use lgi_benches::{build_model, load_workload, make_frames, Workload};
 use lgi_core::choose::{choose, Choice, ChoiceParams, Scoring, Scratch};
 use lgi_core::model::{FrameState, Model};
-use lgi_core::sew::blend;
+use lgi_core::sew::{blend, Pieces};
 use lgi_core::sibson::SibsonWeights;
 use std::hint::black_box;
 use std::time::{Duration, Instant};
@@ -32,7 +32,7 @@ fn fixture() -> Fixture {
     let mut choices = Vec::new();
     for f in &frames {
         let frame = model
-            .solve_frame(f, state.as_ref())
+            .solve_frame(f, state.as_ref(), None)
             .unwrap_or_else(|e| panic!("solve failed: {e}"));
         choices.push(frame.choices.clone());
         state = Some(FrameState {
@@ -171,6 +171,7 @@ fn stages(c: &mut Criterion) {
 
     let mesh = fx.workload.dataset.neutral();
     let mut verts = vec![DVec3::ZERO; nv];
+    let pieces: Vec<Pieces> = fx.choices.iter().map(|c| Pieces::from_choices(c)).collect();
     let mut f = 0;
     g.bench_function("sew_blend_frame", |bench| {
         bench.iter(|| {
@@ -179,7 +180,7 @@ fn stages(c: &mut Criterion) {
                 &mesh.positions,
                 model.dataset().displacements(),
                 model.sew_weights(),
-                &fx.choices[f],
+                &pieces[f],
                 &mut verts,
             );
             black_box(verts[0])
@@ -194,7 +195,7 @@ fn stages(c: &mut Criterion) {
                 choices: fx.choices[(f + fx.frames.len() - 1) % fx.frames.len()].clone(),
             };
             let r = model
-                .solve_frame(&fx.frames[f], Some(&prev))
+                .solve_frame(&fx.frames[f], Some(&prev), None)
                 .unwrap_or_else(|e| panic!("solve: {e}"));
             black_box(r.vertices.len())
         })
