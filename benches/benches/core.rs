@@ -5,7 +5,7 @@
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};
 use glam::DVec3;
 use lgi_benches::{build_model, load_workload, make_frames, Workload};
-use lgi_core::choose::{choose, Choice, ChoiceParams, Scoring, Scratch};
+use lgi_core::choose::{choose, pure_errors, Choice, ChoiceParams, Scoring, Scratch};
 use lgi_core::model::{FrameState, Model};
 use lgi_core::sew::{blend, Pieces};
 use lgi_core::sibson::SibsonWeights;
@@ -93,6 +93,7 @@ fn stages(c: &mut Criterion) {
             f = (f + 1) % fx.frames.len();
             let prev = &fx.choices[(f + fx.frames.len() - 1) % fx.frames.len()];
             let targets = &fx.frames[f];
+            let pure = pure_errors(model.shape_positions(), b, targets);
             let mut acc = 0.0;
             for (i, &t) in targets.iter().enumerate() {
                 let scoring = Scoring {
@@ -102,6 +103,7 @@ fn stages(c: &mut Criterion) {
                     targets,
                     previous: prev[i].as_ref(),
                     temporal_weight: tw,
+                    pure_errors: &pure,
                 };
                 let ch = choose(
                     &model.indices()[i],

@@ -44,6 +44,25 @@ pub struct Scoring<'a> {
     pub previous: Option<&'a Choice>,
     /// Penalty per shape of a candidate that the previous choice did not use (data units²).
     pub temporal_weight: f64,
+    /// Per shape id, the error over all bundles of that shape alone ([`pure_errors`]): the
+    /// same for every bundle of a frame, so the tie-break of pure candidates is a lookup.
+    /// Empty to compute on demand.
+    pub pure_errors: &'a [f64],
+}
+
+/// `Σ_n |P[k][n] − t_n|²` over the present bundles, for every shape id k: the global error
+/// of a bundle choosing shape k alone. Computed once per frame.
+pub fn pure_errors(shape_positions: &[DVec3], num_bundles: usize, targets: &[DVec3]) -> Vec<f64> {
+    shape_positions
+        .chunks(num_bundles)
+        .map(|row| {
+            row.iter()
+                .zip(targets)
+                .filter(|(_, t)| !t.is_nan())
+                .map(|(p, t)| p.distance_squared(*t))
+                .sum()
+        })
+        .collect()
 }
 
 impl Scoring<'_> {
@@ -55,6 +74,11 @@ impl Scoring<'_> {
     /// The same error over every bundle: breaks exact ties between aliases that no
     /// neighbour can tell apart (shapes identical around this bundle but not elsewhere).
     fn global_error(&self, shapes: &[u32; 4], weights: &[f64; 4]) -> f64 {
+        if let Some(j) = (0..4).find(|&j| weights[j] == 1.0) {
+            if let Some(&e) = self.pure_errors.get(shapes[j] as usize) {
+                return e;
+            }
+        }
         self.error_over(0..self.num_bundles as u32, shapes, weights)
     }
 
@@ -182,7 +206,15 @@ pub fn choose(
         }
     } else if index.num_tets() > 0 {
         scratch.nearest.clear();
-        index.nearest(target, params.projection_candidates, &mut scratch.nearest);
+        // Tets around the two cloud points nearest the target (where it left the cloud):
+        // the exact n-nearest search must enumerate every tet tied at a shared vertex and
+        // costs ~10x more for the same choices in practice (docs/performance.md).
+        index.nearest_around(target, 2, &mut scratch.nearest);
+        // A closest point at a tet's vertex is that cloud point, scored below on its own.
+        scratch
+            .nearest
+            .retain(|c| c.1.iter().all(|&b| b < 1.0 - 1e-12));
+        scratch.nearest.truncate(params.projection_candidates);
         for &(t, l, d) in &scratch.nearest {
             let tet = index.tets()[t as usize];
             let w = clean_weights(l);

@@ -59,6 +59,9 @@ pub struct TetIndex {
     bvh_items: Vec<u32>,
     /// Scale of the cloud, for the rounding slack of nearest-tet pruning.
     scale: f64,
+    /// Tets incident to each point (CSR), for the fast projection around the nearest points.
+    incident_start: Vec<u32>,
+    incident: Vec<u32>,
 }
 
 impl TetIndex {
@@ -117,10 +120,29 @@ impl TetIndex {
             .iter()
             .fold(0.0f64, |m, p| m.max(p.abs().max_element()))
             .max(f64::MIN_POSITIVE);
+        let mut incident_start = vec![0u32; points.len() + 1];
+        for t in &tets {
+            for &v in t {
+                incident_start[v as usize + 1] += 1;
+            }
+        }
+        for i in 0..points.len() {
+            incident_start[i + 1] += incident_start[i];
+        }
+        let mut fill = incident_start.clone();
+        let mut incident = vec![0u32; incident_start[points.len()] as usize];
+        for (ti, t) in tets.iter().enumerate() {
+            for &v in t {
+                incident[fill[v as usize] as usize] = ti as u32;
+                fill[v as usize] += 1;
+            }
+        }
         let mut index = TetIndex {
             points,
             tets,
             frames,
+            incident_start,
+            incident,
             lo: DVec3::ZERO,
             hi: DVec3::ZERO,
             dims: [0; 3],
@@ -134,6 +156,45 @@ impl TetIndex {
         index.build_grid(&boxes);
         index.build_bvh(&boxes);
         Ok(index)
+    }
+
+    /// Fast projection for targets outside every tet: the tets incident to the `k` cloud
+    /// points nearest to `p`, each with its closest point to `p` (barycentric, distance),
+    /// appended to `out` sorted by distance then tet index. Not the exact `n` nearest tets of
+    /// [`nearest`](Self::nearest) — which must enumerate every tet tied at a shared vertex —
+    /// but the tets around where `p` left the cloud, in O(points + incident tets).
+    pub fn nearest_around(&self, p: DVec3, k: usize, out: &mut Vec<(u32, [f64; 4], f64)>) {
+        let base = out.len();
+        let mut near: Vec<(f64, u32)> = self
+            .points
+            .iter()
+            .enumerate()
+            .map(|(i, q)| (q.distance_squared(p), i as u32))
+            .collect();
+        let k = k.min(near.len());
+        if k == 0 {
+            return;
+        }
+        near.select_nth_unstable_by(k - 1, |a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+        let mut tets: Vec<u32> = near[..k]
+            .iter()
+            .flat_map(|&(_, v)| {
+                let (s, e) = (
+                    self.incident_start[v as usize],
+                    self.incident_start[v as usize + 1],
+                );
+                self.incident[s as usize..e as usize].iter().copied()
+            })
+            .collect();
+        tets.sort_unstable();
+        tets.dedup();
+        for t in tets {
+            let corners = self.tets[t as usize].map(|i| self.points[i as usize]);
+            let inv = &self.frames[t as usize].inv;
+            let (q, b) = closest_point_in_tet_with(p, corners, inv.is_finite().then_some(inv));
+            out.push((t, b, p.distance(q)));
+        }
+        out[base..].sort_by(|a, b| a.2.total_cmp(&b.2).then(a.0.cmp(&b.0)));
     }
 
     /// Number of tets.
@@ -261,6 +322,7 @@ impl TetIndex {
             + self.cell_items.capacity() * size_of::<u32>()
             + self.nodes.capacity() * size_of::<Node>()
             + self.bvh_items.capacity() * size_of::<u32>()
+            + (self.incident_start.capacity() + self.incident.capacity()) * size_of::<u32>()
     }
 
     /// Grid shape `[nx, ny, nz]` (all 0 when no tet is usable): for diagnostics and benchmarks.

@@ -2,7 +2,7 @@
 //! tets and their grid indices, UV sewing weights), immutable after build and `Send + Sync`,
 //! so frames are solved with `&self` in parallel (rayon over bundles, then over vertices).
 
-use crate::choose::{choose, Choice, ChoiceParams, Scoring, Scratch};
+use crate::choose::{choose, pure_errors, Choice, ChoiceParams, Scoring, Scratch};
 use crate::cloud::{build_cloud, BundleCloud};
 use crate::correspond::{correspond, SurfacePoint};
 use crate::dataset::Dataset;
@@ -437,6 +437,7 @@ impl Model {
             ..ChoiceParams::default()
         };
         let temporal_weight = self.config.temporal_weight * self.diagonal * self.diagonal;
+        let pure = pure_errors(&self.shape_positions, b, lookup_targets);
         (0..b)
             .into_par_iter()
             .map_init(Scratch::default, |scratch, i| {
@@ -453,6 +454,7 @@ impl Model {
                         .and_then(|p| p.choices.get(i))
                         .and_then(|c| c.as_ref()),
                     temporal_weight,
+                    pure_errors: &pure,
                 };
                 Some(choose(
                     &self.indices[i],
@@ -553,6 +555,40 @@ impl Model {
             .enumerate()
             .map(|(f, t)| self.prepare(t, theta(f)).map_err(|e| frame_context(e, f)))
             .collect::<Result<_>>()?;
+        if smooth_window <= 1 {
+            // Frame by frame: each frame is finished (and reported) before the next starts.
+            let mut out: Vec<Frame> = Vec::with_capacity(frames.len());
+            let solved: Result<()> = if temporal {
+                prepared.iter().enumerate().try_for_each(|(f, prep)| {
+                    let previous = out.last().map(|fr| FrameState {
+                        choices: fr.choices.clone(),
+                    });
+                    let choices = self.choose_all(prep, previous.as_ref());
+                    let pieces = Pieces::from_choices(&choices);
+                    out.push(
+                        self.sew_frame(prep, choices, &pieces)
+                            .map_err(|e| frame_context(e, f))?,
+                    );
+                    on_frame(f);
+                    Ok(())
+                })
+            } else {
+                out = prepared
+                    .par_iter()
+                    .enumerate()
+                    .map(|(f, prep)| {
+                        let choices = self.choose_all(prep, None);
+                        let pieces = Pieces::from_choices(&choices);
+                        self.sew_frame(prep, choices, &pieces)
+                            .map_err(|e| frame_context(e, f))
+                    })
+                    .collect::<Result<_>>()?;
+                (0..out.len()).for_each(&mut on_frame);
+                Ok(())
+            };
+            solved?;
+            return Ok(out);
+        }
         let choices: Vec<Vec<Option<Choice>>> = if temporal {
             let mut out: Vec<Vec<Option<Choice>>> = Vec::with_capacity(frames.len());
             for prep in &prepared {
