@@ -1,13 +1,16 @@
 //! `lgi._lgi.RbfInterpolator` and `lgi._lgi.BlendshapeSolver`: the numerical kernels of the
 //! baselines (python/lgi/baselines.py wraps them with the `lgi.Model` solve API).
 
-use crate::convert::{flat_to_array, float_array, points};
+use crate::convert::{flat_to_array, float_array, points as read_points};
 use crate::dataset::Dataset;
 use crate::error::{input_error, PyLgiError};
 use glam::DVec3;
 use lgi_core::baselines::{BlendshapeSolver as CoreBlend, DisplacementInterpolation};
 use numpy::PyArrayDyn;
 use pyo3::prelude::*;
+
+/// Fitted weights (F, S) and iteration counts (F,).
+type WeightsAndIterations<'py> = (Bound<'py, PyArrayDyn<f64>>, Bound<'py, PyArrayDyn<i64>>);
 
 /// Biharmonic RBF interpolation of marker values over mesh vertices (exact at the markers).
 #[pyclass(frozen, module = "lgi._lgi")]
@@ -27,11 +30,11 @@ impl RbfInterpolator {
     #[new]
     fn new(
         py: Python<'_>,
-        points_: &Bound<'_, PyAny>,
+        points: &Bound<'_, PyAny>,
         sample_vertices: &Bound<'_, PyAny>,
         sample_weights: &Bound<'_, PyAny>,
     ) -> PyResult<Self> {
-        let pts = points(points_, "points", None, false)?;
+        let pts = read_points(points, "points", None, false)?;
         let idx = crate::convert::index_array(sample_vertices, "sample_vertices", 3)?;
         let b = idx.len() / 3;
         let w = float_array(sample_weights, "sample_weights", &[Some(b), Some(3)])?;
@@ -57,7 +60,7 @@ impl RbfInterpolator {
         markers_rest: &Bound<'_, PyAny>,
         tolerance: f64,
     ) -> PyResult<Self> {
-        let markers = points(markers_rest, "markers_rest", None, false)?;
+        let markers = read_points(markers_rest, "markers_rest", None, false)?;
         let data = dataset.inner.clone();
         let inner = py
             .detach(move || DisplacementInterpolation::from_dataset(&data, &markers, tolerance))
@@ -177,7 +180,7 @@ impl BlendshapeSolver {
         &self,
         py: Python<'py>,
         targets: &Bound<'py, PyAny>,
-    ) -> PyResult<(Bound<'py, PyArrayDyn<f64>>, Bound<'py, PyArrayDyn<i64>>)> {
+    ) -> PyResult<WeightsAndIterations<'py>> {
         let r = self.inner.num_rows();
         let a = float_array(targets, "targets", &[None, Some(r)])?;
         let rows: Vec<Vec<f64>> = a

@@ -228,21 +228,45 @@ impl BlendshapeSolver {
                     objective,
                 });
             }
-            // Otherwise a damped step (Armijo backtracking) keeps the iteration from cycling.
-            let g = grad(&w);
+            // Otherwise an exact line search: along w + αd the objective is a convex piecewise
+            // quadratic in α, so its derivative is piecewise linear between the breakpoints
+            // where a weight crosses 0 or 1; a damped step keeps the iteration from cycling.
             let d: Vec<f64> = cand.iter().zip(&w).map(|(c, x)| c - x).collect();
-            let slope: f64 = g.iter().zip(&d).map(|(a, b)| a * b).sum();
+            let slope = |alpha: f64| -> f64 {
+                let x: Vec<f64> = w.iter().zip(&d).map(|(a, b)| a + alpha * b).collect();
+                grad(&x).iter().zip(&d).map(|(g, di)| g * di).sum()
+            };
+            let mut breaks: Vec<f64> = w
+                .iter()
+                .zip(&d)
+                .filter(|(_, &di)| di != 0.0)
+                .flat_map(|(&x, &di)| [-x / di, (1.0 - x) / di])
+                .filter(|&a| a > 0.0 && a < 1.0)
+                .collect();
+            breaks.sort_by(f64::total_cmp);
+            breaks.push(1.0);
+            let (mut lo, mut slo) = (0.0, slope(0.0));
             let mut alpha = 1.0;
-            loop {
-                let trial: Vec<f64> = w.iter().zip(&d).map(|(x, dx)| x + alpha * dx).collect();
-                let ft = self.objective(&trial, target);
-                if ft <= f + 1e-4 * alpha * slope || alpha < 1e-12 {
-                    w = trial;
-                    f = ft;
+            for &hi in &breaks {
+                let shi = slope(hi);
+                if shi >= 0.0 {
+                    alpha = if shi > slo {
+                        lo + (hi - lo) * (-slo) / (shi - slo)
+                    } else {
+                        hi
+                    };
                     break;
                 }
-                alpha *= 0.5;
+                (lo, slo) = (hi, shi);
             }
+            w = w.iter().zip(&d).map(|(x, dx)| x + alpha * dx).collect();
+            let fw = self.objective(&w, target);
+            if fw >= f && alpha == 0.0 {
+                return Err(LgiError::Input(
+                    "blendshape fit stalled (no descent)".into(),
+                ));
+            }
+            f = fw;
         }
         Err(LgiError::Input(format!(
             "blendshape fit did not converge in {MAX_ITERATIONS} iterations"
