@@ -170,3 +170,18 @@ def test_bad_inputs_raise_input_error(sample, sample_dataset) -> None:  # type: 
     few[0, 3:] = np.nan
     with pytest.raises(lgi.InputError):
         m.solve(few)  # fewer than 4 markers present
+
+
+def test_ict_displacement_interpolation_is_exact_and_blendshape_fit_explains_shapes(
+    ict_dataset,  # type: ignore[no-untyped-def]
+    ict_markers,  # type: ignore[no-untyped-def]
+) -> None:
+    from lgi.evaluate import verification
+
+    frames, _truth = verification(ict_dataset, ict_markers)
+    diag = np.linalg.norm(np.ptp(np.asarray(ict_dataset.neutral), axis=0))
+    di = DisplacementInterpolation(ict_dataset, ict_markers).solve(frames[:4])
+    assert di.bundle_residuals.max() <= 1e-9 * diag
+    # Frames that are dataset shapes are (nearly) in the span: markers fit to 1e-3 diagonal.
+    fit = BlendshapeFit(ict_dataset, ict_markers).solve(frames)
+    assert fit.bundle_residuals.max() <= 1e-3 * diag

@@ -75,7 +75,7 @@ class _Surface:
         return np.einsum("fbjd,bj->fbd", meshes[:, self.sv], self.sw)
 
     def result(self, vertices: F64, frames: F64, choices: Choices | None = None) -> SolveResult:
-        missing = np.isnan(frames).any(axis=2)
+        missing: NDArray[np.bool_] = np.asarray(np.isnan(frames).any(axis=2))
         pos = self.sample(vertices)
         res = np.where(missing, 0.0, np.linalg.norm(np.nan_to_num(frames - pos), axis=2))
         f, b = missing.shape

@@ -302,6 +302,9 @@ def run_protocol(
             rows = dropout_sweep(methods, frames, truth, region=region, temporal=temporal)
         else:
             rows = evaluate(methods, frames, truth, region, temporal=temporal)
+        if not temporal:
+            for r in rows:
+                r["jitter"] = float("nan")  # independent frames: not a sequence
     (outp / "results.md").write_text(
         f"# lgi evaluate: data {data}, protocol {protocol}\n\n" + to_markdown(rows)
     )

@@ -55,7 +55,7 @@ def draw_mesh(
     shade = 0.35 + 0.65 * np.clip(n @ _LIGHT, 0.0, 1.0)
     colours = np.clip(rgb * shade[:, None], 0, 1)
     pc = PolyCollection(
-        tri[order][:, :, :2], facecolors=colours[order], edgecolors="none", antialiaseds=False
+        list(tri[order][:, :, :2]), facecolors=colours[order], edgecolors="none", antialiaseds=False
     )
     ax.add_collection(pc)
     lo, hi = p[:, :2].min(axis=0), p[:, :2].max(axis=0)
