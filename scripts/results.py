@@ -39,6 +39,13 @@ def main() -> int:
         "second difference of vertex positions, cm) and solve time per frame (ms; LGI-RBF "
         "includes its LGI solve).",
         "",
+        "Methods (`lgi.baselines`): *displacement interpolation* spreads the markers' "
+        "displacements with a 3D biharmonic RBF (phi(r) = r plus a linear polynomial); "
+        "*blendshape fit* solves box-penalised least-squares shape weights per frame; "
+        "*LGI-RBF* spreads LGI's per-bundle choices with normalised Gaussian weights over UV "
+        "distance and adds an RBF correction of the residuals (LGI without Sibson sewing); "
+        "*LGI* is `lgi.Model`. All but the blendshape fit pass through every present marker.",
+        "",
     ]
     s = make_sample(0)
     ds = lgi.Dataset.from_arrays(
