@@ -30,6 +30,9 @@ pub struct DisplacementInterpolation {
     cache: Mutex<HashMap<Vec<bool>, Arc<Lu>>>,
 }
 
+/// Factorisations kept for sets of missing markers (each (B+4)² values).
+const MAX_CACHED: usize = 256;
+
 fn kernel(a: DVec3, b: DVec3) -> f64 {
     (a - b).length()
 }
@@ -163,6 +166,10 @@ impl DisplacementInterpolation {
         }
         let lu = self.factor(present)?;
         if let Ok(mut c) = self.cache.lock() {
+            // Random dropouts make most sets unique: bound the memory, keep the full set.
+            if c.len() >= MAX_CACHED {
+                c.retain(|k, _| k.iter().all(|&p| p));
+            }
             c.insert(present.to_vec(), lu.clone());
         }
         Ok(lu)
