@@ -7,7 +7,7 @@ from typing import Any, final
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-__all__ = ["Dataset", "Model", "__version__"]
+__all__ = ["BlendshapeSolver", "Dataset", "Model", "RbfInterpolator", "__version__"]
 
 __version__: str
 
@@ -115,3 +115,45 @@ class Model:
         """``pivot``, ``weights``, ``shape_theta``, ``bundle_weights``; None without a jaw."""
     def bundle_uvs(self) -> NDArray[np.float64]:
         """(B, 2) bundle positions in UV."""
+
+@final
+class RbfInterpolator:
+    """Biharmonic RBF (phi(r) = r, linear polynomial) interpolation of marker values over points;
+    marker i's constraint is sum_j sample_weights[i, j] f(points[sample_vertices[i, j]])."""
+
+    def __new__(
+        cls, points: ArrayLike, sample_vertices: ArrayLike, sample_weights: ArrayLike
+    ) -> RbfInterpolator: ...
+    @staticmethod
+    def from_dataset(
+        dataset: Dataset, markers_rest: ArrayLike, tolerance: float
+    ) -> RbfInterpolator:
+        """Markers at their closest neutral surface points (within ``tolerance``)."""
+    @property
+    def num_markers(self) -> int: ...
+    @property
+    def num_points(self) -> int: ...
+    @property
+    def matrix(self) -> NDArray[np.float64]:
+        """(V, B) interpolation matrix (all markers present)."""
+    @property
+    def sample_vertices(self) -> NDArray[np.int64]: ...
+    @property
+    def sample_weights(self) -> NDArray[np.float64]: ...
+    @property
+    def centres(self) -> NDArray[np.float64]: ...
+    def interpolate(self, values: ArrayLike) -> NDArray[np.float64]:
+        """(F, B, 3) values (NaN rows missing) -> (F, V, 3)."""
+
+@final
+class BlendshapeSolver:
+    """Active-set solver of min |A w - t|^2 + l2 |w|^2 + penalty * box violation^2."""
+
+    def __new__(cls, a: ArrayLike, l2: float, penalty: float) -> BlendshapeSolver: ...
+    @property
+    def num_shapes(self) -> int: ...
+    @property
+    def num_rows(self) -> int: ...
+    def objective(self, w: ArrayLike, target: ArrayLike) -> float: ...
+    def solve(self, targets: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
+        """(F, R) targets (NaN entries dropped) -> weights (F, S), iterations (F,)."""

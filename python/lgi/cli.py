@@ -16,6 +16,15 @@ def _cmd_demo(args: argparse.Namespace) -> int:
     return demo.run(Path(args.out), seed=args.seed, quiet=args.quiet)
 
 
+def _cmd_evaluate(args: argparse.Namespace) -> int:
+    from lgi import evaluate
+
+    rows = evaluate.run_protocol(args.data, args.protocol, args.out, args.ict_dir)
+    print(evaluate.to_markdown(rows), end="")
+    print(f"wrote {args.out}/results.md and {args.out}/results.csv")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
         prog="lgi",
@@ -32,6 +41,17 @@ def build_parser() -> argparse.ArgumentParser:
     demo.add_argument("--seed", type=int, default=0, help="seed of the generated sample")
     demo.add_argument("-q", "--quiet", action="store_true", help="no progress bars")
     demo.set_defaults(func=_cmd_demo)
+
+    ev = sub.add_parser("evaluate", help="compare LGI with the baselines against ground truth")
+    ev.add_argument("--data", choices=["sample", "ict"], default="sample")
+    ev.add_argument(
+        "--protocol",
+        choices=["performance", "verification", "loo", "noise", "dropout"],
+        default="performance",
+    )
+    ev.add_argument("--out", default="lgi-evaluate-output", help="output folder (created)")
+    ev.add_argument("--ict-dir", default=None, help="ICT-FaceKit folder (for --data ict)")
+    ev.set_defaults(func=_cmd_evaluate)
     return p
 
 

@@ -7,6 +7,7 @@
 #![warn(missing_docs)]
 
 pub mod augment;
+pub mod baselines;
 pub mod choose;
 pub mod cloud;
 pub mod correspond;

@@ -1,6 +1,7 @@
 //! Python binding of lgi-core: numpy in, numpy out. Conversions live in `convert.rs`, the
 //! error mapping in `error.rs`; every heavy call releases the GIL with `py.detach`.
 
+mod baselines;
 mod convert;
 mod dataset;
 mod error;
@@ -14,5 +15,7 @@ fn _lgi(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     m.add_class::<dataset::Dataset>()?;
     m.add_class::<model::Model>()?;
+    m.add_class::<baselines::RbfInterpolator>()?;
+    m.add_class::<baselines::BlendshapeSolver>()?;
     Ok(())
 }

@@ -1,0 +1,358 @@
+//! Displacement interpolation with a 3D biharmonic RBF (φ(r) = r plus a linear polynomial), the
+//! classic smooth-deformation baseline: simple, smooth, exact at the markers and linear in the
+//! data, so a V×B interpolation matrix is computed once and applied to every frame.
+
+use crate::correspond::correspond;
+use crate::dataset::Dataset;
+use crate::error::{LgiError, Result};
+use crate::linalg::Lu;
+use glam::DVec3;
+use rayon::prelude::*;
+use std::collections::HashMap;
+use std::sync::{Arc, Mutex};
+
+/// A marker's constraint: its value is the barycentric combination of three vertex values, so
+/// the reconstructed mesh passes through the marker exactly (not only the smooth field).
+pub type Sample = ([u32; 3], [f64; 3]);
+
+/// Biharmonic RBF interpolation of per-marker values (displacements) over mesh vertices.
+///
+/// Centres are the markers' rest surface points; each marker's constraint is sampled like the
+/// mesh samples it (barycentric combination of its triangle's vertices), so applying the
+/// interpolated displacements to the vertices reproduces every present marker exactly.
+#[derive(Debug)]
+pub struct DisplacementInterpolation {
+    points: Vec<DVec3>,
+    centres: Vec<DVec3>,
+    samples: Vec<Sample>,
+    matrix: Vec<f64>,
+    // Missing markers change the system: its factorisation is cached per set of present ones.
+    cache: Mutex<HashMap<Vec<bool>, Arc<Lu>>>,
+}
+
+/// Factorisations kept for sets of missing markers (each (B+4)² values).
+const MAX_CACHED: usize = 256;
+
+fn kernel(a: DVec3, b: DVec3) -> f64 {
+    (a - b).length()
+}
+
+impl DisplacementInterpolation {
+    /// Interpolation over `points` (V) with one constraint per sample; the centres are the
+    /// samples' positions on `points`. Errors: indices out of range, fewer than 4 samples, or
+    /// a singular system (samples coplanar or coincident) as [`LgiError::Input`].
+    pub fn new(points: Vec<DVec3>, samples: Vec<Sample>) -> Result<Self> {
+        let v = points.len();
+        if samples.len() < 4 {
+            return Err(LgiError::Input(format!(
+                "RBF interpolation needs at least 4 markers, got {}",
+                samples.len()
+            )));
+        }
+        let mut centres = Vec::with_capacity(samples.len());
+        for (i, (idx, w)) in samples.iter().enumerate() {
+            if idx.iter().any(|&j| j as usize >= v) || w.iter().any(|x| !x.is_finite()) {
+                return Err(LgiError::Input(format!(
+                    "marker {i}: sample vertices {idx:?} out of range or weights {w:?} not finite"
+                )));
+            }
+            centres.push(
+                idx.iter()
+                    .zip(w)
+                    .fold(DVec3::ZERO, |acc, (&j, &wj)| acc + points[j as usize] * wj),
+            );
+        }
+        if let Some(i) = points.iter().position(|p| !p.is_finite()) {
+            return Err(LgiError::Input(format!("point {i} is not finite")));
+        }
+        let mut me = DisplacementInterpolation {
+            points,
+            centres,
+            samples,
+            matrix: Vec::new(),
+            cache: Mutex::new(HashMap::new()),
+        };
+        let all = vec![true; me.samples.len()];
+        let lu = me.factor(&all)?;
+        me.matrix = me.build_matrix(&lu);
+        if let Ok(mut c) = me.cache.lock() {
+            c.insert(all, lu);
+        }
+        Ok(me)
+    }
+
+    /// Markers located on the dataset's neutral (closest surface point, at most `tolerance`
+    /// away in data units), interpolating over the neutral's vertices.
+    pub fn from_dataset(dataset: &Dataset, markers_rest: &[DVec3], tolerance: f64) -> Result<Self> {
+        let mesh = dataset.neutral();
+        let found = correspond(mesh, markers_rest, tolerance)?;
+        let samples = found
+            .iter()
+            .map(|(sp, _)| {
+                let t = mesh.triangles[sp.triangle as usize];
+                (t, sp.bary)
+            })
+            .collect();
+        Self::new(mesh.positions.clone(), samples)
+    }
+
+    /// Number of markers B.
+    pub fn num_markers(&self) -> usize {
+        self.samples.len()
+    }
+
+    /// Number of interpolation points V.
+    pub fn num_points(&self) -> usize {
+        self.points.len()
+    }
+
+    /// The markers' constraints (triangle vertices and barycentric weights).
+    pub fn samples(&self) -> &[Sample] {
+        &self.samples
+    }
+
+    /// The RBF centres: the markers' surface points.
+    pub fn centres(&self) -> &[DVec3] {
+        &self.centres
+    }
+
+    /// Row-major V×B matrix mapping marker values to point values (all markers present).
+    pub fn matrix(&self) -> &[f64] {
+        &self.matrix
+    }
+
+    /// Saddle system [[L Φ, L P], [Pᵀ, 0]] over the present markers, `L` the sampling.
+    fn factor(&self, present: &[bool]) -> Result<Arc<Lu>> {
+        let idx: Vec<usize> = (0..present.len()).filter(|&i| present[i]).collect();
+        let n = idx.len();
+        if n < 4 {
+            return Err(LgiError::Input(format!(
+                "RBF interpolation needs at least 4 present markers, got {n}"
+            )));
+        }
+        let m = n + 4;
+        let mut a = vec![0.0; m * m];
+        for (r, &i) in idx.iter().enumerate() {
+            let (vs, ws) = self.samples[i];
+            for (c, &j) in idx.iter().enumerate() {
+                a[r * m + c] = vs
+                    .iter()
+                    .zip(&ws)
+                    .map(|(&v, &w)| w * kernel(self.points[v as usize], self.centres[j]))
+                    .sum();
+            }
+            let p = self.centres[i];
+            let wsum: f64 = ws.iter().sum();
+            for (k, val) in [wsum, p.x, p.y, p.z].into_iter().enumerate() {
+                a[r * m + n + k] = val;
+            }
+        }
+        for (c, &j) in idx.iter().enumerate() {
+            let p = self.centres[j];
+            for (k, val) in [1.0, p.x, p.y, p.z].into_iter().enumerate() {
+                a[(n + k) * m + c] = val;
+            }
+        }
+        Lu::factor(m, a).map(Arc::new).map_err(|_| {
+            LgiError::Input("RBF system is singular: markers coplanar or coincident".into())
+        })
+    }
+
+    fn lu_for(&self, present: &[bool]) -> Result<Arc<Lu>> {
+        if let Ok(c) = self.cache.lock() {
+            if let Some(lu) = c.get(present) {
+                return Ok(lu.clone());
+            }
+        }
+        let lu = self.factor(present)?;
+        if let Ok(mut c) = self.cache.lock() {
+            // Random dropouts make most sets unique: bound the memory, keep the full set.
+            if c.len() >= MAX_CACHED {
+                c.retain(|k, _| k.iter().all(|&p| p));
+            }
+            c.insert(present.to_vec(), lu.clone());
+        }
+        Ok(lu)
+    }
+
+    /// V×B matrix E · A⁻¹[:, :B] with E = [φ(|p − x_c|), 1, p] (all markers present).
+    fn build_matrix(&self, lu: &Lu) -> Vec<f64> {
+        let b = self.samples.len();
+        let m = b + 4;
+        // Columns of A⁻¹ restricted to the marker rows, three unit vectors at a time.
+        let mut inv = vec![0.0; m * b];
+        for c0 in (0..b).step_by(3) {
+            let mut rhs = vec![[0.0; 3]; m];
+            for d in 0..3 {
+                if c0 + d < b {
+                    rhs[c0 + d][d] = 1.0;
+                }
+            }
+            let x = lu.solve3(&rhs);
+            for (r, xr) in x.iter().enumerate() {
+                for d in 0..3 {
+                    if c0 + d < b {
+                        inv[r * b + c0 + d] = xr[d];
+                    }
+                }
+            }
+        }
+        let mut out = vec![0.0; self.points.len() * b];
+        out.par_chunks_mut(b).enumerate().for_each(|(v, row)| {
+            let p = self.points[v];
+            let mut e: Vec<f64> = self.centres.iter().map(|&c| kernel(p, c)).collect();
+            e.extend([1.0, p.x, p.y, p.z]);
+            for (k, ek) in e.iter().enumerate() {
+                let src = &inv[k * b..(k + 1) * b];
+                for (o, s) in row.iter_mut().zip(src) {
+                    *o += ek * s;
+                }
+            }
+        });
+        out
+    }
+
+    /// Interpolates marker values (B; NaN rows are missing markers, refitted without them) to
+    /// the V points.
+    pub fn interpolate(&self, values: &[DVec3]) -> Result<Vec<DVec3>> {
+        let b = self.samples.len();
+        if values.len() != b {
+            return Err(LgiError::Input(format!(
+                "expected {b} marker values, got {}",
+                values.len()
+            )));
+        }
+        if let Some(i) = values.iter().position(|p| p.is_finite() == p.is_nan()) {
+            return Err(LgiError::Input(format!(
+                "marker value {i} is infinite or partly NaN"
+            )));
+        }
+        let present: Vec<bool> = values.iter().map(|p| p.is_finite()).collect();
+        if present.iter().all(|&p| p) {
+            return Ok(self
+                .matrix
+                .par_chunks(b)
+                .map(|row| {
+                    row.iter()
+                        .zip(values)
+                        .fold(DVec3::ZERO, |acc, (w, d)| acc + *d * *w)
+                })
+                .collect());
+        }
+        let lu = self.lu_for(&present)?;
+        let idx: Vec<usize> = (0..b).filter(|&i| present[i]).collect();
+        let mut rhs: Vec<[f64; 3]> = idx.iter().map(|&i| values[i].to_array()).collect();
+        rhs.extend([[0.0; 3]; 4]);
+        let coef: Vec<DVec3> = lu.solve3(&rhs).into_iter().map(DVec3::from_array).collect();
+        let n = idx.len();
+        Ok(self
+            .points
+            .par_iter()
+            .map(|&p| {
+                let mut acc = coef[n] + coef[n + 1] * p.x + coef[n + 2] * p.y + coef[n + 3] * p.z;
+                for (k, &j) in idx.iter().enumerate() {
+                    acc += coef[k] * kernel(p, self.centres[j]);
+                }
+                acc
+            })
+            .collect())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn rnd(seed: &mut u64) -> f64 {
+        *seed = seed
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        (*seed >> 11) as f64 / (1u64 << 53) as f64
+    }
+
+    fn cloud(n: usize, seed: u64) -> Vec<DVec3> {
+        let mut s = seed;
+        (0..n)
+            .map(|_| DVec3::new(rnd(&mut s), rnd(&mut s), rnd(&mut s)))
+            .collect()
+    }
+
+    fn barycentric_samples(b: usize, v: usize, seed: u64) -> Vec<Sample> {
+        let mut s = seed;
+        (0..b)
+            .map(|i| {
+                let (u, w) = (rnd(&mut s), rnd(&mut s));
+                let (u, w) = if u + w > 1.0 {
+                    (1.0 - u, 1.0 - w)
+                } else {
+                    (u, w)
+                };
+                let j = (3 * i) as u32 % v as u32;
+                ([j, j + 1, j + 2], [1.0 - u - w, u, w])
+            })
+            .collect()
+    }
+
+    #[test]
+    fn interpolated_field_reproduces_every_sampled_marker_value() {
+        let pts = cloud(60, 1);
+        let samples = barycentric_samples(12, 60, 2);
+        let rbf = DisplacementInterpolation::new(pts, samples.clone()).unwrap();
+        let vals = cloud(12, 3);
+        let out = rbf.interpolate(&vals).unwrap();
+        for ((vs, ws), want) in samples.iter().zip(&vals) {
+            let got = vs
+                .iter()
+                .zip(ws)
+                .fold(DVec3::ZERO, |a, (&v, &w)| a + out[v as usize] * w);
+            assert!((got - *want).length() < 1e-9, "{got} vs {want}");
+        }
+    }
+
+    #[test]
+    fn linear_fields_are_reproduced_exactly_everywhere() {
+        let pts = cloud(50, 4);
+        let rbf =
+            DisplacementInterpolation::new(pts.clone(), barycentric_samples(10, 50, 5)).unwrap();
+        let f = |p: DVec3| DVec3::new(2.0 * p.x - p.y + 0.5, p.z, 3.0 * p.y - 1.0);
+        let vals: Vec<DVec3> = rbf.centres().iter().map(|&c| f(c)).collect();
+        for (p, got) in pts.iter().zip(rbf.interpolate(&vals).unwrap()) {
+            assert!((got - f(*p)).length() < 1e-9);
+        }
+    }
+
+    #[test]
+    fn missing_markers_refit_equals_a_fresh_fit_without_them() {
+        let pts = cloud(40, 6);
+        let samples = barycentric_samples(10, 40, 7);
+        let rbf = DisplacementInterpolation::new(pts.clone(), samples.clone()).unwrap();
+        let mut vals = cloud(10, 8);
+        vals[3] = DVec3::NAN;
+        let got = rbf.interpolate(&vals).unwrap();
+        let keep: Vec<usize> = (0..10).filter(|&i| i != 3).collect();
+        let fresh = DisplacementInterpolation::new(pts, keep.iter().map(|&i| samples[i]).collect())
+            .unwrap();
+        let want = fresh
+            .interpolate(&keep.iter().map(|&i| vals[i]).collect::<Vec<_>>())
+            .unwrap();
+        for (a, b) in got.iter().zip(&want) {
+            assert!((*a - *b).length() < 1e-9);
+        }
+    }
+
+    #[test]
+    fn coplanar_markers_and_bad_inputs_are_input_errors() {
+        let pts: Vec<DVec3> = (0..20)
+            .map(|i| DVec3::new(i as f64, (i * i % 7) as f64, 0.0))
+            .collect();
+        let samples: Vec<Sample> = (0..6).map(|i| ([i, i, i], [1.0, 0.0, 0.0])).collect();
+        assert!(matches!(
+            DisplacementInterpolation::new(pts.clone(), samples),
+            Err(LgiError::Input(_))
+        ));
+        let few: Vec<Sample> = (0..3).map(|i| ([i, i, i], [1.0, 0.0, 0.0])).collect();
+        assert!(DisplacementInterpolation::new(pts.clone(), few).is_err());
+        let bad: Vec<Sample> = (0..5).map(|i| ([i, 99, i], [1.0, 0.0, 0.0])).collect();
+        assert!(DisplacementInterpolation::new(pts, bad).is_err());
+    }
+}

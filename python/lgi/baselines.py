@@ -1,0 +1,252 @@
+"""Baselines for evaluating LGI, with the same `solve(frames) -> SolveResult` API as `lgi.Model`.
+
+- `DisplacementInterpolation`: marker displacements from rest spread over the mesh by a 3D
+  biharmonic RBF (phi(r) = r plus a linear polynomial). Chosen because it is the simplest smooth
+  interpolant that is exact at the markers and reproduces rigid/affine motion, and it is the
+  standard "marker-driven deformation" baseline (as in Bhat et al. 2013-style pipelines before a
+  learned or example-based correction). Linear in the data, so the V x B matrix is computed once.
+- `BlendshapeFit`: per frame, box-penalised least-squares blendshape weights (the standard
+  production solve), solved exactly by an active-set iteration in the Rust core.
+- `LgiRbf`: LGI's per-bundle local geometry choices spread with normalised Gaussian weights over
+  UV distance (no Sibson sewing), plus an RBF correction of the residuals so every marker is
+  interpolated: isolates what LGI's sewing contributes.
+
+Every result's `Choices` holds -1 shapes and 0 weights where the method has no choice
+(`DisplacementInterpolation`, `BlendshapeFit`); `LgiRbf` reports LGI's choices.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from lgi import _lgi
+from lgi._lgi import Dataset
+from lgi.errors import InputError
+from lgi.model import BuildConfig, Choices, Model, SolveResult
+
+F64 = NDArray[np.float64]
+
+__all__ = ["BlendshapeFit", "DisplacementInterpolation", "LgiRbf", "vertex_uvs"]
+
+
+def _diagonal(points: F64) -> float:
+    return float(np.linalg.norm(points.max(axis=0) - points.min(axis=0)))
+
+
+def _frames(frames: ArrayLike, b: int) -> F64:
+    arr = np.asarray(frames, dtype=np.float64)
+    if arr.ndim == 2:
+        arr = arr[None]
+    if arr.ndim != 3 or arr.shape[1:] != (b, 3):
+        raise InputError(f"frames: expected shape (F, {b}, 3), got {arr.shape}")
+    if np.isinf(arr).any():
+        raise InputError("frames: infinite coordinate")
+    return arr
+
+
+class _Surface:
+    """The markers' rest surface points on the neutral (shared by all baselines)."""
+
+    def __init__(self, dataset: Dataset, markers_rest: ArrayLike, surface_tolerance: float):
+        if not isinstance(dataset, Dataset):
+            raise InputError(f"dataset: expected lgi.Dataset, got {type(dataset).__name__}")
+        self.dataset = dataset
+        self.neutral = np.asarray(dataset.neutral, dtype=np.float64)
+        self.diagonal = _diagonal(self.neutral)
+        markers = np.asarray(markers_rest)
+        if not np.issubdtype(markers.dtype, np.floating):
+            raise InputError(f"markers_rest: expected a float array, got dtype {markers.dtype}")
+        self.rbf = _lgi.RbfInterpolator.from_dataset(
+            dataset, markers, float(surface_tolerance) * self.diagonal
+        )
+        self.sv = self.rbf.sample_vertices
+        self.sw = self.rbf.sample_weights
+        self.rest = self.sample(self.neutral[None])[0]
+
+    @property
+    def num_bundles(self) -> int:
+        return int(self.sv.shape[0])
+
+    def sample(self, meshes: F64) -> F64:
+        """Marker surface positions (F, B, 3) on meshes (F, V, 3)."""
+        return np.einsum("fbjd,bj->fbd", meshes[:, self.sv], self.sw)
+
+    def result(self, vertices: F64, frames: F64, choices: Choices | None = None) -> SolveResult:
+        missing: NDArray[np.bool_] = np.asarray(np.isnan(frames).any(axis=2))
+        pos = self.sample(vertices)
+        res = np.where(missing, 0.0, np.linalg.norm(np.nan_to_num(frames - pos), axis=2))
+        f, b = missing.shape
+        if choices is None:
+            choices = Choices(
+                shapes=np.full((f, b, 4), -1, dtype=np.int64),
+                weights=np.zeros((f, b, 4)),
+                tets=np.full((f, b), -1, dtype=np.int64),
+                projected=np.zeros((f, b), dtype=bool),
+            )
+        return SolveResult(
+            vertices=vertices,
+            bundle_residuals=res,
+            bundle_positions=pos,
+            missing=missing,
+            choices=choices,
+        )
+
+
+class DisplacementInterpolation:
+    """Biharmonic RBF interpolation of the markers' displacements from rest.
+
+    phi(r) = r in 3D (the biharmonic kernel) with a linear polynomial: simple, smooth (minimises
+    bending energy), exact at the markers and exact for affine motion; the standard baseline.
+    Each marker's constraint is sampled like the mesh samples it (barycentric on its triangle),
+    so the output passes through every present marker exactly. Missing markers (NaN) are
+    refitted without them (the factorisation is cached per missing set)."""
+
+    def __init__(
+        self, dataset: Dataset, markers_rest: ArrayLike, surface_tolerance: float = 0.02
+    ) -> None:
+        self._s = _Surface(dataset, markers_rest, surface_tolerance)
+
+    @property
+    def num_bundles(self) -> int:
+        return self._s.num_bundles
+
+    @property
+    def matrix(self) -> F64:
+        """(V, B) interpolation matrix (all markers present)."""
+        return self._s.rbf.matrix
+
+    def solve(self, frames: ArrayLike, *, quiet: bool = False, **_: Any) -> SolveResult:
+        """Frames (F, B, 3) (NaN rows missing) -> meshes through the markers."""
+        fr = _frames(frames, self.num_bundles)
+        disp = self._s.rbf.interpolate(fr - self._s.rest[None])
+        return self._s.result(self._s.neutral[None] + disp, fr)
+
+
+class BlendshapeFit:
+    """Per-frame blendshape weights: min |A w - (t - p0)|^2 + l2 |w|^2
+    + penalty * sum(min(w, 0)^2 + max(w - 1, 0)^2), A (3B x S) the shapes' displacements at the
+    markers. `l2` and `penalty` are relative to the mean diagonal of A^T A. Missing markers drop
+    their rows. Output: x0 + sum_k w_k s_k."""
+
+    def __init__(
+        self,
+        dataset: Dataset,
+        markers_rest: ArrayLike,
+        penalty: float = 10.0,
+        l2: float = 1e-4,
+        surface_tolerance: float = 0.02,
+    ) -> None:
+        self._s = _Surface(dataset, markers_rest, surface_tolerance)
+        if dataset.num_shapes == 0:
+            raise InputError("BlendshapeFit needs a dataset with shapes")
+        self._shapes = np.asarray(dataset.shapes, dtype=np.float64)  # (S, V, 3)
+        at = self._s.sample(self._shapes)  # (S, B, 3)
+        self.a: F64 = at.reshape(at.shape[0], -1).T.copy()
+        scale = float(np.mean(np.sum(self.a**2, axis=0))) or 1.0
+        if not (np.isfinite(l2) and l2 >= 0 and np.isfinite(penalty) and penalty >= 0):
+            raise InputError(f"l2 ({l2}) and penalty ({penalty}) must be non-negative")
+        self._solver = _lgi.BlendshapeSolver(self.a, l2 * scale, penalty * scale)
+        self.last_weights: F64 | None = None
+        self.last_iterations: NDArray[np.int64] | None = None
+
+    @property
+    def num_bundles(self) -> int:
+        return self._s.num_bundles
+
+    @property
+    def solver(self) -> _lgi.BlendshapeSolver:
+        return self._solver
+
+    def weights(self, frames: ArrayLike) -> F64:
+        """(F, S) fitted weights."""
+        fr = _frames(frames, self.num_bundles)
+        target = (fr - self._s.rest[None]).reshape(fr.shape[0], -1)
+        w, it = self._solver.solve(target)
+        self.last_iterations = it
+        return w
+
+    def solve(self, frames: ArrayLike, *, quiet: bool = False, **_: Any) -> SolveResult:
+        fr = _frames(frames, self.num_bundles)
+        w = self.weights(fr)
+        self.last_weights = w
+        verts = self._s.neutral[None] + np.einsum("fk,kvd->fvd", w, self._shapes)
+        return self._s.result(verts, fr)
+
+
+def vertex_uvs(dataset: Dataset) -> F64:
+    """(V, 2) one UV per vertex: the UV of the first triangle corner using it (NaN if none)."""
+    tri = np.asarray(dataset.triangles).reshape(-1)
+    uvt = np.asarray(dataset.uv_triangles).reshape(-1)
+    uvs = np.asarray(dataset.uvs, dtype=np.float64)
+    if uvt.size != tri.size or uvs.size == 0:
+        raise InputError("dataset has no UVs")
+    out = np.full((dataset.num_vertices, 2), np.nan)
+    first_vertex, first = np.unique(tri, return_index=True)
+    out[first_vertex] = uvs[uvt[first]]
+    return out
+
+
+class LgiRbf:
+    """LGI's per-bundle choices spread by normalised Gaussian weights over UV distance, then a
+    biharmonic RBF correction of the residuals so the result interpolates every marker.
+    `sigma` (UV units) defaults to the mean nearest-neighbour distance between bundle UVs."""
+
+    def __init__(
+        self,
+        dataset: Dataset,
+        markers_rest: ArrayLike,
+        config: BuildConfig | None = None,
+        sigma: float | None = None,
+    ) -> None:
+        cfg = config or BuildConfig()
+        self.model = Model.build(dataset, markers_rest, cfg)
+        self._s = _Surface(dataset, markers_rest, cfg.surface_tolerance)
+        self._shapes = np.asarray(dataset.shapes, dtype=np.float64)
+        self._shapes_v = np.ascontiguousarray(self._shapes.transpose(1, 0, 2))  # (V, S, 3)
+        buv = np.asarray(self.model.core.bundle_uvs(), dtype=np.float64)
+        d = np.linalg.norm(buv[:, None] - buv[None], axis=2)
+        np.fill_diagonal(d, np.inf)
+        self.sigma = float(d.min(axis=1).mean()) if sigma is None else float(sigma)
+        if not (np.isfinite(self.sigma) and self.sigma > 0):
+            raise InputError(f"sigma must be positive, got {sigma}")
+        vuv = vertex_uvs(dataset)
+        dv = np.linalg.norm(vuv[:, None] - buv[None], axis=2)  # (V, B), NaN without UV
+        # Vertices without a UV fall back to 3D distance to the bundles at rest, in UV scale.
+        no_uv = np.isnan(dv).any(axis=1)
+        if no_uv.any():
+            d3 = np.linalg.norm(self._s.neutral[no_uv][:, None] - self._s.rest[None], axis=2)
+            dv[no_uv] = d3 * (self.sigma / max(float(d3.min(axis=1).mean()), 1e-300))
+        dv = dv - dv.min(axis=1, keepdims=True)  # shift-invariant after normalisation
+        self._g = np.exp(-0.5 * (dv / self.sigma) ** 2)  # (V, B)
+
+    @property
+    def num_bundles(self) -> int:
+        return self._s.num_bundles
+
+    def solve(
+        self, frames: ArrayLike, *, temporal: bool = True, quiet: bool = False
+    ) -> SolveResult:
+        fr = _frames(frames, self.num_bundles)
+        lgi_res = self.model.solve(fr, temporal=temporal, quiet=quiet)
+        ch = lgi_res.choices
+        nf, b = fr.shape[:2]
+        s = self._shapes.shape[0]
+        verts = np.empty((nf, self._shapes.shape[1], 3))
+        for f in range(nf):
+            lam = np.zeros((b, s + 1))  # column s: the neutral (discarded)
+            np.add.at(
+                lam,
+                (np.arange(b)[:, None], np.where(ch.shapes[f] < 0, s, ch.shapes[f])),
+                ch.weights[f],
+            )
+            present = ~lgi_res.missing[f]
+            g = self._g * present[None]
+            g = g / np.maximum(g.sum(axis=1, keepdims=True), 1e-300)
+            coef = g @ lam[:, :s]  # (V, S)
+            verts[f] = self._s.neutral + np.matmul(coef[:, None, :], self._shapes_v)[:, 0]
+        spread = self._s.sample(verts)
+        corr = self._s.rbf.interpolate(fr - spread)
+        return self._s.result(verts + corr, fr, choices=ch)

@@ -1,0 +1,312 @@
+"""Evaluation of LGI and the baselines against ground truth: per-vertex error statistics, bundle
+residuals, temporal jitter and speed, on the protocols of the paper's comparisons (held-out
+performance, verification on the dataset's own shapes, leave-one-shape-out, noise, dropouts)."""
+
+from __future__ import annotations
+
+import csv
+import os
+import time
+from collections.abc import Callable, Mapping, Sequence
+from typing import Any, Protocol
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from lgi import _lgi
+from lgi._lgi import Dataset
+from lgi.model import SolveResult
+
+F64 = NDArray[np.float64]
+Row = dict[str, Any]
+
+__all__ = [
+    "COLUMNS",
+    "Solver",
+    "dropout_sweep",
+    "evaluate",
+    "leave_one_out",
+    "noise_sweep",
+    "score",
+    "to_csv",
+    "to_markdown",
+    "verification",
+]
+
+COLUMNS = [
+    "method",
+    "frames",
+    "mean",
+    "p95",
+    "max",
+    "max_residual_rel",
+    "jitter",
+    "ms_per_frame",
+]
+"""Row keys: errors (mean, p95, max of per-vertex distances) and jitter (mean norm of the second
+difference of vertex positions over time) are in data units; the bundle residual is relative to
+the bounding-box diagonal."""
+
+
+class Solver(Protocol):
+    def solve(self, frames: ArrayLike, *, temporal: bool = ..., quiet: bool = ...) -> Any: ...
+
+
+def _diag(points: F64) -> float:
+    return float(np.linalg.norm(np.ptp(points, axis=0)))
+
+
+def score(
+    name: str,
+    result: SolveResult,
+    truth: F64,
+    seconds: float,
+    region: ArrayLike | None = None,
+    diagonal: float | None = None,
+) -> Row:
+    """One row for a solved sequence against `truth` (F, V, 3)."""
+    verts = np.asarray(result.vertices)
+    idx = slice(None) if region is None else np.asarray(region)
+    err = np.linalg.norm(verts[:, idx] - truth[:, idx], axis=2)
+    diag = diagonal if diagonal is not None else _diag(truth[0])
+    nf = verts.shape[0]
+    jitter = (
+        float(np.linalg.norm(np.diff(verts[:, idx], n=2, axis=0), axis=2).mean())
+        if nf >= 3
+        else float("nan")
+    )
+    return {
+        "method": name,
+        "frames": nf,
+        "mean": float(err.mean()),
+        "p95": float(np.percentile(err, 95)),
+        "max": float(err.max()),
+        "max_residual_rel": float(np.max(result.bundle_residuals)) / diag,
+        "jitter": jitter,
+        "ms_per_frame": 1e3 * seconds / max(nf, 1),
+    }
+
+
+def evaluate(
+    methods: Mapping[str, Solver],
+    frames: ArrayLike,
+    truth: ArrayLike,
+    region: ArrayLike | None = None,
+    diagonal: float | None = None,
+    temporal: bool = True,
+) -> list[Row]:
+    """Solves `frames` (F, B, 3) with every method and scores it against `truth` (F, V, 3) on
+    the vertices `region` (default all; ICT: the face skin, vertices 0..9408)."""
+    fr = np.asarray(frames, dtype=np.float64)
+    tr = np.asarray(truth, dtype=np.float64)
+    rows = []
+    for name, m in methods.items():
+        t0 = time.perf_counter()
+        res = m.solve(fr, temporal=temporal, quiet=True)
+        rows.append(score(name, res, tr, time.perf_counter() - t0, region, diagonal))
+    return rows
+
+
+def _samples(dataset: Dataset, markers: ArrayLike, tolerance: float = 0.02) -> _lgi.RbfInterpolator:
+    neutral = np.asarray(dataset.neutral)
+    return _lgi.RbfInterpolator.from_dataset(dataset, markers, tolerance * _diag(neutral))
+
+
+def _on_meshes(rbf: _lgi.RbfInterpolator, meshes: F64) -> F64:
+    return np.einsum("fbjd,bj->fbd", meshes[:, rbf.sample_vertices], rbf.sample_weights)
+
+
+def verification(dataset: Dataset, markers: ArrayLike) -> tuple[F64, F64]:
+    """Frames (S, B, 3): the markers on each dataset shape, and the shapes (S, V, 3) as truth."""
+    truth = np.asarray(dataset.neutral)[None] + np.asarray(dataset.shapes, dtype=np.float64)
+    return _on_meshes(_samples(dataset, markers), truth), truth
+
+
+def _without(dataset: Dataset, k: int) -> Dataset:
+    keep = [i for i in range(dataset.num_shapes) if i != k]
+    has_uv = np.asarray(dataset.uv_triangles).size > 0
+    return Dataset.from_arrays(
+        dataset.neutral,
+        dataset.triangles,
+        np.asarray(dataset.shapes)[keep],
+        names=[dataset.names[i] for i in keep],
+        uvs=dataset.uvs if has_uv else None,
+        uv_triangles=dataset.uv_triangles if has_uv else None,
+    )
+
+
+def leave_one_out(
+    dataset: Dataset,
+    markers: ArrayLike,
+    method_factory: Callable[[Dataset, ArrayLike], Mapping[str, Solver]],
+    shapes: Sequence[int] | None = None,
+    region: ArrayLike | None = None,
+) -> list[Row]:
+    """For each shape k: methods built without k solve the markers on shape k; the rows pool
+    all held-out shapes (build time not counted; jitter is not meaningful and is NaN)."""
+    frames, truth = verification(dataset, markers)
+    ks = list(range(dataset.num_shapes)) if shapes is None else list(shapes)
+    verts: dict[str, list[F64]] = {}
+    res_max: dict[str, float] = {}
+    secs: dict[str, float] = {}
+    for k in ks:
+        methods = method_factory(_without(dataset, k), markers)
+        for name, m in methods.items():
+            t0 = time.perf_counter()
+            r = m.solve(frames[k : k + 1], temporal=False, quiet=True)
+            secs[name] = secs.get(name, 0.0) + time.perf_counter() - t0
+            verts.setdefault(name, []).append(np.asarray(r.vertices)[0])
+            res_max[name] = max(res_max.get(name, 0.0), float(np.max(r.bundle_residuals)))
+    rows = []
+    diag = _diag(np.asarray(dataset.neutral))
+    for name, vs in verts.items():
+        fake = SolveResult(
+            vertices=np.stack(vs),
+            bundle_residuals=np.array([[res_max[name]]]),
+            bundle_positions=np.zeros((0, 0, 3)),
+            missing=np.zeros((0, 0), dtype=bool),
+            choices=None,  # type: ignore[arg-type]
+        )
+        row = score(name, fake, truth[ks], secs[name], region, diag)
+        row["jitter"] = float("nan")
+        rows.append(row)
+    return rows
+
+
+def noise_sweep(
+    methods: Mapping[str, Solver],
+    frames: ArrayLike,
+    truth: ArrayLike,
+    sigmas: Sequence[float] = (0.0, 0.05, 0.1, 0.2),
+    seed: int = 0,
+    region: ArrayLike | None = None,
+    temporal: bool = True,
+) -> list[Row]:
+    """Gaussian marker noise of each standard deviation (data units; 0..0.2 cm = 0..2 mm)."""
+    fr = np.asarray(frames, dtype=np.float64)
+    rows = []
+    for s in sigmas:
+        noisy = fr + np.random.default_rng(seed).normal(scale=s, size=fr.shape)
+        for row in evaluate(methods, noisy, truth, region, temporal=temporal):
+            rows.append({"sigma": s, **row})
+    return rows
+
+
+def dropout_sweep(
+    methods: Mapping[str, Solver],
+    frames: ArrayLike,
+    truth: ArrayLike,
+    rates: Sequence[float] = (0.0, 0.05, 0.1, 0.2),
+    seed: int = 0,
+    region: ArrayLike | None = None,
+    temporal: bool = True,
+) -> list[Row]:
+    """A fraction `rate` of marker entries set missing (NaN), uniformly at random."""
+    fr = np.asarray(frames, dtype=np.float64)
+    rows = []
+    for r in rates:
+        drop = np.random.default_rng(seed).random(fr.shape[:2]) < r
+        holey = np.where(drop[..., None], np.nan, fr)
+        for row in evaluate(methods, holey, truth, region, temporal=temporal):
+            rows.append({"dropout": r, **row})
+    return rows
+
+
+def _fmt(v: Any) -> str:
+    if isinstance(v, float):
+        return "nan" if np.isnan(v) else f"{v:.4g}"
+    return str(v)
+
+
+def to_markdown(rows: Sequence[Row]) -> str:
+    """A Markdown table of `rows` (columns in the order of the first row)."""
+    if not rows:
+        return ""
+    keys = list(rows[0])
+    lines = ["| " + " | ".join(keys) + " |", "|" + "---|" * len(keys)]
+    lines += ["| " + " | ".join(_fmt(r.get(k)) for k in keys) + " |" for r in rows]
+    return "\n".join(lines) + "\n"
+
+
+def to_csv(rows: Sequence[Row], path: str | os.PathLike[str]) -> None:
+    """Writes `rows` as CSV with a header."""
+    if not rows:
+        return
+    with open(path, "w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=list(rows[0]))
+        w.writeheader()
+        w.writerows(rows)
+
+
+def default_methods(dataset: Dataset, markers: ArrayLike) -> dict[str, Solver]:
+    """The four compared methods (LGI and LGI-RBF share one built model)."""
+    from lgi.baselines import BlendshapeFit, DisplacementInterpolation, LgiRbf
+
+    lgi_rbf = LgiRbf(dataset, markers)
+    return {
+        "displacement interpolation": DisplacementInterpolation(dataset, markers),
+        "blendshape fit": BlendshapeFit(dataset, markers),
+        "LGI-RBF": lgi_rbf,
+        "LGI": lgi_rbf.model,
+    }
+
+
+def run_protocol(
+    data: str, protocol: str, out: str | os.PathLike[str], ict_dir: str | None = None
+) -> list[Row]:
+    """The `lgi evaluate` command: writes results.md and results.csv into `out`."""
+    from pathlib import Path
+
+    from lgi.errors import InputError
+    from lgi.sample import make_sample
+
+    outp = Path(out)
+    outp.mkdir(parents=True, exist_ok=True)
+    region: ArrayLike | None = None
+    if data == "sample":
+        s = make_sample(0)
+        ds = Dataset.from_arrays(
+            s.neutral, s.triangles, s.shapes, names=s.names, uvs=s.uvs, uv_triangles=s.uv_triangles
+        )
+        markers: F64 = s.markers_rest
+        perf: tuple[F64, F64] | None = (s.performance, s.truth)
+    elif data == "ict":
+        d = Path(ict_dir or os.environ.get("LGI_ICT_DIR", "../shared/data/ict-facekit"))
+        ds = Dataset.from_obj(d / "generic_neutral_mesh.obj", str(d / "shapes" / "*.obj"))
+        markers = np.loadtxt(d / "markers_120.csv", delimiter=",", skiprows=1, usecols=(1, 2, 3))
+        perf = None
+        region = np.arange(9409)
+    else:
+        raise InputError(f"unknown data '{data}' (sample or ict)")
+    if protocol == "loo":
+        rows = leave_one_out(ds, markers, default_methods, region=region)
+    else:
+        methods = default_methods(ds, markers)
+        if protocol == "performance":
+            if perf is None:
+                raise InputError("the performance protocol needs --data sample")
+            frames, truth = perf
+            temporal = True
+        elif protocol in ("verification", "noise", "dropout"):
+            frames, truth = (
+                perf
+                if (perf is not None and protocol != "verification")
+                else (verification(ds, markers))
+            )
+            temporal = perf is not None and protocol != "verification"
+        else:
+            raise InputError(f"unknown protocol '{protocol}'")
+        if protocol == "noise":
+            rows = noise_sweep(methods, frames, truth, region=region, temporal=temporal)
+        elif protocol == "dropout":
+            rows = dropout_sweep(methods, frames, truth, region=region, temporal=temporal)
+        else:
+            rows = evaluate(methods, frames, truth, region, temporal=temporal)
+        if not temporal:
+            for r in rows:
+                r["jitter"] = float("nan")  # independent frames: not a sequence
+    (outp / "results.md").write_text(
+        f"# lgi evaluate: data {data}, protocol {protocol}\n\n" + to_markdown(rows)
+    )
+    to_csv(rows, outp / "results.csv")
+    return rows

@@ -1,0 +1,119 @@
+"""Headless pictures of per-vertex error: meshes drawn with matplotlib's Agg backend as
+projected triangles sorted back to front (painter's algorithm), so no OpenGL or display is
+needed. One colour scale for every method makes the panels comparable."""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Mapping, Sequence
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+F64 = NDArray[np.float64]
+
+__all__ = ["draw_mesh", "panel"]
+
+_LIGHT = np.array([0.3, 0.4, 1.0]) / np.linalg.norm([0.3, 0.4, 1.0])
+
+
+def _rotate_y(points: F64, yaw_deg: float, centre: F64) -> F64:
+    a = np.deg2rad(yaw_deg)
+    r = np.array([[np.cos(a), 0, np.sin(a)], [0, 1, 0], [-np.sin(a), 0, np.cos(a)]])
+    return (points - centre) @ r.T
+
+
+def draw_mesh(
+    ax,  # type: ignore[no-untyped-def]
+    vertices: ArrayLike,
+    triangles: ArrayLike,
+    values: ArrayLike | None,
+    norm,  # type: ignore[no-untyped-def]
+    cmap,  # type: ignore[no-untyped-def]
+    yaw_deg: float = 0.0,
+    centre: ArrayLike | None = None,
+) -> None:
+    """Draws the mesh seen from +z after a rotation by `yaw_deg` about +y (orthographic),
+    coloured by per-vertex `values` (grey when None), shaded by a fixed light."""
+    from matplotlib.collections import PolyCollection
+
+    v = np.asarray(vertices, dtype=np.float64)
+    t = np.asarray(triangles, dtype=np.int64)
+    c = v.mean(axis=0) if centre is None else np.asarray(centre, dtype=np.float64)
+    p = _rotate_y(v, yaw_deg, c)
+    tri = p[t]  # (T, 3, 3)
+    n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
+    visible = n[:, 2] > 0  # back faces are hidden by front ones anyway; culling halves the work
+    order = np.argsort(tri[:, :, 2].mean(axis=1))  # farthest first
+    order = order[visible[order]]
+    if values is None:
+        rgb = np.full((len(t), 3), 0.8)
+    else:
+        val = np.asarray(values, dtype=np.float64)[t].mean(axis=1)
+        rgb = np.asarray(cmap(norm(val)))[:, :3]
+    shade = 0.35 + 0.65 * np.clip(n @ _LIGHT, 0.0, 1.0)
+    colours = np.clip(rgb * shade[:, None], 0, 1)
+    pc = PolyCollection(
+        list(tri[order][:, :, :2]), facecolors=colours[order], edgecolors="none", antialiaseds=False
+    )
+    ax.add_collection(pc)
+    lo, hi = p[:, :2].min(axis=0), p[:, :2].max(axis=0)
+    pad = 0.03 * float(np.max(hi - lo))
+    ax.set_xlim(lo[0] - pad, hi[0] + pad)
+    ax.set_ylim(lo[1] - pad, hi[1] + pad)
+    ax.set_aspect("equal")
+    ax.set_axis_off()
+
+
+def panel(
+    path: str | os.PathLike[str],
+    meshes: Mapping[str, ArrayLike],
+    triangles: ArrayLike,
+    errors: Mapping[str, ArrayLike],
+    *,
+    vmax: float | None = None,
+    views: Sequence[float] = (0.0, 35.0),
+    cell_inches: float = 3.0,
+    dpi: int = 100,
+    units: str = "",
+) -> tuple[int, int]:
+    """Side-by-side panel: one column per mesh (e.g. ground truth | displacement interpolation
+    | blendshape fit | LGI-RBF | LGI), one row per view (front, three-quarter). Meshes without
+    an entry in `errors` are drawn grey. Every column shares one colour scale (0..`vmax`,
+    default the largest error). Writes a PNG; returns its (width, height) in pixels."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.cm import ScalarMappable
+    from matplotlib.colors import Normalize
+    from matplotlib.figure import Figure
+
+    names = list(meshes)
+    if vmax is None:
+        vmax = max((float(np.max(e)) for e in errors.values()), default=1.0) or 1.0
+    norm = Normalize(0.0, vmax)
+    cmap = _cmap()
+    ncol, nrow = len(names), len(views)
+    width_in = cell_inches * ncol + 1.0
+    fig = Figure(figsize=(width_in, cell_inches * nrow + 0.4), dpi=dpi)
+    FigureCanvasAgg(fig)
+    axes = fig.subplots(nrow, ncol, squeeze=False)
+    centre = np.asarray(next(iter(meshes.values())), dtype=np.float64).mean(axis=0)
+    for j, name in enumerate(names):
+        for i, yaw in enumerate(views):
+            ax = axes[i][j]
+            draw_mesh(ax, meshes[name], triangles, errors.get(name), norm, cmap, yaw, centre)
+            if i == 0:
+                ax.set_title(name, fontsize=10)
+    fig.subplots_adjust(left=0.01, right=1 - 0.9 / width_in, top=0.92, bottom=0.01, wspace=0.02)
+    cax = fig.add_axes((1 - 0.75 / width_in, 0.1, 0.15 / width_in, 0.75))
+    cb = fig.colorbar(ScalarMappable(norm=norm, cmap=cmap), cax=cax)
+    cb.set_label(f"vertex error{' (' + units + ')' if units else ''}")
+    fig.savefig(os.fspath(path), dpi=dpi)
+    w, h = fig.canvas.get_width_height()
+    return int(w), int(h)
+
+
+def _cmap():  # type: ignore[no-untyped-def]
+    from matplotlib import colormaps
+
+    return colormaps["viridis"]

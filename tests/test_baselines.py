@@ -1,0 +1,187 @@
+"""Baselines against independent references: scipy's RBFInterpolator, brute-force enumeration
+of the blendshape fit's active sets and scipy's L-BFGS-B; exact marker interpolation."""
+
+from __future__ import annotations
+
+import itertools
+
+import numpy as np
+import pytest
+
+import lgi
+from lgi import _lgi
+from lgi.baselines import BlendshapeFit, DisplacementInterpolation, LgiRbf
+
+
+def test_rbf_kernel_matches_scipy_linear_rbf_with_linear_polynomial() -> None:
+    from scipy.interpolate import RBFInterpolator
+
+    rng = np.random.default_rng(0)
+    pts = rng.uniform(-1, 1, (200, 3))
+    centres = rng.choice(200, 25, replace=False)
+    vals = rng.normal(size=(25, 3))
+    sv = np.repeat(centres[:, None], 3, axis=1)
+    sw = np.tile([1.0, 0.0, 0.0], (25, 1))
+    rbf = _lgi.RbfInterpolator(pts, sv, sw)
+    got = rbf.interpolate(vals[None])[0]
+    want = RBFInterpolator(pts[centres], vals, kernel="linear", degree=1)(pts)
+    assert np.abs(got - want).max() < 1e-8
+    np.testing.assert_allclose(rbf.matrix @ vals, got, atol=1e-10)
+    # Missing markers: the refit equals scipy's fit on the remaining ones.
+    holes = vals.copy()
+    holes[[2, 7]] = np.nan
+    keep = np.setdiff1d(np.arange(25), [2, 7])
+    got = rbf.interpolate(holes[None])[0]
+    want = RBFInterpolator(pts[centres[keep]], vals[keep], kernel="linear", degree=1)(pts)
+    assert np.abs(got - want).max() < 1e-8
+
+
+def test_displacement_interpolation_passes_through_every_marker(sample, sample_dataset) -> None:  # type: ignore[no-untyped-def]
+    m = DisplacementInterpolation(sample_dataset, sample.markers_rest)
+    res = m.solve(sample.performance)
+    diag = np.linalg.norm(np.ptp(sample.neutral, axis=0))
+    assert res.bundle_residuals.max() <= 1e-9 * diag
+    assert res.missing.sum() == np.isnan(sample.performance).any(axis=2).sum()
+    assert (res.choices.shapes == -1).all() and (res.choices.weights == 0).all()
+    assert res.vertices.shape == sample.truth.shape
+
+
+def test_lgi_rbf_passes_through_every_marker_and_reports_lgi_choices(
+    sample,  # type: ignore[no-untyped-def]
+    sample_dataset,  # type: ignore[no-untyped-def]
+) -> None:
+    m = LgiRbf(sample_dataset, sample.markers_rest)
+    frames = sample.performance[:20]
+    res = m.solve(frames, quiet=True)
+    diag = np.linalg.norm(np.ptp(sample.neutral, axis=0))
+    assert res.bundle_residuals.max() <= 1e-9 * diag
+    assert m.sigma > 0
+    lgi_res = m.model.solve(frames, quiet=True)
+    np.testing.assert_array_equal(res.choices.shapes, lgi_res.choices.shapes)
+
+
+def _enumerate_active_sets(a, t, l2, p):  # type: ignore[no-untyped-def]
+    """Exact reference: minimise each quadratic piece (each weight below 0, in [0,1] or above 1)
+    and keep the consistent one with the lowest objective."""
+    s = a.shape[1]
+    best, best_f = None, np.inf
+    for sides in itertools.product((-1, 0, 1), repeat=s):
+        d = np.array([1.0 if x else 0.0 for x in sides])
+        h = a.T @ a + l2 * np.eye(s) + p * np.diag(d)
+        rhs = a.T @ t + p * (np.array(sides) == 1)
+        w = np.linalg.solve(h, rhs)
+        ok = all(
+            (x < 0) if sd == -1 else (x > 1) if sd == 1 else (0 <= x <= 1)
+            for x, sd in zip(w, sides, strict=True)
+        )
+        if ok:
+            f = _objective(a, t, l2, p, w)
+            if f < best_f:
+                best, best_f = w, f
+    return best, best_f
+
+
+def _objective(a, t, l2, p, w):  # type: ignore[no-untyped-def]
+    out = np.minimum(w, 0) + np.maximum(w - 1, 0)
+    return float(np.sum((a @ w - t) ** 2) + l2 * w @ w + p * out @ out)
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_blendshape_solver_matches_exact_enumeration_and_lbfgsb(seed: int) -> None:
+    from scipy.optimize import minimize
+
+    rng = np.random.default_rng(seed)
+    a = rng.normal(size=(18, 5))
+    t = a @ rng.uniform(-0.8, 1.8, 5) + 0.1 * rng.normal(size=18)
+    l2, p = 1e-3, 3.0
+    solver = _lgi.BlendshapeSolver(a, l2, p)
+    w, it = solver.solve(t[None])
+    w = w[0]
+    want, want_f = _enumerate_active_sets(a, t, l2, p)
+    np.testing.assert_allclose(w, want, atol=1e-9)
+    assert abs(solver.objective(w, t) - want_f) <= 1e-12 * max(want_f, 1.0)
+    assert it[0] <= 20
+
+    def f(x):  # type: ignore[no-untyped-def]
+        out = np.minimum(x, 0) + np.maximum(x - 1, 0)
+        g = 2 * a.T @ (a @ x - t) + 2 * l2 * x + 2 * p * out
+        return _objective(a, t, l2, p, x), g
+
+    ref = minimize(
+        f,
+        np.zeros(5),
+        jac=True,
+        method="L-BFGS-B",
+        tol=1e-15,
+        options={"maxiter": 10_000, "ftol": 1e-16, "gtol": 1e-12},
+    )
+    assert solver.objective(w, t) <= ref.fun * (1 + 1e-9)
+    assert abs(ref.fun - want_f) <= 1e-9 * want_f
+    np.testing.assert_allclose(w, ref.x, atol=1e-6)
+
+
+def test_blendshape_missing_rows_equal_a_fit_without_them() -> None:
+    rng = np.random.default_rng(7)
+    a = rng.normal(size=(12, 4))
+    t = rng.normal(size=12)
+    solver = _lgi.BlendshapeSolver(a, 1e-3, 2.0)
+    holes = t.copy()
+    holes[[1, 5]] = np.nan
+    keep = np.setdiff1d(np.arange(12), [1, 5])
+    got = solver.solve(holes[None])[0][0]
+    want = _lgi.BlendshapeSolver(a[keep], 1e-3, 2.0).solve(t[keep][None])[0][0]
+    np.testing.assert_allclose(got, want, atol=1e-12)
+
+
+def test_blendshape_penalty_keeps_weights_near_the_unit_box(sample, sample_dataset) -> None:  # type: ignore[no-untyped-def]
+    frames = sample.performance[:40] * 1.0
+    frames = sample.markers_rest + 3.0 * (frames - sample.markers_rest)  # exaggerated motion
+    loose = BlendshapeFit(sample_dataset, sample.markers_rest, penalty=0.0).weights(frames)
+    tight = BlendshapeFit(sample_dataset, sample.markers_rest, penalty=1e4).weights(frames)
+
+    def outside(w):  # type: ignore[no-untyped-def]
+        return float(np.max(np.maximum(-w, 0) + np.maximum(w - 1, 0)))
+
+    assert outside(loose) > 0.2
+    assert outside(tight) < 0.02
+    res = BlendshapeFit(sample_dataset, sample.markers_rest).solve(sample.performance[:5])
+    assert res.vertices.shape == (5, *sample.neutral.shape)
+    assert (res.choices.shapes == -1).all()
+
+
+def test_bad_inputs_raise_input_error(sample, sample_dataset) -> None:  # type: ignore[no-untyped-def]
+    m = DisplacementInterpolation(sample_dataset, sample.markers_rest)
+    with pytest.raises(lgi.InputError):
+        m.solve(np.zeros((2, 3, 3)))
+    bad = sample.performance[:2].copy()
+    bad[0, 0, 0] = np.inf
+    with pytest.raises(lgi.InputError):
+        m.solve(bad)
+    with pytest.raises(lgi.InputError):
+        DisplacementInterpolation(sample_dataset, np.zeros((5, 3), dtype=np.int64))
+    with pytest.raises(lgi.InputError):
+        BlendshapeFit(sample_dataset, sample.markers_rest, l2=-1.0)
+    with pytest.raises(lgi.InputError):
+        _lgi.BlendshapeSolver(np.zeros((4, 2)), 0.0, 0.0)  # singular normal matrix
+    flat = np.c_[np.random.default_rng(0).uniform(size=(10, 2)), np.zeros(10)]
+    with pytest.raises(lgi.InputError):
+        _lgi.RbfInterpolator(flat, np.repeat(np.arange(6)[:, None], 3, 1), np.eye(6, 3))
+    few = sample.performance[:1].copy()
+    few[0, 3:] = np.nan
+    with pytest.raises(lgi.InputError):
+        m.solve(few)  # fewer than 4 markers present
+
+
+def test_ict_displacement_interpolation_is_exact_and_blendshape_fit_explains_shapes(
+    ict_dataset,  # type: ignore[no-untyped-def]
+    ict_markers,  # type: ignore[no-untyped-def]
+) -> None:
+    from lgi.evaluate import verification
+
+    frames, _truth = verification(ict_dataset, ict_markers)
+    diag = np.linalg.norm(np.ptp(np.asarray(ict_dataset.neutral), axis=0))
+    di = DisplacementInterpolation(ict_dataset, ict_markers).solve(frames[:4])
+    assert di.bundle_residuals.max() <= 1e-9 * diag
+    # Frames that are dataset shapes are (nearly) in the span: markers fit to 1e-3 diagonal.
+    fit = BlendshapeFit(ict_dataset, ict_markers).solve(frames)
+    assert fit.bundle_residuals.max() <= 1e-3 * diag

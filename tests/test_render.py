@@ -1,0 +1,44 @@
+"""The headless error panel: a PNG of the expected size with real content, and the demo's
+comparison outputs."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from lgi.render import panel
+
+
+def test_panel_png_has_expected_size_and_nontrivial_content(sample, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
+    import matplotlib.image as mpimg
+
+    truth = sample.truth[10]
+    rng = np.random.default_rng(0)
+    moved = truth + rng.normal(scale=0.05, size=truth.shape)
+    err = np.linalg.norm(moved - truth, axis=1)
+    size = panel(
+        tmp_path / "p.png",
+        {"ground truth": truth, "noisy": moved},
+        sample.triangles,
+        {"noisy": err},
+        cell_inches=2.0,
+        dpi=50,
+    )
+    # 2 columns of 2 in plus 1 in for the colour bar; 2 rows of 2 in plus 0.4 in of titles.
+    assert size == (250, 220)
+    img = mpimg.imread(tmp_path / "p.png")
+    assert img.shape[:2] == (220, 250)
+    rgb = img[..., :3]
+    assert (rgb.std(axis=(0, 1)) > 0.05).all()
+    assert len(np.unique((rgb * 255).astype(np.uint8).reshape(-1, 3), axis=0)) > 100
+
+
+def test_demo_writes_comparison_table_and_panel(tmp_path: Path) -> None:
+    from lgi import demo
+
+    assert demo.run(tmp_path, quiet=True) == 0
+    text = (tmp_path / "results.md").read_text()
+    for name in ("displacement interpolation", "blendshape fit", "LGI-RBF", "| LGI |"):
+        assert name in text
+    assert (tmp_path / "panel.png").stat().st_size > 10_000
