@@ -108,6 +108,7 @@ fn stages(c: &mut Criterion) {
                 let ch = choose(
                     &model.indices()[i],
                     &model.clouds()[i],
+                    &model.alias_groups()[i],
                     t,
                     &scoring,
                     &p,

@@ -174,6 +174,7 @@ fn clean_weights(l: [f64; 4]) -> [f64; 4] {
 pub fn choose(
     index: &TetIndex,
     cloud: &BundleCloud,
+    groups: &[AliasGroups],
     target: DVec3,
     scoring: &Scoring<'_>,
     params: &ChoiceParams,
@@ -206,10 +207,10 @@ pub fn choose(
         }
     } else if index.num_tets() > 0 {
         scratch.nearest.clear();
-        // Tets around the two cloud points nearest the target (where it left the cloud):
+        // Tets around the cloud point nearest the target (where it left the cloud):
         // the exact n-nearest search must enumerate every tet tied at a shared vertex and
         // costs ~10x more for the same choices in practice (docs/performance.md).
-        index.nearest_around(target, 2, &mut scratch.nearest);
+        index.nearest_around(target, 1, &mut scratch.nearest);
         // A closest point at a tet's vertex is that cloud point, scored below on its own.
         scratch
             .nearest
@@ -234,21 +235,26 @@ pub fn choose(
     } else {
         lower_simplices(cloud, target, scoring, &mut scratch.scored);
     }
-    scratch
-        .scored
-        .sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)).then(a.2.cmp(&b.2)));
+    // Only the best few need ordering (a total order: score, tet, points), not all candidates.
+    let order =
+        |a: &Scored, b: &Scored| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)).then(a.2.cmp(&b.2));
+    let refine = params.alias_refine.max(1);
+    if scratch.scored.len() > refine {
+        scratch.scored.select_nth_unstable_by(refine - 1, order);
+    }
+    let head = refine.min(scratch.scored.len());
+    scratch.scored[..head].sort_unstable_by(order);
     let mut best: Option<(f64, Choice)> = None;
     // Refine the best few, and every exact hit on a cloud point: a hit's representative may
     // score badly (the neutral standing for every shape that does not move this bundle) while
     // one of its aliases is exactly right.
-    let refine = params.alias_refine.max(1);
     let candidates = scratch
         .scored
         .iter()
         .enumerate()
         .filter(|(r, c)| *r < refine || (c.1 == NO_TET && c.4 <= params.hit_distance));
     for (_, &(_, t, tet, w, d)) in candidates {
-        let shapes = refine_aliases(cloud, &tet, &w, scoring);
+        let shapes = refine_aliases(cloud, groups, &tet, &w, scoring);
         let s = scoring.score(&shapes, &w, d);
         let choice = Choice {
             shapes,
@@ -275,44 +281,95 @@ pub fn choose(
 /// all bundles, then to the lowest shape id (deterministic).
 fn refine_aliases(
     cloud: &BundleCloud,
+    groups: &[AliasGroups],
     tet: &[u32; 4],
     w: &[f64; 4],
     scoring: &Scoring<'_>,
 ) -> [u32; 4] {
     let mut shapes = tet.map(|p| cloud.aliases[p as usize][0]);
+    let mut tied: Vec<usize> = Vec::new();
     for j in 0..4 {
-        let aliases = &cloud.aliases[tet[j] as usize];
-        if w[j] == 0.0 || aliases.len() < 2 {
+        let point_groups = &groups[tet[j] as usize];
+        if w[j] == 0.0 || cloud.aliases[tet[j] as usize].len() < 2 {
             continue;
         }
-        let mut best = (scoring.neighbour_error(&shapes, w), shapes[j], None);
-        for &a in aliases {
-            if a == best.1 {
-                continue;
-            }
+        // Aliases identical at every neighbour form a group: one neighbour error per group.
+        let mut best = f64::INFINITY;
+        tied.clear();
+        for (g, members) in point_groups.iter().enumerate() {
             let mut trial = shapes;
-            trial[j] = a;
+            trial[j] = members[0];
             let e = scoring.neighbour_error(&trial, w);
-            if e < best.0 {
-                best = (e, a, None);
-            } else if e == best.0 {
-                // Exact tie: let the whole face decide, then the lower shape id.
-                let mut incumbent = shapes;
-                incumbent[j] = best.1;
-                let g_best = best
-                    .2
-                    .unwrap_or_else(|| scoring.global_error(&incumbent, w));
-                let g = scoring.global_error(&trial, w);
-                if g < g_best || (g == g_best && a < best.1) {
-                    best = (e, a, Some(g));
-                } else {
-                    best.2 = Some(g_best);
+            if e < best {
+                best = e;
+                tied.clear();
+                tied.push(g);
+            } else if e == best {
+                tied.push(g);
+            }
+        }
+        let mut winner = (f64::INFINITY, u32::MAX);
+        let single = tied.len() == 1 && point_groups[tied[0]].len() == 1;
+        for &g in &tied {
+            for &a in &point_groups[g] {
+                if single {
+                    winner = (0.0, a);
+                    continue;
+                }
+                // Exact tie at the neighbours: let the whole face decide, then the lower id.
+                let mut trial = shapes;
+                trial[j] = a;
+                let e = scoring.global_error(&trial, w);
+                if e < winner.0 || (e == winner.0 && a < winner.1) {
+                    winner = (e, a);
                 }
             }
         }
-        shapes[j] = best.1;
+        if winner.1 != u32::MAX {
+            shapes[j] = winner.1;
+        }
     }
     shapes
+}
+
+/// One cloud point's aliases split into groups whose bundle positions agree exactly at every
+/// natural neighbour (first member of each group is its lowest shape id).
+pub type AliasGroups = Vec<Vec<u32>>;
+
+/// Groups the aliases of every point of `cloud` by their positions at `neighbours`.
+pub fn alias_groups(
+    cloud: &BundleCloud,
+    neighbours: &[u32],
+    shape_positions: &[DVec3],
+    num_bundles: usize,
+) -> Vec<AliasGroups> {
+    cloud
+        .aliases
+        .iter()
+        .map(|aliases| {
+            let mut groups: Vec<(Vec<[u64; 3]>, Vec<u32>)> = Vec::new();
+            for &a in aliases {
+                let key: Vec<[u64; 3]> = neighbours
+                    .iter()
+                    .map(|&n| {
+                        let p = shape_positions[a as usize * num_bundles + n as usize];
+                        [p.x.to_bits(), p.y.to_bits(), p.z.to_bits()]
+                    })
+                    .collect();
+                match groups.iter_mut().find(|(k, _)| *k == key) {
+                    Some((_, m)) => m.push(a),
+                    None => groups.push((key, vec![a])),
+                }
+            }
+            groups
+                .into_iter()
+                .map(|(_, mut m)| {
+                    m.sort_unstable();
+                    m
+                })
+                .collect()
+        })
+        .collect()
 }
 
 /// Clouds with no tets (fewer than 4 points, or all coplanar): closest points of the cloud's

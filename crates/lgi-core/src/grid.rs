@@ -186,15 +186,18 @@ impl TetIndex {
                 self.incident[s as usize..e as usize].iter().copied()
             })
             .collect();
-        tets.sort_unstable();
-        tets.dedup();
+        if k > 1 {
+            // Tets shared by several of the points appear once per point.
+            tets.sort_unstable();
+            tets.dedup();
+        }
         for t in tets {
             let corners = self.tets[t as usize].map(|i| self.points[i as usize]);
             let inv = &self.frames[t as usize].inv;
             let (q, b) = closest_point_in_tet_with(p, corners, inv.is_finite().then_some(inv));
             out.push((t, b, p.distance(q)));
         }
-        out[base..].sort_by(|a, b| a.2.total_cmp(&b.2).then(a.0.cmp(&b.0)));
+        out[base..].sort_unstable_by(|a, b| a.2.total_cmp(&b.2).then(a.0.cmp(&b.0)));
     }
 
     /// Number of tets.
@@ -877,5 +880,53 @@ mod tests {
     fn index_is_send_and_sync() {
         fn check<T: Send + Sync>() {}
         check::<TetIndex>();
+    }
+
+    #[test]
+    fn nearest_around_returns_exactly_the_tets_of_the_nearest_points_with_exact_distances() {
+        let cfg = TetConfig::default();
+        let ix = index(60, 11, &cfg);
+        let pts = ix.points().to_vec();
+        for (qi, q) in [
+            DVec3::new(2.0, -1.0, 0.5),
+            DVec3::new(0.3, 0.2, 0.1),
+            DVec3::splat(-3.0),
+        ]
+        .into_iter()
+        .enumerate()
+        {
+            for k in [1usize, 3] {
+                let mut out = Vec::new();
+                ix.nearest_around(q, k, &mut out);
+                // Brute force: the k nearest points (ties by index) and every tet touching one.
+                let mut order: Vec<usize> = (0..pts.len()).collect();
+                order.sort_by(|&a, &b| {
+                    pts[a]
+                        .distance_squared(q)
+                        .total_cmp(&pts[b].distance_squared(q))
+                        .then(a.cmp(&b))
+                });
+                let near = &order[..k];
+                let mut want: Vec<u32> = (0..ix.num_tets() as u32)
+                    .filter(|&t| {
+                        ix.tets()[t as usize]
+                            .iter()
+                            .any(|v| near.contains(&(*v as usize)))
+                    })
+                    .collect();
+                want.sort_unstable();
+                let mut got: Vec<u32> = out.iter().map(|c| c.0).collect();
+                got.sort_unstable();
+                assert_eq!(got, want, "query {qi}, k {k}");
+                for w in out.windows(2) {
+                    assert!(w[0].2 <= w[1].2);
+                }
+                for &(t, _, d) in &out {
+                    let corners = ix.tets()[t as usize].map(|i| pts[i as usize]);
+                    let (c, _) = crate::tets::closest_point_in_tet(q, corners);
+                    assert!((c.distance(q) - d).abs() <= 1e-12 * (1.0 + d));
+                }
+            }
+        }
     }
 }

@@ -2,7 +2,9 @@
 //! tets and their grid indices, UV sewing weights), immutable after build and `Send + Sync`,
 //! so frames are solved with `&self` in parallel (rayon over bundles, then over vertices).
 
-use crate::choose::{choose, pure_errors, Choice, ChoiceParams, Scoring, Scratch};
+use crate::choose::{
+    alias_groups, choose, pure_errors, AliasGroups, Choice, ChoiceParams, Scoring, Scratch,
+};
 use crate::cloud::{build_cloud, BundleCloud};
 use crate::correspond::{correspond, SurfacePoint};
 use crate::dataset::Dataset;
@@ -185,6 +187,7 @@ pub struct Model {
     diagonal: f64,
     shape_positions: Vec<DVec3>,
     clouds: Vec<BundleCloud>,
+    groups: Vec<Vec<AliasGroups>>,
     indices: Vec<TetIndex>,
     space: SewingSpace,
     graph: EdgeGraph,
@@ -298,6 +301,11 @@ impl Model {
             slack: DETOUR_SLACK * diagonal,
         };
         let neighbours = sew.filter_neighbours(uv_neighbours);
+        let groups = clouds
+            .par_iter()
+            .zip(&neighbours)
+            .map(|(c, nb)| alias_groups(c, nb, &shape_positions, b))
+            .collect();
         let all: Vec<u32> = (0..b as u32).collect();
         let full_plan = Arc::new(sew.plan(&all)?);
         let jaw = match jaw {
@@ -324,6 +332,7 @@ impl Model {
             diagonal,
             shape_positions,
             clouds,
+            groups,
             indices,
             space,
             graph,
@@ -459,6 +468,7 @@ impl Model {
                 Some(choose(
                     &self.indices[i],
                     &self.clouds[i],
+                    &self.groups[i],
                     t,
                     &scoring,
                     &params,
@@ -709,6 +719,10 @@ impl Model {
     /// Clouds of all bundles.
     pub fn clouds(&self) -> &[BundleCloud] {
         &self.clouds
+    }
+    /// Alias groups of every bundle's cloud points (see [`alias_groups`]).
+    pub fn alias_groups(&self) -> &[Vec<AliasGroups>] {
+        &self.groups
     }
     /// Tet indices of all bundles.
     pub fn indices(&self) -> &[TetIndex] {
