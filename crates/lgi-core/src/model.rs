@@ -196,6 +196,10 @@ pub struct Model {
     plans: Mutex<HashMap<Vec<u32>, Arc<SewPlan>>>,
 }
 
+/// Round-off left at a bundle after the residual pass that triggers a refinement round
+/// (relative to the diagonal; the promise to users is 1e-6).
+const RESIDUAL_TOLERANCE: f64 = 1e-12;
+
 /// Plans kept for distinct sets of missing bundles before the cache is cleared.
 const PLAN_CACHE: usize = 64;
 
@@ -506,6 +510,7 @@ impl Model {
             &self.bundles,
             &plan.weights,
             targets_clean,
+            RESIDUAL_TOLERANCE * self.diagonal,
             &mut vertices,
         );
         if let Some(v) = vertices.iter().position(|p| !p.is_finite()) {

@@ -144,10 +144,12 @@ impl ResidualPass {
         bundles: &[SurfacePoint],
         weights: &SparseWeights,
         targets: &[DVec3],
+        tolerance: f64,
         x: &mut [DVec3],
     ) {
-        // Two rounds: the second mops up the round-off of the first (iterative refinement).
-        for _ in 0..2 {
+        // Up to two rounds: a second one (iterative refinement) only when the first left more
+        // round-off than `tolerance` at some bundle.
+        for round in 0..2 {
             let r: Vec<[f64; 3]> = self
                 .present
                 .iter()
@@ -156,6 +158,13 @@ impl ResidualPass {
                     (targets[b as usize] - sp.evaluate(triangles, x)).to_array()
                 })
                 .collect();
+            let worst = r
+                .iter()
+                .map(|v| DVec3::from_array(*v).length())
+                .fold(0.0, f64::max);
+            if round > 0 && worst <= tolerance {
+                break;
+            }
             let c = self.lu.solve3(&r);
             let slot = &self.slot;
             x.par_chunks_mut(CHUNK).enumerate().for_each(|(ci, chunk)| {
