@@ -193,6 +193,9 @@ pub struct Model {
     graph: EdgeGraph,
     neighbours: Vec<Vec<u32>>,
     full_plan: Arc<SewPlan>,
+    /// Every sewn vertex's natural neighbours among all bundles, before barriers and detours
+    /// (rows of the sewn vertices in order): which rows a missing bundle can change.
+    support: SparseWeights,
     plans: Mutex<HashMap<Vec<u32>, Arc<SewPlan>>>,
 }
 
@@ -312,6 +315,7 @@ impl Model {
             .collect();
         let all: Vec<u32> = (0..b as u32).collect();
         let full_plan = Arc::new(sew.plan(&all)?);
+        let support = sew.support()?;
         let jaw = match jaw {
             None => None,
             Some((rig, shape_thetas)) => {
@@ -342,6 +346,7 @@ impl Model {
             graph,
             neighbours,
             full_plan,
+            support,
             plans: Mutex::new(HashMap::new()),
         })
     }
@@ -356,7 +361,8 @@ impl Model {
                 return Ok(p.clone());
             }
         }
-        let plan = Arc::new(self.sew_context().plan(present)?);
+        let ctx = self.sew_context();
+        let plan = Arc::new(ctx.plan_without(present, &self.full_plan, &self.support)?);
         if let Ok(mut cache) = self.plans.lock() {
             if cache.len() >= PLAN_CACHE {
                 cache.clear();
@@ -788,6 +794,83 @@ impl SewContext<'_> {
         Ok(SewPlan { weights, residual })
     }
 
+    /// Natural neighbours of every sewn vertex among all bundles, with no barrier or detour.
+    fn support(&self) -> Result<SparseWeights> {
+        let sp = self.space;
+        let sib = SibsonWeights::new(&sp.bundle_uv, &[])?;
+        let queries: Vec<_> = (0..self.dataset.num_vertices())
+            .filter(|&v| sp.contains(v))
+            .map(|v| sp.vertex_uv[v])
+            .collect();
+        Ok(sib.weights(&queries))
+    }
+
+    /// The plan for `present` bundles derived from the full plan: removing a site changes the
+    /// natural-neighbour weights only of points that had it as a natural neighbour, so only
+    /// those rows are recomputed (same rules as [`plan`](Self::plan)).
+    fn plan_without(
+        &self,
+        present: &[u32],
+        full: &SewPlan,
+        support: &SparseWeights,
+    ) -> Result<SewPlan> {
+        let (dataset, sp) = (self.dataset, self.space);
+        let nb = self.bundles.len();
+        let mut missing = vec![true; nb];
+        for &b in present {
+            missing[b as usize] = false;
+        }
+        let nv = dataset.num_vertices();
+        let sewn: Vec<usize> = (0..nv).filter(|&v| sp.contains(v)).collect();
+        let touches = |cols: &[u32]| cols.iter().any(|&c| missing[c as usize]);
+        let affected: Vec<usize> = sewn
+            .iter()
+            .enumerate()
+            .filter(|&(r, &v)| touches(support.row(r).0) || touches(full.weights.row(v).0))
+            .map(|(_, &v)| v)
+            .collect();
+        let mut new_row = vec![usize::MAX; nv];
+        for (r, &v) in affected.iter().enumerate() {
+            new_row[v] = r;
+        }
+        let recomputed = if affected.is_empty() {
+            None
+        } else {
+            let sites: Vec<_> = present.iter().map(|&i| sp.bundle_uv[i as usize]).collect();
+            let sib = SibsonWeights::new(&sites, &sp.barriers)?;
+            let queries: Vec<_> = affected.iter().map(|&v| sp.vertex_uv[v]).collect();
+            Some(self.drop_detours(sib.weights(&queries), &affected, present))
+        };
+        let mut weights = SparseWeights {
+            row_start: Vec::with_capacity(nv + 1),
+            cols: Vec::new(),
+            vals: Vec::new(),
+            num_cols: nb,
+        };
+        weights.row_start.push(0);
+        for v in 0..nv {
+            let r = new_row[sp.proxy[v] as usize];
+            match (&recomputed, r) {
+                (Some(w), r) if r != usize::MAX => {
+                    let (cols, vals) = w.row(r);
+                    weights
+                        .cols
+                        .extend(cols.iter().map(|&c| present[c as usize]));
+                    weights.vals.extend_from_slice(vals);
+                }
+                _ => {
+                    let (cols, vals) = full.weights.row(v);
+                    weights.cols.extend_from_slice(cols);
+                    weights.vals.extend_from_slice(vals);
+                }
+            }
+            weights.row_start.push(weights.cols.len() as u32);
+        }
+        let tris = &dataset.neutral().triangles;
+        let residual = ResidualPass::new(tris, self.bundles, &weights, present)?;
+        Ok(SewPlan { weights, residual })
+    }
+
     /// Removes the weights whose surface path detours around a hole; rows renormalised (a
     /// row that would lose everything keeps its weights).
     fn drop_detours(&self, w: SparseWeights, sewn: &[usize], present: &[u32]) -> SparseWeights {
@@ -986,5 +1069,86 @@ fn bundle_context(e: LgiError, what: &str) -> LgiError {
     match e {
         LgiError::Input(m) => LgiError::Input(format!("{what}: {m}")),
         other => other,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::mesh::Mesh;
+    use glam::DVec2;
+
+    /// A wavy n×n grid patch with UVs = xy and a few smooth shapes.
+    fn patch(n: usize) -> Dataset {
+        let mut positions = Vec::new();
+        let mut uvs = Vec::new();
+        for y in 0..n {
+            for x in 0..n {
+                let (u, v) = (x as f64 / (n - 1) as f64, y as f64 / (n - 1) as f64);
+                positions.push(DVec3::new(u, v, 0.1 * (3.0 * u).sin() * (2.0 * v).cos()));
+                uvs.push(DVec2::new(u, v));
+            }
+        }
+        let mut triangles = Vec::new();
+        for y in 0..n - 1 {
+            for x in 0..n - 1 {
+                let a = (y * n + x) as u32;
+                let (b, c, d) = (a + 1, a + n as u32 + 1, a + n as u32);
+                triangles.push([a, b, c]);
+                triangles.push([a, c, d]);
+            }
+        }
+        let mesh = Mesh {
+            positions: positions.clone(),
+            uv_triangles: triangles.clone(),
+            triangles,
+            uvs,
+        };
+        let shapes = (0..6)
+            .map(|k| {
+                let f = k as f64 + 1.0;
+                let pos = positions
+                    .iter()
+                    .map(|p| *p + DVec3::new(0.0, 0.0, 0.05 * (f * p.x + 0.3 * f * p.y).sin()))
+                    .collect();
+                (format!("s{k}"), pos)
+            })
+            .collect();
+        Dataset::from_shape_positions(mesh, shapes).unwrap()
+    }
+
+    #[test]
+    fn plan_for_missing_bundles_equals_the_plan_built_from_scratch() {
+        let data = patch(24);
+        let mut markers = Vec::new();
+        let mut s = 3u64;
+        for _ in 0..30 {
+            s = s
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            let u = 0.05 + 0.9 * ((s >> 11) as f64 / (1u64 << 53) as f64);
+            s = s
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            let v = 0.05 + 0.9 * ((s >> 11) as f64 / (1u64 << 53) as f64);
+            markers.push(DVec3::new(u, v, 0.1 * (3.0 * u).sin() * (2.0 * v).cos()));
+        }
+        let model = Model::build(&data, &markers, &BuildConfig::default()).unwrap();
+        let ctx = model.sew_context();
+        for missing in [vec![0u32], vec![3, 17], vec![5, 6, 7, 29]] {
+            let present: Vec<u32> = (0..30).filter(|b| !missing.contains(b)).collect();
+            let fresh = ctx.plan(&present).unwrap();
+            let derived = ctx
+                .plan_without(&present, &model.full_plan, &model.support)
+                .unwrap();
+            assert_eq!(
+                fresh.weights.row_start, derived.weights.row_start,
+                "{missing:?}"
+            );
+            assert_eq!(fresh.weights.cols, derived.weights.cols, "{missing:?}");
+            for (a, b) in fresh.weights.vals.iter().zip(&derived.weights.vals) {
+                assert!((a - b).abs() <= 1e-12, "{missing:?}: {a} vs {b}");
+            }
+        }
     }
 }
