@@ -59,12 +59,11 @@ def load_workload() -> tuple[str, Any, np.ndarray]:
             f"{base.num_shapes} shapes augmented to {data.num_shapes}, {len(markers)} markers"
         )
         return name, data, markers
+    from lgi.dataset import sample_dataset
     from lgi.sample import make_sample
 
     s = make_sample(0)
-    data = lgi.Dataset.from_arrays(
-        s.neutral, s.triangles, s.shapes, names=s.names, uvs=s.uvs, uv_triangles=s.uv_triangles
-    )
+    data = sample_dataset(s)
     name = (
         f"sample (ICT data not found): synthetic face ({data.num_vertices} vertices), "
         f"{data.num_shapes} shapes, {len(s.markers_rest)} markers"

@@ -11,6 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 import lgi
+from lgi.dataset import sample_dataset
 from lgi.jaw import JawRig, estimate_rig
 from lgi.sample import make_sample
 
@@ -27,9 +28,7 @@ def errors(v: np.ndarray, truth: np.ndarray) -> str:
 
 def main() -> None:
     s = make_sample(0)
-    data = lgi.Dataset.from_arrays(
-        s.neutral, s.triangles, s.shapes, names=s.names, uvs=s.uvs, uv_triangles=s.uv_triangles
-    )
+    data = sample_dataset(s)
     plain = lgi.Model.build(data, s.markers_rest)
     rig, theta = estimate_rig(s.neutral, s.shapes, s.names, triangles=s.triangles)
     jawed = lgi.Model.build(data, s.markers_rest, jaw=rig, shape_theta=theta)

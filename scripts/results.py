@@ -16,6 +16,7 @@ import numpy as np
 
 import lgi
 from lgi import evaluate as ev
+from lgi.dataset import sample_dataset
 from lgi.sample import make_sample
 
 ICT_SKIN = np.arange(9409)
@@ -48,9 +49,7 @@ def main() -> int:
         "",
     ]
     s = make_sample(0)
-    ds = lgi.Dataset.from_arrays(
-        s.neutral, s.triangles, s.shapes, names=s.names, uvs=s.uvs, uv_triangles=s.uv_triangles
-    )
+    ds = sample_dataset(s)
     rows = ev.evaluate(ev.default_methods(ds, s.markers_rest), s.performance, s.truth)
     parts += [
         "## Sample: held-out performance (all methods)",

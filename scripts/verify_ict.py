@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 
 import lgi
+from lgi.dataset import without_shapes
 
 SKIN = 9409  # face skin: vertices 0..9408
 MOVED = 1e-3  # cm
@@ -116,19 +117,10 @@ def main() -> None:
         say("## Leave-one-out: build without shape k, solve shape k's markers\n")
         say("| shape | mean disp. | mean err | max err | mean err / mean disp. |")
         say("|---|---|---|---|---|")
-        tris, uvs, uvt = data.triangles, data.uvs, data.uv_triangles
         means = []
         t0 = time.perf_counter()
         for k, name in enumerate(data.names):
-            keep = np.arange(data.num_shapes) != k
-            sub = lgi.Dataset.from_arrays(
-                data.neutral,
-                tris,
-                data.shapes[keep],
-                names=[n for n, m in zip(data.names, keep, strict=True) if m],
-                uvs=uvs,
-                uv_triangles=uvt,
-            )
+            sub = without_shapes(data, [k])
             m = lgi.Model.build(sub, markers)
             r = m.solve(frames[k : k + 1], temporal=False, quiet=True)
             err = np.linalg.norm(r.vertices[0, :SKIN] - meshes[k, :SKIN], axis=1)

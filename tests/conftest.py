@@ -66,16 +66,9 @@ def sample():  # type: ignore[no-untyped-def]
 
 @pytest.fixture(scope="session")
 def sample_dataset(sample):  # type: ignore[no-untyped-def]
-    import lgi
+    from lgi.dataset import sample_dataset as of_sample
 
-    return lgi.Dataset.from_arrays(
-        sample.neutral,
-        sample.triangles,
-        sample.shapes,
-        names=sample.names,
-        uvs=sample.uvs,
-        uv_triangles=sample.uv_triangles,
-    )
+    return of_sample(sample)
 
 
 @pytest.fixture(scope="session")

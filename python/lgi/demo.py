@@ -10,6 +10,7 @@ import numpy as np
 
 from lgi import export
 from lgi._lgi import Dataset
+from lgi.dataset import sample_dataset
 from lgi.model import Model
 from lgi.sample import describe, make_sample
 
@@ -26,14 +27,7 @@ def run(out: Path, seed: int = 0, quiet: bool = False) -> int:
     sample = make_sample(seed)
     t_sample = time.perf_counter() - t0
     print(describe(sample))
-    data = Dataset.from_arrays(
-        sample.neutral,
-        sample.triangles,
-        sample.shapes,
-        names=sample.names,
-        uvs=sample.uvs,
-        uv_triangles=sample.uv_triangles,
-    )
+    data = sample_dataset(sample)
     t0 = time.perf_counter()
     model = Model.build(data, sample.markers_rest)
     t_build = time.perf_counter() - t0

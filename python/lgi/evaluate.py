@@ -15,6 +15,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from lgi import _lgi
 from lgi._lgi import Dataset
+from lgi.dataset import sample_dataset, without_shapes
 from lgi.model import SolveResult
 
 F64 = NDArray[np.float64]
@@ -123,16 +124,7 @@ def verification(dataset: Dataset, markers: ArrayLike) -> tuple[F64, F64]:
 
 
 def _without(dataset: Dataset, k: int) -> Dataset:
-    keep = [i for i in range(dataset.num_shapes) if i != k]
-    has_uv = np.asarray(dataset.uv_triangles).size > 0
-    return Dataset.from_arrays(
-        dataset.neutral,
-        dataset.triangles,
-        np.asarray(dataset.shapes)[keep],
-        names=[dataset.names[i] for i in keep],
-        uvs=dataset.uvs if has_uv else None,
-        uv_triangles=dataset.uv_triangles if has_uv else None,
-    )
+    return without_shapes(dataset, [k])
 
 
 def leave_one_out(
@@ -265,9 +257,7 @@ def run_protocol(
     region: ArrayLike | None = None
     if data == "sample":
         s = make_sample(0)
-        ds = Dataset.from_arrays(
-            s.neutral, s.triangles, s.shapes, names=s.names, uvs=s.uvs, uv_triangles=s.uv_triangles
-        )
+        ds = sample_dataset(s)
         markers: F64 = s.markers_rest
         perf: tuple[F64, F64] | None = (s.performance, s.truth)
     elif data == "ict":
