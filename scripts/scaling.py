@@ -2,7 +2,8 @@
 scaling table). One run, 2 threads, medians over the frames of one temporal `solve` call.
 
 - vertices: the built-in sample at growing resolutions (its own performance, dropouts included),
-- shapes: ICT-FaceKit's 57 shapes, and augmented to 300 / 1000 shapes (`Dataset.augmented`), markers_120,
+- shapes: ICT-FaceKit's 57 shapes, then augmented to 300 / 1000 (`Dataset.augmented`),
+  markers_120,
 - markers: ICT-300 with 60 (the first 60 of markers_120) / 120 / 240 markers (120 more placed at
   seeded random points of the face skin).
 
