@@ -51,42 +51,31 @@ def main() -> None:
     args = ap.parse_args()
     print("| axis | size | vertices | shapes | markers | build (s) | solve median (ms/frame) |")
     print("|---|---|---|---|---|---|---|")
+
+    def row(axis: str, size: object, data: lgi.Dataset, markers: np.ndarray, frames=None) -> None:  # type: ignore[no-untyped-def]
+        t = time.perf_counter()
+        m = lgi.Model.build(data, markers)
+        tb = time.perf_counter() - t
+        fr = make_frames(m, data, args.frames) if frames is None else frames
+        ms = per_frame_ms(m, fr)
+        print(
+            f"| {axis} | {size} | {data.num_vertices} | {data.num_shapes} | {len(markers)} | "
+            f"{tb:.2f} | {ms:.2f} |"
+        )
+
     for res in (110, 220, 440):
         s = make_sample(0, resolution=res, num_frames=args.frames)
-        data = sample_dataset(s)
-        t = time.perf_counter()
-        m = lgi.Model.build(data, s.markers_rest)
-        tb = time.perf_counter() - t
-        ms = per_frame_ms(m, s.performance)
-        print(
-            f"| vertices | res {res} | {data.num_vertices} | {data.num_shapes} | "
-            f"{m.num_bundles} | {tb:.2f} | {ms:.2f} |"
-        )
+        row("vertices", f"res {res}", sample_dataset(s), s.markers_rest, s.performance)
     ict = lgi.Dataset.from_obj(
-        args.ict / "generic_neutral_mesh.obj", str(args.ict / "shapes/*.obj")
+        args.ict / "generic_neutral_mesh.obj", str(args.ict / "shapes" / "*.obj")
     )
     markers = np.loadtxt(args.ict / "markers_120.csv", delimiter=",", skiprows=1, usecols=(1, 2, 3))
     # The 57 ICT shapes themselves stand for "60"; augmentation adds in-betweens first.
     for n in (57, 300, 1000):
-        data = ict if n == ict.num_shapes else ict.augmented(n)
-        t = time.perf_counter()
-        m = lgi.Model.build(data, markers)
-        tb = time.perf_counter() - t
-        ms = per_frame_ms(m, make_frames(m, data, args.frames))
-        print(
-            f"| shapes | {n} | {data.num_vertices} | {data.num_shapes} | 120 | {tb:.2f} | "
-            f"{ms:.2f} |"
-        )
-    data = ict.augmented(300)
+        row("shapes", n, ict if n == ict.num_shapes else ict.augmented(n), markers)
+    ict300 = ict.augmented(300)
     for mk in (markers[:60], markers, np.concatenate([markers, extra_markers(ict, 120)])):
-        t = time.perf_counter()
-        m = lgi.Model.build(data, mk)
-        tb = time.perf_counter() - t
-        ms = per_frame_ms(m, make_frames(m, data, args.frames))
-        print(
-            f"| markers | {len(mk)} | {data.num_vertices} | {data.num_shapes} | {len(mk)} | "
-            f"{tb:.2f} | {ms:.2f} |"
-        )
+        row("markers", len(mk), ict300, mk)
 
 
 if __name__ == "__main__":

@@ -165,6 +165,27 @@ def leave_one_out(
     return rows
 
 
+def _sweep(
+    methods: Mapping[str, Solver],
+    frames: ArrayLike,
+    truth: ArrayLike,
+    key: str,
+    values: Sequence[float],
+    perturb: Callable[[F64, float, np.random.Generator], F64],
+    seed: int,
+    region: ArrayLike | None,
+    temporal: bool,
+) -> list[Row]:
+    """Evaluates every method on `perturb(frames, value, rng)` for each value; rows get `key`."""
+    fr = np.asarray(frames, dtype=np.float64)
+    rows = []
+    for v in values:
+        changed = perturb(fr, v, np.random.default_rng(seed))
+        for row in evaluate(methods, changed, truth, region, temporal=temporal):
+            rows.append({key: v, **row})
+    return rows
+
+
 def noise_sweep(
     methods: Mapping[str, Solver],
     frames: ArrayLike,
@@ -175,13 +196,11 @@ def noise_sweep(
     temporal: bool = True,
 ) -> list[Row]:
     """Gaussian marker noise of each standard deviation (data units; 0..0.2 cm = 0..2 mm)."""
-    fr = np.asarray(frames, dtype=np.float64)
-    rows = []
-    for s in sigmas:
-        noisy = fr + np.random.default_rng(seed).normal(scale=s, size=fr.shape)
-        for row in evaluate(methods, noisy, truth, region, temporal=temporal):
-            rows.append({"sigma": s, **row})
-    return rows
+
+    def noisy(fr: F64, s: float, rng: np.random.Generator) -> F64:
+        return fr + rng.normal(scale=s, size=fr.shape)
+
+    return _sweep(methods, frames, truth, "sigma", sigmas, noisy, seed, region, temporal)
 
 
 def dropout_sweep(
@@ -194,14 +213,11 @@ def dropout_sweep(
     temporal: bool = True,
 ) -> list[Row]:
     """A fraction `rate` of marker entries set missing (NaN), uniformly at random."""
-    fr = np.asarray(frames, dtype=np.float64)
-    rows = []
-    for r in rates:
-        drop = np.random.default_rng(seed).random(fr.shape[:2]) < r
-        holey = np.where(drop[..., None], np.nan, fr)
-        for row in evaluate(methods, holey, truth, region, temporal=temporal):
-            rows.append({"dropout": r, **row})
-    return rows
+
+    def holey(fr: F64, r: float, rng: np.random.Generator) -> F64:
+        return np.where((rng.random(fr.shape[:2]) < r)[..., None], np.nan, fr)
+
+    return _sweep(methods, frames, truth, "dropout", rates, holey, seed, region, temporal)
 
 
 def _fmt(v: Any) -> str:
