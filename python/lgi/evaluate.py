@@ -277,7 +277,10 @@ def run_protocol(
         markers: F64 = s.markers_rest
         perf: tuple[F64, F64] | None = (s.performance, s.truth)
     elif data == "ict":
-        d = Path(ict_dir or os.environ.get("LGI_ICT_DIR", "../shared/data/ict-facekit"))
+        d = Path(
+            ict_dir
+            or str(Path(os.environ.get("LGI_SHARED_DATA", "../shared/data")) / "ict-facekit")
+        )
         ds = Dataset.from_obj(d / "generic_neutral_mesh.obj", str(d / "shapes" / "*.obj"))
         markers = np.loadtxt(d / "markers_120.csv", delimiter=",", skiprows=1, usecols=(1, 2, 3))
         perf = None

@@ -5,25 +5,16 @@
 use lgi_core::correspond::{correspond, SurfaceIndex, SurfacePoint};
 use lgi_core::geom::closest_point_on_triangle;
 use lgi_core::{DVec3, Mesh};
+mod common;
+
 use std::path::PathBuf;
 use std::time::Instant;
 
-/// `$LGI_ICT_DATA`, else `shared/` beside the checkout (one level further up for a worktree
-/// under `wt/`).
+/// The ICT data (see `common::ict_dir`), saying why when it is skipped.
 fn data_dir() -> Option<PathBuf> {
-    let root = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
-    let candidates = [
-        std::env::var_os("LGI_ICT_DATA").map(PathBuf::from),
-        Some(root.join("../../../shared/data/ict-facekit")),
-        Some(root.join("../../../../shared/data/ict-facekit")),
-    ];
-    let found = candidates.into_iter().flatten().find(|dir| {
-        dir.join("generic_neutral_mesh.obj").is_file() && dir.join("markers_120.csv").is_file()
-    });
+    let found = common::ict_dir();
     if found.is_none() {
-        eprintln!(
-            "skipping: ICT data not found (set LGI_ICT_DATA or put it in shared/data/ict-facekit)"
-        );
+        eprintln!("skipping: ICT data not found (set LGI_SHARED_DATA or put it in ../shared/data)");
     }
     found
 }

@@ -1,6 +1,8 @@
 //! Readers against malformed and edge-case files: every error must carry the right variant and
 //! name the file, line or element; plus glTF round trips and the real ICT data when present.
 
+mod common;
+
 use lgi_core::io::gltf::read_gltf;
 use lgi_core::io::obj::{parse_obj, read_obj, read_obj_positions, write_obj};
 use lgi_core::{DVec2, DVec3, Dataset, LgiError, Mesh};
@@ -473,21 +475,7 @@ fn garbled_gltf_is_a_parse_error_naming_the_file() {
 
 // ---------------------------------------------------------------------------------- ICT
 
-/// The ICT FaceKit data: `$LGI_SHARED_DATA/ict-facekit`, else `shared/data/ict-facekit` in the
-/// nearest ancestor of this crate that has it (the repository's sibling `shared/`).
-fn ict_dir() -> Option<PathBuf> {
-    let from_env =
-        std::env::var_os("LGI_SHARED_DATA").map(|d| PathBuf::from(d).join("ict-facekit"));
-    let manifest = Path::new(env!("CARGO_MANIFEST_DIR"));
-    from_env
-        .into_iter()
-        .chain(
-            manifest
-                .ancestors()
-                .map(|a| a.join("shared/data/ict-facekit")),
-        )
-        .find(|d| d.join("generic_neutral_mesh.obj").exists())
-}
+use common::ict_dir;
 
 #[test]
 fn ict_neutral_and_57_shapes_load_with_expected_counts() {

@@ -6,20 +6,11 @@ use lgi_core::geom::{closest_point_on_triangle, interpolate3};
 use lgi_core::sibson::{boundary_barriers, vertex_charts, Barrier, SibsonWeights, UvIslands};
 use lgi_core::{DVec2, DVec3, Mesh};
 use std::collections::{BinaryHeap, HashMap};
-use std::path::PathBuf;
+mod common;
+
 use std::time::Instant;
 
-/// `$LGI_DATA_DIR/ict-facekit`, else the first `shared/data/ict-facekit` above this crate.
-fn ict_dir() -> Option<PathBuf> {
-    if let Some(d) = std::env::var_os("LGI_DATA_DIR") {
-        let p = PathBuf::from(d).join("ict-facekit");
-        return p.is_dir().then_some(p);
-    }
-    let here = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
-    here.ancestors()
-        .map(|a| a.join("shared/data/ict-facekit"))
-        .find(|p| p.is_dir())
-}
+use common::ict_dir;
 
 /// Minimal OBJ reading (positions, UVs, polygon fans): this test must not depend on the
 /// project's reader.
@@ -149,7 +140,7 @@ fn loops(b: &[Barrier]) -> Vec<Vec<usize>> {
 #[test]
 fn ict_face_weights_do_not_leak_across_mouth_and_eyes() {
     let Some(dir) = ict_dir() else {
-        eprintln!("ICT-FaceKit data not found (set LGI_DATA_DIR): skipped");
+        eprintln!("ICT-FaceKit data not found (set LGI_SHARED_DATA): skipped");
         return;
     };
     let mesh = read_obj(&dir.join("generic_neutral_mesh.obj"));
