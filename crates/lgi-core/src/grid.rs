@@ -165,37 +165,55 @@ impl TetIndex {
     /// but the tets around where `p` left the cloud, in O(points + incident tets).
     pub fn nearest_around(&self, p: DVec3, k: usize, out: &mut Vec<(u32, [f64; 4], f64)>) {
         let base = out.len();
-        let mut near: Vec<(f64, u32)> = self
-            .points
-            .iter()
-            .enumerate()
-            .map(|(i, q)| (q.distance_squared(p), i as u32))
-            .collect();
-        let k = k.min(near.len());
+        let k = k.min(self.points.len());
         if k == 0 {
             return;
         }
-        near.select_nth_unstable_by(k - 1, |a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
-        let mut tets: Vec<u32> = near[..k]
-            .iter()
-            .flat_map(|&(_, v)| {
-                let (s, e) = (
-                    self.incident_start[v as usize],
-                    self.incident_start[v as usize + 1],
-                );
-                self.incident[s as usize..e as usize].iter().copied()
-            })
-            .collect();
-        if k > 1 {
-            // Tets shared by several of the points appear once per point.
-            tets.sort_unstable();
-            tets.dedup();
-        }
-        for t in tets {
+        let project = |t: u32, out: &mut Vec<(u32, [f64; 4], f64)>| {
             let corners = self.tets[t as usize].map(|i| self.points[i as usize]);
             let inv = &self.frames[t as usize].inv;
             let (q, b) = closest_point_in_tet_with(p, corners, inv.is_finite().then_some(inv));
             out.push((t, b, p.distance(q)));
+        };
+        if k == 1 {
+            // The common case, without allocating: the nearest point (ties: lowest index).
+            let v = (0..self.points.len())
+                .min_by(|&a, &b| {
+                    let (da, db) = (
+                        self.points[a].distance_squared(p),
+                        self.points[b].distance_squared(p),
+                    );
+                    da.total_cmp(&db).then(a.cmp(&b))
+                })
+                .unwrap_or(0);
+            let (s, e) = (self.incident_start[v], self.incident_start[v + 1]);
+            for &t in &self.incident[s as usize..e as usize] {
+                project(t, out);
+            }
+        } else {
+            let mut near: Vec<(f64, u32)> = self
+                .points
+                .iter()
+                .enumerate()
+                .map(|(i, q)| (q.distance_squared(p), i as u32))
+                .collect();
+            near.select_nth_unstable_by(k - 1, |a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+            let mut tets: Vec<u32> = near[..k]
+                .iter()
+                .flat_map(|&(_, v)| {
+                    let (s, e) = (
+                        self.incident_start[v as usize],
+                        self.incident_start[v as usize + 1],
+                    );
+                    self.incident[s as usize..e as usize].iter().copied()
+                })
+                .collect();
+            // Tets shared by several of the points appear once per point.
+            tets.sort_unstable();
+            tets.dedup();
+            for t in tets {
+                project(t, out);
+            }
         }
         out[base..].sort_unstable_by(|a, b| a.2.total_cmp(&b.2).then(a.0.cmp(&b.0)));
     }
