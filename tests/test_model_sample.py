@@ -125,3 +125,12 @@ def test_inputs_are_not_modified(sample, sample_model):  # type: ignore[no-untyp
     before = frames.copy()
     sample_model.solve(frames, quiet=True)
     np.testing.assert_array_equal(frames, before)
+
+
+def test_non_finite_mesh_in_bundle_positions_raises_input_error_naming_mesh_and_vertex(
+    sample, sample_model
+):  # type: ignore[no-untyped-def]
+    meshes = np.repeat(sample.neutral[None], 2, axis=0)
+    meshes[1, 5, 1] = np.inf
+    with pytest.raises(lgi.InputError, match=r"mesh 1, vertex 5"):
+        sample_model.bundle_positions(meshes)

@@ -6,7 +6,6 @@
 
 use crate::correspond::SurfacePoint;
 use crate::mesh::Mesh;
-use glam::DVec3;
 use std::cmp::Ordering;
 use std::collections::{BinaryHeap, HashMap};
 
@@ -105,15 +104,10 @@ pub fn is_detour(path: f64, straight: f64, ratio: f64, slack: f64) -> bool {
     path > ratio * straight + slack
 }
 
-/// Straight-line distance helper shared by callers.
-pub fn straight(a: DVec3, b: DVec3) -> f64 {
-    a.distance(b)
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
-    use glam::DVec2;
+    use glam::{DVec2, DVec3};
 
     /// A 2D strip mesh in the plane with a slit cut between rows: grid n×n with the middle
     /// row's vertices duplicated so the slit separates upper and lower halves for columns
@@ -189,7 +183,7 @@ mod tests {
         };
         let d = g.distances_from(&m, &below, f64::INFINITY);
         let above = (5 * n + 3) as u32;
-        let straight_d = straight(below.position(&m), m.positions[above as usize]);
+        let straight_d = below.position(&m).distance(m.positions[above as usize]);
         assert!(
             is_detour(d[&above], straight_d, 2.0, 0.0),
             "{} vs {straight_d}",

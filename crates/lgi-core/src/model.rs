@@ -381,9 +381,18 @@ impl Model {
         jaw: Option<JawParams>,
     ) -> Result<Frame> {
         let prep = self.prepare(targets, jaw)?;
-        let choices = self.choose_all(&prep, previous);
+        self.solve_prepared(&prep, previous.map(|p| p.choices.as_slice()))
+    }
+
+    /// Choice, then sewing of the unsmoothed choices, for a checked frame.
+    fn solve_prepared(
+        &self,
+        prep: &Prepared,
+        previous: Option<&[Option<Choice>]>,
+    ) -> Result<Frame> {
+        let choices = self.choose_all(prep, previous);
         let pieces = Pieces::from_choices(&choices);
-        self.sew_frame(&prep, choices, &pieces)
+        self.sew_frame(prep, choices, &pieces)
     }
 
     /// Checks a frame's targets and, with a jaw, unskins them for the lookup.
@@ -445,7 +454,11 @@ impl Model {
     }
 
     /// Every present bundle's choice (rayon over bundles).
-    fn choose_all(&self, prep: &Prepared, previous: Option<&FrameState>) -> Vec<Option<Choice>> {
+    fn choose_all(
+        &self,
+        prep: &Prepared,
+        previous: Option<&[Option<Choice>]>,
+    ) -> Vec<Option<Choice>> {
         let b = self.bundles.len();
         let lookup_targets = &prep.lookup;
         let params = ChoiceParams {
@@ -469,9 +482,7 @@ impl Model {
                     num_bundles: b,
                     neighbours: &self.neighbours[i],
                     targets: lookup_targets,
-                    previous: previous
-                        .and_then(|p| p.choices.get(i))
-                        .and_then(|c| c.as_ref()),
+                    previous: previous.and_then(|p| p.get(i)).and_then(|c| c.as_ref()),
                     temporal_weight,
                     pure_errors: &pure,
                 };
@@ -579,42 +590,31 @@ impl Model {
         if smooth_window <= 1 {
             // Frame by frame: each frame is finished (and reported) before the next starts.
             let mut out: Vec<Frame> = Vec::with_capacity(frames.len());
-            let solved: Result<()> = if temporal {
-                prepared.iter().enumerate().try_for_each(|(f, prep)| {
-                    let previous = out.last().map(|fr| FrameState {
-                        choices: fr.choices.clone(),
-                    });
-                    let choices = self.choose_all(prep, previous.as_ref());
-                    let pieces = Pieces::from_choices(&choices);
-                    out.push(
-                        self.sew_frame(prep, choices, &pieces)
-                            .map_err(|e| frame_context(e, f))?,
-                    );
+            if temporal {
+                for (f, prep) in prepared.iter().enumerate() {
+                    let previous = out.last().map(|fr| fr.choices.as_slice());
+                    let frame = self.solve_prepared(prep, previous);
+                    out.push(frame.map_err(|e| frame_context(e, f))?);
                     on_frame(f);
-                    Ok(())
-                })
+                }
             } else {
                 out = prepared
                     .par_iter()
                     .enumerate()
                     .map(|(f, prep)| {
-                        let choices = self.choose_all(prep, None);
-                        let pieces = Pieces::from_choices(&choices);
-                        self.sew_frame(prep, choices, &pieces)
+                        self.solve_prepared(prep, None)
                             .map_err(|e| frame_context(e, f))
                     })
                     .collect::<Result<_>>()?;
                 (0..out.len()).for_each(&mut on_frame);
-                Ok(())
-            };
-            solved?;
+            }
             return Ok(out);
         }
         let choices: Vec<Vec<Option<Choice>>> = if temporal {
             let mut out: Vec<Vec<Option<Choice>>> = Vec::with_capacity(frames.len());
             for prep in &prepared {
-                let previous = out.last().map(|c| FrameState { choices: c.clone() });
-                out.push(self.choose_all(prep, previous.as_ref()));
+                let previous = out.last().map(|c| c.as_slice());
+                out.push(self.choose_all(prep, previous));
             }
             out
         } else {
@@ -623,11 +623,7 @@ impl Model {
                 .map(|p| self.choose_all(p, None))
                 .collect()
         };
-        let pieces: Vec<Pieces> = if smooth_window > 1 {
-            smooth_choices(&choices, smooth_window)
-        } else {
-            choices.iter().map(|c| Pieces::from_choices(c)).collect()
-        };
+        let pieces = smooth_choices(&choices, smooth_window);
         let mut out = Vec::with_capacity(frames.len());
         for (f, (prep, (ch, pc))) in prepared
             .iter()
@@ -763,17 +759,39 @@ impl SewContext<'_> {
     /// Sewing weights for the present bundles: Sibson weights in UV for sewn vertices (minus
     /// detours around holes), copied from the proxy for the others; plus the residual pass.
     fn plan(&self, present: &[u32]) -> Result<SewPlan> {
-        let (dataset, sp) = (self.dataset, self.space);
-        let sites: Vec<_> = present.iter().map(|&i| sp.bundle_uv[i as usize]).collect();
-        let sib = SibsonWeights::new(&sites, &sp.barriers)?;
-        let nv = dataset.num_vertices();
-        let sewn: Vec<usize> = (0..nv).filter(|&v| sp.contains(v)).collect();
-        let queries: Vec<_> = sewn.iter().map(|&v| sp.vertex_uv[v]).collect();
-        let w_sewn = self.drop_detours(sib.weights(&queries), &sewn, present);
+        let nv = self.dataset.num_vertices();
+        let sewn: Vec<usize> = (0..nv).filter(|&v| self.space.contains(v)).collect();
+        let w = self.rows_for(present, &sewn)?;
         let mut row_of = vec![usize::MAX; nv];
         for (r, &v) in sewn.iter().enumerate() {
             row_of[v] = r;
         }
+        self.plan_from(present, |v| w.row(row_of[v]))
+    }
+
+    /// Sibson rows (minus detours) of `vertices` for the present bundles; columns are bundle
+    /// indices.
+    fn rows_for(&self, present: &[u32], vertices: &[usize]) -> Result<SparseWeights> {
+        let sp = self.space;
+        let sites: Vec<_> = present.iter().map(|&i| sp.bundle_uv[i as usize]).collect();
+        let sib = SibsonWeights::new(&sites, &sp.barriers)?;
+        let queries: Vec<_> = vertices.iter().map(|&v| sp.vertex_uv[v]).collect();
+        let mut w = self.drop_detours(sib.weights(&queries), vertices, present);
+        for c in &mut w.cols {
+            *c = present[*c as usize];
+        }
+        w.num_cols = self.bundles.len();
+        Ok(w)
+    }
+
+    /// The plan whose row for vertex v is `sewn_row(proxy[v])` (a sewn vertex is its own
+    /// proxy), with the residual pass for the present bundles.
+    fn plan_from<'w>(
+        &self,
+        present: &[u32],
+        sewn_row: impl Fn(usize) -> (&'w [u32], &'w [f64]),
+    ) -> Result<SewPlan> {
+        let nv = self.dataset.num_vertices();
         let mut weights = SparseWeights {
             row_start: Vec::with_capacity(nv + 1),
             cols: Vec::new(),
@@ -782,14 +800,12 @@ impl SewContext<'_> {
         };
         weights.row_start.push(0);
         for v in 0..nv {
-            let (cols, vals) = w_sewn.row(row_of[sp.proxy[v] as usize]);
-            weights
-                .cols
-                .extend(cols.iter().map(|&c| present[c as usize]));
+            let (cols, vals) = sewn_row(self.space.proxy[v] as usize);
+            weights.cols.extend_from_slice(cols);
             weights.vals.extend_from_slice(vals);
             weights.row_start.push(weights.cols.len() as u32);
         }
-        let tris = &dataset.neutral().triangles;
+        let tris = &self.dataset.neutral().triangles;
         let residual = ResidualPass::new(tris, self.bundles, &weights, present)?;
         Ok(SewPlan { weights, residual })
     }
@@ -815,8 +831,7 @@ impl SewContext<'_> {
         support: &SparseWeights,
     ) -> Result<SewPlan> {
         let (dataset, sp) = (self.dataset, self.space);
-        let nb = self.bundles.len();
-        let mut missing = vec![true; nb];
+        let mut missing = vec![true; self.bundles.len()];
         for &b in present {
             missing[b as usize] = false;
         }
@@ -833,42 +848,12 @@ impl SewContext<'_> {
         for (r, &v) in affected.iter().enumerate() {
             new_row[v] = r;
         }
-        let recomputed = if affected.is_empty() {
-            None
-        } else {
-            let sites: Vec<_> = present.iter().map(|&i| sp.bundle_uv[i as usize]).collect();
-            let sib = SibsonWeights::new(&sites, &sp.barriers)?;
-            let queries: Vec<_> = affected.iter().map(|&v| sp.vertex_uv[v]).collect();
-            Some(self.drop_detours(sib.weights(&queries), &affected, present))
-        };
-        let mut weights = SparseWeights {
-            row_start: Vec::with_capacity(nv + 1),
-            cols: Vec::new(),
-            vals: Vec::new(),
-            num_cols: nb,
-        };
-        weights.row_start.push(0);
-        for v in 0..nv {
-            let r = new_row[sp.proxy[v] as usize];
-            match (&recomputed, r) {
-                (Some(w), r) if r != usize::MAX => {
-                    let (cols, vals) = w.row(r);
-                    weights
-                        .cols
-                        .extend(cols.iter().map(|&c| present[c as usize]));
-                    weights.vals.extend_from_slice(vals);
-                }
-                _ => {
-                    let (cols, vals) = full.weights.row(v);
-                    weights.cols.extend_from_slice(cols);
-                    weights.vals.extend_from_slice(vals);
-                }
-            }
-            weights.row_start.push(weights.cols.len() as u32);
-        }
-        let tris = &dataset.neutral().triangles;
-        let residual = ResidualPass::new(tris, self.bundles, &weights, present)?;
-        Ok(SewPlan { weights, residual })
+        let recomputed = self.rows_for(present, &affected)?;
+        // A proxy has the same row as its own vertex in the full plan.
+        self.plan_from(present, |v| match new_row[v] {
+            usize::MAX => full.weights.row(v),
+            r => recomputed.row(r),
+        })
     }
 
     /// Removes the weights whose surface path detours around a hole; rows renormalised (a

@@ -48,6 +48,13 @@ pub fn float_array(
     Ok(arr.readonly().as_array().to_owned())
 }
 
+/// A row of three coordinates as a point, or `None` when it is not acceptable: NaN (a
+/// missing marker) only when `allow_nan`, infinity never.
+fn checked_point(p: DVec3, allow_nan: bool) -> Option<DVec3> {
+    let has_inf = p.to_array().iter().any(|x| x.is_infinite());
+    (!has_inf && (p.is_finite() || (allow_nan && p.is_nan()))).then_some(p)
+}
+
 /// An `(N, 3)` float array as points; `allow_nan` lets NaN through (missing markers) but
 /// never infinities. `name` appears in error messages with the offending row.
 pub fn points(
@@ -57,21 +64,45 @@ pub fn points(
     allow_nan: bool,
 ) -> PyResult<Vec<DVec3>> {
     let a = float_array(obj, name, &[rows, Some(3)])?;
-    let mut out = Vec::with_capacity(a.shape()[0]);
-    for (i, r) in a.outer_iter().enumerate() {
-        let p = DVec3::new(r[0], r[1], r[2]);
-        // NaN (a missing marker) is allowed only when asked; infinity never.
-        let has_inf = p.to_array().iter().any(|x| x.is_infinite());
-        let ok = !has_inf && (p.is_finite() || (allow_nan && p.is_nan()));
-        if !ok {
-            return Err(input_error(format!(
-                "{name}: row {i} has a non-finite coordinate [{}, {}, {}]",
-                p.x, p.y, p.z
-            )));
-        }
-        out.push(p);
-    }
-    Ok(out)
+    a.outer_iter()
+        .enumerate()
+        .map(|(i, r)| {
+            checked_point(DVec3::new(r[0], r[1], r[2]), allow_nan).ok_or_else(|| {
+                input_error(format!(
+                    "{name}: row {i} has a non-finite coordinate [{}, {}, {}]",
+                    r[0], r[1], r[2]
+                ))
+            })
+        })
+        .collect()
+}
+
+/// An `(F, N, 3)` float array as F sets of points (frames of markers, meshes), checked like
+/// [`points`]; errors name the set and the row with `labels`, e.g. ("frame", "bundle").
+pub fn point_sets(
+    obj: &Bound<'_, PyAny>,
+    name: &str,
+    labels: (&str, &str),
+    rows: Option<usize>,
+    allow_nan: bool,
+) -> PyResult<Vec<Vec<DVec3>>> {
+    let a = float_array(obj, name, &[None, rows, Some(3)])?;
+    a.outer_iter()
+        .enumerate()
+        .map(|(f, set)| {
+            set.outer_iter()
+                .enumerate()
+                .map(|(i, r)| {
+                    checked_point(DVec3::new(r[0], r[1], r[2]), allow_nan).ok_or_else(|| {
+                        input_error(format!(
+                            "{name}: {} {f}, {} {i} has a non-finite coordinate [{}, {}, {}]",
+                            labels.0, labels.1, r[0], r[1], r[2]
+                        ))
+                    })
+                })
+                .collect()
+        })
+        .collect()
 }
 
 /// Points as a new `(N, 3)` float64 array.

@@ -1,7 +1,7 @@
 //! `lgi._lgi.Model`: build and solve with the GIL released; the Python class `lgi.Model`
 //! (python/lgi/model.py) wraps it with progress bars and a typed result.
 
-use crate::convert::{flat_to_array, float_array, points, points_to_array};
+use crate::convert::{flat_to_array, float_array, point_sets, points, points_to_array};
 use crate::dataset::Dataset;
 use crate::error::{input_error, PyLgiError};
 use glam::DVec3;
@@ -50,26 +50,6 @@ fn config_from_dict(d: Option<&Bound<'_, PyDict>>) -> PyResult<BuildConfig> {
         }
     }
     Ok(c)
-}
-
-fn frames_from(obj: &Bound<'_, PyAny>, b: usize) -> PyResult<Vec<Vec<DVec3>>> {
-    let a = float_array(obj, "frames", &[None, Some(b), Some(3)])?;
-    let mut out = Vec::with_capacity(a.shape()[0]);
-    for (f, fr) in a.outer_iter().enumerate() {
-        let mut row = Vec::with_capacity(b);
-        for (i, r) in fr.outer_iter().enumerate() {
-            let p = DVec3::new(r[0], r[1], r[2]);
-            if !p.to_array().iter().any(|x| x.is_infinite()) {
-                row.push(if p.is_nan() { DVec3::NAN } else { p });
-            } else {
-                return Err(input_error(format!(
-                    "frames: frame {f}, bundle {i} has an infinite coordinate"
-                )));
-            }
-        }
-        out.push(row);
-    }
-    Ok(out)
 }
 
 #[pymethods]
@@ -180,7 +160,7 @@ impl Model {
         smooth_window: usize,
     ) -> PyResult<Bound<'py, PyDict>> {
         let b = self.inner.num_bundles();
-        let frames = frames_from(frames, b)?;
+        let frames = point_sets(frames, "frames", ("frame", "bundle"), Some(b), true)?;
         let thetas: Option<Vec<JawParams>> = match jaw_theta {
             None => None,
             Some(t) => Some(
@@ -255,18 +235,14 @@ impl Model {
         meshes: &Bound<'py, PyAny>,
     ) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
         let nv = self.inner.dataset().num_vertices();
-        let a = float_array(meshes, "meshes", &[None, Some(nv), Some(3)])?;
+        let sets = point_sets(meshes, "meshes", ("mesh", "vertex"), Some(nv), false)?;
         let b = self.inner.num_bundles();
-        let mut out = Vec::with_capacity(a.shape()[0] * b * 3);
-        for m in a.outer_iter() {
-            let pts: Vec<DVec3> = m
-                .outer_iter()
-                .map(|r| DVec3::new(r[0], r[1], r[2]))
-                .collect();
-            let bp = self.inner.bundle_positions(&pts).map_err(PyLgiError)?;
+        let mut out = Vec::with_capacity(sets.len() * b * 3);
+        for pts in &sets {
+            let bp = self.inner.bundle_positions(pts).map_err(PyLgiError)?;
             out.extend(bp.iter().flat_map(|p| [p.x, p.y, p.z]));
         }
-        flat_to_array(py, out, &[a.shape()[0], b, 3])
+        flat_to_array(py, out, &[sets.len(), b, 3])
     }
 
     /// Per-bundle statistics: dict of arrays `points`, `tets`, `index_bytes` (B,).
