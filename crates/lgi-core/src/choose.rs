@@ -156,7 +156,51 @@ type Scored = (f64, u32, [u32; 4], [f64; 4], f64);
 pub struct Scratch {
     inside: Vec<(u32, [f64; 4])>,
     nearest: Vec<(u32, [f64; 4], f64)>,
+    bounds: Vec<(f64, u32)>,
     scored: Vec<Scored>,
+}
+
+/// The `k` lowest scores seen so far (k is small: `alias_refine`), for pruning candidates
+/// whose lower bound cannot enter them.
+struct BestScores {
+    k: usize,
+    scores: [f64; 8],
+    len: usize,
+}
+
+impl BestScores {
+    /// Beyond 8 nothing is pruned (`worst` stays infinite).
+    fn new(k: usize) -> Self {
+        BestScores {
+            k,
+            scores: [f64::INFINITY; 8],
+            len: 0,
+        }
+    }
+
+    fn add(&mut self, s: f64) {
+        if self.k > self.scores.len() {
+            return;
+        }
+        if self.len < self.k {
+            self.scores[self.len] = s;
+            self.len += 1;
+        } else if s < self.scores[self.len - 1] {
+            self.scores[self.len - 1] = s;
+        } else {
+            return;
+        }
+        self.scores[..self.len].sort_unstable_by(f64::total_cmp);
+    }
+
+    /// The k-th lowest score (infinity until k scores were added).
+    fn worst(&self) -> f64 {
+        if self.len < self.k {
+            f64::INFINITY
+        } else {
+            self.scores[self.len - 1]
+        }
+    }
 }
 
 fn clean_weights(l: [f64; 4]) -> [f64; 4] {
@@ -209,28 +253,36 @@ pub fn choose(
         scratch.nearest.clear();
         // Tets around the cloud point nearest the target (where it left the cloud):
         // the exact n-nearest search must enumerate every tet tied at a shared vertex and
-        // costs ~10x more for the same choices in practice (docs/performance.md).
-        index.nearest_around(target, 1, &mut scratch.nearest);
-        // A closest point at a tet's vertex is that cloud point, scored below on its own.
-        scratch
-            .nearest
-            .retain(|c| c.1.iter().all(|&b| b < 1.0 - 1e-12));
-        scratch.nearest.truncate(params.projection_candidates);
+        // costs ~10x more for the same choices in practice (docs/performance.md). A closest
+        // point at a tet's vertex is that cloud point, scored below on its own.
+        index.project_around(
+            target,
+            params.projection_candidates,
+            &mut scratch.bounds,
+            &mut scratch.nearest,
+        );
+        let mut best = BestScores::new(params.alias_refine.max(1));
         for &(t, l, d) in &scratch.nearest {
             let tet = index.tets()[t as usize];
             let w = clean_weights(l);
             let s = scoring.score(&reps(&tet), &w, d);
+            best.add(s);
             scratch.scored.push((s, t, tet, w, d));
         }
         // Cloud points themselves: a point whose every tet was too thin to keep is still
-        // real geometry, and a target on it must find it exactly.
+        // real geometry, and a target on it must find it exactly. A score is at least the
+        // squared distance, so a point farther than the current best few cannot enter them
+        // (hits are always kept: their aliases are refined).
         for (p, &q) in cloud.points.iter().enumerate() {
+            let d = q.distance(target);
+            if d > params.hit_distance && d * d > best.worst() {
+                continue;
+            }
             let tet = [p as u32; 4];
             let w = [1.0, 0.0, 0.0, 0.0];
-            let d = q.distance(target);
-            scratch
-                .scored
-                .push((scoring.score(&reps(&tet), &w, d), NO_TET, tet, w, d));
+            let s = scoring.score(&reps(&tet), &w, d);
+            best.add(s);
+            scratch.scored.push((s, NO_TET, tet, w, d));
         }
     } else {
         lower_simplices(cloud, target, scoring, &mut scratch.scored);

@@ -62,7 +62,15 @@ pub struct TetIndex {
     /// Tets incident to each point (CSR), for the fast projection around the nearest points.
     incident_start: Vec<u32>,
     incident: Vec<u32>,
+    /// Extent of the points along each of [`SLAB_DIRECTIONS`] and the cloud's thinnest axis:
+    /// a point beyond one of these slabs is outside the hull, so no tet can contain it.
+    slabs: Vec<(DVec3, f64, f64)>,
+    /// Largest slab width (the cloud's size), scaling the slab margin.
+    extent: f64,
 }
+
+/// Fixed directions of the slab test (a Fibonacci sphere; opposite directions are redundant).
+const SLAB_DIRECTIONS: usize = 48;
 
 impl TetIndex {
     /// Builds the index of `tets` over `points`.
@@ -152,7 +160,14 @@ impl TetIndex {
             nodes: Vec::new(),
             bvh_items: Vec::new(),
             scale,
+            slabs: Vec::new(),
+            extent: 0.0,
         };
+        index.slabs = slabs(&index.points);
+        index.extent = index
+            .slabs
+            .iter()
+            .fold(0.0f64, |m, &(_, lo, hi)| m.max(hi - lo));
         index.build_grid(&boxes);
         index.build_bvh(&boxes);
         Ok(index)
@@ -177,15 +192,7 @@ impl TetIndex {
         };
         if k == 1 {
             // The common case, without allocating: the nearest point (ties: lowest index).
-            let v = (0..self.points.len())
-                .min_by(|&a, &b| {
-                    let (da, db) = (
-                        self.points[a].distance_squared(p),
-                        self.points[b].distance_squared(p),
-                    );
-                    da.total_cmp(&db).then(a.cmp(&b))
-                })
-                .unwrap_or(0);
+            let v = self.nearest_point(p);
             let (s, e) = (self.incident_start[v], self.incident_start[v + 1]);
             for &t in &self.incident[s as usize..e as usize] {
                 project(t, out);
@@ -216,6 +223,67 @@ impl TetIndex {
             }
         }
         out[base..].sort_unstable_by(|a, b| a.2.total_cmp(&b.2).then(a.0.cmp(&b.0)));
+    }
+
+    /// Projection of a target outside every tet: the `n` tets nearest to `p`, among those
+    /// incident to the cloud point nearest to `p` (ties: lowest index), whose closest point to
+    /// `p` is not one of their vertices (that point is scored on its own) — appended to `out`
+    /// sorted by distance then tet index, with the closest point's barycentric and distance.
+    /// Equal to [`nearest_around`](Self::nearest_around) with `k = 1`, filtered and truncated,
+    /// but exact closest points are computed only for tets whose face-plane lower bound can
+    /// still beat the current `n`-th distance (`bounds` is scratch).
+    pub fn project_around(
+        &self,
+        p: DVec3,
+        n: usize,
+        bounds: &mut Vec<(f64, u32)>,
+        out: &mut Vec<(u32, [f64; 4], f64)>,
+    ) {
+        let base = out.len();
+        if n == 0 || self.points.is_empty() || !p.is_finite() {
+            return;
+        }
+        let v = self.nearest_point(p);
+        let (s, e) = (self.incident_start[v], self.incident_start[v + 1]);
+        let pv = p - self.points[v];
+        bounds.clear();
+        bounds.extend(
+            self.incident[s as usize..e as usize]
+                .iter()
+                .filter(|&&t| !closest_is_corner(&self.points, self.tets[t as usize], v, pv))
+                .map(|&t| (plane_lower_bound(&self.frames[t as usize], p), t)),
+        );
+        // The n lowest bounds first (a tight n-th distance early), the rest in any order: a
+        // tet is skipped only when its bound exceeds the n-th distance, which only shrinks.
+        if bounds.len() > n {
+            bounds.select_nth_unstable_by(n - 1, |a, b| a.0.total_cmp(&b.0));
+        }
+        // Rounding slack so a bound never prunes a tet whose computed distance ties.
+        let slack = 1e-12 * (self.scale + p.abs().max_element());
+        for &(lb, t) in bounds.iter() {
+            if out.len() - base == n && lb - slack > out[out.len() - 1].2 {
+                continue;
+            }
+            let corners = self.tets[t as usize].map(|i| self.points[i as usize]);
+            let inv = &self.frames[t as usize].inv;
+            let (q, b) = closest_point_in_tet_with(p, corners, inv.is_finite().then_some(inv));
+            if b.iter().all(|&x| x < 1.0 - 1e-12) {
+                insert_nearest(out, base, n, (t, b, p.distance(q)));
+            }
+        }
+    }
+
+    /// The cloud point nearest to `p` (ties: lowest index); 0 for an empty cloud.
+    fn nearest_point(&self, p: DVec3) -> usize {
+        (0..self.points.len())
+            .min_by(|&a, &b| {
+                let (da, db) = (
+                    self.points[a].distance_squared(p),
+                    self.points[b].distance_squared(p),
+                );
+                da.total_cmp(&db).then(a.cmp(&b))
+            })
+            .unwrap_or(0)
     }
 
     /// Number of tets.
@@ -265,6 +333,15 @@ impl TetIndex {
             return;
         }
         if p.cmplt(self.lo).any() || p.cmpgt(self.hi).any() {
+            return;
+        }
+        // Outside the hull (with a margin beyond the reach of `eps`): nothing can contain p.
+        let margin = (8.0 * FAST_EPS.max(eps) + 1e-12) * self.extent;
+        if self
+            .slabs
+            .iter()
+            .any(|&(d, lo, hi)| !(lo - margin..=hi + margin).contains(&p.dot(d)))
+        {
             return;
         }
         let c = self.cell_of(p);
@@ -632,6 +709,88 @@ fn bary(f: &Frame, p: DVec3) -> [f64; 4] {
     [1.0 - l.x - l.y - l.z, l.x, l.y, l.z]
 }
 
+/// The slabs of [`TetIndex`]: for each direction, the extent of `points` along it.
+fn slabs(points: &[DVec3]) -> Vec<(DVec3, f64, f64)> {
+    if points.is_empty() {
+        return Vec::new();
+    }
+    let mut dirs: Vec<DVec3> = (0..SLAB_DIRECTIONS)
+        .map(|i| {
+            // Half a Fibonacci sphere (y >= 0): the other half gives the same slabs.
+            let y = 1.0 - (i as f64 + 0.5) / SLAB_DIRECTIONS as f64;
+            let r = (1.0 - y * y).sqrt();
+            let phi = i as f64 * 2.399_963_229_728_653;
+            DVec3::new(r * phi.cos(), y, r * phi.sin())
+        })
+        .collect();
+    // The thinnest principal axis (inverse power iteration on the covariance): clouds of
+    // bundles that move in little more than a plane have noisy targets just off that plane.
+    let c = points.iter().copied().sum::<DVec3>() / points.len() as f64;
+    let cov = points.iter().fold(DMat3::ZERO, |m, p| {
+        let q = *p - c;
+        m + DMat3::from_cols(q * q.x, q * q.y, q * q.z)
+    });
+    let inv = cov.inverse();
+    if inv.is_finite() {
+        let mut v = DVec3::new(0.267, 0.535, 0.802);
+        for _ in 0..32 {
+            v = (inv * v).normalize_or_zero();
+        }
+        if v != DVec3::ZERO {
+            dirs.push(v);
+        }
+    }
+    dirs.into_iter()
+        .map(|d| {
+            let (lo, hi) = points
+                .iter()
+                .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), p| {
+                    let x = p.dot(d);
+                    (lo.min(x), hi.max(x))
+                });
+            (d, lo, hi)
+        })
+        .collect()
+}
+
+/// True when the closest point of `tet` (which has corner `v`) to `v + pv` is certainly `v`
+/// itself: `pv` makes an obtuse angle, with margin, with every edge leaving `v` (then `v + pv`
+/// lies in the tet's normal cone at `v`). Borderline cases answer false.
+fn closest_is_corner(points: &[DVec3], tet: Tet, v: usize, pv: DVec3) -> bool {
+    let o = points[v];
+    let lp = pv.length();
+    tet.iter().all(|&w| {
+        let e = points[w as usize] - o;
+        w as usize == v || pv.dot(e) < -1e-9 * lp * e.length()
+    })
+}
+
+/// A lower bound of the distance from `p` to the tet of `f`: the largest distance of `p` beyond
+/// one of the tet's face planes (the face opposite vertex j is where barycentric λ_j = 0, at
+/// distance −λ_j / |∇λ_j|). 0 for a flat tet or a point inside.
+fn plane_lower_bound(f: &Frame, p: DVec3) -> f64 {
+    if !f.inv.is_finite() {
+        return 0.0;
+    }
+    let l = f.inv * (p - f.p0);
+    let l0 = 1.0 - l.x - l.y - l.z;
+    let rows = [f.inv.row(0), f.inv.row(1), f.inv.row(2)];
+    let mut lb = 0.0f64;
+    if l0 < 0.0 {
+        lb = lb.max(-l0 / (rows[0] + rows[1] + rows[2]).length());
+    }
+    for (lj, row) in [l.x, l.y, l.z].into_iter().zip(rows) {
+        if lj < 0.0 {
+            lb = lb.max(-lj / row.length());
+        }
+    }
+    if lb.is_finite() {
+        lb
+    } else {
+        0.0
+    }
+}
+
 #[inline]
 fn box_distance(p: DVec3, node: &Node) -> f64 {
     (node.lo - p).max(p - node.hi).max(DVec3::ZERO).length()
@@ -943,6 +1102,36 @@ mod tests {
                     let corners = ix.tets()[t as usize].map(|i| pts[i as usize]);
                     let (c, _) = crate::tets::closest_point_in_tet(q, corners);
                     assert!((c.distance(q) - d).abs() <= 1e-12 * (1.0 + d));
+                }
+            }
+        }
+    }
+
+    proptest! {
+        #![proptest_config(config(96, 0x9e1d_0007))]
+
+        /// The pruned projection gives bit for bit what projecting every incident tet, dropping
+        /// vertex closest points and keeping the n nearest gives.
+        #[test]
+        fn project_around_equals_the_unpruned_projection_filtered_and_truncated(
+            npts in 5usize..80,
+            seed in any::<u64>(),
+            n in 1usize..12,
+            samples in prop::collection::vec(
+                (-1.5f64..1.5, -1.5f64..1.5, -1.5f64..1.5), 1..16),
+        ) {
+            let ix = index(npts, seed, &TetConfig::default());
+            let (mut bounds, mut got, mut all) = (Vec::new(), Vec::new(), Vec::new());
+            for (x, y, z) in samples {
+                // Far and near points, outside and inside the cloud.
+                for q in [DVec3::new(x, y, z), DVec3::new(x, y, z) * 3.0] {
+                    got.clear();
+                    all.clear();
+                    ix.project_around(q, n, &mut bounds, &mut got);
+                    ix.nearest_around(q, 1, &mut all);
+                    all.retain(|c| c.1.iter().all(|&b| b < 1.0 - 1e-12));
+                    all.truncate(n);
+                    prop_assert_eq!(&got, &all);
                 }
             }
         }

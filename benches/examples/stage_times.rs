@@ -1,0 +1,77 @@
+//! Per-frame stage times that survive a busy machine: every stage is timed over the same 100
+//! frames several times and the fastest pass is reported (contention only adds time). Used to
+//! compare two builds side by side: `cargo run --release -p lgi-benches --example stage_times`.
+
+use lgi_benches::{build_model, load_workload, make_frames};
+use lgi_core::choose::{choose, pure_errors, ChoiceParams, Scoring, Scratch};
+use lgi_core::model::FrameState;
+use std::hint::black_box;
+use std::time::Instant;
+
+const FRAMES: usize = 100;
+const PASSES: usize = 15;
+
+fn main() -> Result<(), Box<dyn std::error::Error>> {
+    let workload = load_workload()?;
+    let model = build_model(&workload)?;
+    let frames = make_frames(&model, FRAMES, 1)?;
+    let b = model.num_bundles();
+    let c = model.config();
+    let params = ChoiceParams {
+        eps: c.containment_eps,
+        projection_candidates: c.projection_candidates,
+        hit_distance: c.prune_motion.max(c.duplicate_distance) * model.diagonal(),
+        ..ChoiceParams::default()
+    };
+    let tw = c.temporal_weight * model.diagonal() * model.diagonal();
+    let mut scratch = Scratch::default();
+    let (mut choose_best, mut solve_best) = (f64::INFINITY, f64::INFINITY);
+    for _ in 0..PASSES {
+        // Serial choice of every bundle (no temporal preference).
+        let t = Instant::now();
+        for targets in &frames {
+            let pure = pure_errors(model.shape_positions(), b, targets);
+            for (i, &target) in targets.iter().enumerate() {
+                let scoring = Scoring {
+                    shape_positions: model.shape_positions(),
+                    num_bundles: b,
+                    neighbours: &model.neighbours()[i],
+                    targets,
+                    previous: None,
+                    temporal_weight: tw,
+                    pure_errors: &pure,
+                };
+                black_box(choose(
+                    &model.indices()[i],
+                    &model.clouds()[i],
+                    &model.alias_groups()[i],
+                    target,
+                    &scoring,
+                    &params,
+                    &mut scratch,
+                ));
+            }
+        }
+        choose_best = choose_best.min(t.elapsed().as_secs_f64() / FRAMES as f64);
+        // Full temporal solve (rayon's threads).
+        let t = Instant::now();
+        let mut state: Option<FrameState> = None;
+        for targets in &frames {
+            let frame = model.solve_frame(targets, state.as_ref(), None)?;
+            state = Some(FrameState {
+                choices: black_box(frame).choices,
+            });
+        }
+        solve_best = solve_best.min(t.elapsed().as_secs_f64() / FRAMES as f64);
+    }
+    println!("{}", workload.name);
+    println!(
+        "choose, all bundles, serial: {:.3} ms/frame (fastest of {PASSES} passes)",
+        choose_best * 1e3
+    );
+    println!(
+        "solve_frame with previous:   {:.3} ms/frame (fastest of {PASSES} passes)",
+        solve_best * 1e3
+    );
+    Ok(())
+}
