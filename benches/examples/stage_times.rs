@@ -26,10 +26,12 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let tw = c.temporal_weight * model.diagonal() * model.diagonal();
     let mut scratch = Scratch::default();
     let (mut choose_best, mut solve_best) = (f64::INFINITY, f64::INFINITY);
+    // LGI_STAGE=solve times only the solve (for profiling it alone).
+    let only_solve = std::env::var("LGI_STAGE").is_ok_and(|s| s == "solve");
     for _ in 0..PASSES {
         // Serial choice of every bundle (no temporal preference).
         let t = Instant::now();
-        for targets in &frames {
+        for targets in frames.iter().filter(|_| !only_solve) {
             let pure = pure_errors(model.shape_positions(), b, targets);
             for (i, &target) in targets.iter().enumerate() {
                 let scoring = Scoring {
