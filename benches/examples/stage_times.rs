@@ -2,9 +2,11 @@
 //! frames several times and the fastest pass is reported (contention only adds time). Used to
 //! compare two builds side by side: `cargo run --release -p lgi-benches --example stage_times`.
 
+use glam::DVec3;
 use lgi_benches::{build_model, load_workload, make_frames};
 use lgi_core::choose::{choose, pure_errors, ChoiceParams, Scoring, Scratch};
 use lgi_core::model::FrameState;
+use lgi_core::sew::{blend, Pieces};
 use std::hint::black_box;
 use std::time::Instant;
 
@@ -25,7 +27,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     };
     let tw = c.temporal_weight * model.diagonal() * model.diagonal();
     let mut scratch = Scratch::default();
-    let (mut choose_best, mut solve_best) = (f64::INFINITY, f64::INFINITY);
+    let (mut choose_best, mut solve_best, mut blend_best) =
+        (f64::INFINITY, f64::INFINITY, f64::INFINITY);
+    let mut pieces: Vec<Pieces> = Vec::new();
+    let mesh = model.dataset().neutral();
+    let mut verts = vec![DVec3::ZERO; mesh.num_vertices()];
     // LGI_STAGE=solve times only the solve (for profiling it alone).
     let only_solve = std::env::var("LGI_STAGE").is_ok_and(|s| s == "solve");
     for _ in 0..PASSES {
@@ -60,11 +66,27 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         let mut state: Option<FrameState> = None;
         for targets in &frames {
             let frame = model.solve_frame(targets, state.as_ref(), None)?;
+            if pieces.len() < FRAMES {
+                pieces.push(Pieces::from_choices(&frame.choices));
+            }
             state = Some(FrameState {
                 choices: black_box(frame).choices,
             });
         }
         solve_best = solve_best.min(t.elapsed().as_secs_f64() / FRAMES as f64);
+        // Sewing's blend alone (rayon's threads), on the solve's choices.
+        let t = Instant::now();
+        for p in &pieces {
+            blend(
+                &mesh.positions,
+                model.dataset().displacements(),
+                model.sew_weights(),
+                p,
+                &mut verts,
+            );
+            black_box(verts[0]);
+        }
+        blend_best = blend_best.min(t.elapsed().as_secs_f64() / FRAMES as f64);
     }
     println!("{}", workload.name);
     println!(
@@ -74,6 +96,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     println!(
         "solve_frame with previous:   {:.3} ms/frame (fastest of {PASSES} passes)",
         solve_best * 1e3
+    );
+    println!(
+        "blend (sewing, no residual pass): {:.3} ms/frame (fastest of {PASSES} passes)",
+        blend_best * 1e3
     );
     Ok(())
 }
