@@ -1433,4 +1433,329 @@ mod tests {
             }
         }
     }
+
+    /// The patch's jaw: a hinge about x through a pivot behind and above the patch, weight 1
+    /// below y = 0.35, 0 above y = 0.65, linear between.
+    fn patch_rig(data: &Dataset) -> JawRig {
+        let weights = data
+            .neutral()
+            .positions
+            .iter()
+            .map(|p| ((0.65 - p.y) / 0.3).clamp(0.0, 1.0))
+            .collect();
+        JawRig::new(DVec3::new(0.5, 0.8, -0.6), weights).unwrap()
+    }
+
+    /// Dataset shape jaw openings of [`jaw_patch`] (radians).
+    const OPENINGS: [f64; 10] = [0.0, 0.0, 0.0, 0.2, 0.2, 0.3, 0.3, 0.4, 0.5, 0.5];
+
+    /// The patch's expressions, each at its opening from [`OPENINGS`] (skinned with the rig),
+    /// plus markers only where the jaw weight is constant over their triangle (so a marker's
+    /// own weight skins it exactly like its triangle's vertices).
+    fn jaw_patch() -> (Dataset, JawRig, Vec<JawParams>, Vec<DVec3>) {
+        let base = patch(24);
+        let rig = patch_rig(&base);
+        let x0 = &base.neutral().positions;
+        let mut shapes = Vec::new();
+        let mut thetas = Vec::new();
+        for (k, &open) in OPENINGS.iter().enumerate() {
+            let theta = JawParams {
+                open,
+                ..JawParams::ZERO
+            };
+            let expr: Vec<DVec3> = (0..x0.len())
+                .map(|v| x0[v] + base.displacement(k % base.num_shapes(), v))
+                .collect();
+            let mut posed = expr.clone();
+            rig.skin(&expr, theta, &mut posed).unwrap();
+            shapes.push((format!("e{k}_open{open}"), posed));
+            thetas.push(theta);
+        }
+        let data = Dataset::from_shape_positions(base.neutral().clone(), shapes).unwrap();
+        let mut markers = Vec::new();
+        for &y in &[0.08, 0.17, 0.26, 0.74, 0.83, 0.92] {
+            for &x in &[0.1, 0.3, 0.5, 0.7, 0.9] {
+                let (u, v) = (x + 0.013 * y, y);
+                markers.push(DVec3::new(u, v, 0.1 * (3.0 * u).sin() * (2.0 * v).cos()));
+            }
+        }
+        (data, rig, thetas, markers)
+    }
+
+    fn binned_model(edges: Vec<f64>, overlap: f64) -> Result<(Model, Dataset, Vec<JawParams>)> {
+        let (data, rig, thetas, markers) = jaw_patch();
+        let jaw = JawInput {
+            rig,
+            shape_thetas: thetas.clone(),
+            bins: Some(JawBins { edges, overlap }),
+        };
+        let model = Model::build_shared(
+            Arc::new(data.clone()),
+            &markers,
+            &BuildConfig::default(),
+            Some(jaw),
+        )?;
+        Ok((model, data, thetas))
+    }
+
+    fn shape_mesh(data: &Dataset, k: usize) -> Vec<DVec3> {
+        let x0 = &data.neutral().positions;
+        (0..x0.len())
+            .map(|v| x0[v] + data.displacement(k, v))
+            .collect()
+    }
+
+    #[test]
+    fn every_member_shape_of_every_bin_is_reproduced_at_its_own_jaw_pose() {
+        let (model, data, thetas) = binned_model(vec![0.0, 0.25, 0.5], 0.06).unwrap();
+        assert_eq!(model.lookups()[0].members(), &[0, 1, 2, 3, 4, 5, 6]);
+        assert_eq!(model.lookups()[1].members(), &[3, 4, 5, 6, 7, 8, 9]);
+        let diag = model.diagonal();
+        for (bin, lk) in model.lookups().iter().enumerate() {
+            for &k in lk.members() {
+                let k = k as usize;
+                let mesh = shape_mesh(&data, k);
+                let targets = model.bundle_positions(&mesh).unwrap();
+                let frame = model
+                    .solve_frame_in_bin(&targets, Some(thetas[k]), bin)
+                    .unwrap();
+                assert_eq!(frame.bin, bin);
+                for (i, c) in frame.choices.iter().enumerate() {
+                    let c = c.unwrap();
+                    let w: f64 = (0..4)
+                        .filter(|&j| c.shapes[j] == k as u32 + 1)
+                        .map(|j| c.weights[j])
+                        .sum();
+                    // The target matches the cloud point up to the f32 storage of shapes.
+                    assert!(w > 1.0 - 1e-6, "bin {bin} shape {k} bundle {i}: {c:?}");
+                }
+                // f32 storage of the re-posed displacements (like the dataset's) bounds the
+                // round trip T(θ_k) T(θ_b)⁻¹ (T(θ_b) T(θ_k)⁻¹ x) at ~1e-7 of the motion.
+                let err = (0..mesh.len())
+                    .filter(|&v| model.sewing_space().contains(v))
+                    .map(|v| frame.vertices[v].distance(mesh[v]))
+                    .fold(0.0, f64::max);
+                assert!(err <= 1e-6 * diag, "bin {bin} shape {k}: {err:e}");
+                assert!(frame.residuals.iter().all(|&r| r <= 1e-9 * diag));
+            }
+        }
+    }
+
+    #[test]
+    fn one_bin_holding_every_shape_matches_the_unbinned_model_to_f32_round_off() {
+        let (binned, data, thetas) = binned_model(vec![0.0, 0.5], 0.0).unwrap();
+        let (_, rig, _, markers) = jaw_patch();
+        let plain = Model::build_shared(
+            Arc::new(data.clone()),
+            &markers,
+            &BuildConfig::default(),
+            Some(JawInput {
+                rig,
+                shape_thetas: thetas.clone(),
+                bins: None,
+            }),
+        )
+        .unwrap();
+        // Frames between shapes: blends of two shapes' meshes at an intermediate pose.
+        for (a, b, t) in [(0, 5, 0.3), (3, 8, 0.6), (1, 7, 0.5)] {
+            let (ma, mb) = (shape_mesh(&data, a), shape_mesh(&data, b));
+            let mesh: Vec<DVec3> = ma.iter().zip(&mb).map(|(p, q)| p.lerp(*q, t)).collect();
+            let targets = plain.bundle_positions(&mesh).unwrap();
+            let theta = JawParams {
+                open: (1.0 - t) * thetas[a].open + t * thetas[b].open,
+                ..JawParams::ZERO
+            };
+            let f0 = plain.solve_frame(&targets, None, Some(theta)).unwrap();
+            let f1 = binned.solve_frame(&targets, None, Some(theta)).unwrap();
+            let err = f0
+                .vertices
+                .iter()
+                .zip(&f1.vertices)
+                .map(|(p, q)| p.distance(*q))
+                .fold(0.0, f64::max);
+            assert!(err <= 1e-5 * plain.diagonal(), "{a}-{b}: {err:e}");
+        }
+    }
+
+    #[test]
+    fn bin_selection_follows_a_hand_written_sequence_with_hysteresis() {
+        let bins = JawBins {
+            edges: vec![0.0, 0.2, 0.4, 0.6],
+            overlap: 0.05,
+        };
+        bins.validate().unwrap();
+        // (opening, expected bin) in order; each frame sees the previous frame's bin.
+        let script = [
+            (0.0, 0), // core of bin 0
+            (0.19, 0),
+            (0.23, 0), // past edge 0.2 but inside bin 0's overlap (to 0.25): kept
+            (0.26, 1), // outside: core bin 1
+            (0.17, 1), // inside bin 1's overlap (from 0.15): kept
+            (0.14, 0), // outside: core bin 0
+            (-0.3, 0), // below the first edge: clamped to bin 0
+            (0.9, 2),  // above the last edge: clamped to the last bin
+            (0.36, 2), // inside bin 2's overlap (from 0.35): kept
+            (0.34, 1), // outside: core bin 1
+            (0.4, 1),  // on an edge, inside bin 1's range: kept
+            (0.46, 2), // outside bin 1's overlap (to 0.45)
+        ];
+        let mut previous = None;
+        for (f, &(open, want)) in script.iter().enumerate() {
+            let got = bins.select(open, previous);
+            assert_eq!(got, want, "frame {f}, opening {open}");
+            previous = Some(got);
+        }
+        // Without a previous frame: the core bin (an edge belongs to the bin above it).
+        assert_eq!(bins.select(0.2, None), 1);
+        assert_eq!(bins.select(0.6, None), 2);
+    }
+
+    #[test]
+    fn a_temporal_solve_picks_bins_by_hysteresis_and_reports_dataset_shape_ids() {
+        let (model, data, _) = binned_model(vec![0.0, 0.25, 0.5], 0.06).unwrap();
+        let opens = [0.0, 0.2, 0.29, 0.32, 0.2, 0.18, 0.5];
+        let want = [0, 0, 0, 1, 1, 0, 1];
+        let frames: Vec<Vec<DVec3>> = opens
+            .iter()
+            .enumerate()
+            .map(|(f, _)| {
+                let k = [0, 3, 5, 7, 4, 1, 9][f];
+                model.bundle_positions(&shape_mesh(&data, k)).unwrap()
+            })
+            .collect();
+        let poses: Vec<JawParams> = opens
+            .iter()
+            .map(|&open| JawParams {
+                open,
+                ..JawParams::ZERO
+            })
+            .collect();
+        for window in [0, 3] {
+            let out = model
+                .solve_sequence(&frames, Some(&poses), true, window, |_| {})
+                .unwrap();
+            let bins: Vec<usize> = out.iter().map(|f| f.bin).collect();
+            assert_eq!(bins, want, "window {window}");
+            for (f, fr) in out.iter().enumerate() {
+                let members = model.lookups()[fr.bin].members();
+                for c in fr.choices.iter().flatten() {
+                    for j in 0..4 {
+                        let s = c.shapes[j];
+                        assert!(c.weights[j] == 0.0 || s == 0 || members.contains(&(s - 1)));
+                    }
+                }
+                assert!(
+                    fr.residuals.iter().all(|&r| r <= 1e-9 * model.diagonal()),
+                    "{f}"
+                );
+            }
+        }
+        // Frame 1 is shape 3 at its own pose (0.2): it chooses that shape (id 4), purely.
+        let out = model
+            .solve_sequence(&frames[..2], Some(&poses[..2]), true, 0, |_| {})
+            .unwrap();
+        for c in out[1].choices.iter().flatten() {
+            let w: f64 = (0..4)
+                .filter(|&j| c.shapes[j] == 4)
+                .map(|j| c.weights[j])
+                .sum();
+            assert!(w > 1.0 - 1e-6, "{c:?}");
+        }
+        // solve_frame with a FrameState applies the same rule.
+        let state = FrameState {
+            choices: out[1].choices.clone(),
+            bin: Some(out[1].bin),
+        };
+        let fr = model
+            .solve_frame(&frames[2], Some(&state), Some(poses[2]))
+            .unwrap();
+        assert_eq!(fr.bin, 0);
+    }
+
+    #[test]
+    fn binned_model_save_load_round_trip_gives_identical_frames() {
+        let (model, data, thetas) = binned_model(vec![0.0, 0.25, 0.5], 0.06).unwrap();
+        let path = std::env::temp_dir().join(format!("lgi-bins-{}.lgi", std::process::id()));
+        crate::io::model_file::save(&model, &path).unwrap();
+        let loaded = crate::io::model_file::load(&path);
+        std::fs::remove_file(&path).unwrap();
+        let loaded = loaded.unwrap();
+        assert_eq!(loaded.jaw().unwrap().bins, model.jaw().unwrap().bins);
+        assert_eq!(loaded.lookups().len(), 2);
+        let frames: Vec<Vec<DVec3>> = [0, 3, 5, 7, 9]
+            .iter()
+            .map(|&k| model.bundle_positions(&shape_mesh(&data, k)).unwrap())
+            .collect();
+        let poses: Vec<JawParams> = [0, 3, 5, 7, 9].iter().map(|&k| thetas[k]).collect();
+        let a = model
+            .solve_sequence(&frames, Some(&poses), true, 3, |_| {})
+            .unwrap();
+        let b = loaded
+            .solve_sequence(&frames, Some(&poses), true, 3, |_| {})
+            .unwrap();
+        for (fa, fb) in a.iter().zip(&b) {
+            assert_eq!(fa.vertices, fb.vertices);
+            assert_eq!(fa.choices, fb.choices);
+            assert_eq!(fa.bin, fb.bin);
+        }
+    }
+
+    #[test]
+    fn a_version_2_file_still_loads_as_an_unbinned_model() {
+        let (data, rig, thetas, markers) = jaw_patch();
+        let model = Model::build_shared(
+            Arc::new(data),
+            &markers,
+            &BuildConfig::default(),
+            Some(JawInput {
+                rig,
+                shape_thetas: thetas.clone(),
+                bins: None,
+            }),
+        )
+        .unwrap();
+        let path = std::env::temp_dir().join(format!("lgi-v2-{}.lgi", std::process::id()));
+        crate::io::model_file::save(&model, &path).unwrap();
+        // Version 2 is version 3 without the trailing bins section (a u64 0 when unbinned).
+        let bytes = std::fs::read(&path).unwrap();
+        let payload = &bytes[28..bytes.len() - 8];
+        assert_eq!(&bytes[bytes.len() - 8..], &[0u8; 8]);
+        let mut v2 = bytes[..8].to_vec();
+        v2.extend_from_slice(&2u32.to_le_bytes());
+        v2.extend_from_slice(&(payload.len() as u64).to_le_bytes());
+        v2.extend_from_slice(&crate::io::model_file::checksum(payload).to_le_bytes());
+        v2.extend_from_slice(payload);
+        std::fs::write(&path, v2).unwrap();
+        let loaded = crate::io::model_file::load(&path);
+        std::fs::remove_file(&path).unwrap();
+        let loaded = loaded.unwrap();
+        assert!(loaded.jaw().unwrap().bins.is_none());
+        let t = model
+            .bundle_positions(&shape_mesh(model.dataset(), 5))
+            .unwrap();
+        let a = model.solve_frame(&t, None, Some(thetas[5])).unwrap();
+        let b = loaded.solve_frame(&t, None, Some(thetas[5])).unwrap();
+        assert_eq!(a.vertices, b.vertices);
+    }
+
+    #[test]
+    fn invalid_bin_specs_are_rejected_with_named_errors() {
+        let cases: [(Vec<f64>, f64, &str); 6] = [
+            (vec![0.1], 0.0, "at least 2 edges"),
+            (vec![0.0, f64::NAN], 0.0, "edge 1 must be finite"),
+            (vec![0.0, 0.3, 0.2], 0.0, "edge 2 (0.2) <= edge 1 (0.3)"),
+            (vec![0.0, 0.5], -0.1, "overlap must be finite and >= 0"),
+            (vec![0.0, 0.5], f64::INFINITY, "overlap must be finite"),
+            (
+                vec![0.0, 0.1, 0.15, 0.5],
+                0.0,
+                "jaw bin 1 (opening 0.1 to 0.15 rad",
+            ),
+        ];
+        for (edges, overlap, want) in cases {
+            let e = binned_model(edges.clone(), overlap).unwrap_err();
+            assert!(matches!(e, LgiError::Input(_)), "{edges:?}: {e:?}");
+            assert!(e.to_string().contains(want), "{edges:?}: {e}");
+        }
+    }
 }

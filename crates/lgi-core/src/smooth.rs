@@ -34,11 +34,13 @@ pub fn smooth_choices_in_bins(
             if choices[f][b].is_some() {
                 acc.clear();
                 let mut count = 0.0;
-                for g in f.saturating_sub(half)..(f + half + 1).min(nf) {
-                    if bins.get(g) != bins.get(f) {
+                let lo = f.saturating_sub(half);
+                let hi = (f + half + 1).min(nf);
+                for (g, frame) in choices[lo..hi].iter().enumerate() {
+                    if bins.get(lo + g) != bins.get(f) {
                         continue;
                     }
-                    let Some(c) = choices[g].get(b).and_then(|c| c.as_ref()) else {
+                    let Some(c) = frame.get(b).and_then(|c| c.as_ref()) else {
                         continue;
                     };
                     count += 1.0;

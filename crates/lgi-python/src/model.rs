@@ -96,7 +96,10 @@ impl Model {
                 let bins = match jaw_bins {
                     None => None,
                     Some(e) => Some(JawBins {
-                        edges: float_array(e, "jaw_bins", &[None])?.iter().copied().collect(),
+                        edges: float_array(e, "jaw_bins", &[None])?
+                            .iter()
+                            .copied()
+                            .collect(),
                         overlap: bin_overlap,
                     }),
                 };
