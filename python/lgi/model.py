@@ -89,7 +89,7 @@ class SolveResult:
 def _bin_edges(jaw_bins: int | ArrayLike, shape_theta: NDArray[np.float64]) -> NDArray[np.float64]:
     """Bin edges over the jaw opening: given, or for an int n at quantiles of the shapes'
     distinct openings (repeated openings, such as the many expressions at rest, would make
-    equal quantiles)."""
+    equal quantiles), the outer edges at the smallest and largest opening."""
     if isinstance(jaw_bins, (bool, np.bool_)):
         raise InputError(f"jaw_bins must be an int, a sequence of edges or None, got {jaw_bins!r}")
     if isinstance(jaw_bins, (int, np.integer)):
@@ -98,15 +98,21 @@ def _bin_edges(jaw_bins: int | ArrayLike, shape_theta: NDArray[np.float64]) -> N
             raise InputError(f"jaw_bins must be >= 1 bins, got {n}")
         if shape_theta.ndim != 2 or shape_theta.shape[1] != 3:
             raise InputError(f"shape_theta: expected shape (S, 3), got {shape_theta.shape}")
-        opens = np.unique(shape_theta[:, 0])
-        if not np.all(np.isfinite(opens)):
+        raw = shape_theta[:, 0]
+        if not np.all(np.isfinite(raw)):
             raise InputError("shape_theta: jaw openings must be finite")
+        # Openings within 1e-6 rad of the previous one are the same opening (estimated poses
+        # of expressions at rest scatter around 0 by round-off).
+        ordered = np.sort(raw)
+        opens = ordered[np.concatenate([[True], np.diff(ordered) > 1e-6])]
         if opens.size < 2:
             raise InputError(
                 "jaw_bins: every dataset shape has the same jaw opening; binning needs shapes "
                 "at different openings"
             )
-        return np.quantile(opens, np.linspace(0.0, 1.0, n + 1))
+        edges = np.quantile(opens, np.linspace(0.0, 1.0, n + 1))
+        edges[0], edges[-1] = raw.min(), raw.max()
+        return edges
     edges = np.asarray(jaw_bins)
     if edges.ndim != 1 or edges.dtype.kind not in "iuf":
         raise InputError(
