@@ -44,8 +44,8 @@ def lookup_bytes(model: lgi.Model) -> int:
 def binned_results(s, data, rig, theta, unbinned, jawed) -> None:  # type: ignore[no-untyped-def]
     """Point clouds binned by jaw opening: error with tracked and true poses, build time and
     lookup memory per bin count (unbinned first, for reference)."""
-    opens = np.unique(theta[:, 0])
-    print(f"\nDistinct shape openings (deg): {np.round(np.degrees(opens), 3).tolist()}\n")
+    opens, counts = np.unique(np.round(np.degrees(theta[:, 0]), 3) + 0.0, return_counts=True)
+    print(f"\nShape openings (deg: count): {dict(zip(opens.tolist(), counts.tolist()))}\n")
     print(
         "| clouds | members per bin | tracked: mean / p95 / max (mm) "
         "| true poses: mean / p95 / max (mm) | build (s) | lookup memory (MB) |"
