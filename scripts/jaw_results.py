@@ -45,7 +45,8 @@ def binned_results(s, data, rig, theta, unbinned, jawed) -> None:  # type: ignor
     """Point clouds binned by jaw opening: error with tracked and true poses, build time and
     lookup memory per bin count (unbinned first, for reference)."""
     opens, counts = np.unique(np.round(np.degrees(theta[:, 0]), 3) + 0.0, return_counts=True)
-    print(f"\nShape openings (deg: count): {dict(zip(opens.tolist(), counts.tolist()))}\n")
+    by_opening = dict(zip(opens.tolist(), counts.tolist(), strict=True))
+    print(f"\nShape openings (deg: count): {by_opening}\n")
     print(
         "| clouds | members per bin | tracked: mean / p95 / max (mm) "
         "| true poses: mean / p95 / max (mm) | build (s) | lookup memory (MB) |"

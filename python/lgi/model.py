@@ -251,7 +251,8 @@ class Model:
 
         `jaw` (models built with a jaw rig): `"track"` estimates each frame's jaw pose from the
         markers the jaw carries (`lgi.jaw.track_jaw`), an (F, 3) array gives the poses, None
-        solves at the rest pose. The poses used are in `result.jaw_theta`.
+        solves at the rest pose. The poses used are in `result.jaw_theta`; with jaw bins
+        (`Model.build(jaw_bins=...)`) the bin each frame used is in `result.jaw_bin`.
 
         `smooth_window` > 1 averages each marker's shape weights over that many frames
         (centred) before sewing, in the jaw-unskinned space so jaw motion is kept; markers are
