@@ -37,6 +37,7 @@ fn fixture() -> Fixture {
         choices.push(frame.choices.clone());
         state = Some(FrameState {
             choices: frame.choices,
+            bin: None,
         });
     }
     Fixture {
@@ -196,6 +197,7 @@ fn stages(c: &mut Criterion) {
             f = (f + 1) % fx.frames.len();
             let prev = FrameState {
                 choices: fx.choices[(f + fx.frames.len() - 1) % fx.frames.len()].clone(),
+                bin: None,
             };
             let r = model
                 .solve_frame(&fx.frames[f], Some(&prev), None)

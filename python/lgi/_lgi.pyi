@@ -75,8 +75,11 @@ class Model:
         jaw_pivot: ArrayLike | None = None,
         jaw_weights: ArrayLike | None = None,
         shape_theta: ArrayLike | None = None,
+        jaw_bins: ArrayLike | None = None,
+        bin_overlap: float = 0.0,
     ) -> Model:
-        """Builds a model; ``config`` holds ``lgi.BuildConfig`` fields."""
+        """Builds a model; ``config`` holds ``lgi.BuildConfig`` fields; ``jaw_bins`` are bin
+        edges over the jaw opening (radians)."""
     @staticmethod
     def load(path: _Path) -> Model:
         """Loads a model written by ``save``."""
@@ -111,8 +114,10 @@ class Model:
         """Natural neighbours of each bundle."""
     def bundle_surface_points(self) -> dict[str, NDArray[Any]]:
         """``triangles`` (B,) and ``barycentrics`` (B, 3)."""
-    def jaw(self) -> dict[str, NDArray[np.float64]] | None:
-        """``pivot``, ``weights``, ``shape_theta``, ``bundle_weights``; None without a jaw."""
+    def jaw(self) -> dict[str, Any] | None:
+        """``pivot``, ``weights``, ``shape_theta``, ``bundle_weights`` and, for a binned model,
+        ``bin_edges``, ``bin_overlap``, ``bin_members`` (dataset shapes per bin); None without
+        a jaw."""
     def bundle_uvs(self) -> NDArray[np.float64]:
         """(B, 2) bundle positions in UV."""
 

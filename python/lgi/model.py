@@ -81,6 +81,44 @@ class SolveResult:
     choices: Choices
     jaw_theta: NDArray[np.float64] | None = None
     """(F, 3) jaw poses used (open, lateral, forward), None when solved without a jaw."""
+    jaw_bin: NDArray[np.int64] | None = None
+    """(F,) jaw-opening bin each frame was looked up in (0 for an unbinned jaw model), None
+    when solved without a jaw."""
+
+
+def _bin_edges(jaw_bins: int | ArrayLike, shape_theta: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Bin edges over the jaw opening: given, or for an int n at quantiles of the shapes'
+    distinct openings (repeated openings, such as the many expressions at rest, would make
+    equal quantiles), the outer edges at the smallest and largest opening."""
+    if isinstance(jaw_bins, (bool, np.bool_)):
+        raise InputError(f"jaw_bins must be an int, a sequence of edges or None, got {jaw_bins!r}")
+    if isinstance(jaw_bins, (int, np.integer)):
+        n = int(jaw_bins)
+        if n < 1:
+            raise InputError(f"jaw_bins must be >= 1 bins, got {n}")
+        if shape_theta.ndim != 2 or shape_theta.shape[1] != 3:
+            raise InputError(f"shape_theta: expected shape (S, 3), got {shape_theta.shape}")
+        raw = shape_theta[:, 0]
+        if not np.all(np.isfinite(raw)):
+            raise InputError("shape_theta: jaw openings must be finite")
+        # Openings within 1e-6 rad of the previous one are the same opening (estimated poses
+        # of expressions at rest scatter around 0 by round-off).
+        ordered = np.sort(raw)
+        opens = ordered[np.concatenate([[True], np.diff(ordered) > 1e-6])]
+        if opens.size < 2:
+            raise InputError(
+                "jaw_bins: every dataset shape has the same jaw opening; binning needs shapes "
+                "at different openings"
+            )
+        edges = np.quantile(opens, np.linspace(0.0, 1.0, n + 1))
+        edges[0], edges[-1] = raw.min(), raw.max()
+        return edges
+    edges = np.asarray(jaw_bins)
+    if edges.ndim != 1 or edges.dtype.kind not in "iuf":
+        raise InputError(
+            f"jaw_bins: expected an int or a 1-D sequence of edges (radians), got {jaw_bins!r}"
+        )
+    return edges.astype(np.float64)
 
 
 def _progress_bar(total: int, desc: str, quiet: bool) -> Any:
@@ -104,28 +142,49 @@ class Model:
         *,
         jaw: JawRig | None = None,
         shape_theta: ArrayLike | None = None,
+        jaw_bins: int | ArrayLike | None = None,
+        bin_overlap: float = 0.0,
     ) -> Model:
         """Builds the model for `dataset` and marker rest positions `markers_rest` (B, 3).
 
         With a jaw rig (`lgi.jaw.estimate_rig` gives one and `shape_theta`, the jaw pose
         (open, lateral, forward) of every dataset shape), shapes are unskinned before indexing
-        (paper Eq. 2) and `solve(frames, jaw=...)` unskins and reskins each frame."""
+        (paper Eq. 2) and `solve(frames, jaw=...)` unskins and reskins each frame.
+
+        `jaw_bins` bins the point clouds by jaw opening (the paper's suggestion for datasets
+        scanned at many openings): an int n gives n bins with edges at quantiles of the
+        shapes' distinct openings (first edge the smallest, last the largest); a sequence
+        gives the edges (radians, strictly increasing). Each bin holds the shapes whose
+        opening lies in its range widened by `bin_overlap` (radians) on both sides, re-posed
+        to the bin's middle opening; each frame uses the bin of its jaw opening (keeping the
+        previous frame's bin while the opening stays in its widened range). None (default):
+        one set of clouds with every shape."""
         cfg = dataclasses.asdict(config or BuildConfig())
         if jaw is None:
             if shape_theta is not None:
                 raise InputError("shape_theta was given without a jaw rig")
+            if jaw_bins is not None:
+                raise InputError("jaw_bins needs a jaw rig (jaw=...) and shape_theta")
             return cls(_lgi.Model.build(dataset, markers_rest, cfg))
         if shape_theta is None:
             raise InputError("a jaw rig needs shape_theta: the jaw pose of every dataset shape")
         if not np.allclose(jaw.frame, np.eye(3)):
             raise InputError("the core supports jaw rigs with the identity frame (x, y, z axes)")
+        theta = np.asarray(shape_theta, dtype=np.float64)
+        edges = None if jaw_bins is None else _bin_edges(jaw_bins, theta)
+        try:
+            overlap = float(bin_overlap)
+        except (TypeError, ValueError):
+            raise InputError(f"bin_overlap must be a number, got {bin_overlap!r}") from None
         core = _lgi.Model.build(
             dataset,
             markers_rest,
             cfg,
             jaw_pivot=jaw.pivot,
             jaw_weights=jaw.weights,
-            shape_theta=np.asarray(shape_theta, dtype=np.float64),
+            shape_theta=theta,
+            jaw_bins=edges,
+            bin_overlap=overlap,
         )
         return cls(core)
 
@@ -166,6 +225,12 @@ class Model:
         return None if j is None else JawRig(pivot=j["pivot"], weights=j["weights"])
 
     @property
+    def jaw_bins(self) -> NDArray[np.float64] | None:
+        """Edges (K + 1,) of the jaw-opening bins (radians), None for an unbinned model."""
+        j = self._core.jaw()
+        return None if j is None or "bin_edges" not in j else j["bin_edges"]
+
+    @property
     def core(self) -> _lgi.Model:
         """The compiled model, for low-level inspection (weights, neighbours, statistics)."""
         return self._core
@@ -186,7 +251,8 @@ class Model:
 
         `jaw` (models built with a jaw rig): `"track"` estimates each frame's jaw pose from the
         markers the jaw carries (`lgi.jaw.track_jaw`), an (F, 3) array gives the poses, None
-        solves at the rest pose. The poses used are in `result.jaw_theta`.
+        solves at the rest pose. The poses used are in `result.jaw_theta`; with jaw bins
+        (`Model.build(jaw_bins=...)`) the bin each frame used is in `result.jaw_bin`.
 
         `smooth_window` > 1 averages each marker's shape weights over that many frames
         (centred) before sewing, in the jaw-unskinned space so jaw motion is kept; markers are
@@ -212,6 +278,7 @@ class Model:
             bundle_positions=out["bundle_positions"],
             missing=out["missing"],
             jaw_theta=theta,
+            jaw_bin=None if theta is None else out["jaw_bin"],
             choices=Choices(
                 shapes=out["choice_shapes"],
                 weights=out["choice_weights"],

@@ -279,6 +279,60 @@ impl JawRig {
         Ok(out)
     }
 
+    /// Re-poses dataset shapes to a reference pose (a jaw bin's): returns the neutral skinned
+    /// to `reference`, `T(θ_ref) x0`, and for each of `members` (dataset shape indices) its
+    /// displacement from it, `T(θ_ref) T(θ_k)⁻¹ (x0 + s_k) − T(θ_ref) x0` (per-vertex maps,
+    /// f64 math, f32 storage like the dataset), shape-major.
+    pub fn repose_shapes(
+        &self,
+        neutral: &[DVec3],
+        displacements: &[f32],
+        thetas: &[JawParams],
+        members: &[u32],
+        reference: JawParams,
+    ) -> Result<(Vec<DVec3>, Vec<f32>)> {
+        reference.validate()?;
+        let v = self.weights.len();
+        let stride = 3 * v;
+        if neutral.len() != v || displacements.len() != thetas.len() * stride {
+            return Err(LgiError::Input(format!(
+                "re-posing needs {v} neutral vertices and {} x {stride} displacement values, \
+                 got {} and {}",
+                thetas.len(),
+                neutral.len(),
+                displacements.len()
+            )));
+        }
+        let to_ref = Blend::new(reference, self.pivot);
+        let mut base = vec![DVec3::ZERO; v];
+        base.par_iter_mut()
+            .zip(neutral.par_iter().zip(self.weights.par_iter()))
+            .for_each(|(o, (&x0, &w))| *o = to_ref.skin(x0, w));
+        let mut out = vec![0.0f32; members.len() * stride];
+        for (j, &k) in members.iter().enumerate() {
+            let k = k as usize;
+            let theta = *thetas.get(k).ok_or_else(|| {
+                LgiError::Input(format!("member shape {k} out of range ({})", thetas.len()))
+            })?;
+            theta.validate()?;
+            let from = Blend::new(theta, self.pivot);
+            let shape = &displacements[k * stride..(k + 1) * stride];
+            out[j * stride..(j + 1) * stride]
+                .par_chunks_mut(3)
+                .zip(shape.par_chunks(3))
+                .zip(neutral.par_iter().zip(self.weights.par_iter()))
+                .zip(base.par_iter())
+                .for_each(|(((o, s), (&x0, &w)), &b0)| {
+                    let s = DVec3::new(f64::from(s[0]), f64::from(s[1]), f64::from(s[2]));
+                    let d = to_ref.skin(from.unskin(x0 + s, w), w) - b0;
+                    o[0] = d.x as f32;
+                    o[1] = d.y as f32;
+                    o[2] = d.z as f32;
+                });
+        }
+        Ok((base, out))
+    }
+
     fn apply(
         &self,
         positions: &[DVec3],
@@ -287,6 +341,107 @@ impl JawRig {
         f: fn(&Blend, DVec3, f64) -> DVec3,
     ) -> Result<()> {
         apply_weighted(self.pivot, positions, &self.weights, theta, out, f)
+    }
+}
+
+/// Point clouds binned by jaw opening (the paper's suggestion for large openings): bin b's core
+/// range over θ.open is `[edges[b], edges[b + 1]]`; its members are the dataset shapes whose
+/// opening lies in the core range widened by `overlap` on both sides, unskinned to the bin's
+/// reference pose (the core range's midpoint). Binning changes which shapes a frame may use.
+#[derive(Debug, Clone, PartialEq)]
+pub struct JawBins {
+    /// Bin edges over the opening angle (radians), finite and strictly increasing; K + 1 of
+    /// them for K bins.
+    pub edges: Vec<f64>,
+    /// How far (radians, ≥ 0) each bin's member range reaches beyond its core range.
+    pub overlap: f64,
+}
+
+impl JawBins {
+    /// Checks the edges (at least 2, finite, strictly increasing, references below 180°) and
+    /// the overlap (finite, ≥ 0).
+    pub fn validate(&self) -> Result<()> {
+        let e = &self.edges;
+        if e.len() < 2 {
+            return Err(LgiError::Input(format!(
+                "jaw bins need at least 2 edges (one bin), got {}",
+                e.len()
+            )));
+        }
+        if let Some(i) = e.iter().position(|x| !x.is_finite()) {
+            return Err(LgiError::Input(format!(
+                "jaw bin edge {i} must be finite, got {}",
+                e[i]
+            )));
+        }
+        if let Some(i) = (1..e.len()).find(|&i| e[i] <= e[i - 1]) {
+            return Err(LgiError::Input(format!(
+                "jaw bin edges must be strictly increasing: edge {i} ({}) <= edge {} ({})",
+                e[i],
+                i - 1,
+                e[i - 1]
+            )));
+        }
+        if !(self.overlap.is_finite() && self.overlap >= 0.0) {
+            return Err(LgiError::Input(format!(
+                "jaw bin overlap must be finite and >= 0, got {}",
+                self.overlap
+            )));
+        }
+        for b in 0..self.num_bins() {
+            self.reference(b).validate()?;
+        }
+        Ok(())
+    }
+
+    /// Number of bins K.
+    pub fn num_bins(&self) -> usize {
+        self.edges.len().saturating_sub(1)
+    }
+
+    /// Bin b's core range `[edges[b], edges[b + 1]]`.
+    pub fn core_range(&self, b: usize) -> (f64, f64) {
+        (self.edges[b], self.edges[b + 1])
+    }
+
+    /// Bin b's member range: the core range widened by the overlap.
+    pub fn member_range(&self, b: usize) -> (f64, f64) {
+        let (lo, hi) = self.core_range(b);
+        (lo - self.overlap, hi + self.overlap)
+    }
+
+    /// Bin b's reference pose: the core range's midpoint opening, no lateral or forward motion.
+    pub fn reference(&self, b: usize) -> JawParams {
+        let (lo, hi) = self.core_range(b);
+        JawParams {
+            open: 0.5 * (lo + hi),
+            ..JawParams::ZERO
+        }
+    }
+
+    /// Dataset shape indices (0-based, ascending) whose opening lies in bin b's member range.
+    pub fn members(&self, b: usize, shape_thetas: &[JawParams]) -> Vec<u32> {
+        let (lo, hi) = self.member_range(b);
+        (0..shape_thetas.len() as u32)
+            .filter(|&k| (lo..=hi).contains(&shape_thetas[k as usize].open))
+            .collect()
+    }
+
+    /// The bin a frame with opening `open` uses: the previous frame's bin while `open` stays
+    /// in its member range (hysteresis, so a frame near an edge does not flip between bins),
+    /// otherwise the bin whose core range holds `open` (clamped to the first and last bins).
+    pub fn select(&self, open: f64, previous: Option<usize>) -> usize {
+        let k = self.num_bins();
+        if let Some(p) = previous.filter(|&p| p < k) {
+            let (lo, hi) = self.member_range(p);
+            if (lo..=hi).contains(&open) {
+                return p;
+            }
+        }
+        self.edges
+            .partition_point(|&e| e <= open)
+            .saturating_sub(1)
+            .min(k.saturating_sub(1))
     }
 }
 

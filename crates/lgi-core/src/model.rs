@@ -11,14 +11,16 @@ use crate::dataset::Dataset;
 use crate::error::{LgiError, Result};
 use crate::geodesic::{is_detour, EdgeGraph};
 use crate::grid::TetIndex;
-use crate::jaw::{JawParams, JawRig};
+use crate::jaw::{JawBins, JawParams, JawRig};
+use crate::mesh::Mesh;
 use crate::sew::{blend, Pieces, ResidualPass};
 use crate::sibson::{SibsonWeights, SparseWeights};
-use crate::smooth::smooth_choices;
+use crate::smooth::smooth_choices_in_bins;
 use crate::tets::{generate_tets, Tet, TetConfig};
 use crate::uvspace::{self, SewingSpace};
 use glam::DVec3;
 use rayon::prelude::*;
+use std::borrow::Cow;
 use std::collections::HashMap;
 use std::sync::{Arc, Mutex};
 
@@ -131,13 +133,18 @@ pub struct Frame {
     pub residuals: Vec<f64>,
     /// Per bundle: the reconstructed surface position (for missing bundles, the estimate).
     pub bundle_positions: Vec<DVec3>,
+    /// The jaw bin whose clouds the frame was looked up in (0 for an unbinned model).
+    pub bin: usize,
 }
 
 /// What the next frame needs from the previous one.
 #[derive(Debug, Clone, Default)]
 pub struct FrameState {
-    /// Previous choices per bundle.
+    /// Previous choices per bundle (dataset shape ids, as in [`Frame::choices`]).
     pub choices: Vec<Option<Choice>>,
+    /// The previous frame's jaw bin ([`Frame::bin`]): kept while the opening allows, and the
+    /// choices are only preferred within the same bin. `None`: no bin hysteresis.
+    pub bin: Option<usize>,
 }
 
 /// Jaw articulation of a model (paper Eq. 2): the rig, each dataset shape's jaw parameters
@@ -150,6 +157,128 @@ pub struct JawSetup {
     pub shape_thetas: Vec<JawParams>,
     /// Jaw weight of every bundle (barycentric blend of its triangle's vertex weights).
     pub bundle_weights: Vec<f64>,
+    /// Jaw-opening bins of the point clouds (`None`: one set, every shape at the rest pose).
+    pub bins: Option<JawBins>,
+}
+
+/// The jaw part of a build: the rig, every dataset shape's jaw pose, and optionally bins of
+/// jaw opening (each with its own point clouds, shapes unskinned to the bin's reference).
+#[derive(Debug, Clone)]
+pub struct JawInput {
+    /// Two-bone skinning rig.
+    pub rig: JawRig,
+    /// Jaw parameters θ_k of every dataset shape.
+    pub shape_thetas: Vec<JawParams>,
+    /// Jaw-opening bins (`None`: unbinned).
+    pub bins: Option<JawBins>,
+}
+
+/// The per-shape lookup structures of one jaw bin (the only one when unbinned): its shapes
+/// re-posed to the bin's reference pose, their bundle positions, clouds, alias groups and
+/// tet indices. Shape ids inside are local: 0 the bin's neutral, `j ≥ 1` the dataset shape
+/// `members[j - 1]`.
+#[derive(Debug)]
+pub struct Lookup {
+    /// The bin's reference pose; `None` for an unbinned model (shapes at the rest pose, and
+    /// no re-posing of frames beyond the jaw unskinning).
+    reference: Option<JawParams>,
+    members: Vec<u32>,
+    /// Dataset shape id (0 = neutral) → local id, `u32::MAX` for a non-member.
+    local_of: Vec<u32>,
+    /// Neutral (skinned to the reference) and member displacements the pieces come from.
+    data: Arc<Dataset>,
+    shape_positions: Vec<DVec3>,
+    clouds: Vec<BundleCloud>,
+    groups: Vec<Vec<AliasGroups>>,
+    indices: Vec<TetIndex>,
+}
+
+impl Lookup {
+    /// The bin's reference pose (`None` when the model is unbinned).
+    pub fn reference(&self) -> Option<JawParams> {
+        self.reference
+    }
+    /// Dataset shape index (0-based) of each local shape id `j ≥ 1` (`members[j - 1]`).
+    pub fn members(&self) -> &[u32] {
+        &self.members
+    }
+    /// Clouds of all bundles (local shape ids).
+    pub fn clouds(&self) -> &[BundleCloud] {
+        &self.clouds
+    }
+    /// Alias groups of every bundle's cloud points.
+    pub fn alias_groups(&self) -> &[Vec<AliasGroups>] {
+        &self.groups
+    }
+    /// Tet indices of all bundles.
+    pub fn indices(&self) -> &[TetIndex] {
+        &self.indices
+    }
+    /// Bundle positions on every local shape, `(members + 1) × B`.
+    pub fn shape_positions(&self) -> &[DVec3] {
+        &self.shape_positions
+    }
+    /// Dataset shape id (0 = neutral, k ≥ 1 dataset shape k − 1) of a local shape id.
+    pub fn global_id(&self, local: u32) -> u32 {
+        match local {
+            0 => 0,
+            j => self.members[j as usize - 1] + 1,
+        }
+    }
+    /// A choice with its shape ids mapped from local to dataset ids.
+    fn globalize(&self, mut c: Choice) -> Choice {
+        for s in &mut c.shapes {
+            *s = self.global_id(*s);
+        }
+        c
+    }
+    /// Choices in dataset ids mapped to this bin's local ids (a non-member shape gets an id
+    /// no candidate has); borrowed unchanged for an unbinned model.
+    fn localize<'a>(&self, choices: &'a [Option<Choice>]) -> Cow<'a, [Option<Choice>]> {
+        if self.reference.is_none() {
+            return Cow::Borrowed(choices);
+        }
+        let map = |s: u32| self.local_of.get(s as usize).copied().unwrap_or(u32::MAX);
+        Cow::Owned(
+            choices
+                .iter()
+                .map(|c| {
+                    c.map(|mut c| {
+                        for s in &mut c.shapes {
+                            *s = map(*s);
+                        }
+                        c
+                    })
+                })
+                .collect(),
+        )
+    }
+}
+
+/// What one lookup is built from: its reference pose, member shapes and re-posed dataset.
+pub(crate) struct LookupSource {
+    reference: Option<JawParams>,
+    members: Vec<u32>,
+    data: Arc<Dataset>,
+}
+
+impl LookupSource {
+    /// Number of local shapes (members, not counting the neutral).
+    pub(crate) fn num_shapes(&self) -> usize {
+        self.members.len()
+    }
+    /// The re-posed dataset (bin neutral and member displacements).
+    pub(crate) fn data(&self) -> &Dataset {
+        &self.data
+    }
+}
+
+/// A lookup's source with its built clouds and tets (what a saved model stores).
+pub(crate) struct LookupParts {
+    pub(crate) source: LookupSource,
+    pub(crate) shape_positions: Vec<DVec3>,
+    pub(crate) clouds: Vec<BundleCloud>,
+    pub(crate) tets: Vec<Vec<Tet>>,
 }
 
 /// A frame's targets after the checks: as given (NaN rows missing) and as looked up (jaw
@@ -159,6 +288,7 @@ struct Prepared {
     lookup: Vec<DVec3>,
     present: Vec<u32>,
     theta: Option<JawParams>,
+    bin: usize,
 }
 
 /// Per-bundle statistics of a built model.
@@ -177,18 +307,13 @@ pub struct BundleStats {
 pub struct Model {
     /// The dataset as given (what `dataset()` returns and what is saved).
     dataset: Arc<Dataset>,
-    /// The dataset the pieces come from: `dataset` with its jaw unskinned when a jaw rig is
-    /// used (the same `Arc` otherwise).
-    sew_dataset: Arc<Dataset>,
     jaw: Option<JawSetup>,
     config: BuildConfig,
     markers_rest: Vec<DVec3>,
     bundles: Vec<SurfacePoint>,
     diagonal: f64,
-    shape_positions: Vec<DVec3>,
-    clouds: Vec<BundleCloud>,
-    groups: Vec<Vec<AliasGroups>>,
-    indices: Vec<TetIndex>,
+    /// One per jaw bin (one when unbinned); everything else is shared by the bins.
+    lookups: Vec<Lookup>,
     space: SewingSpace,
     graph: EdgeGraph,
     neighbours: Vec<Vec<u32>>,
@@ -213,18 +338,16 @@ impl Model {
     }
 
     /// As [`Model::build`], sharing the dataset instead of copying it, with an optional jaw
-    /// rig and the dataset shapes' jaw parameters (their jaw motion is unskinned first).
+    /// (rig, the dataset shapes' jaw parameters — their jaw motion is unskinned first — and
+    /// optional jaw-opening bins, each with its own clouds).
     pub fn build_shared(
         dataset: Arc<Dataset>,
         markers_rest: &[DVec3],
         config: &BuildConfig,
-        jaw: Option<(JawRig, Vec<JawParams>)>,
+        jaw: Option<JawInput>,
     ) -> Result<Model> {
         config.validate()?;
-        let dataset_given = dataset;
-        let sew_dataset = unskinned_dataset(&dataset_given, jaw.as_ref())?;
-        let dataset_arc = sew_dataset.clone();
-        let dataset: &Dataset = &dataset_arc;
+        let sources = lookup_sources(&dataset, jaw.as_ref())?;
         let mesh = dataset.neutral();
         let b = markers_rest.len();
         if b < 3 {
@@ -233,63 +356,54 @@ impl Model {
             )));
         }
         let diagonal = mesh.diagonal();
-        let (bundles, shape_positions) = locate_bundles(dataset, markers_rest, config)?;
-        let s1 = dataset.num_shapes() + 1;
+        let bundles = locate_bundles(mesh, markers_rest, config)?;
         let tet_cfg = TetConfig {
             neighbours: config.tet_neighbours,
             max_tets: config.max_tets,
             min_quality: config.min_quality,
             max_edge: config.max_edge * diagonal,
         };
-        let built: Vec<(BundleCloud, Vec<Tet>)> = (0..b)
-            .into_par_iter()
-            .map(|i| {
-                let pos: Vec<DVec3> = (0..s1).map(|k| shape_positions[k * b + i]).collect();
-                let cloud = build_cloud(
-                    &pos,
-                    config.prune_motion * diagonal,
-                    config.duplicate_distance * diagonal,
-                )?;
-                let tets = generate_tets(&cloud.points, &tet_cfg);
-                Ok((cloud, tets))
-            })
-            .collect::<Result<_>>()?;
-        let (clouds, tets): (Vec<BundleCloud>, Vec<Vec<Tet>>) = built.into_iter().unzip();
-        let given = if jaw.is_some() {
-            dataset_given
-        } else {
-            sew_dataset
-        };
-        Model::assemble(
-            (given, dataset_arc),
-            jaw,
-            markers_rest,
-            config,
-            (bundles, shape_positions),
-            clouds,
-            tets,
-        )
+        let mut parts = Vec::with_capacity(sources.len());
+        for source in sources {
+            let shape_positions = shape_bundle_positions(&source.data, &bundles);
+            let s1 = source.num_shapes() + 1;
+            let built: Vec<(BundleCloud, Vec<Tet>)> = (0..b)
+                .into_par_iter()
+                .map(|i| {
+                    let pos: Vec<DVec3> = (0..s1).map(|k| shape_positions[k * b + i]).collect();
+                    let cloud = build_cloud(
+                        &pos,
+                        config.prune_motion * diagonal,
+                        config.duplicate_distance * diagonal,
+                    )?;
+                    let tets = generate_tets(&cloud.points, &tet_cfg);
+                    Ok((cloud, tets))
+                })
+                .collect::<Result<_>>()?;
+            let (clouds, tets) = built.into_iter().unzip();
+            parts.push(LookupParts {
+                source,
+                shape_positions,
+                clouds,
+                tets,
+            });
+        }
+        Model::assemble(dataset, jaw, markers_rest, config, bundles, parts)
     }
 
     /// The cheap part of a build, shared with loading a saved model: everything derived from
-    /// the dataset, markers, clouds and tets (correspondences, grid indices, sewing weights).
+    /// the dataset, markers, clouds and tets (grid indices, sewing weights, alias groups).
     pub(crate) fn assemble(
-        (given, dataset): (Arc<Dataset>, Arc<Dataset>),
-        jaw: Option<(JawRig, Vec<JawParams>)>,
+        dataset: Arc<Dataset>,
+        jaw: Option<JawInput>,
         markers_rest: &[DVec3],
         config: &BuildConfig,
-        (bundles, shape_positions): (Vec<SurfacePoint>, Vec<DVec3>),
-        clouds: Vec<BundleCloud>,
-        tets: Vec<Vec<Tet>>,
+        bundles: Vec<SurfacePoint>,
+        parts: Vec<LookupParts>,
     ) -> Result<Model> {
         let mesh = dataset.neutral();
         let b = markers_rest.len();
         let diagonal = mesh.diagonal();
-        let indices: Vec<TetIndex> = clouds
-            .par_iter()
-            .zip(tets)
-            .map(|(c, t)| TetIndex::new(c.points.clone(), t))
-            .collect::<Result<_>>()?;
         let space = uvspace::build(mesh, &bundles)?;
         let graph = EdgeGraph::new(mesh, |t| {
             mesh.triangles[t]
@@ -308,17 +422,47 @@ impl Model {
             slack: DETOUR_SLACK * diagonal,
         };
         let neighbours = sew.filter_neighbours(uv_neighbours);
-        let groups = clouds
-            .par_iter()
-            .zip(&neighbours)
-            .map(|(c, nb)| alias_groups(c, nb, &shape_positions, b))
-            .collect();
+        let mut lookups = Vec::with_capacity(parts.len());
+        for part in parts {
+            let indices: Vec<TetIndex> = part
+                .clouds
+                .par_iter()
+                .zip(part.tets)
+                .map(|(c, t)| TetIndex::new(c.points.clone(), t))
+                .collect::<Result<_>>()?;
+            let groups = part
+                .clouds
+                .par_iter()
+                .zip(&neighbours)
+                .map(|(c, nb)| alias_groups(c, nb, &part.shape_positions, b))
+                .collect();
+            let src = part.source;
+            let mut local_of = vec![u32::MAX; dataset.num_shapes() + 1];
+            local_of[0] = 0;
+            for (j, &k) in src.members.iter().enumerate() {
+                local_of[k as usize + 1] = j as u32 + 1;
+            }
+            lookups.push(Lookup {
+                reference: src.reference,
+                members: src.members,
+                local_of,
+                data: src.data,
+                shape_positions: part.shape_positions,
+                clouds: part.clouds,
+                groups,
+                indices,
+            });
+        }
         let all: Vec<u32> = (0..b as u32).collect();
         let full_plan = Arc::new(sew.plan(&all)?);
         let support = sew.support()?;
         let jaw = match jaw {
             None => None,
-            Some((rig, shape_thetas)) => {
+            Some(JawInput {
+                rig,
+                shape_thetas,
+                bins,
+            }) => {
                 let bundle_weights = bundles
                     .iter()
                     .map(|b| rig.interpolate_weight(mesh.triangles[b.triangle as usize], b.bary))
@@ -327,21 +471,18 @@ impl Model {
                     rig,
                     shape_thetas,
                     bundle_weights,
+                    bins,
                 })
             }
         };
         Ok(Model {
-            dataset: given,
-            sew_dataset: dataset,
+            dataset,
             jaw,
             config: config.clone(),
             markers_rest: markers_rest.to_vec(),
             bundles,
             diagonal,
-            shape_positions,
-            clouds,
-            groups,
-            indices,
+            lookups,
             space,
             graph,
             neighbours,
@@ -374,14 +515,42 @@ impl Model {
 
     /// Solves one frame. `targets` (B) are bundle positions; a row with a NaN is missing.
     /// `jaw` is the frame's jaw pose for a model built with a jaw rig (`None` = rest).
+    /// With jaw bins, `previous.bin` is kept while the opening allows (hysteresis), and the
+    /// previous choices are preferred only when the frame stays in that bin.
     pub fn solve_frame(
         &self,
         targets: &[DVec3],
         previous: Option<&FrameState>,
         jaw: Option<JawParams>,
     ) -> Result<Frame> {
-        let prep = self.prepare(targets, jaw)?;
-        self.solve_prepared(&prep, previous.map(|p| p.choices.as_slice()))
+        let prep = self.prepare(targets, jaw, previous.and_then(|p| p.bin))?;
+        let lookup = &self.lookups[prep.bin];
+        let previous = previous
+            .filter(|p| p.bin.is_none_or(|b| b == prep.bin))
+            .map(|p| lookup.localize(&p.choices));
+        self.solve_prepared(&prep, previous.as_deref())
+    }
+
+    /// As [`Model::solve_frame`] in a given jaw bin (no previous frame): what a frame would
+    /// give if hysteresis had kept it in `bin`.
+    pub fn solve_frame_in_bin(
+        &self,
+        targets: &[DVec3],
+        jaw: Option<JawParams>,
+        bin: usize,
+    ) -> Result<Frame> {
+        if bin >= self.lookups.len() {
+            return Err(LgiError::Input(format!(
+                "jaw bin {bin} out of range: the model has {}",
+                self.lookups.len()
+            )));
+        }
+        let mut prep = self.prepare(targets, jaw, None)?;
+        if prep.bin != bin {
+            prep.bin = bin;
+            prep.lookup = self.lookup_targets(&prep.targets, prep.theta, bin)?;
+        }
+        self.solve_prepared(&prep, None)
     }
 
     /// Choice, then sewing of the unsmoothed choices, for a checked frame.
@@ -395,8 +564,14 @@ impl Model {
         self.sew_frame(prep, choices, &pieces)
     }
 
-    /// Checks a frame's targets and, with a jaw, unskins them for the lookup.
-    fn prepare(&self, targets: &[DVec3], jaw: Option<JawParams>) -> Result<Prepared> {
+    /// Checks a frame's targets, picks its jaw bin and, with a jaw, maps them into the bin's
+    /// space for the lookup.
+    fn prepare(
+        &self,
+        targets: &[DVec3],
+        jaw: Option<JawParams>,
+        previous_bin: Option<usize>,
+    ) -> Result<Prepared> {
         let b = self.bundles.len();
         if targets.len() != b {
             return Err(LgiError::Input(format!(
@@ -436,21 +611,42 @@ impl Model {
             }
             _ => None,
         };
-        let lookup_targets = match (&self.jaw, theta) {
-            (Some(j), Some(t)) => {
-                let mut out = targets_clean.clone();
-                j.rig
-                    .unskin_weighted(&targets_clean, &j.bundle_weights, t, &mut out)?;
-                out
-            }
-            _ => targets_clean.clone(),
+        let bin = match self.jaw.as_ref().and_then(|j| j.bins.as_ref()) {
+            Some(bins) => bins.select(theta.unwrap_or(JawParams::ZERO).open, previous_bin),
+            None => 0,
         };
+        let lookup = self.lookup_targets(&targets_clean, theta, bin)?;
         Ok(Prepared {
             targets: targets_clean,
-            lookup: lookup_targets,
+            lookup,
             present,
             theta,
+            bin,
         })
+    }
+
+    /// Targets in bin `bin`'s space: unskinned with the frame's pose, then skinned to the
+    /// bin's reference pose, `T(θ_b) T(θ)⁻¹` with each bundle's jaw weight.
+    fn lookup_targets(
+        &self,
+        targets: &[DVec3],
+        theta: Option<JawParams>,
+        bin: usize,
+    ) -> Result<Vec<DVec3>> {
+        let Some(j) = &self.jaw else {
+            return Ok(targets.to_vec());
+        };
+        let mut out = targets.to_vec();
+        if let Some(t) = theta {
+            j.rig
+                .unskin_weighted(targets, &j.bundle_weights, t, &mut out)?;
+        }
+        if let Some(r) = self.lookups[bin].reference {
+            let unskinned = out.clone();
+            j.rig
+                .skin_weighted(&unskinned, &j.bundle_weights, r, &mut out)?;
+        }
+        Ok(out)
     }
 
     /// Every present bundle's choice (rayon over bundles).
@@ -461,6 +657,7 @@ impl Model {
     ) -> Vec<Option<Choice>> {
         let b = self.bundles.len();
         let lookup_targets = &prep.lookup;
+        let lk = &self.lookups[prep.bin];
         let params = ChoiceParams {
             eps: self.config.containment_eps,
             projection_candidates: self.config.projection_candidates,
@@ -469,7 +666,7 @@ impl Model {
             ..ChoiceParams::default()
         };
         let temporal_weight = self.config.temporal_weight * self.diagonal * self.diagonal;
-        let pure = pure_errors(&self.shape_positions, b, lookup_targets);
+        let pure = pure_errors(&lk.shape_positions, b, lookup_targets);
         (0..b)
             .into_par_iter()
             .map_init(Scratch::default, |scratch, i| {
@@ -478,7 +675,7 @@ impl Model {
                     return None;
                 }
                 let scoring = Scoring {
-                    shape_positions: &self.shape_positions,
+                    shape_positions: &lk.shape_positions,
                     num_bundles: b,
                     neighbours: &self.neighbours[i],
                     targets: lookup_targets,
@@ -487,9 +684,9 @@ impl Model {
                     pure_errors: &pure,
                 };
                 Some(choose(
-                    &self.indices[i],
-                    &self.clouds[i],
-                    &self.groups[i],
+                    &lk.indices[i],
+                    &lk.clouds[i],
+                    &lk.groups[i],
                     t,
                     &scoring,
                     &params,
@@ -499,7 +696,9 @@ impl Model {
             .collect()
     }
 
-    /// Blends `pieces`, reskins the jaw, and runs the residual pass.
+    /// Blends `pieces` (local shape ids of the frame's bin), maps the vertices back from the
+    /// bin's space and reskins the jaw, runs the residual pass, and reports the choices in
+    /// dataset shape ids.
     fn sew_frame(
         &self,
         prep: &Prepared,
@@ -510,17 +709,24 @@ impl Model {
         let (targets_clean, theta) = (&prep.targets, prep.theta);
         let plan = self.plan_for(&prep.present)?;
         let mesh = self.dataset.neutral();
+        let lk = &self.lookups[prep.bin];
         let mut vertices = vec![DVec3::ZERO; mesh.num_vertices()];
         blend(
-            &mesh.positions,
-            self.sew_dataset.displacements(),
+            &lk.data.neutral().positions,
+            lk.data.displacements(),
             &plan.weights,
             pieces,
             &mut vertices,
         );
-        if let (Some(j), Some(t)) = (&self.jaw, theta) {
-            let unskinned = vertices.clone();
-            j.rig.skin(&unskinned, t, &mut vertices)?;
+        if let Some(j) = &self.jaw {
+            if let Some(r) = lk.reference {
+                let binned = vertices.clone();
+                j.rig.unskin(&binned, r, &mut vertices)?;
+            }
+            if let Some(t) = theta {
+                let unskinned = vertices.clone();
+                j.rig.skin(&unskinned, t, &mut vertices)?;
+            }
         }
         plan.residual.apply(
             &mesh.triangles,
@@ -550,11 +756,20 @@ impl Model {
                 }
             })
             .collect();
+        let choices = if lk.reference.is_some() {
+            choices
+                .into_iter()
+                .map(|c| c.map(|c| lk.globalize(c)))
+                .collect()
+        } else {
+            choices
+        };
         Ok(Frame {
             vertices,
             choices,
             residuals,
             bundle_positions,
+            bin: prep.bin,
         })
     }
 
@@ -582,18 +797,27 @@ impl Model {
             }
         }
         let theta = |f: usize| jaw.map(|j| j[f]);
-        let prepared: Vec<Prepared> = frames
-            .iter()
-            .enumerate()
-            .map(|(f, t)| self.prepare(t, theta(f)).map_err(|e| frame_context(e, f)))
-            .collect::<Result<_>>()?;
+        // Bins are picked in order: in a temporal solve a frame keeps the previous frame's bin
+        // while its opening allows (hysteresis).
+        let mut prepared: Vec<Prepared> = Vec::with_capacity(frames.len());
+        for (f, t) in frames.iter().enumerate() {
+            let previous_bin = prepared.last().filter(|_| temporal).map(|p| p.bin);
+            let prep = self
+                .prepare(t, theta(f), previous_bin)
+                .map_err(|e| frame_context(e, f))?;
+            prepared.push(prep);
+        }
         if smooth_window <= 1 {
             // Frame by frame: each frame is finished (and reported) before the next starts.
             let mut out: Vec<Frame> = Vec::with_capacity(frames.len());
             if temporal {
                 for (f, prep) in prepared.iter().enumerate() {
-                    let previous = out.last().map(|fr| fr.choices.as_slice());
-                    let frame = self.solve_prepared(prep, previous);
+                    let lookup = &self.lookups[prep.bin];
+                    let previous = out
+                        .last()
+                        .filter(|fr| fr.bin == prep.bin)
+                        .map(|fr| lookup.localize(&fr.choices));
+                    let frame = self.solve_prepared(prep, previous.as_deref());
                     out.push(frame.map_err(|e| frame_context(e, f))?);
                     on_frame(f);
                 }
@@ -611,10 +835,13 @@ impl Model {
             return Ok(out);
         }
         let choices: Vec<Vec<Option<Choice>>> = if temporal {
+            // Local shape ids: the previous choices count only within the same bin.
             let mut out: Vec<Vec<Option<Choice>>> = Vec::with_capacity(frames.len());
-            for prep in &prepared {
-                let previous = out.last().map(|c| c.as_slice());
-                out.push(self.choose_all(prep, previous));
+            for (f, prep) in prepared.iter().enumerate() {
+                let same_bin = f > 0 && prepared[f - 1].bin == prep.bin;
+                let previous = out.last().filter(|_| same_bin).map(|c| c.as_slice());
+                let chosen = self.choose_all(prep, previous);
+                out.push(chosen);
             }
             out
         } else {
@@ -623,7 +850,8 @@ impl Model {
                 .map(|p| self.choose_all(p, None))
                 .collect()
         };
-        let pieces = smooth_choices(&choices, smooth_window);
+        let bins: Vec<usize> = prepared.iter().map(|p| p.bin).collect();
+        let pieces = smooth_choices_in_bins(&choices, &bins, smooth_window);
         let mut out = Vec::with_capacity(frames.len());
         for (f, (prep, (ch, pc))) in prepared
             .iter()
@@ -641,7 +869,7 @@ impl Model {
 
     fn sew_context(&self) -> SewContext<'_> {
         SewContext {
-            dataset: &self.sew_dataset,
+            dataset: &self.dataset,
             bundles: &self.bundles,
             space: &self.space,
             graph: &self.graph,
@@ -711,34 +939,46 @@ impl Model {
     pub fn sewing_space(&self) -> &SewingSpace {
         &self.space
     }
-    /// Per-bundle cloud, tet and memory statistics.
+    /// Per-bundle cloud, tet and memory statistics, summed over the jaw bins.
     pub fn bundle_stats(&self) -> Vec<BundleStats> {
-        self.clouds
-            .iter()
-            .zip(&self.indices)
-            .map(|(c, i)| BundleStats {
-                points: c.points.len(),
-                tets: i.num_tets(),
-                index_bytes: i.memory_bytes(),
-            })
-            .collect()
+        let mut out = vec![
+            BundleStats {
+                points: 0,
+                tets: 0,
+                index_bytes: 0,
+            };
+            self.bundles.len()
+        ];
+        for lk in &self.lookups {
+            for ((o, c), i) in out.iter_mut().zip(&lk.clouds).zip(&lk.indices) {
+                o.points += c.points.len();
+                o.tets += i.num_tets();
+                o.index_bytes += i.memory_bytes();
+            }
+        }
+        out
     }
-    /// Clouds of all bundles.
+    /// The per-bin lookup structures (one when the model is unbinned).
+    pub fn lookups(&self) -> &[Lookup] {
+        &self.lookups
+    }
+    /// Clouds of all bundles (of the first jaw bin; the only one when unbinned).
     pub fn clouds(&self) -> &[BundleCloud] {
-        &self.clouds
+        &self.lookups[0].clouds
     }
-    /// Alias groups of every bundle's cloud points (see [`alias_groups`]).
+    /// Alias groups of every bundle's cloud points (see [`alias_groups`]; first jaw bin).
     pub fn alias_groups(&self) -> &[Vec<AliasGroups>] {
-        &self.groups
+        &self.lookups[0].groups
     }
-    /// Tet indices of all bundles.
+    /// Tet indices of all bundles (first jaw bin).
     pub fn indices(&self) -> &[TetIndex] {
-        &self.indices
+        &self.lookups[0].indices
     }
     /// Bundle surface positions on every shape, `(S + 1) × B` (index `[k * B + n]`, shape id
-    /// 0 the neutral): what [`Scoring`] needs to score candidates outside a full solve.
+    /// 0 the neutral; first jaw bin): what [`Scoring`] needs to score candidates outside a
+    /// full solve.
     pub fn shape_positions(&self) -> &[DVec3] {
-        &self.shape_positions
+        &self.lookups[0].shape_positions
     }
 }
 
@@ -967,15 +1207,39 @@ impl SewContext<'_> {
     }
 }
 
-/// The dataset whose pieces are indexed: with a jaw, every shape's jaw motion is unskinned,
-/// `s*_k = T(θ_k)⁻¹ (x0 + s_k) − x0` (Eq. 2), so clouds hold expression without jaw rotation.
-pub(crate) fn unskinned_dataset(
+/// The dataset whose pieces are indexed when unbinned: with a jaw, every shape's jaw motion is
+/// unskinned, `s*_k = T(θ_k)⁻¹ (x0 + s_k) − x0` (Eq. 2), so clouds hold expression without jaw
+/// rotation.
+fn unskinned_dataset(
     dataset: &Arc<Dataset>,
-    jaw: Option<&(JawRig, Vec<JawParams>)>,
+    rig: &JawRig,
+    thetas: &[JawParams],
 ) -> Result<Arc<Dataset>> {
-    let Some((rig, thetas)) = jaw else {
-        return Ok(dataset.clone());
+    let mesh = dataset.neutral();
+    let disp = rig.unskin_shapes(&mesh.positions, dataset.displacements(), thetas)?;
+    Ok(Arc::new(Dataset::new(
+        mesh.clone(),
+        disp,
+        dataset.names().to_vec(),
+    )?))
+}
+
+/// What each lookup is built from: without a jaw the dataset as given; with a jaw and no bins
+/// every shape unskinned to the rest pose; with bins, per bin its member shapes re-posed to the
+/// bin's reference, `T(θ_b) T(θ_k)⁻¹ (x0 + s_k)`, relative to the bin's neutral `T(θ_b) x0`.
+pub(crate) fn lookup_sources(
+    dataset: &Arc<Dataset>,
+    jaw: Option<&JawInput>,
+) -> Result<Vec<LookupSource>> {
+    let all = || (0..dataset.num_shapes() as u32).collect();
+    let Some(j) = jaw else {
+        return Ok(vec![LookupSource {
+            reference: None,
+            members: all(),
+            data: dataset.clone(),
+        }]);
     };
+    let (rig, thetas) = (&j.rig, &j.shape_thetas);
     if rig.num_vertices() != dataset.num_vertices() {
         return Err(LgiError::Input(format!(
             "jaw rig has {} weights, the dataset {} vertices",
@@ -990,36 +1254,69 @@ pub(crate) fn unskinned_dataset(
             dataset.num_shapes()
         )));
     }
+    let Some(bins) = &j.bins else {
+        return Ok(vec![LookupSource {
+            reference: None,
+            members: all(),
+            data: unskinned_dataset(dataset, rig, thetas)?,
+        }]);
+    };
+    bins.validate()?;
     let mesh = dataset.neutral();
-    let disp = rig.unskin_shapes(&mesh.positions, dataset.displacements(), thetas)?;
-    Ok(Arc::new(Dataset::new(
-        mesh.clone(),
-        disp,
-        dataset.names().to_vec(),
-    )?))
+    (0..bins.num_bins())
+        .map(|b| {
+            let members = bins.members(b, thetas);
+            if members.is_empty() {
+                let (lo, hi) = bins.core_range(b);
+                return Err(LgiError::Input(format!(
+                    "jaw bin {b} (opening {lo} to {hi} rad, overlap {}) has no member shapes: \
+                     no dataset shape opens the jaw that far; change the bin edges",
+                    bins.overlap
+                )));
+            }
+            let reference = bins.reference(b);
+            let (base, disp) = rig.repose_shapes(
+                &mesh.positions,
+                dataset.displacements(),
+                thetas,
+                &members,
+                reference,
+            )?;
+            let names = members
+                .iter()
+                .map(|&k| dataset.names()[k as usize].clone())
+                .collect();
+            let neutral = Mesh {
+                positions: base,
+                ..mesh.clone()
+            };
+            Ok(LookupSource {
+                reference: Some(reference),
+                members,
+                data: Arc::new(Dataset::new(neutral, disp, names)?),
+            })
+        })
+        .collect()
 }
 
-/// Bundles' closest points on the neutral and their positions on every shape.
+/// Bundles' closest points on the neutral.
 pub(crate) fn locate_bundles(
-    dataset: &Dataset,
+    mesh: &Mesh,
     markers_rest: &[DVec3],
     config: &BuildConfig,
-) -> Result<(Vec<SurfacePoint>, Vec<DVec3>)> {
-    let mesh = dataset.neutral();
-    let bundles: Vec<SurfacePoint> = correspond(
+) -> Result<Vec<SurfacePoint>> {
+    Ok(correspond(
         mesh,
         markers_rest,
         config.surface_tolerance * mesh.diagonal(),
     )?
     .into_iter()
     .map(|(sp, _)| sp)
-    .collect();
-    let positions = shape_bundle_positions(dataset, &bundles);
-    Ok((bundles, positions))
+    .collect())
 }
 
 /// Bundle positions on every shape, `(S + 1) × B` with shape id 0 the neutral.
-fn shape_bundle_positions(dataset: &Dataset, bundles: &[SurfacePoint]) -> Vec<DVec3> {
+pub(crate) fn shape_bundle_positions(dataset: &Dataset, bundles: &[SurfacePoint]) -> Vec<DVec3> {
     let mesh = dataset.neutral();
     let b = bundles.len();
     let s1 = dataset.num_shapes() + 1;
@@ -1134,6 +1431,331 @@ mod tests {
             for (a, b) in fresh.weights.vals.iter().zip(&derived.weights.vals) {
                 assert!((a - b).abs() <= 1e-12, "{missing:?}: {a} vs {b}");
             }
+        }
+    }
+
+    /// The patch's jaw: a hinge about x through a pivot behind and above the patch, weight 1
+    /// below y = 0.35, 0 above y = 0.65, linear between.
+    fn patch_rig(data: &Dataset) -> JawRig {
+        let weights = data
+            .neutral()
+            .positions
+            .iter()
+            .map(|p| ((0.65 - p.y) / 0.3).clamp(0.0, 1.0))
+            .collect();
+        JawRig::new(DVec3::new(0.5, 0.8, -0.6), weights).unwrap()
+    }
+
+    /// Dataset shape jaw openings of [`jaw_patch`] (radians).
+    const OPENINGS: [f64; 10] = [0.0, 0.0, 0.0, 0.2, 0.2, 0.3, 0.3, 0.4, 0.5, 0.5];
+
+    /// The patch's expressions, each at its opening from [`OPENINGS`] (skinned with the rig),
+    /// plus markers only where the jaw weight is constant over their triangle (so a marker's
+    /// own weight skins it exactly like its triangle's vertices).
+    fn jaw_patch() -> (Dataset, JawRig, Vec<JawParams>, Vec<DVec3>) {
+        let base = patch(24);
+        let rig = patch_rig(&base);
+        let x0 = &base.neutral().positions;
+        let mut shapes = Vec::new();
+        let mut thetas = Vec::new();
+        for (k, &open) in OPENINGS.iter().enumerate() {
+            let theta = JawParams {
+                open,
+                ..JawParams::ZERO
+            };
+            let expr: Vec<DVec3> = (0..x0.len())
+                .map(|v| x0[v] + base.displacement(k % base.num_shapes(), v))
+                .collect();
+            let mut posed = expr.clone();
+            rig.skin(&expr, theta, &mut posed).unwrap();
+            shapes.push((format!("e{k}_open{open}"), posed));
+            thetas.push(theta);
+        }
+        let data = Dataset::from_shape_positions(base.neutral().clone(), shapes).unwrap();
+        let mut markers = Vec::new();
+        for &y in &[0.08, 0.17, 0.26, 0.74, 0.83, 0.92] {
+            for &x in &[0.1, 0.3, 0.5, 0.7, 0.9] {
+                let (u, v) = (x + 0.013 * y, y);
+                markers.push(DVec3::new(u, v, 0.1 * (3.0 * u).sin() * (2.0 * v).cos()));
+            }
+        }
+        (data, rig, thetas, markers)
+    }
+
+    fn binned_model(edges: Vec<f64>, overlap: f64) -> Result<(Model, Dataset, Vec<JawParams>)> {
+        let (data, rig, thetas, markers) = jaw_patch();
+        let jaw = JawInput {
+            rig,
+            shape_thetas: thetas.clone(),
+            bins: Some(JawBins { edges, overlap }),
+        };
+        let model = Model::build_shared(
+            Arc::new(data.clone()),
+            &markers,
+            &BuildConfig::default(),
+            Some(jaw),
+        )?;
+        Ok((model, data, thetas))
+    }
+
+    fn shape_mesh(data: &Dataset, k: usize) -> Vec<DVec3> {
+        let x0 = &data.neutral().positions;
+        (0..x0.len())
+            .map(|v| x0[v] + data.displacement(k, v))
+            .collect()
+    }
+
+    #[test]
+    fn every_member_shape_of_every_bin_is_reproduced_at_its_own_jaw_pose() {
+        let (model, data, thetas) = binned_model(vec![0.0, 0.25, 0.5], 0.06).unwrap();
+        assert_eq!(model.lookups()[0].members(), &[0, 1, 2, 3, 4, 5, 6]);
+        assert_eq!(model.lookups()[1].members(), &[3, 4, 5, 6, 7, 8, 9]);
+        let diag = model.diagonal();
+        for (bin, lk) in model.lookups().iter().enumerate() {
+            for &k in lk.members() {
+                let k = k as usize;
+                let mesh = shape_mesh(&data, k);
+                let targets = model.bundle_positions(&mesh).unwrap();
+                let frame = model
+                    .solve_frame_in_bin(&targets, Some(thetas[k]), bin)
+                    .unwrap();
+                assert_eq!(frame.bin, bin);
+                for (i, c) in frame.choices.iter().enumerate() {
+                    let c = c.unwrap();
+                    let w: f64 = (0..4)
+                        .filter(|&j| c.shapes[j] == k as u32 + 1)
+                        .map(|j| c.weights[j])
+                        .sum();
+                    // The target matches the cloud point up to the f32 storage of shapes.
+                    assert!(w > 1.0 - 1e-6, "bin {bin} shape {k} bundle {i}: {c:?}");
+                }
+                // f32 storage of the re-posed displacements (like the dataset's) bounds the
+                // round trip T(θ_k) T(θ_b)⁻¹ (T(θ_b) T(θ_k)⁻¹ x) at ~1e-7 of the motion.
+                let err = (0..mesh.len())
+                    .filter(|&v| model.sewing_space().contains(v))
+                    .map(|v| frame.vertices[v].distance(mesh[v]))
+                    .fold(0.0, f64::max);
+                assert!(err <= 1e-6 * diag, "bin {bin} shape {k}: {err:e}");
+                assert!(frame.residuals.iter().all(|&r| r <= 1e-9 * diag));
+            }
+        }
+    }
+
+    #[test]
+    fn one_bin_holding_every_shape_matches_the_unbinned_model_to_f32_round_off() {
+        let (binned, data, thetas) = binned_model(vec![0.0, 0.5], 0.0).unwrap();
+        let (_, rig, _, markers) = jaw_patch();
+        let plain = Model::build_shared(
+            Arc::new(data.clone()),
+            &markers,
+            &BuildConfig::default(),
+            Some(JawInput {
+                rig,
+                shape_thetas: thetas.clone(),
+                bins: None,
+            }),
+        )
+        .unwrap();
+        // Frames between shapes: blends of two shapes' meshes at an intermediate pose.
+        for (a, b, t) in [(0, 5, 0.3), (3, 8, 0.6), (1, 7, 0.5)] {
+            let (ma, mb) = (shape_mesh(&data, a), shape_mesh(&data, b));
+            let mesh: Vec<DVec3> = ma.iter().zip(&mb).map(|(p, q)| p.lerp(*q, t)).collect();
+            let targets = plain.bundle_positions(&mesh).unwrap();
+            let theta = JawParams {
+                open: (1.0 - t) * thetas[a].open + t * thetas[b].open,
+                ..JawParams::ZERO
+            };
+            let f0 = plain.solve_frame(&targets, None, Some(theta)).unwrap();
+            let f1 = binned.solve_frame(&targets, None, Some(theta)).unwrap();
+            let err = f0
+                .vertices
+                .iter()
+                .zip(&f1.vertices)
+                .map(|(p, q)| p.distance(*q))
+                .fold(0.0, f64::max);
+            assert!(err <= 1e-5 * plain.diagonal(), "{a}-{b}: {err:e}");
+        }
+    }
+
+    #[test]
+    fn bin_selection_follows_a_hand_written_sequence_with_hysteresis() {
+        let bins = JawBins {
+            edges: vec![0.0, 0.2, 0.4, 0.6],
+            overlap: 0.05,
+        };
+        bins.validate().unwrap();
+        // (opening, expected bin) in order; each frame sees the previous frame's bin.
+        let script = [
+            (0.0, 0), // core of bin 0
+            (0.19, 0),
+            (0.23, 0), // past edge 0.2 but inside bin 0's overlap (to 0.25): kept
+            (0.26, 1), // outside: core bin 1
+            (0.17, 1), // inside bin 1's overlap (from 0.15): kept
+            (0.14, 0), // outside: core bin 0
+            (-0.3, 0), // below the first edge: clamped to bin 0
+            (0.9, 2),  // above the last edge: clamped to the last bin
+            (0.36, 2), // inside bin 2's overlap (from 0.35): kept
+            (0.34, 1), // outside: core bin 1
+            (0.4, 1),  // on an edge, inside bin 1's range: kept
+            (0.46, 2), // outside bin 1's overlap (to 0.45)
+        ];
+        let mut previous = None;
+        for (f, &(open, want)) in script.iter().enumerate() {
+            let got = bins.select(open, previous);
+            assert_eq!(got, want, "frame {f}, opening {open}");
+            previous = Some(got);
+        }
+        // Without a previous frame: the core bin (an edge belongs to the bin above it).
+        assert_eq!(bins.select(0.2, None), 1);
+        assert_eq!(bins.select(0.6, None), 2);
+    }
+
+    #[test]
+    fn a_temporal_solve_picks_bins_by_hysteresis_and_reports_dataset_shape_ids() {
+        let (model, data, _) = binned_model(vec![0.0, 0.25, 0.5], 0.06).unwrap();
+        let opens = [0.0, 0.2, 0.29, 0.32, 0.2, 0.18, 0.5];
+        let want = [0, 0, 0, 1, 1, 0, 1];
+        let frames: Vec<Vec<DVec3>> = opens
+            .iter()
+            .enumerate()
+            .map(|(f, _)| {
+                let k = [0, 3, 5, 7, 4, 1, 9][f];
+                model.bundle_positions(&shape_mesh(&data, k)).unwrap()
+            })
+            .collect();
+        let poses: Vec<JawParams> = opens
+            .iter()
+            .map(|&open| JawParams {
+                open,
+                ..JawParams::ZERO
+            })
+            .collect();
+        for window in [0, 3] {
+            let out = model
+                .solve_sequence(&frames, Some(&poses), true, window, |_| {})
+                .unwrap();
+            let bins: Vec<usize> = out.iter().map(|f| f.bin).collect();
+            assert_eq!(bins, want, "window {window}");
+            for (f, fr) in out.iter().enumerate() {
+                let members = model.lookups()[fr.bin].members();
+                for c in fr.choices.iter().flatten() {
+                    for j in 0..4 {
+                        let s = c.shapes[j];
+                        assert!(c.weights[j] == 0.0 || s == 0 || members.contains(&(s - 1)));
+                    }
+                }
+                assert!(
+                    fr.residuals.iter().all(|&r| r <= 1e-9 * model.diagonal()),
+                    "{f}"
+                );
+            }
+        }
+        // Frame 1 is shape 3 at its own pose (0.2): it chooses that shape (id 4), purely.
+        let out = model
+            .solve_sequence(&frames[..2], Some(&poses[..2]), true, 0, |_| {})
+            .unwrap();
+        for c in out[1].choices.iter().flatten() {
+            let w: f64 = (0..4)
+                .filter(|&j| c.shapes[j] == 4)
+                .map(|j| c.weights[j])
+                .sum();
+            assert!(w > 1.0 - 1e-6, "{c:?}");
+        }
+        // solve_frame with a FrameState applies the same rule.
+        let state = FrameState {
+            choices: out[1].choices.clone(),
+            bin: Some(out[1].bin),
+        };
+        let fr = model
+            .solve_frame(&frames[2], Some(&state), Some(poses[2]))
+            .unwrap();
+        assert_eq!(fr.bin, 0);
+    }
+
+    #[test]
+    fn binned_model_save_load_round_trip_gives_identical_frames() {
+        let (model, data, thetas) = binned_model(vec![0.0, 0.25, 0.5], 0.06).unwrap();
+        let path = std::env::temp_dir().join(format!("lgi-bins-{}.lgi", std::process::id()));
+        crate::io::model_file::save(&model, &path).unwrap();
+        let loaded = crate::io::model_file::load(&path);
+        std::fs::remove_file(&path).unwrap();
+        let loaded = loaded.unwrap();
+        assert_eq!(loaded.jaw().unwrap().bins, model.jaw().unwrap().bins);
+        assert_eq!(loaded.lookups().len(), 2);
+        let frames: Vec<Vec<DVec3>> = [0, 3, 5, 7, 9]
+            .iter()
+            .map(|&k| model.bundle_positions(&shape_mesh(&data, k)).unwrap())
+            .collect();
+        let poses: Vec<JawParams> = [0, 3, 5, 7, 9].iter().map(|&k| thetas[k]).collect();
+        let a = model
+            .solve_sequence(&frames, Some(&poses), true, 3, |_| {})
+            .unwrap();
+        let b = loaded
+            .solve_sequence(&frames, Some(&poses), true, 3, |_| {})
+            .unwrap();
+        for (fa, fb) in a.iter().zip(&b) {
+            assert_eq!(fa.vertices, fb.vertices);
+            assert_eq!(fa.choices, fb.choices);
+            assert_eq!(fa.bin, fb.bin);
+        }
+    }
+
+    #[test]
+    fn a_version_2_file_still_loads_as_an_unbinned_model() {
+        let (data, rig, thetas, markers) = jaw_patch();
+        let model = Model::build_shared(
+            Arc::new(data),
+            &markers,
+            &BuildConfig::default(),
+            Some(JawInput {
+                rig,
+                shape_thetas: thetas.clone(),
+                bins: None,
+            }),
+        )
+        .unwrap();
+        let path = std::env::temp_dir().join(format!("lgi-v2-{}.lgi", std::process::id()));
+        crate::io::model_file::save(&model, &path).unwrap();
+        // Version 2 is version 3 without the trailing bins section (a u64 0 when unbinned).
+        let bytes = std::fs::read(&path).unwrap();
+        let payload = &bytes[28..bytes.len() - 8];
+        assert_eq!(&bytes[bytes.len() - 8..], &[0u8; 8]);
+        let mut v2 = bytes[..8].to_vec();
+        v2.extend_from_slice(&2u32.to_le_bytes());
+        v2.extend_from_slice(&(payload.len() as u64).to_le_bytes());
+        v2.extend_from_slice(&crate::io::model_file::checksum(payload).to_le_bytes());
+        v2.extend_from_slice(payload);
+        std::fs::write(&path, v2).unwrap();
+        let loaded = crate::io::model_file::load(&path);
+        std::fs::remove_file(&path).unwrap();
+        let loaded = loaded.unwrap();
+        assert!(loaded.jaw().unwrap().bins.is_none());
+        let t = model
+            .bundle_positions(&shape_mesh(model.dataset(), 5))
+            .unwrap();
+        let a = model.solve_frame(&t, None, Some(thetas[5])).unwrap();
+        let b = loaded.solve_frame(&t, None, Some(thetas[5])).unwrap();
+        assert_eq!(a.vertices, b.vertices);
+    }
+
+    #[test]
+    fn invalid_bin_specs_are_rejected_with_named_errors() {
+        let cases: [(Vec<f64>, f64, &str); 6] = [
+            (vec![0.1], 0.0, "at least 2 edges"),
+            (vec![0.0, f64::NAN], 0.0, "edge 1 must be finite"),
+            (vec![0.0, 0.3, 0.2], 0.0, "edge 2 (0.2) <= edge 1 (0.3)"),
+            (vec![0.0, 0.5], -0.1, "overlap must be finite and >= 0"),
+            (vec![0.0, 0.5], f64::INFINITY, "overlap must be finite"),
+            (
+                vec![0.0, 0.1, 0.15, 0.5],
+                0.0,
+                "jaw bin 1 (opening 0.1 to 0.15 rad",
+            ),
+        ];
+        for (edges, overlap, want) in cases {
+            let e = binned_model(edges.clone(), overlap).unwrap_err();
+            assert!(matches!(e, LgiError::Input(_)), "{edges:?}: {e:?}");
+            assert!(e.to_string().contains(want), "{edges:?}: {e}");
         }
     }
 }

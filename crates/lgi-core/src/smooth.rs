@@ -9,6 +9,17 @@ use crate::sew::Pieces;
 /// (shrinking at the ends; frames where the bundle is missing are skipped). A bundle missing
 /// in a frame stays missing there.
 pub fn smooth_choices(choices: &[Vec<Option<Choice>>], window: usize) -> Vec<Pieces> {
+    smooth_choices_in_bins(choices, &vec![0; choices.len()], window)
+}
+
+/// As [`smooth_choices`] for frames looked up in jaw bins (`bins[f]`, choices in each bin's
+/// local shape ids): a frame averages only over the window's frames in its own bin, since
+/// shape ids of different bins name different shapes.
+pub fn smooth_choices_in_bins(
+    choices: &[Vec<Option<Choice>>],
+    bins: &[usize],
+    window: usize,
+) -> Vec<Pieces> {
     let nf = choices.len();
     let half = window / 2;
     let mut out = Vec::with_capacity(nf);
@@ -23,7 +34,12 @@ pub fn smooth_choices(choices: &[Vec<Option<Choice>>], window: usize) -> Vec<Pie
             if choices[f][b].is_some() {
                 acc.clear();
                 let mut count = 0.0;
-                for frame in &choices[f.saturating_sub(half)..(f + half + 1).min(nf)] {
+                let lo = f.saturating_sub(half);
+                let hi = (f + half + 1).min(nf);
+                for (g, frame) in choices[lo..hi].iter().enumerate() {
+                    if bins.get(lo + g) != bins.get(f) {
+                        continue;
+                    }
                     let Some(c) = frame.get(b).and_then(|c| c.as_ref()) else {
                         continue;
                     };
@@ -89,5 +105,29 @@ mod tests {
                 assert!(w.iter().all(|&x| x > 0.0));
             }
         }
+    }
+
+    #[test]
+    fn binned_smoothing_averages_only_frames_of_the_same_bin() {
+        // Frames 0..5 in bins 0, 0, 1, 1, 0: shape id 2 in bin 1 is another shape than in bin 0.
+        let frames = vec![
+            vec![pure(1)],
+            vec![pure(2)],
+            vec![pure(2)],
+            vec![pure(3)],
+            vec![pure(1)],
+        ];
+        let bins = [0, 0, 1, 1, 0];
+        let p = smooth_choices_in_bins(&frames, &bins, 3);
+        // Frame 1 (bin 0) sees frames 0 and 1 only; frame 2 (bin 1) sees 2 and 3.
+        assert_eq!(p[1].bundle(0), (&[1u32, 2][..], &[0.5, 0.5][..]));
+        assert_eq!(p[2].bundle(0), (&[2u32, 3][..], &[0.5, 0.5][..]));
+        // Frame 4 (bin 0) has no bin-0 neighbour in its window: its own choice.
+        assert_eq!(p[4].bundle(0), (&[1u32][..], &[1.0][..]));
+        // One bin everywhere is the unbinned average.
+        assert_eq!(
+            smooth_choices_in_bins(&frames, &[0; 5], 3),
+            smooth_choices(&frames, 3)
+        );
     }
 }

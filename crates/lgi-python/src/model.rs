@@ -5,8 +5,8 @@ use crate::convert::{flat_to_array, float_array, point_sets, points, points_to_a
 use crate::dataset::Dataset;
 use crate::error::{input_error, PyLgiError};
 use glam::DVec3;
-use lgi_core::jaw::{JawParams, JawRig};
-use lgi_core::model::{BuildConfig, Model as CoreModel};
+use lgi_core::jaw::{JawBins, JawParams, JawRig};
+use lgi_core::model::{BuildConfig, JawInput, Model as CoreModel};
 use numpy::PyArrayDyn;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
@@ -54,9 +54,11 @@ fn config_from_dict(d: Option<&Bound<'_, PyDict>>) -> PyResult<BuildConfig> {
 
 #[pymethods]
 impl Model {
-    /// Builds a model (GIL released). `config` is a dict of BuildConfig fields.
+    /// Builds a model (GIL released). `config` is a dict of BuildConfig fields; `jaw_bins`
+    /// (edges over the jaw opening, radians) and `bin_overlap` bin the clouds of a jaw model.
     #[staticmethod]
-    #[pyo3(signature = (dataset, markers_rest, config=None, jaw_pivot=None, jaw_weights=None, shape_theta=None))]
+    #[pyo3(signature = (dataset, markers_rest, config=None, jaw_pivot=None, jaw_weights=None, shape_theta=None, jaw_bins=None, bin_overlap=0.0))]
+    #[allow(clippy::too_many_arguments)]
     fn build(
         py: Python<'_>,
         dataset: &Dataset,
@@ -65,10 +67,15 @@ impl Model {
         jaw_pivot: Option<&Bound<'_, PyAny>>,
         jaw_weights: Option<&Bound<'_, PyAny>>,
         shape_theta: Option<&Bound<'_, PyAny>>,
+        jaw_bins: Option<&Bound<'_, PyAny>>,
+        bin_overlap: f64,
     ) -> PyResult<Model> {
         let markers = points(markers_rest, "markers_rest", None, false)?;
         let cfg = config_from_dict(config)?;
         let data = dataset.inner.clone();
+        if jaw_bins.is_some() && jaw_pivot.is_none() {
+            return Err(input_error("jaw_bins: binning needs a jaw rig"));
+        }
         let jaw = match (jaw_pivot, jaw_weights, shape_theta) {
             (None, None, None) => None,
             (Some(p), Some(w), Some(t)) => {
@@ -86,7 +93,21 @@ impl Model {
                     .outer_iter()
                     .map(|r| JawParams::from_array([r[0], r[1], r[2]]))
                     .collect();
-                Some((rig, th))
+                let bins = match jaw_bins {
+                    None => None,
+                    Some(e) => Some(JawBins {
+                        edges: float_array(e, "jaw_bins", &[None])?
+                            .iter()
+                            .copied()
+                            .collect(),
+                        overlap: bin_overlap,
+                    }),
+                };
+                Some(JawInput {
+                    rig,
+                    shape_thetas: th,
+                    bins,
+                })
             }
             _ => {
                 return Err(input_error(
@@ -192,6 +213,7 @@ impl Model {
         let mut tets = Vec::with_capacity(nf * b);
         let mut projected = Vec::with_capacity(nf * b);
         let mut missing = Vec::with_capacity(nf * b);
+        let bins: Vec<i64> = solved.iter().map(|fr| fr.bin as i64).collect();
         for fr in &solved {
             verts.extend(fr.vertices.iter().flat_map(|p| [p.x, p.y, p.z]));
             res.extend_from_slice(&fr.residuals);
@@ -225,6 +247,7 @@ impl Model {
         d.set_item("choice_tets", flat_to_array(py, tets, &[nf, b])?)?;
         d.set_item("choice_projected", flat_to_array(py, projected, &[nf, b])?)?;
         d.set_item("missing", flat_to_array(py, missing, &[nf, b])?)?;
+        d.set_item("jaw_bin", flat_to_array(py, bins, &[nf])?)?;
         Ok(d)
     }
 
@@ -335,6 +358,18 @@ impl Model {
             "bundle_weights",
             flat_to_array(py, bw, &[j.bundle_weights.len()])?,
         )?;
+        if let Some(bins) = &j.bins {
+            let n = bins.edges.len();
+            d.set_item("bin_edges", flat_to_array(py, bins.edges.clone(), &[n])?)?;
+            d.set_item("bin_overlap", bins.overlap)?;
+            let members: Vec<Vec<u32>> = self
+                .inner
+                .lookups()
+                .iter()
+                .map(|l| l.members().to_vec())
+                .collect();
+            d.set_item("bin_members", members)?;
+        }
         Ok(Some(d))
     }
 

@@ -6,9 +6,13 @@
 use crate::cloud::BundleCloud;
 use crate::dataset::Dataset;
 use crate::error::{LgiError, Result};
-use crate::jaw::{JawParams, JawRig};
+use crate::grid::TetIndex;
+use crate::jaw::{JawBins, JawParams, JawRig};
 use crate::mesh::Mesh;
-use crate::model::{locate_bundles, unskinned_dataset, BuildConfig, Model};
+use crate::model::{
+    locate_bundles, lookup_sources, shape_bundle_positions, BuildConfig, JawInput, LookupParts,
+    Model,
+};
 use crate::tets::Tet;
 use glam::{DVec2, DVec3};
 use std::path::Path;
@@ -16,11 +20,13 @@ use std::sync::Arc;
 
 const MAGIC: &[u8; 8] = b"LGIMODEL";
 /// Format version written by this build; readers accept exactly the versions they know.
-pub const FORMAT_VERSION: u32 = 2;
+pub const FORMAT_VERSION: u32 = 3;
+/// The previous version (no jaw bins), still read (as an unbinned model).
+const PREVIOUS_VERSION: u32 = 2;
 const HEADER: usize = 8 + 4 + 8 + 8;
 
 /// FNV-1a 64: tiny, dependency-free, enough to catch truncation and bit rot.
-fn checksum(bytes: &[u8]) -> u64 {
+pub(crate) fn checksum(bytes: &[u8]) -> u64 {
     bytes.iter().fold(0xcbf2_9ce4_8422_2325u64, |h, &b| {
         (h ^ b as u64).wrapping_mul(0x0000_0100_0000_01b3)
     })
@@ -203,22 +209,8 @@ pub fn save(model: &Model, path: &Path) -> Result<()> {
     }
     w.f32s(d.displacements());
     w.f64s(vec3s(model.markers_rest()));
-    for (cloud, index) in model.clouds().iter().zip(model.indices()) {
-        w.f64s(vec3s(&cloud.points));
-        w.u64(cloud.aliases.len() as u64);
-        for a in &cloud.aliases {
-            w.u32s(a.iter().copied());
-        }
-        w.u32s(
-            index
-                .tets()
-                .iter()
-                .flatten()
-                .copied()
-                .collect::<Vec<_>>()
-                .into_iter(),
-        );
-    }
+    let lookups = model.lookups();
+    write_clouds(&mut w, lookups[0].clouds(), lookups[0].indices());
     // Version 2: the jaw section (0 = none; 1 = pivot, vertex weights, shape poses).
     match model.jaw() {
         None => w.u64(0),
@@ -235,6 +227,19 @@ pub fn save(model: &Model, path: &Path) -> Result<()> {
                     .collect::<Vec<_>>()
                     .into_iter(),
             );
+        }
+    }
+    // Version 3: the jaw bins section (0 = none; 1 = edges, overlap, then the clouds and tets
+    // of bins 1.. — bin 0's are the ones above).
+    match model.jaw().and_then(|j| j.bins.as_ref()) {
+        None => w.u64(0),
+        Some(bins) => {
+            w.u64(1);
+            w.f64s(bins.edges.clone().into_iter());
+            w.f64(bins.overlap);
+            for lk in &lookups[1..] {
+                write_clouds(&mut w, lk.clouds(), lk.indices());
+            }
         }
     }
     let payload = w.0;
@@ -258,9 +263,10 @@ pub fn load(path: &Path) -> Result<Model> {
         return Err(bad("not an lgi model file (bad magic)"));
     }
     let version = u32::from_le_bytes([bytes[8], bytes[9], bytes[10], bytes[11]]);
-    if version != FORMAT_VERSION {
+    if version != FORMAT_VERSION && version != PREVIOUS_VERSION {
         return Err(bad(&format!(
-            "format version {version}; this lgi reads version {FORMAT_VERSION}: rebuild the model"
+            "format version {version}; this lgi reads versions {PREVIOUS_VERSION} and \
+             {FORMAT_VERSION}: rebuild the model"
         )));
     }
     let mut u = [0u8; 8];
@@ -340,35 +346,7 @@ pub fn load(path: &Path) -> Result<Model> {
         let v = r.f64s()?;
         to_vec3s(&r, v)?
     };
-    let mut clouds = Vec::with_capacity(markers.len());
-    let mut tets = Vec::with_capacity(markers.len());
-    for i in 0..markers.len() {
-        let points = {
-            let v = r.f64s()?;
-            to_vec3s(&r, v)?
-        };
-        let na = r.len(8)?;
-        let aliases = (0..na).map(|_| r.u32s()).collect::<Result<Vec<_>>>()?;
-        let t = r.u32s()?;
-        if aliases.len() != points.len() || t.len() % 4 != 0 {
-            return Err(bad(&format!("bundle {i}: inconsistent cloud or tets")));
-        }
-        let np = points.len() as u32;
-        let ns = dataset.num_shapes() as u32;
-        let t: Vec<Tet> = t
-            .chunks_exact(4)
-            .map(|c| [c[0], c[1], c[2], c[3]])
-            .collect();
-        if t.iter().flatten().any(|&p| p >= np)
-            || aliases
-                .iter()
-                .any(|a| a.is_empty() || a.iter().any(|&s| s > ns))
-        {
-            return Err(bad(&format!("bundle {i}: index out of range")));
-        }
-        clouds.push(BundleCloud { points, aliases });
-        tets.push(t);
-    }
+    let mut built = vec![read_clouds(&mut r, markers.len())?];
     let jaw = match r.u64()? {
         0 => None,
         1 => {
@@ -383,16 +361,120 @@ pub fn load(path: &Path) -> Result<Model> {
                 .map(|c| JawParams::from_array([c[0], c[1], c[2]]))
                 .collect();
             let rig = JawRig::new(pivot, weights).map_err(|e| bad(&e.to_string()))?;
-            Some((rig, thetas))
+            Some(JawInput {
+                rig,
+                shape_thetas: thetas,
+                bins: None,
+            })
         }
         _ => return Err(r.err("unknown jaw section")),
     };
+    let bins = match version {
+        PREVIOUS_VERSION => None,
+        _ => match r.u64()? {
+            0 => None,
+            1 => {
+                let edges = r.f64s()?;
+                let overlap = r.f64()?;
+                let bins = JawBins { edges, overlap };
+                bins.validate().map_err(|e| bad(&e.to_string()))?;
+                for _ in 1..bins.num_bins() {
+                    built.push(read_clouds(&mut r, markers.len())?);
+                }
+                Some(bins)
+            }
+            _ => return Err(r.err("unknown jaw bins section")),
+        },
+    };
     if r.at != payload.len() {
-        return Err(bad("trailing bytes after the jaw section"));
+        return Err(bad("trailing bytes after the last section"));
     }
+    let jaw = match (jaw, bins) {
+        (jaw, None) => jaw,
+        (Some(j), Some(bins)) => Some(JawInput {
+            bins: Some(bins),
+            ..j
+        }),
+        (None, Some(_)) => return Err(bad("jaw bins without a jaw rig")),
+    };
     config.validate().map_err(|e| bad(&e.to_string()))?;
     let given = Arc::new(dataset);
-    let sew = unskinned_dataset(&given, jaw.as_ref()).map_err(|e| bad(&e.to_string()))?;
-    let located = locate_bundles(&sew, &markers, &config)?;
-    Model::assemble((given, sew), jaw, &markers, &config, located, clouds, tets)
+    let sources = lookup_sources(&given, jaw.as_ref()).map_err(|e| bad(&e.to_string()))?;
+    if sources.len() != built.len() {
+        return Err(bad("number of jaw bins does not match the stored clouds"));
+    }
+    let bundles = locate_bundles(given.neutral(), &markers, &config)?;
+    let mut parts = Vec::with_capacity(sources.len());
+    for (bin, (source, (clouds, tets))) in sources.into_iter().zip(built).enumerate() {
+        let ns = source.num_shapes() as u32;
+        if let Some(i) = clouds
+            .iter()
+            .position(|c| c.aliases.iter().flatten().any(|&s| s > ns))
+        {
+            return Err(bad(&format!(
+                "bin {bin}, bundle {i}: shape id out of range"
+            )));
+        }
+        let shape_positions = shape_bundle_positions(source.data(), &bundles);
+        parts.push(LookupParts {
+            source,
+            shape_positions,
+            clouds,
+            tets,
+        });
+    }
+    Model::assemble(given, jaw, &markers, &config, bundles, parts)
+}
+
+/// One bin's clouds and tets, bundle after bundle.
+fn write_clouds(w: &mut Writer, clouds: &[BundleCloud], indices: &[TetIndex]) {
+    for (cloud, index) in clouds.iter().zip(indices) {
+        w.f64s(vec3s(&cloud.points));
+        w.u64(cloud.aliases.len() as u64);
+        for a in &cloud.aliases {
+            w.u32s(a.iter().copied());
+        }
+        w.u32s(
+            index
+                .tets()
+                .iter()
+                .flatten()
+                .copied()
+                .collect::<Vec<_>>()
+                .into_iter(),
+        );
+    }
+}
+
+/// Reads what [`write_clouds`] wrote for `num_bundles` bundles; tets must index their cloud and
+/// every point must have an alias (shape ids are checked against the bin's shapes later).
+fn read_clouds(
+    r: &mut Reader<'_>,
+    num_bundles: usize,
+) -> Result<(Vec<BundleCloud>, Vec<Vec<Tet>>)> {
+    let mut clouds = Vec::with_capacity(num_bundles);
+    let mut tets = Vec::with_capacity(num_bundles);
+    for i in 0..num_bundles {
+        let points = {
+            let v = r.f64s()?;
+            to_vec3s(r, v)?
+        };
+        let na = r.len(8)?;
+        let aliases = (0..na).map(|_| r.u32s()).collect::<Result<Vec<_>>>()?;
+        let t = r.u32s()?;
+        if aliases.len() != points.len() || t.len() % 4 != 0 {
+            return Err(r.err(&format!("bundle {i}: inconsistent cloud or tets")));
+        }
+        let np = points.len() as u32;
+        let t: Vec<Tet> = t
+            .chunks_exact(4)
+            .map(|c| [c[0], c[1], c[2], c[3]])
+            .collect();
+        if t.iter().flatten().any(|&p| p >= np) || aliases.iter().any(|a| a.is_empty()) {
+            return Err(r.err(&format!("bundle {i}: index out of range")));
+        }
+        clouds.push(BundleCloud { points, aliases });
+        tets.push(t);
+    }
+    Ok((clouds, tets))
 }
