@@ -69,8 +69,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             if pieces.len() < FRAMES {
                 pieces.push(Pieces::from_choices(&frame.choices));
             }
+            let frame = black_box(frame);
             state = Some(FrameState {
-                choices: black_box(frame).choices,
+                choices: frame.choices,
+                bin: Some(frame.bin),
             });
         }
         solve_best = solve_best.min(t.elapsed().as_secs_f64() / FRAMES as f64);
