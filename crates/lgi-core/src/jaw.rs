@@ -344,6 +344,59 @@ impl JawRig {
     }
 }
 
+/// A frame's jaw map of every vertex, for sewing one vertex at a time: unskin from `from` (a
+/// bin's reference pose), then skin to `to` (the frame's pose) — vertex by vertex the same
+/// arithmetic as [`JawRig::unskin`] then [`JawRig::skin`].
+#[derive(Debug, Clone)]
+pub struct VertexMap<'a> {
+    weights: &'a [f64],
+    from: Option<Blend>,
+    to: Option<Blend>,
+}
+
+impl JawRig {
+    /// The map from pose `from` to pose `to` (`None`: rest, no transform) for a mesh of
+    /// `num_vertices` vertices.
+    pub fn vertex_map(
+        &self,
+        from: Option<JawParams>,
+        to: Option<JawParams>,
+        num_vertices: usize,
+    ) -> Result<VertexMap<'_>> {
+        if num_vertices != self.weights.len() {
+            return Err(LgiError::Input(format!(
+                "jaw skinning needs one weight per vertex: {num_vertices} vertices, {} weights",
+                self.weights.len()
+            )));
+        }
+        let blend = |t: Option<JawParams>| -> Result<Option<Blend>> {
+            t.map(|t| t.validate().map(|_| Blend::new(t, self.pivot)))
+                .transpose()
+        };
+        Ok(VertexMap {
+            weights: &self.weights,
+            from: blend(from)?,
+            to: blend(to)?,
+        })
+    }
+}
+
+impl VertexMap<'_> {
+    /// Vertex `v` at `p` mapped from the first pose to the second.
+    #[inline]
+    pub fn apply(&self, v: usize, p: DVec3) -> DVec3 {
+        let w = self.weights.get(v).copied().unwrap_or(0.0);
+        let mut q = p;
+        if let Some(b) = &self.from {
+            q = b.unskin(q, w);
+        }
+        if let Some(b) = &self.to {
+            q = b.skin(q, w);
+        }
+        q
+    }
+}
+
 /// Point clouds binned by jaw opening (the paper's suggestion for large openings): bin b's core
 /// range over θ.open is `[edges[b], edges[b + 1]]`; its members are the dataset shapes whose
 /// opening lies in the core range widened by `overlap` on both sides, unskinned to the bin's

@@ -13,7 +13,7 @@ use crate::geodesic::{is_detour, EdgeGraph};
 use crate::grid::TetIndex;
 use crate::jaw::{JawBins, JawParams, JawRig};
 use crate::mesh::Mesh;
-use crate::sew::{blend, Pieces, ResidualPass};
+use crate::sew::{BlendInput, BundleTargets, Pieces, ResidualPass};
 use crate::sibson::{SibsonWeights, SparseWeights};
 use crate::smooth::smooth_choices_in_bins;
 use crate::tets::{generate_tets, Tet, TetConfig};
@@ -135,6 +135,32 @@ pub struct Frame {
     pub bundle_positions: Vec<DVec3>,
     /// The jaw bin whose clouds the frame was looked up in (0 for an unbinned model).
     pub bin: usize,
+}
+
+/// A solved frame without its vertices (those went to the caller's buffer, see
+/// [`Model::solve_sequence_into`]).
+#[derive(Debug, Clone)]
+pub struct FrameInfo {
+    /// Per bundle: the chosen geometry (`None` for a missing bundle).
+    pub choices: Vec<Option<Choice>>,
+    /// Per bundle: distance from target to reconstructed surface point (0 for missing).
+    pub residuals: Vec<f64>,
+    /// Per bundle: the reconstructed surface position (for missing bundles, the estimate).
+    pub bundle_positions: Vec<DVec3>,
+    /// The jaw bin whose clouds the frame was looked up in (0 for an unbinned model).
+    pub bin: usize,
+}
+
+impl Frame {
+    fn from_parts(vertices: Vec<DVec3>, info: FrameInfo) -> Frame {
+        Frame {
+            vertices,
+            choices: info.choices,
+            residuals: info.residuals,
+            bundle_positions: info.bundle_positions,
+            bin: info.bin,
+        }
+    }
 }
 
 /// What the next frame needs from the previous one.
@@ -559,9 +585,21 @@ impl Model {
         prep: &Prepared,
         previous: Option<&[Option<Choice>]>,
     ) -> Result<Frame> {
+        let mut vertices = vec![DVec3::ZERO; self.dataset.num_vertices()];
+        let info = self.solve_prepared_into(prep, previous, &mut vertices)?;
+        Ok(Frame::from_parts(vertices, info))
+    }
+
+    /// [`solve_prepared`](Self::solve_prepared) writing the vertices into `out` (V).
+    fn solve_prepared_into(
+        &self,
+        prep: &Prepared,
+        previous: Option<&[Option<Choice>]>,
+        out: &mut [DVec3],
+    ) -> Result<FrameInfo> {
         let choices = self.choose_all(prep, previous);
         let pieces = Pieces::from_choices(&choices);
-        self.sew_frame(prep, choices, &pieces)
+        self.sew_frame_into(prep, choices, &pieces, out)
     }
 
     /// Checks a frame's targets, picks its jaw bin and, with a jaw, maps them into the bin's
@@ -696,47 +734,43 @@ impl Model {
             .collect()
     }
 
-    /// Blends `pieces` (local shape ids of the frame's bin), maps the vertices back from the
-    /// bin's space and reskins the jaw, runs the residual pass, and reports the choices in
-    /// dataset shape ids.
-    fn sew_frame(
+    /// Blends `pieces`, maps them out of the bin and to the frame's jaw pose, and runs the
+    /// residual pass — one pass over the vertices, written into `out` (V).
+    fn sew_frame_into(
         &self,
         prep: &Prepared,
         choices: Vec<Option<Choice>>,
         pieces: &Pieces,
-    ) -> Result<Frame> {
+        out: &mut [DVec3],
+    ) -> Result<FrameInfo> {
         let b = self.bundles.len();
         let (targets_clean, theta) = (&prep.targets, prep.theta);
         let plan = self.plan_for(&prep.present)?;
         let mesh = self.dataset.neutral();
         let lk = &self.lookups[prep.bin];
-        let mut vertices = vec![DVec3::ZERO; mesh.num_vertices()];
-        blend(
-            &lk.data.neutral().positions,
-            lk.data.displacements(),
-            &plan.weights,
+        let input = BlendInput {
+            x0: &lk.data.neutral().positions,
+            displacements: lk.data.displacements(),
+            weights: &plan.weights,
             pieces,
-            &mut vertices,
-        );
-        if let Some(j) = &self.jaw {
-            if let Some(r) = lk.reference {
-                let binned = vertices.clone();
-                j.rig.unskin(&binned, r, &mut vertices)?;
+        };
+        let at = BundleTargets {
+            triangles: &mesh.triangles,
+            bundles: &self.bundles,
+            targets: targets_clean,
+            tolerance: RESIDUAL_TOLERANCE * self.diagonal,
+        };
+        let jaw_map = match &self.jaw {
+            Some(j) if lk.reference.is_some() || theta.is_some() => {
+                Some(j.rig.vertex_map(lk.reference, theta, mesh.num_vertices())?)
             }
-            if let Some(t) = theta {
-                let unskinned = vertices.clone();
-                j.rig.skin(&unskinned, t, &mut vertices)?;
-            }
-        }
-        plan.residual.apply(
-            &mesh.triangles,
-            &self.bundles,
-            &plan.weights,
-            targets_clean,
-            RESIDUAL_TOLERANCE * self.diagonal,
-            &mut vertices,
-        );
-        if let Some(v) = vertices.iter().position(|p| !p.is_finite()) {
+            _ => None,
+        };
+        let bad = match &jaw_map {
+            Some(m) => plan.residual.sew(&input, &|v, p| m.apply(v, p), &at, out),
+            None => plan.residual.sew(&input, &|_, p| p, &at, out),
+        };
+        if let Some(v) = bad {
             return Err(LgiError::Input(format!(
                 "the solve produced a non-finite vertex {v}: targets are probably far outside \
                  the dataset's range"
@@ -745,7 +779,7 @@ impl Model {
         let bundle_positions: Vec<DVec3> = self
             .bundles
             .iter()
-            .map(|sp| sp.evaluate(&mesh.triangles, &vertices))
+            .map(|sp| sp.evaluate(&mesh.triangles, out))
             .collect();
         let residuals = (0..b)
             .map(|i| {
@@ -764,8 +798,7 @@ impl Model {
         } else {
             choices
         };
-        Ok(Frame {
-            vertices,
+        Ok(FrameInfo {
             choices,
             residuals,
             bundle_positions,
@@ -785,8 +818,46 @@ impl Model {
         jaw: Option<&[JawParams]>,
         temporal: bool,
         smooth_window: usize,
-        mut on_frame: impl FnMut(usize),
+        on_frame: impl FnMut(usize),
     ) -> Result<Vec<Frame>> {
+        let nv = self.dataset.num_vertices();
+        let mut vertices = vec![DVec3::ZERO; frames.len() * nv];
+        let infos = self.solve_sequence_into(
+            frames,
+            jaw,
+            temporal,
+            smooth_window,
+            &mut vertices,
+            on_frame,
+        )?;
+        Ok(infos
+            .into_iter()
+            .zip(vertices.chunks(nv.max(1)))
+            .map(|(info, v)| Frame::from_parts(v.to_vec(), info))
+            .collect())
+    }
+
+    /// As [`Model::solve_sequence`], writing frame f's vertices into
+    /// `vertices[f * V..(f + 1) * V]` (a caller's buffer, e.g. a numpy array: no per-frame
+    /// allocation) and returning the rest of each frame.
+    pub fn solve_sequence_into(
+        &self,
+        frames: &[Vec<DVec3>],
+        jaw: Option<&[JawParams]>,
+        temporal: bool,
+        smooth_window: usize,
+        vertices: &mut [DVec3],
+        mut on_frame: impl FnMut(usize),
+    ) -> Result<Vec<FrameInfo>> {
+        let nv = self.dataset.num_vertices();
+        if vertices.len() != frames.len() * nv {
+            return Err(LgiError::Input(format!(
+                "output buffer holds {} vertices, {} frames of {nv} need {}",
+                vertices.len(),
+                frames.len(),
+                frames.len() * nv
+            )));
+        }
         if let Some(j) = jaw {
             if j.len() != frames.len() {
                 return Err(LgiError::Input(format!(
@@ -807,26 +878,29 @@ impl Model {
                 .map_err(|e| frame_context(e, f))?;
             prepared.push(prep);
         }
+        // An empty mesh still gets one (empty) slot per frame.
+        let slots = vertices.chunks_mut(nv.max(1));
         if smooth_window <= 1 {
             // Frame by frame: each frame is finished (and reported) before the next starts.
-            let mut out: Vec<Frame> = Vec::with_capacity(frames.len());
+            let mut out: Vec<FrameInfo> = Vec::with_capacity(frames.len());
             if temporal {
-                for (f, prep) in prepared.iter().enumerate() {
+                for (f, (prep, slot)) in prepared.iter().zip(slots).enumerate() {
                     let lookup = &self.lookups[prep.bin];
                     let previous = out
                         .last()
                         .filter(|fr| fr.bin == prep.bin)
                         .map(|fr| lookup.localize(&fr.choices));
-                    let frame = self.solve_prepared(prep, previous.as_deref());
+                    let frame = self.solve_prepared_into(prep, previous.as_deref(), slot);
                     out.push(frame.map_err(|e| frame_context(e, f))?);
                     on_frame(f);
                 }
             } else {
                 out = prepared
                     .par_iter()
+                    .zip(vertices.par_chunks_mut(nv.max(1)))
                     .enumerate()
-                    .map(|(f, prep)| {
-                        self.solve_prepared(prep, None)
+                    .map(|(f, (prep, slot))| {
+                        self.solve_prepared_into(prep, None, slot)
                             .map_err(|e| frame_context(e, f))
                     })
                     .collect::<Result<_>>()?;
@@ -853,13 +927,14 @@ impl Model {
         let bins: Vec<usize> = prepared.iter().map(|p| p.bin).collect();
         let pieces = smooth_choices_in_bins(&choices, &bins, smooth_window);
         let mut out = Vec::with_capacity(frames.len());
-        for (f, (prep, (ch, pc))) in prepared
+        for (f, ((prep, (ch, pc)), slot)) in prepared
             .iter()
             .zip(choices.into_iter().zip(&pieces))
+            .zip(slots)
             .enumerate()
         {
             out.push(
-                self.sew_frame(prep, ch, pc)
+                self.sew_frame_into(prep, ch, pc, slot)
                     .map_err(|e| frame_context(e, f))?,
             );
             on_frame(f);
@@ -1503,6 +1578,76 @@ mod tests {
         (0..x0.len())
             .map(|v| x0[v] + data.displacement(k, v))
             .collect()
+    }
+
+    /// The old sewing, one stage after another over every vertex: blend, jaw maps, residual
+    /// pass (the reference of the fused one-pass sewing).
+    fn staged_sewing(model: &Model, prep: &Prepared, pieces: &Pieces) -> Vec<DVec3> {
+        let plan = model.plan_for(&prep.present).unwrap();
+        let lk = &model.lookups[prep.bin];
+        let mesh = model.dataset.neutral();
+        let mut v = vec![DVec3::ZERO; mesh.num_vertices()];
+        crate::sew::blend(
+            &lk.data.neutral().positions,
+            lk.data.displacements(),
+            &plan.weights,
+            pieces,
+            &mut v,
+        );
+        if let Some(j) = &model.jaw {
+            if let Some(r) = lk.reference {
+                let c = v.clone();
+                j.rig.unskin(&c, r, &mut v).unwrap();
+            }
+            if let Some(t) = prep.theta {
+                let c = v.clone();
+                j.rig.skin(&c, t, &mut v).unwrap();
+            }
+        }
+        plan.residual.apply(
+            &mesh.triangles,
+            &model.bundles,
+            &plan.weights,
+            &prep.targets,
+            RESIDUAL_TOLERANCE * model.diagonal,
+            &mut v,
+        );
+        v
+    }
+
+    #[test]
+    fn fused_sewing_equals_blend_then_jaw_maps_then_residual_pass_bit_for_bit() {
+        let (binned, data, thetas) = binned_model(vec![0.0, 0.25, 0.5], 0.06).unwrap();
+        let plain =
+            Model::build(&patch(24), binned.markers_rest(), &BuildConfig::default()).unwrap();
+        let mut checked = 0;
+        for (model, jaw) in [(&binned, true), (&plain, false)] {
+            for k in [2usize, 5, 8] {
+                let mesh = shape_mesh(if jaw { &data } else { plain.dataset() }, k % 6);
+                let mut targets = model.bundle_positions(&mesh).unwrap();
+                // Off the dataset (noise), and one marker missing in the second case.
+                for (i, t) in targets.iter_mut().enumerate() {
+                    *t += DVec3::new(0.003, -0.002, 0.004) * ((i * 7 + k) % 5) as f64;
+                }
+                for missing in [None, Some(3usize)] {
+                    let mut t = targets.clone();
+                    if let Some(m) = missing {
+                        t[m] = DVec3::NAN;
+                    }
+                    let theta = jaw.then(|| thetas[k]);
+                    let prep = model.prepare(&t, theta, None).unwrap();
+                    let choices = model.choose_all(&prep, None);
+                    let pieces = Pieces::from_choices(&choices);
+                    let mut fused = vec![DVec3::ZERO; model.dataset.num_vertices()];
+                    model
+                        .sew_frame_into(&prep, choices, &pieces, &mut fused)
+                        .unwrap();
+                    assert_eq!(fused, staged_sewing(model, &prep, &pieces), "k {k}");
+                    checked += 1;
+                }
+            }
+        }
+        assert_eq!(checked, 12);
     }
 
     #[test]

@@ -6,6 +6,7 @@
 use crate::choose::Choice;
 use crate::correspond::SurfacePoint;
 use crate::error::Result;
+use crate::geom::interpolate3;
 use crate::linalg::Lu;
 use crate::sibson::SparseWeights;
 use glam::DVec3;
@@ -63,32 +64,73 @@ pub fn blend(
     pieces: &Pieces,
     out: &mut [DVec3],
 ) {
-    let nv = x0.len();
+    let input = BlendInput {
+        x0,
+        displacements,
+        weights,
+        pieces,
+    };
     out.par_chunks_mut(CHUNK)
         .enumerate()
         .for_each(|(c, chunk)| {
             let base = c * CHUNK;
             for (o, x) in chunk.iter_mut().enumerate() {
-                let v = base + o;
-                let (cols, vals) = weights.row(v);
-                let mut d = [0.0f64; 3];
-                for (&b, &w) in cols.iter().zip(vals) {
-                    let (shapes, alphas) = pieces.bundle(b as usize);
-                    for (&k, &a) in shapes.iter().zip(alphas) {
-                        let k = k as usize;
-                        if k == 0 {
-                            continue;
-                        }
-                        let s = &displacements[((k - 1) * nv + v) * 3..((k - 1) * nv + v) * 3 + 3];
-                        let f = w * a;
-                        d[0] += f * s[0] as f64;
-                        d[1] += f * s[1] as f64;
-                        d[2] += f * s[2] as f64;
-                    }
-                }
-                *x = x0[v] + DVec3::from_array(d);
+                *x = input.vertex(base + o);
             }
         });
+}
+
+/// What the blend of one frame reads (see [`blend`]).
+#[derive(Clone, Copy)]
+pub struct BlendInput<'a> {
+    /// Neutral positions (V) of the space the pieces live in.
+    pub x0: &'a [DVec3],
+    /// `S × V × 3` displacements (shape id k ≥ 1 reads shape k − 1).
+    pub displacements: &'a [f32],
+    /// V × B sewing weights.
+    pub weights: &'a SparseWeights,
+    /// Each bundle's piece.
+    pub pieces: &'a Pieces,
+}
+
+impl BlendInput<'_> {
+    /// One vertex of [`blend`]: `x0 + Σ_i W_vi Σ_j α_ij s_k(v)`.
+    #[inline]
+    pub fn vertex(&self, v: usize) -> DVec3 {
+        let nv = self.x0.len();
+        let (cols, vals) = self.weights.row(v);
+        let mut d = [0.0f64; 3];
+        for (&b, &w) in cols.iter().zip(vals) {
+            let (shapes, alphas) = self.pieces.bundle(b as usize);
+            for (&k, &a) in shapes.iter().zip(alphas) {
+                let k = k as usize;
+                if k == 0 {
+                    continue;
+                }
+                let at = ((k - 1) * nv + v) * 3;
+                let s = &self.displacements[at..at + 3];
+                let f = w * a;
+                d[0] += f * s[0] as f64;
+                d[1] += f * s[1] as f64;
+                d[2] += f * s[2] as f64;
+            }
+        }
+        self.x0[v] + DVec3::from_array(d)
+    }
+}
+
+/// Where the residual pass must put the bundles: their surface points and targets (NaN rows
+/// are missing), and the round-off that triggers a refinement round (absolute).
+#[derive(Clone, Copy)]
+pub struct BundleTargets<'a> {
+    /// The mesh's triangles.
+    pub triangles: &'a [[u32; 3]],
+    /// Every bundle's surface point.
+    pub bundles: &'a [SurfacePoint],
+    /// Every bundle's target.
+    pub targets: &'a [DVec3],
+    /// Largest round-off left at a bundle without a second round.
+    pub tolerance: f64,
 }
 
 /// The exact residual correction for one set of present bundles.
@@ -135,6 +177,78 @@ impl ResidualPass {
             slot,
             lu,
         })
+    }
+
+    /// The whole of sewing in one pass over the vertices: `out[v] = map(v, blend(v))` plus the
+    /// residual corrections, bit for bit what [`blend`], `map` over every vertex and
+    /// [`apply`](Self::apply) give one after another. The corrections only need the bundles'
+    /// triangle corners, so those are blended first and every other vertex is written once.
+    /// Returns the first vertex that is not finite, if any.
+    pub fn sew(
+        &self,
+        input: &BlendInput<'_>,
+        map: &(dyn Fn(usize, DVec3) -> DVec3 + Sync),
+        at: &BundleTargets<'_>,
+        out: &mut [DVec3],
+    ) -> Option<usize> {
+        let weights = input.weights;
+        // The present bundles' corners, blended and mapped (3 per bundle, in `present` order).
+        let corners: Vec<(usize, DVec3)> = self
+            .present
+            .iter()
+            .flat_map(|&b| {
+                let tri = at.triangles[at.bundles[b as usize].triangle as usize];
+                tri.map(|v| (v as usize, map(v as usize, input.vertex(v as usize))))
+            })
+            .collect();
+        let corrected = |v: usize, x: DVec3, rounds: &[Vec<[f64; 3]>]| {
+            let mut x = x;
+            let (cols, vals) = weights.row(v);
+            for c in rounds {
+                for (&b, &w) in cols.iter().zip(vals) {
+                    let s = self.slot[b as usize];
+                    if s != u32::MAX {
+                        x += DVec3::from_array(c[s as usize]) * w;
+                    }
+                }
+            }
+            x
+        };
+        let residuals = |rounds: &[Vec<[f64; 3]>]| -> Vec<[f64; 3]> {
+            self.present
+                .iter()
+                .zip(corners.chunks(3))
+                .map(|(&b, c)| {
+                    let sp = at.bundles[b as usize];
+                    let x = [0, 1, 2].map(|j| corrected(c[j].0, c[j].1, rounds));
+                    (at.targets[b as usize] - interpolate3(x, sp.bary)).to_array()
+                })
+                .collect()
+        };
+        // As in `apply`: a second round only when the first left more than the tolerance.
+        let mut rounds = vec![self.lu.solve3(&residuals(&[]))];
+        let r = residuals(&rounds);
+        let worst = r
+            .iter()
+            .map(|v| DVec3::from_array(*v).length())
+            .fold(0.0, f64::max);
+        if worst.is_nan() || worst > at.tolerance {
+            rounds.push(self.lu.solve3(&r));
+        }
+        out.par_chunks_mut(CHUNK)
+            .enumerate()
+            .map(|(ci, chunk)| {
+                let mut bad = None;
+                for (o, x) in chunk.iter_mut().enumerate() {
+                    let v = ci * CHUNK + o;
+                    *x = corrected(v, map(v, input.vertex(v)), &rounds);
+                    if bad.is_none() && !x.is_finite() {
+                        bad = Some(v);
+                    }
+                }
+                bad
+            })
+            .reduce(|| None, |a, b| a.or(b))
     }
 
     /// Moves `x` so that every present bundle's surface point equals its target.

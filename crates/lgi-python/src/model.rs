@@ -7,7 +7,7 @@ use crate::error::{input_error, PyLgiError};
 use glam::DVec3;
 use lgi_core::jaw::{JawBins, JawParams, JawRig};
 use lgi_core::model::{BuildConfig, JawInput, Model as CoreModel};
-use numpy::PyArrayDyn;
+use numpy::{PyArray3, PyArrayDyn, PyArrayMethods};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use std::sync::Arc;
@@ -192,20 +192,36 @@ impl Model {
             ),
         };
         let model = self.inner.clone();
-        let solved = py
-            .detach(move || {
-                model.solve_sequence(&frames, thetas.as_deref(), temporal, smooth_window, |f| {
-                    if let Some(cb) = &progress {
-                        Python::attach(|py| {
-                            let _ = cb.call1(py, (f,));
-                        });
-                    }
-                })
-            })
-            .map_err(PyLgiError)?;
-        let nf = solved.len();
+        let nf = frames.len();
         let nv = self.inner.dataset().num_vertices();
-        let mut verts = Vec::with_capacity(nf * nv * 3);
+        // The vertices go straight into the numpy array the caller gets (no copy, no second
+        // F × V × 3 buffer).
+        let vertices = PyArray3::<f64>::zeros(py, [nf, nv, 3], false);
+        let solved = {
+            let mut rw = vertices.readwrite();
+            let flat = rw
+                .as_slice_mut()
+                .map_err(|e| pyo3::exceptions::PyRuntimeError::new_err(format!("internal: {e}")))?;
+            let out: &mut [DVec3] = bytemuck::try_cast_slice_mut(flat)
+                .map_err(|e| pyo3::exceptions::PyRuntimeError::new_err(format!("internal: {e}")))?;
+            py.detach(move || {
+                model.solve_sequence_into(
+                    &frames,
+                    thetas.as_deref(),
+                    temporal,
+                    smooth_window,
+                    out,
+                    |f| {
+                        if let Some(cb) = &progress {
+                            Python::attach(|py| {
+                                let _ = cb.call1(py, (f,));
+                            });
+                        }
+                    },
+                )
+            })
+            .map_err(PyLgiError)?
+        };
         let mut res = Vec::with_capacity(nf * b);
         let mut pos = Vec::with_capacity(nf * b * 3);
         let mut shapes = Vec::with_capacity(nf * b * 4);
@@ -215,7 +231,6 @@ impl Model {
         let mut missing = Vec::with_capacity(nf * b);
         let bins: Vec<i64> = solved.iter().map(|fr| fr.bin as i64).collect();
         for fr in &solved {
-            verts.extend(fr.vertices.iter().flat_map(|p| [p.x, p.y, p.z]));
             res.extend_from_slice(&fr.residuals);
             pos.extend(fr.bundle_positions.iter().flat_map(|p| [p.x, p.y, p.z]));
             for c in &fr.choices {
@@ -239,7 +254,7 @@ impl Model {
             }
         }
         let d = PyDict::new(py);
-        d.set_item("vertices", flat_to_array(py, verts, &[nf, nv, 3])?)?;
+        d.set_item("vertices", vertices)?;
         d.set_item("bundle_residuals", flat_to_array(py, res, &[nf, b])?)?;
         d.set_item("bundle_positions", flat_to_array(py, pos, &[nf, b, 3])?)?;
         d.set_item("choice_shapes", flat_to_array(py, shapes, &[nf, b, 4])?)?;
