@@ -748,12 +748,12 @@ impl Model {
         let plan = self.plan_for(&prep.present)?;
         let mesh = self.dataset.neutral();
         let lk = &self.lookups[prep.bin];
-        let input = BlendInput {
-            x0: &lk.data.neutral().positions,
-            displacements: lk.data.displacements(),
-            weights: &plan.weights,
+        let input = BlendInput::new(
+            &lk.data.neutral().positions,
+            lk.data.displacements(),
+            &plan.weights,
             pieces,
-        };
+        );
         let at = BundleTargets {
             triangles: &mesh.triangles,
             bundles: &self.bundles,
@@ -767,8 +767,8 @@ impl Model {
             _ => None,
         };
         let bad = match &jaw_map {
-            Some(m) => plan.residual.sew(&input, &|v, p| m.apply(v, p), &at, out),
-            None => plan.residual.sew(&input, &|_, p| p, &at, out),
+            Some(m) => plan.residual.sew(&input, |v, p| m.apply(v, p), &at, out),
+            None => plan.residual.sew(&input, |_, p| p, &at, out),
         };
         if let Some(v) = bad {
             return Err(LgiError::Input(format!(

@@ -64,12 +64,7 @@ pub fn blend(
     pieces: &Pieces,
     out: &mut [DVec3],
 ) {
-    let input = BlendInput {
-        x0,
-        displacements,
-        weights,
-        pieces,
-    };
+    let input = BlendInput::new(x0, displacements, weights, pieces);
     out.par_chunks_mut(CHUNK)
         .enumerate()
         .for_each(|(c, chunk)| {
@@ -80,39 +75,65 @@ pub fn blend(
         });
 }
 
-/// What the blend of one frame reads (see [`blend`]).
-#[derive(Clone, Copy)]
+/// What the blend of one frame reads (see [`blend`]), with each bundle's piece flattened to
+/// (offset of the shape's row in `displacements`, weight) terms, the neutral left out.
 pub struct BlendInput<'a> {
-    /// Neutral positions (V) of the space the pieces live in.
-    pub x0: &'a [DVec3],
-    /// `S × V × 3` displacements (shape id k ≥ 1 reads shape k − 1).
-    pub displacements: &'a [f32],
-    /// V × B sewing weights.
-    pub weights: &'a SparseWeights,
-    /// Each bundle's piece.
-    pub pieces: &'a Pieces,
+    x0: &'a [DVec3],
+    displacements: &'a [f32],
+    weights: &'a SparseWeights,
+    start: Vec<u32>,
+    terms: Vec<(usize, f64)>,
 }
 
-impl BlendInput<'_> {
+impl<'a> BlendInput<'a> {
+    /// `x0` (V) neutral positions of the space the pieces live in, `displacements` its
+    /// `S × V × 3` shapes (shape id k ≥ 1 reads shape k − 1), `weights` V × B.
+    pub fn new(
+        x0: &'a [DVec3],
+        displacements: &'a [f32],
+        weights: &'a SparseWeights,
+        pieces: &Pieces,
+    ) -> Self {
+        let nv = x0.len();
+        let mut start = Vec::with_capacity(pieces.start.len());
+        let mut terms = Vec::with_capacity(pieces.shapes.len());
+        start.push(0);
+        for b in 0..pieces.start.len().saturating_sub(1) {
+            let (shapes, alphas) = pieces.bundle(b);
+            for (&k, &a) in shapes.iter().zip(alphas) {
+                if k != 0 {
+                    terms.push(((k as usize - 1) * nv * 3, a));
+                }
+            }
+            start.push(terms.len() as u32);
+        }
+        BlendInput {
+            x0,
+            displacements,
+            weights,
+            start,
+            terms,
+        }
+    }
+
     /// One vertex of [`blend`]: `x0 + Σ_i W_vi Σ_j α_ij s_k(v)`.
     #[inline]
     pub fn vertex(&self, v: usize) -> DVec3 {
-        let nv = self.x0.len();
         let (cols, vals) = self.weights.row(v);
         let mut d = [0.0f64; 3];
         for (&b, &w) in cols.iter().zip(vals) {
-            let (shapes, alphas) = self.pieces.bundle(b as usize);
-            for (&k, &a) in shapes.iter().zip(alphas) {
-                let k = k as usize;
-                if k == 0 {
-                    continue;
+            let (s, e) = (
+                self.start[b as usize] as usize,
+                self.start[b as usize + 1] as usize,
+            );
+            for &(offset, a) in &self.terms[s..e] {
+                let at = offset + 3 * v;
+                if let Some(s) = self.displacements.get(at..at + 3) {
+                    let f = w * a;
+                    d[0] += f * s[0] as f64;
+                    d[1] += f * s[1] as f64;
+                    d[2] += f * s[2] as f64;
                 }
-                let at = ((k - 1) * nv + v) * 3;
-                let s = &self.displacements[at..at + 3];
-                let f = w * a;
-                d[0] += f * s[0] as f64;
-                d[1] += f * s[1] as f64;
-                d[2] += f * s[2] as f64;
             }
         }
         self.x0[v] + DVec3::from_array(d)
@@ -187,7 +208,7 @@ impl ResidualPass {
     pub fn sew(
         &self,
         input: &BlendInput<'_>,
-        map: &(dyn Fn(usize, DVec3) -> DVec3 + Sync),
+        map: impl Fn(usize, DVec3) -> DVec3 + Sync,
         at: &BundleTargets<'_>,
         out: &mut [DVec3],
     ) -> Option<usize> {
