@@ -1868,7 +1868,7 @@ mod tests {
         let mut v2 = bytes[..8].to_vec();
         v2.extend_from_slice(&2u32.to_le_bytes());
         v2.extend_from_slice(&(payload.len() as u64).to_le_bytes());
-        v2.extend_from_slice(&crate::io::model_file::checksum(payload).to_le_bytes());
+        v2.extend_from_slice(&crate::io::model_file::checksum_v2(payload).to_le_bytes());
         v2.extend_from_slice(payload);
         std::fs::write(&path, v2).unwrap();
         let loaded = crate::io::model_file::load(&path);
