@@ -190,11 +190,38 @@ def worker(args: argparse.Namespace) -> dict[str, Any]:
     out["vertices"] = v
     out["sew_bytes_per_frame"] = float(v * 24 + np.mean(touched) * 12 + v * 24)
     out["memcpy_gbps"] = memcpy_bandwidth() / 1e9
+    out.update(baselines(data, markers, frames, 20 if args.quick else 50))
+    return out
+
+
+def baselines(data: Any, markers: np.ndarray, frames: np.ndarray, n: int) -> dict[str, Any]:
+    """Setup time and per-frame solve time of every baseline on the first `n` frames (one call
+    over all n frames, as a pipeline would; per frame = total / n)."""
+    from lgi.baselines import BlendshapeFit, DisplacementInterpolation, LgiRbf
+
+    out: dict[str, Any] = {}
+    for key, make in [
+        ("displacement", lambda: DisplacementInterpolation(data, markers)),
+        ("blendshape", lambda: BlendshapeFit(data, markers)),
+        ("lgi_rbf", lambda: LgiRbf(data, markers)),
+    ]:
+        t = time.perf_counter()
+        method = make()
+        out[f"{key}_setup_s"] = time.perf_counter() - t
+        t = time.perf_counter()
+        method.solve(frames[:n], quiet=True)
+        out[f"{key}_ms"] = (time.perf_counter() - t) / n * 1e3
     return out
 
 
 def run_threads(threads: int, args: argparse.Namespace, reference: bool) -> dict[str, Any]:
-    env = dict(os.environ, RAYON_NUM_THREADS=str(threads))
+    # numpy's BLAS gets the same thread count, so the baselines compare like for like.
+    env = dict(
+        os.environ,
+        RAYON_NUM_THREADS=str(threads),
+        OPENBLAS_NUM_THREADS=str(threads),
+        OMP_NUM_THREADS=str(threads),
+    )
     cmd = [sys.executable, __file__, "--worker", "--frames", str(args.frames)]
     if args.quick:
         cmd.append("--quick")
@@ -264,6 +291,19 @@ def table(r1: dict[str, Any], r2: dict[str, Any]) -> str:
             f"{r1['sew_bytes_per_frame'] / (r1['memcpy_gbps'] * 1e9) * 1e3:.3f} ms",
         ),
     ]
+    for key, label in [
+        ("displacement", "Baseline: displacement interpolation (biharmonic RBF)"),
+        ("blendshape", "Baseline: blendshape fit (active set)"),
+        ("lgi_rbf", "Baseline: LGI-RBF (LGI choices + Gaussian UV spread + RBF)"),
+    ]:
+        ms = r1[f"{key}_ms"]
+        rows.append(
+            (
+                f"{label}, 1 thread",
+                f"{ms:.2f} ms/frame = {ms / r1['solve_ms_median']:.2f} x lgi's 1-thread solve; "
+                f"setup {r1[f'{key}_setup_s']:.2f} s",
+            )
+        )
     lines = ["| Measure | Value |", "|---|---|"]
     lines += [f"| {a} | {b} |" for a, b in rows]
     return "\n".join(lines)
