@@ -15,7 +15,7 @@ const BUILD_EPS: f64 = 1e-6;
 /// At most this many grid cells per bundle (4 bytes each).
 const MAX_CELLS: usize = 1 << 18;
 /// At most this many (cell, tet) registrations per tet on average (4 bytes each).
-const MAX_REGISTRATIONS_PER_TET: usize = 16;
+const MAX_REGISTRATIONS_PER_TET: usize = 32;
 /// Tets sampled to choose the grid resolution.
 const SAMPLE_TETS: usize = 512;
 /// Tets per leaf of the nearest-tet hierarchy.
@@ -77,13 +77,13 @@ impl TetIndex {
     ///
     /// The grid spans the union of the tets' (slightly grown) bounding boxes. A tet is registered
     /// in each cell of its box that is not wholly beyond one of its face planes. The (near-cubic)
-    /// cell size is the finest of a geometric sequence that keeps at most 2¹⁸ cells and about 16
+    /// cell size is the finest of a geometric sequence that keeps at most 2¹⁸ cells and about 32
     /// registrations per tet (estimated on a sample of 512 tets); finer cells mean fewer tets
     /// tested per query but more memory. Flat tets (singular barycentric matrix) are kept in
     /// [`tets`](Self::tets) and in [`nearest`](Self::nearest), but never contain a point.
     ///
     /// Cost: O(#tets × cells per tet box) time; memory ≈ 96 bytes per tet for the barycentric
-    /// frames, 16 for the tet, ~60 for the hierarchy and ~4 × 16 for the grid (about 4 MiB for
+    /// frames, 16 for the tet, ~60 for the hierarchy and ~4 × 32 for the grid (about 6 MiB for
     /// 20,000 tets).
     ///
     /// Errors: [`LgiError::Input`] when a tet refers to a missing point, a point is not finite,
