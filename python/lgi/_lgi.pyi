@@ -77,9 +77,11 @@ class Model:
         shape_theta: ArrayLike | None = None,
         jaw_bins: ArrayLike | None = None,
         bin_overlap: float = 0.0,
+        jaw_frame: ArrayLike | None = None,
     ) -> Model:
         """Builds a model; ``config`` holds ``lgi.BuildConfig`` fields; ``jaw_bins`` are bin
-        edges over the jaw opening (radians)."""
+        edges over the jaw opening (radians); ``jaw_frame`` (3, 3) is the jaw rig's rotation
+        (columns: open, lateral, forward axes; None: identity)."""
     @staticmethod
     def load(path: _Path) -> Model:
         """Loads a model written by ``save``."""
@@ -115,9 +117,14 @@ class Model:
     def bundle_surface_points(self) -> dict[str, NDArray[Any]]:
         """``triangles`` (B,) and ``barycentrics`` (B, 3)."""
     def jaw(self) -> dict[str, Any] | None:
-        """``pivot``, ``weights``, ``shape_theta``, ``bundle_weights`` and, for a binned model,
-        ``bin_edges``, ``bin_overlap``, ``bin_members`` (dataset shapes per bin); None without
-        a jaw."""
+        """``pivot``, ``frame`` (3, 3; columns the jaw's axes), ``weights``, ``shape_theta``,
+        ``bundle_weights`` and, for a binned model, ``bin_edges``, ``bin_overlap``,
+        ``bin_members`` (dataset shapes per bin); None without a jaw."""
+    def jaw_skin(
+        self, points: ArrayLike, theta: ArrayLike, inverse: bool = False
+    ) -> NDArray[np.float64]:
+        """(V, 3) vertices skinned to jaw pose ``theta`` (3,) with the rig's weights
+        (``inverse``: unskinned)."""
     def bundle_uvs(self) -> NDArray[np.float64]:
         """(B, 2) bundle positions in UV."""
 

@@ -7,9 +7,9 @@ The conventions are those of `lgi.sample` and of the Rust core (`lgi_core::jaw`)
     T(theta)(p) = F R(theta) F^T (p - pivot) + pivot + F (0, 0, forward),
     R(theta) = R_y(lateral) @ R_x(open),
 
-with F the rig's `frame` (identity by default, which is what the Rust core implements). A vertex
-with jaw weight w is skinned to p + w (T(theta)(p) - p) (linear blend skinning, Eq. 2 of the
-paper); `unskin` inverts that blended affine map exactly. numpy only.
+with F the rig's `frame` (identity by default; the Rust core takes any rotation). A vertex with
+jaw weight w is skinned to p + w (T(theta)(p) - p) (linear blend skinning, Eq. 2 of the paper);
+`unskin` inverts that blended affine map exactly. numpy only.
 """
 
 from __future__ import annotations
@@ -78,7 +78,7 @@ def _points(points: ArrayLike, what: str = "points") -> F64:
 @dataclass(eq=False)
 class JawRig:
     """Pivot, per-vertex jaw weights and the jaw's axes (`frame` columns: open axis, lateral
-    axis, forward direction; identity means x, y, z as in `lgi.sample` and the Rust core)."""
+    axis, forward direction; identity means x, y, z as in `lgi.sample`)."""
 
     pivot: F64
     """(3,) centre of the jaw rotation."""
@@ -418,7 +418,7 @@ def estimate_rig(
     rigid vertices (otherwise the shape deforms them non-rigidly and gets theta = 0).
 
     With `estimate_frame`, the rig's axes follow the estimated hinge (and the jawLeft/jawRight
-    rotation axis for the lateral axis); by default they are x, y, z as in the Rust core.
+    rotation axis for the lateral axis); by default they are x, y, z as in `lgi.sample`.
     Returns (JawRig, shape_theta (S, 3)), plus a `RigReport` when `return_report`.
     """
     x0 = _points(neutral, "neutral")

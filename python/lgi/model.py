@@ -168,8 +168,6 @@ class Model:
             return cls(_lgi.Model.build(dataset, markers_rest, cfg))
         if shape_theta is None:
             raise InputError("a jaw rig needs shape_theta: the jaw pose of every dataset shape")
-        if not np.allclose(jaw.frame, np.eye(3)):
-            raise InputError("the core supports jaw rigs with the identity frame (x, y, z axes)")
         theta = np.asarray(shape_theta, dtype=np.float64)
         edges = None if jaw_bins is None else _bin_edges(jaw_bins, theta)
         try:
@@ -185,6 +183,7 @@ class Model:
             shape_theta=theta,
             jaw_bins=edges,
             bin_overlap=overlap,
+            jaw_frame=jaw.frame,
         )
         return cls(core)
 
@@ -222,7 +221,9 @@ class Model:
     def jaw_rig(self) -> JawRig | None:
         """The jaw rig the model was built with (None without one)."""
         j = self._core.jaw()
-        return None if j is None else JawRig(pivot=j["pivot"], weights=j["weights"])
+        return (
+            None if j is None else JawRig(pivot=j["pivot"], weights=j["weights"], frame=j["frame"])
+        )
 
     @property
     def jaw_bins(self) -> NDArray[np.float64] | None:
@@ -298,7 +299,7 @@ class Model:
         if isinstance(jaw, str):
             if jaw != "track":
                 raise InputError(f"jaw must be 'track', an (F, 3) array or None, got {jaw!r}")
-            rig = JawRig(pivot=j["pivot"], weights=j["weights"])
+            rig = JawRig(pivot=j["pivot"], weights=j["weights"], frame=j["frame"])
             rest = self.bundle_positions(self.dataset.neutral)
             return track_jaw(rig, rest, j["bundle_weights"], frames)
         theta = np.asarray(jaw, dtype=np.float64)

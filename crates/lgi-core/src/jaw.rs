@@ -2,8 +2,10 @@
 //! jaw a rigid motion about a pivot. Dataset shapes and captured bundles are unskinned before
 //! indexing so the index sees no jaw rotation, and the result is reskinned afterwards.
 //!
-//! Conventions match `python/lgi/sample.py`: θ = (open, lateral, forward) maps `p` to
-//! `R (p − pivot) + pivot + t` with `R = R_y(lateral) · R_x(open)` and `t = (0, 0, forward)`.
+//! Conventions match `python/lgi/jaw.py`: θ = (open, lateral, forward) maps `p` to
+//! `F R Fᵀ (p − pivot) + pivot + F t` with `R = R_y(lateral) · R_x(open)`, `t = (0, 0, forward)`
+//! and `F` the rig's frame (columns: open axis, lateral axis, forward direction; identity in
+//! `python/lgi/sample.py`).
 
 use glam::{DAffine3, DMat3, DVec3};
 use rayon::prelude::*;
@@ -74,18 +76,53 @@ impl JawParams {
     }
 }
 
-/// A two-bone jaw rig: the pivot of the jaw rotation and one jaw weight per vertex
-/// (0 = follows the skull, 1 = follows the jaw).
+/// A two-bone jaw rig: the pivot of the jaw rotation, the jaw's axes and one jaw weight per
+/// vertex (0 = follows the skull, 1 = follows the jaw).
 #[derive(Debug, Clone, PartialEq)]
 pub struct JawRig {
     /// Centre of the jaw rotation.
     pub pivot: DVec3,
     /// Per-vertex jaw weight in [0, 1].
     pub weights: Vec<f64>,
+    /// The jaw's axes as a rotation: columns are the open axis, the lateral axis and the
+    /// forward direction (identity: x, y, z). θ is applied in this frame.
+    pub frame: DMat3,
 }
 
-/// The blended skinning map of one vertex, `p ↦ p + w ((R − I)(p − pivot) + t)`, kept as its
-/// pieces so the inverse can be applied exactly.
+/// How far `FᵀF` may be from the identity (largest element) for a frame to count as
+/// orthonormal; matches the Python rig's check.
+pub const FRAME_TOLERANCE: f64 = 1e-9;
+
+/// Checks that `frame` is a rotation: finite, orthonormal columns (`FᵀF = I` to
+/// [`FRAME_TOLERANCE`]) and determinant +1 (not a reflection).
+pub fn validate_frame(frame: &DMat3) -> Result<()> {
+    if !frame.is_finite() {
+        return Err(LgiError::Input(format!(
+            "jaw frame must be finite, got {frame:?}"
+        )));
+    }
+    let gram = frame.transpose() * *frame - DMat3::IDENTITY;
+    let off = gram
+        .to_cols_array()
+        .iter()
+        .fold(0.0f64, |m, x| m.max(x.abs()));
+    if off > FRAME_TOLERANCE {
+        return Err(LgiError::Input(format!(
+            "jaw frame columns must be orthonormal: max |F^T F - I| = {off:e} > \
+             {FRAME_TOLERANCE:e}"
+        )));
+    }
+    let det = frame.determinant();
+    if det <= 0.0 {
+        return Err(LgiError::Input(format!(
+            "jaw frame must be a rotation (determinant +1), got a reflection (determinant {det})"
+        )));
+    }
+    Ok(())
+}
+
+/// The blended skinning map of one vertex, `p ↦ p + w ((R − I)(p − pivot) + t)` with `R` and
+/// `t` in world space, kept as its pieces so the inverse can be applied exactly.
 #[derive(Debug, Clone, Copy)]
 struct Blend {
     rot_minus_id: DMat3,
@@ -94,10 +131,22 @@ struct Blend {
 }
 
 impl Blend {
-    fn new(theta: JawParams, pivot: DVec3) -> Self {
+    /// World space: `F R Fᵀ − I` is formed as `F (R − I) Fᵀ` so that θ = 0 still gives an
+    /// exactly zero map (`F Fᵀ − I` is only zero to rounding). The identity frame skips the
+    /// products so those rigs keep the exact arithmetic of the frame-less rig.
+    fn new(theta: JawParams, pivot: DVec3, frame: &DMat3) -> Self {
+        let rot_minus_id = theta.rotation() - DMat3::IDENTITY;
+        let translation = theta.translation();
+        if *frame == DMat3::IDENTITY {
+            return Blend {
+                rot_minus_id,
+                translation,
+                pivot,
+            };
+        }
         Blend {
-            rot_minus_id: theta.rotation() - DMat3::IDENTITY,
-            translation: theta.translation(),
+            rot_minus_id: *frame * rot_minus_id * frame.transpose(),
+            translation: *frame * translation,
             pivot,
         }
     }
@@ -128,9 +177,16 @@ impl Blend {
 }
 
 impl JawRig {
-    /// A rig from its pivot and per-vertex weights; every value must be finite and every weight
-    /// in [0, 1] (the error names the first offending vertex).
+    /// A rig with the identity frame (θ about x, y, along z) from its pivot and per-vertex
+    /// weights; every value must be finite and every weight in [0, 1] (the error names the
+    /// first offending vertex).
     pub fn new(pivot: DVec3, weights: Vec<f64>) -> Result<Self> {
+        JawRig::with_frame(pivot, weights, DMat3::IDENTITY)
+    }
+
+    /// A rig whose axes are the columns of `frame` (open axis, lateral axis, forward
+    /// direction), which must be a rotation ([`validate_frame`]); otherwise as [`JawRig::new`].
+    pub fn with_frame(pivot: DVec3, weights: Vec<f64>, frame: DMat3) -> Result<Self> {
         if !pivot.is_finite() {
             return Err(LgiError::Input(format!(
                 "jaw pivot must be finite, got {pivot:?}"
@@ -145,7 +201,12 @@ impl JawRig {
                 "jaw weight of vertex {v} must be finite and in [0, 1], got {w}"
             )));
         }
-        Ok(JawRig { pivot, weights })
+        validate_frame(&frame)?;
+        Ok(JawRig {
+            pivot,
+            weights,
+            frame,
+        })
     }
 
     /// Number of vertices the rig has weights for.
@@ -153,21 +214,35 @@ impl JawRig {
         self.weights.len()
     }
 
-    /// The rigid jaw transform for `theta` about `pivot`: `p ↦ R (p − pivot) + pivot + t`.
+    /// The rigid jaw transform for `theta` about `pivot` in the identity frame:
+    /// `p ↦ R (p − pivot) + pivot + t`.
     pub fn transform(theta: JawParams, pivot: DVec3) -> DAffine3 {
         let r = theta.rotation();
         DAffine3::from_mat3_translation(r, pivot - r * pivot + theta.translation())
     }
 
+    /// This rig's rigid jaw transform for `theta` (weight-1 vertices move by it):
+    /// `p ↦ F R Fᵀ (p − pivot) + pivot + F t`.
+    pub fn rigid_transform(&self, theta: JawParams) -> DAffine3 {
+        let f = self.frame;
+        let r = f * theta.rotation() * f.transpose();
+        DAffine3::from_mat3_translation(r, self.pivot - r * self.pivot + f * theta.translation())
+    }
+
+    /// The blended map of `theta` in this rig's frame.
+    fn blend(&self, theta: JawParams) -> Blend {
+        Blend::new(theta, self.pivot, &self.frame)
+    }
+
     /// Skins one point with jaw weight `w`: `p + w (T(θ) p − p)`.
     pub fn skin_point(&self, p: DVec3, w: f64, theta: JawParams) -> DVec3 {
-        Blend::new(theta, self.pivot).skin(p, w)
+        self.blend(theta).skin(p, w)
     }
 
     /// The exact inverse of [`JawRig::skin_point`] (the blended affine map inverted in f64).
     /// θ should satisfy [`JawParams::validate`]; otherwise the result may not be finite.
     pub fn unskin_point(&self, p: DVec3, w: f64, theta: JawParams) -> DVec3 {
-        Blend::new(theta, self.pivot).unskin(p, w)
+        self.blend(theta).unskin(p, w)
     }
 
     /// Jaw weight at a point given by barycentric coordinates in a triangle of the mesh the rig
@@ -204,7 +279,7 @@ impl JawRig {
         theta: JawParams,
         out: &mut [DVec3],
     ) -> Result<()> {
-        apply_weighted(self.pivot, positions, weights, theta, out, Blend::skin)
+        apply_weighted(self, positions, weights, theta, out, Blend::skin)
     }
 
     /// Unskins arbitrary points (e.g. bundles) each with its own weight from `weights`.
@@ -215,7 +290,7 @@ impl JawRig {
         theta: JawParams,
         out: &mut [DVec3],
     ) -> Result<()> {
-        apply_weighted(self.pivot, positions, weights, theta, out, Blend::unskin)
+        apply_weighted(self, positions, weights, theta, out, Blend::unskin)
     }
 
     /// Unskins one dataset shape: `s*_k = T_v(θ_k)⁻¹ (x0 + s_k) − x0`, with `disp` the V·3
@@ -241,7 +316,7 @@ impl JawRig {
                 3 * v
             )));
         }
-        let blend = Blend::new(theta, self.pivot);
+        let blend = self.blend(theta);
         let mut out = vec![0.0f32; 3 * v];
         out.par_chunks_mut(3)
             .zip(disp.par_chunks(3))
@@ -303,7 +378,7 @@ impl JawRig {
                 displacements.len()
             )));
         }
-        let to_ref = Blend::new(reference, self.pivot);
+        let to_ref = self.blend(reference);
         let mut base = vec![DVec3::ZERO; v];
         base.par_iter_mut()
             .zip(neutral.par_iter().zip(self.weights.par_iter()))
@@ -315,7 +390,7 @@ impl JawRig {
                 LgiError::Input(format!("member shape {k} out of range ({})", thetas.len()))
             })?;
             theta.validate()?;
-            let from = Blend::new(theta, self.pivot);
+            let from = self.blend(theta);
             let shape = &displacements[k * stride..(k + 1) * stride];
             out[j * stride..(j + 1) * stride]
                 .par_chunks_mut(3)
@@ -340,7 +415,7 @@ impl JawRig {
         out: &mut [DVec3],
         f: fn(&Blend, DVec3, f64) -> DVec3,
     ) -> Result<()> {
-        apply_weighted(self.pivot, positions, &self.weights, theta, out, f)
+        apply_weighted(self, positions, &self.weights, theta, out, f)
     }
 }
 
@@ -370,8 +445,7 @@ impl JawRig {
             )));
         }
         let blend = |t: Option<JawParams>| -> Result<Option<Blend>> {
-            t.map(|t| t.validate().map(|_| Blend::new(t, self.pivot)))
-                .transpose()
+            t.map(|t| t.validate().map(|_| self.blend(t))).transpose()
         };
         Ok(VertexMap {
             weights: &self.weights,
@@ -499,7 +573,7 @@ impl JawBins {
 }
 
 fn apply_weighted(
-    pivot: DVec3,
+    rig: &JawRig,
     positions: &[DVec3],
     weights: &[f64],
     theta: JawParams,
@@ -515,7 +589,7 @@ fn apply_weighted(
             out.len()
         )));
     }
-    let blend = Blend::new(theta, pivot);
+    let blend = rig.blend(theta);
     out.par_iter_mut()
         .zip(positions.par_iter().zip(weights.par_iter()))
         .for_each(|(o, (&p, &w))| *o = f(&blend, p, w));
@@ -712,6 +786,208 @@ mod tests {
         let r = rig(vec![0.0, 0.5, 1.0]);
         let w = r.interpolate_weight([0, 1, 2], [0.2, 0.3, 0.5]).unwrap();
         assert!((w - (0.15 + 0.5)).abs() < 1e-15);
+    }
+
+    fn mat(m: [[f64; 3]; 3]) -> DMat3 {
+        DMat3::from_cols_array_2d(&[
+            [m[0][0], m[1][0], m[2][0]],
+            [m[0][1], m[1][1], m[2][1]],
+            [m[0][2], m[1][2], m[2][2]],
+        ])
+    }
+
+    fn tilted_rig(weights: Vec<f64>, frame: [[f64; 3]; 3]) -> JawRig {
+        JawRig::with_frame(DVec3::new(0.0, -1.5, 3.0), weights, mat(frame)).unwrap()
+    }
+
+    #[test]
+    fn weight_one_vertices_in_a_tilted_frame_rotate_about_the_frame_axes_by_rodrigues() {
+        let f = axis_angle([0.3, -0.5, 1.0], 0.4);
+        let r = tilted_rig(vec![1.0; 4], f);
+        // The frame's columns: the open axis, the lateral axis and the forward direction.
+        let col = |j: usize| [f[0][j], f[1][j], f[2][j]];
+        let pts = [
+            DVec3::new(0.0, -6.0, 9.0),
+            DVec3::new(3.0, -4.0, 8.0),
+            DVec3::new(-2.5, -2.0, 7.5),
+            DVec3::new(1.0, 2.0, -3.0),
+        ];
+        for (open, lateral, forward) in [(0.4, 0.0, 0.0), (0.0, -0.2, 0.0), (0.3, 0.15, 0.7)] {
+            let theta = JawParams {
+                open,
+                lateral,
+                forward,
+            };
+            // Open about the frame's first axis, then lateral about its second (both world
+            // axes through the pivot), then forward along its third.
+            let m = matmul(axis_angle(col(1), lateral), axis_angle(col(0), open));
+            let shift = DVec3::from_array(col(2)) * forward;
+            let mut out = vec![DVec3::ZERO; pts.len()];
+            r.skin(&pts, theta, &mut out).unwrap();
+            let affine = r.rigid_transform(theta);
+            for (p, q) in pts.iter().zip(&out) {
+                let expected = apply(m, *p - r.pivot) + r.pivot + shift;
+                assert!((*q - expected).length() < 1e-12, "{q} vs {expected}");
+                assert!((affine.transform_point3(*p) - expected).length() < 1e-12);
+                assert!((r.skin_point(*p, 1.0, theta) - expected).length() < 1e-12);
+            }
+        }
+    }
+
+    #[test]
+    fn identity_frame_is_bit_identical_to_the_frame_less_blend() {
+        // The blend as it was before rigs had a frame, written out here.
+        fn old_skin(pivot: DVec3, theta: JawParams, p: DVec3, w: f64) -> DVec3 {
+            let moved = (theta.rotation() - DMat3::IDENTITY) * (p - pivot) + theta.translation();
+            p + w * moved
+        }
+        fn old_unskin(pivot: DVec3, theta: JawParams, y: DVec3, w: f64) -> DVec3 {
+            if w == 0.0 {
+                return y;
+            }
+            let m = DMat3::IDENTITY + (theta.rotation() - DMat3::IDENTITY) * w;
+            let rhs = y - pivot - w * theta.translation();
+            let inv = m.inverse();
+            let mut q = inv * rhs;
+            q += inv * (rhs - m * q);
+            pivot + q
+        }
+        let weights = vec![0.0, 0.2, 0.5, 0.8, 1.0, 1.0];
+        let neutral = vec![
+            DVec3::new(0.0, 2.0, 9.0),
+            DVec3::new(1.0, -3.0, 9.5),
+            DVec3::new(-1.0, -4.0, 9.0),
+            DVec3::new(0.0, -6.0, 8.5),
+            DVec3::new(2.0, -5.5, 8.0),
+            DVec3::new(-3.0, -1.0, 6.0),
+        ];
+        let plain = JawRig::new(DVec3::new(0.0, -1.5, 3.0), weights.clone()).unwrap();
+        let framed =
+            JawRig::with_frame(DVec3::new(0.0, -1.5, 3.0), weights.clone(), DMat3::IDENTITY)
+                .unwrap();
+        assert_eq!(plain, framed);
+        let disp: Vec<f32> = (0..18).map(|i| 0.05 * (i as f32 - 9.0)).collect();
+        for theta in [
+            JawParams::from_array([0.4, 0.05, 0.2]),
+            JawParams::from_array([-0.1, -0.3, -0.7]),
+        ] {
+            let mut skinned = vec![DVec3::ZERO; 6];
+            framed.skin(&neutral, theta, &mut skinned).unwrap();
+            let mut back = vec![DVec3::ZERO; 6];
+            framed.unskin(&skinned, theta, &mut back).unwrap();
+            let map = framed.vertex_map(Some(theta), Some(theta), 6).unwrap();
+            for v in 0..6 {
+                let (p, w) = (neutral[v], weights[v]);
+                let s = old_skin(plain.pivot, theta, p, w);
+                assert_eq!(skinned[v], s, "skin, vertex {v}");
+                assert_eq!(back[v], old_unskin(plain.pivot, theta, s, w), "unskin {v}");
+                assert_eq!(
+                    map.apply(v, s),
+                    old_skin(plain.pivot, theta, old_unskin(plain.pivot, theta, s, w), w)
+                );
+            }
+            let star = framed.unskin_displacements(&neutral, &disp, theta).unwrap();
+            for v in 0..6 {
+                let s = DVec3::new(
+                    f64::from(disp[3 * v]),
+                    f64::from(disp[3 * v + 1]),
+                    f64::from(disp[3 * v + 2]),
+                );
+                let d = old_unskin(plain.pivot, theta, neutral[v] + s, weights[v]) - neutral[v];
+                assert_eq!(
+                    &star[3 * v..3 * v + 3],
+                    &[d.x as f32, d.y as f32, d.z as f32]
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn a_tilted_frame_at_rest_pose_or_weight_zero_leaves_points_bit_identical() {
+        let r = tilted_rig(vec![0.0, 0.6], axis_angle([1.0, 2.0, -0.5], 0.7));
+        let pts = [DVec3::new(1.3, -4.1, 7.7), DVec3::new(-0.3, -5.9, 8.2)];
+        let mut out = vec![DVec3::ZERO; 2];
+        r.skin(&pts, JawParams::ZERO, &mut out).unwrap();
+        assert_eq!(out, pts.to_vec());
+        r.unskin(&pts, JawParams::ZERO, &mut out).unwrap();
+        assert_eq!(out, pts.to_vec());
+        r.skin(&pts, JawParams::from_array([0.3, 0.1, 0.2]), &mut out)
+            .unwrap();
+        assert_eq!(out[0], pts[0]);
+    }
+
+    #[test]
+    fn invalid_frames_are_rejected_naming_the_problem() {
+        let ok = mat(axis_angle([0.2, 1.0, 0.3], 1.1));
+        let with = |f: DMat3| JawRig::with_frame(DVec3::ZERO, vec![0.5], f);
+        assert!(with(ok).is_ok());
+        // Within the tolerance: a frame rounded to ~1e-12 is accepted.
+        assert!(with(ok * (1.0 + 1e-12)).is_ok());
+        let cases = [
+            (ok * 1.001, "orthonormal"),
+            (
+                ok + DMat3::from_cols(DVec3::ZERO, DVec3::X * 1e-6, DVec3::ZERO),
+                "orthonormal",
+            ),
+            (
+                DMat3::from_cols(DVec3::X, DVec3::X, DVec3::Z),
+                "orthonormal",
+            ),
+            (DMat3::ZERO, "orthonormal"),
+            (
+                DMat3::from_diagonal(DVec3::new(1.0, 1.0, -1.0)),
+                "reflection",
+            ),
+            (-ok, "reflection"),
+            (
+                DMat3::from_cols(DVec3::new(f64::NAN, 0.0, 0.0), DVec3::Y, DVec3::Z),
+                "finite",
+            ),
+            (
+                DMat3::from_cols(DVec3::X, DVec3::Y, DVec3::Z * f64::INFINITY),
+                "finite",
+            ),
+        ];
+        for (f, want) in cases {
+            let e = with(f).unwrap_err();
+            assert!(matches!(e, LgiError::Input(_)), "{f:?}: {e:?}");
+            assert!(e.to_string().contains("jaw frame"), "{e}");
+            assert!(e.to_string().contains(want), "{f:?}: {e}");
+        }
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig { cases: 2000, rng_seed: proptest::test_runner::RngSeed::Fixed(0x7f3), ..ProptestConfig::default() })]
+        #[test]
+        fn unskin_inverts_skin_to_1e12_relative_in_a_random_frame(
+            ax in -1f64..1.0, ay in -1f64..1.0, az in 0.1f64..1.0,
+            angle in -3.1f64..3.1,
+            open in -40f64..40.0,
+            lateral in -15f64..15.0,
+            forward in -2f64..2.0,
+            w in 0f64..=1.0,
+            x in -8f64..8.0, y in -9f64..9.0, z in -2f64..12.0,
+        ) {
+            let theta = JawParams { open: open.to_radians(), lateral: lateral.to_radians(), forward };
+            let r = tilted_rig(vec![w], axis_angle([ax, ay, az], angle));
+            let p = DVec3::new(x, y, z);
+            let scale = 1.0 + p.length() + r.pivot.length();
+            let back = r.unskin_point(r.skin_point(p, w, theta), w, theta);
+            prop_assert!((back - p).length() <= 1e-12 * scale, "{back} vs {p}");
+            let fwd = r.skin_point(r.unskin_point(p, w, theta), w, theta);
+            prop_assert!((fwd - p).length() <= 1e-12 * scale, "{fwd} vs {p}");
+            let mut out = [DVec3::ZERO];
+            r.skin(&[p], theta, &mut out).unwrap();
+            let mut back2 = [DVec3::ZERO];
+            r.unskin(&out, theta, &mut back2).unwrap();
+            prop_assert!((back2[0] - p).length() <= 1e-12 * scale);
+            // The per-vertex map from θ to the rest pose undoes the skinning too.
+            let map = r.vertex_map(Some(theta), None, 1).unwrap();
+            prop_assert!((map.apply(0, out[0]) - p).length() <= 1e-12 * scale);
+            // And the blend is the linear blend of skull and the frame's rigid motion.
+            let lbs = (1.0 - w) * p + w * r.rigid_transform(theta).transform_point3(p);
+            prop_assert!((out[0] - lbs).length() <= 1e-12 * scale, "{} vs {lbs}", out[0]);
+        }
     }
 
     proptest! {

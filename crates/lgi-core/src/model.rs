@@ -1509,16 +1509,17 @@ mod tests {
         }
     }
 
-    /// The patch's jaw: a hinge about x through a pivot behind and above the patch, weight 1
-    /// below y = 0.35, 0 above y = 0.65, linear between.
-    fn patch_rig(data: &Dataset) -> JawRig {
+    /// The patch's jaw: a hinge about the frame's first axis (x for the identity) through a
+    /// pivot behind and above the patch, weight 1 below y = 0.35, 0 above y = 0.65, linear
+    /// between.
+    fn patch_rig(data: &Dataset, frame: glam::DMat3) -> JawRig {
         let weights = data
             .neutral()
             .positions
             .iter()
             .map(|p| ((0.65 - p.y) / 0.3).clamp(0.0, 1.0))
             .collect();
-        JawRig::new(DVec3::new(0.5, 0.8, -0.6), weights).unwrap()
+        JawRig::with_frame(DVec3::new(0.5, 0.8, -0.6), weights, frame).unwrap()
     }
 
     /// Dataset shape jaw openings of [`jaw_patch`] (radians).
@@ -1528,8 +1529,13 @@ mod tests {
     /// plus markers only where the jaw weight is constant over their triangle (so a marker's
     /// own weight skins it exactly like its triangle's vertices).
     fn jaw_patch() -> (Dataset, JawRig, Vec<JawParams>, Vec<DVec3>) {
+        jaw_patch_in(glam::DMat3::IDENTITY)
+    }
+
+    /// [`jaw_patch`] with the rig's axes the columns of `frame`.
+    fn jaw_patch_in(frame: glam::DMat3) -> (Dataset, JawRig, Vec<JawParams>, Vec<DVec3>) {
         let base = patch(24);
-        let rig = patch_rig(&base);
+        let rig = patch_rig(&base, frame);
         let x0 = &base.neutral().positions;
         let mut shapes = Vec::new();
         let mut thetas = Vec::new();
@@ -1842,6 +1848,91 @@ mod tests {
             assert_eq!(fa.vertices, fb.vertices);
             assert_eq!(fa.choices, fb.choices);
             assert_eq!(fa.bin, fb.bin);
+        }
+    }
+
+    /// A jaw frame tilted 0.3 rad about (1, 2, -1), built from the axis-angle formula.
+    fn tilted_frame() -> glam::DMat3 {
+        glam::DMat3::from_axis_angle(DVec3::new(1.0, 2.0, -1.0).normalize(), 0.3)
+    }
+
+    #[test]
+    fn a_tilted_frame_jaw_model_reproduces_its_shapes_and_its_frame_survives_save_load() {
+        let frame = tilted_frame();
+        let (data, rig, thetas, markers) = jaw_patch_in(frame);
+        let jaw = JawInput {
+            rig,
+            shape_thetas: thetas.clone(),
+            bins: Some(JawBins {
+                edges: vec![0.0, 0.25, 0.5],
+                overlap: 0.06,
+            }),
+        };
+        let model = Model::build_shared(
+            Arc::new(data.clone()),
+            &markers,
+            &BuildConfig::default(),
+            Some(jaw),
+        )
+        .unwrap();
+        assert_eq!(model.jaw().unwrap().rig.frame, frame);
+        let diag = model.diagonal();
+        for k in [0usize, 3, 5, 7, 9] {
+            let mesh = shape_mesh(&data, k);
+            let targets = model.bundle_positions(&mesh).unwrap();
+            let fr = model.solve_frame(&targets, None, Some(thetas[k])).unwrap();
+            let err = (0..mesh.len())
+                .filter(|&v| model.sewing_space().contains(v))
+                .map(|v| fr.vertices[v].distance(mesh[v]))
+                .fold(0.0, f64::max);
+            assert!(err <= 1e-6 * diag, "shape {k}: {err:e}");
+            assert!(fr.residuals.iter().all(|&r| r <= 1e-9 * diag));
+        }
+        let path = std::env::temp_dir().join(format!("lgi-frame-{}.lgi", std::process::id()));
+        crate::io::model_file::save(&model, &path).unwrap();
+        let bytes = std::fs::read(&path).unwrap();
+        let loaded = crate::io::model_file::load(&path);
+        // A frame that is no rotation (its first axis doubled), checksum fixed: a format error.
+        let cols: Vec<u8> = frame
+            .to_cols_array()
+            .iter()
+            .flat_map(|x| x.to_le_bytes())
+            .collect();
+        let at = bytes
+            .windows(cols.len())
+            .position(|w| w == &cols[..])
+            .unwrap();
+        let mut bad = bytes.clone();
+        for i in 0..3 {
+            let x = f64::from_le_bytes(bad[at + 8 * i..at + 8 * i + 8].try_into().unwrap());
+            bad[at + 8 * i..at + 8 * i + 8].copy_from_slice(&(2.0 * x).to_le_bytes());
+        }
+        let sum = crate::io::model_file::checksum(&bad[28..]);
+        bad[20..28].copy_from_slice(&sum.to_le_bytes());
+        std::fs::write(&path, bad).unwrap();
+        let corrupt = crate::io::model_file::load(&path);
+        std::fs::remove_file(&path).unwrap();
+        let loaded = loaded.unwrap();
+        assert_eq!(loaded.jaw().unwrap().rig, model.jaw().unwrap().rig);
+        let frames: Vec<Vec<DVec3>> = [0, 4, 8]
+            .iter()
+            .map(|&k| model.bundle_positions(&shape_mesh(&data, k)).unwrap())
+            .collect();
+        let poses: Vec<JawParams> = [0, 4, 8].iter().map(|&k| thetas[k]).collect();
+        let a = model
+            .solve_sequence(&frames, Some(&poses), true, 0, |_| {})
+            .unwrap();
+        let b = loaded
+            .solve_sequence(&frames, Some(&poses), true, 0, |_| {})
+            .unwrap();
+        for (fa, fb) in a.iter().zip(&b) {
+            assert_eq!(fa.vertices, fb.vertices);
+        }
+        match corrupt {
+            Err(LgiError::ModelFormat { message, .. }) => {
+                assert!(message.contains("jaw frame"), "{message}")
+            }
+            other => panic!("expected a format error, got {other:?}"),
         }
     }
 

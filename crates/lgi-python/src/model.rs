@@ -4,7 +4,7 @@
 use crate::convert::{flat_to_array, float_array, point_sets, points, points_to_array};
 use crate::dataset::Dataset;
 use crate::error::{input_error, PyLgiError};
-use glam::DVec3;
+use glam::{DMat3, DVec3};
 use lgi_core::jaw::{JawBins, JawParams, JawRig};
 use lgi_core::model::{BuildConfig, JawInput, Model as CoreModel};
 use numpy::{PyArray3, PyArrayDyn, PyArrayMethods};
@@ -54,10 +54,12 @@ fn config_from_dict(d: Option<&Bound<'_, PyDict>>) -> PyResult<BuildConfig> {
 
 #[pymethods]
 impl Model {
-    /// Builds a model (GIL released). `config` is a dict of BuildConfig fields; `jaw_bins`
-    /// (edges over the jaw opening, radians) and `bin_overlap` bin the clouds of a jaw model.
+    /// Builds a model (GIL released). `config` is a dict of BuildConfig fields; `jaw_frame`
+    /// (3, 3) is the jaw rig's rotation (columns: open, lateral, forward axes; None: identity);
+    /// `jaw_bins` (edges over the jaw opening, radians) and `bin_overlap` bin the clouds of a
+    /// jaw model.
     #[staticmethod]
-    #[pyo3(signature = (dataset, markers_rest, config=None, jaw_pivot=None, jaw_weights=None, shape_theta=None, jaw_bins=None, bin_overlap=0.0))]
+    #[pyo3(signature = (dataset, markers_rest, config=None, jaw_pivot=None, jaw_weights=None, shape_theta=None, jaw_bins=None, bin_overlap=0.0, jaw_frame=None))]
     #[allow(clippy::too_many_arguments)]
     fn build(
         py: Python<'_>,
@@ -69,12 +71,16 @@ impl Model {
         shape_theta: Option<&Bound<'_, PyAny>>,
         jaw_bins: Option<&Bound<'_, PyAny>>,
         bin_overlap: f64,
+        jaw_frame: Option<&Bound<'_, PyAny>>,
     ) -> PyResult<Model> {
         let markers = points(markers_rest, "markers_rest", None, false)?;
         let cfg = config_from_dict(config)?;
         let data = dataset.inner.clone();
         if jaw_bins.is_some() && jaw_pivot.is_none() {
             return Err(input_error("jaw_bins: binning needs a jaw rig"));
+        }
+        if jaw_frame.is_some() && jaw_pivot.is_none() {
+            return Err(input_error("jaw_frame: a frame needs a jaw rig"));
         }
         let jaw = match (jaw_pivot, jaw_weights, shape_theta) {
             (None, None, None) => None,
@@ -84,9 +90,19 @@ impl Model {
                 let weights = float_array(w, "jaw_weights", &[Some(nv)])?;
                 let ns = data.num_shapes();
                 let thetas = float_array(t, "shape_theta", &[Some(ns), Some(3)])?;
-                let rig = JawRig::new(
+                let frame = match jaw_frame {
+                    None => DMat3::IDENTITY,
+                    Some(f) => {
+                        let f = float_array(f, "jaw_frame", &[Some(3), Some(3)])?;
+                        // Columns of the (3, 3) array are the jaw's axes.
+                        let col = |j: usize| DVec3::new(f[[0, j]], f[[1, j]], f[[2, j]]);
+                        DMat3::from_cols(col(0), col(1), col(2))
+                    }
+                };
+                let rig = JawRig::with_frame(
                     DVec3::new(pivot[0], pivot[1], pivot[2]),
                     weights.iter().copied().collect(),
+                    frame,
                 )
                 .map_err(PyLgiError)?;
                 let th = thetas
@@ -350,8 +366,9 @@ impl Model {
         )
     }
 
-    /// The jaw setup as a dict (`pivot` (3,), `weights` (V,), `shape_theta` (S, 3),
-    /// `bundle_weights` (B,)), or None for a model without a jaw rig.
+    /// The jaw setup as a dict (`pivot` (3,), `frame` (3, 3) with the jaw's axes as columns,
+    /// `weights` (V,), `shape_theta` (S, 3), `bundle_weights` (B,)), or None for a model
+    /// without a jaw rig.
     fn jaw<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyDict>>> {
         let Some(j) = self.inner.jaw() else {
             return Ok(None);
@@ -361,6 +378,9 @@ impl Model {
             "pivot",
             flat_to_array(py, j.rig.pivot.to_array().to_vec(), &[3])?,
         )?;
+        // Row-major (3, 3) whose columns are the frame's axes.
+        let frame = j.rig.frame.transpose().to_cols_array().to_vec();
+        d.set_item("frame", flat_to_array(py, frame, &[3, 3])?)?;
         let nv = j.rig.weights.len();
         d.set_item("weights", flat_to_array(py, j.rig.weights.clone(), &[nv])?)?;
         let t: Vec<f64> = j.shape_thetas.iter().flat_map(|t| t.to_array()).collect();
@@ -386,6 +406,34 @@ impl Model {
             d.set_item("bin_members", members)?;
         }
         Ok(Some(d))
+    }
+
+    /// The core's jaw skinning of (V, 3) vertex positions to pose `theta` (3,) with the rig's
+    /// per-vertex weights (`inverse`: unskinning); the reference of `lgi.jaw.JawRig.skin`.
+    #[pyo3(signature = (points, theta, inverse=false))]
+    fn jaw_skin<'py>(
+        &self,
+        py: Python<'py>,
+        points: &Bound<'py, PyAny>,
+        theta: &Bound<'py, PyAny>,
+        inverse: bool,
+    ) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
+        let Some(j) = self.inner.jaw() else {
+            return Err(input_error(
+                "jaw_skin: this model was built without a jaw rig",
+            ));
+        };
+        let p = crate::convert::points(points, "points", Some(j.rig.num_vertices()), false)?;
+        let t = float_array(theta, "theta", &[Some(3)])?;
+        let theta = JawParams::from_array([t[0], t[1], t[2]]);
+        let mut out = vec![DVec3::ZERO; p.len()];
+        if inverse {
+            j.rig.unskin(&p, theta, &mut out)
+        } else {
+            j.rig.skin(&p, theta, &mut out)
+        }
+        .map_err(PyLgiError)?;
+        points_to_array(py, &out)
     }
 
     /// Marker rest positions (B, 3).

@@ -14,7 +14,7 @@ use crate::model::{
     Model,
 };
 use crate::tets::Tet;
-use glam::{DVec2, DVec3};
+use glam::{DMat3, DVec2, DVec3};
 use std::path::Path;
 use std::sync::Arc;
 
@@ -244,13 +244,21 @@ pub fn save(model: &Model, path: &Path) -> Result<()> {
     w.f64s(vec3s(model.markers_rest()));
     let lookups = model.lookups();
     write_clouds(&mut w, lookups[0].clouds(), lookups[0].indices());
-    // Version 2: the jaw section (0 = none; 1 = pivot, vertex weights, shape poses).
+    // The jaw section: 0 = none; 1 = pivot, vertex weights, shape poses (identity frame, the
+    // version 2 layout); 2 (version 3) = pivot, frame (9 values, column-major), vertex
+    // weights, shape poses. Identity frames keep layout 1 so their files stay as before.
     match model.jaw() {
         None => w.u64(0),
         Some(j) => {
-            w.u64(1);
+            let identity = j.rig.frame == DMat3::IDENTITY;
+            w.u64(if identity { 1 } else { 2 });
             for x in j.rig.pivot.to_array() {
                 w.f64(x);
+            }
+            if !identity {
+                for x in j.rig.frame.to_cols_array() {
+                    w.f64(x);
+                }
             }
             w.f64s(j.rig.weights.clone().into_iter());
             w.f64s(
@@ -387,8 +395,20 @@ pub fn load(path: &Path) -> Result<Model> {
     let mut built = vec![read_clouds(&mut r, markers.len())?];
     let jaw = match r.u64()? {
         0 => None,
-        1 => {
+        layout @ (1 | 2) => {
+            if layout == 2 && version == PREVIOUS_VERSION {
+                return Err(r.err("jaw frame in a version 2 file"));
+            }
             let pivot = DVec3::new(r.f64()?, r.f64()?, r.f64()?);
+            let frame = if layout == 2 {
+                let mut c = [0.0; 9];
+                for x in &mut c {
+                    *x = r.f64()?;
+                }
+                DMat3::from_cols_array(&c)
+            } else {
+                DMat3::IDENTITY
+            };
             let weights = r.f64s()?;
             let t = r.f64s()?;
             if t.len() != 3 * dataset.num_shapes() {
@@ -398,7 +418,7 @@ pub fn load(path: &Path) -> Result<Model> {
                 .chunks_exact(3)
                 .map(|c| JawParams::from_array([c[0], c[1], c[2]]))
                 .collect();
-            let rig = JawRig::new(pivot, weights).map_err(|e| bad(&e.to_string()))?;
+            let rig = JawRig::with_frame(pivot, weights, frame).map_err(|e| bad(&e.to_string()))?;
             Some(JawInput {
                 rig,
                 shape_thetas: thetas,
