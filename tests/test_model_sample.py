@@ -134,3 +134,41 @@ def test_non_finite_mesh_in_bundle_positions_raises_input_error_naming_mesh_and_
     meshes[1, 5, 1] = np.inf
     with pytest.raises(lgi.InputError, match=r"mesh 1, vertex 5"):
         sample_model.bundle_positions(meshes)
+
+
+def test_solve_into_out_writes_the_same_vertices_and_returns_that_array(sample, sample_model):
+    frames = np.asarray(sample.performance)[:6]
+    fresh = sample_model.solve(frames, quiet=True)
+    buf = np.full((6, sample_model.num_vertices, 3), np.nan)
+    res = sample_model.solve(frames, quiet=True, out=buf)
+    assert res.vertices is buf
+    np.testing.assert_array_equal(buf, fresh.vertices)
+    # Reused for the next chunk: overwritten, not accumulated.
+    other = frames[3:] + 0.01
+    res2 = sample_model.solve(other, quiet=True, out=buf[:3])
+    np.testing.assert_array_equal(res2.vertices, sample_model.solve(other, quiet=True).vertices)
+    np.testing.assert_array_equal(buf[3:], fresh.vertices[3:])
+
+
+@pytest.mark.parametrize(
+    ("make", "message"),
+    [
+        (lambda f, v: np.zeros((f, v, 3), np.float32), "float64"),
+        (lambda f, v: np.zeros((f + 1, v, 3)), "shape"),
+        (lambda f, v: np.zeros((f, 3, v)).transpose(0, 2, 1), "C-contiguous"),
+        (lambda f, v: [[[0.0] * 3] * v] * f, "float64"),
+    ],
+)
+def test_solve_out_rejects_wrong_dtype_shape_and_layout(sample, sample_model, make, message):
+    frames = np.asarray(sample.performance)[:2]
+    with pytest.raises(lgi.errors.InputError, match=message):
+        sample_model.solve(frames, quiet=True, out=make(2, sample_model.num_vertices))
+
+
+def test_solve_out_rejects_a_read_only_array(sample, sample_model):
+    frames = np.asarray(sample.performance)[:2]
+    buf = np.zeros((2, sample_model.num_vertices, 3))
+    buf.flags.writeable = False
+    with pytest.raises(lgi.errors.InputError, match="writeable"):
+        sample_model.solve(frames, quiet=True, out=buf)
+    assert not buf.any()

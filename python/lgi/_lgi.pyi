@@ -104,8 +104,9 @@ class Model:
         temporal: bool = True,
         jaw_theta: ArrayLike | None = None,
         smooth_window: int = 0,
+        out: NDArray[np.float64] | None = None,
     ) -> dict[str, NDArray[Any]]:
-        """Solves (F, B, 3) frames; returns arrays keyed by name."""
+        """Solves (F, B, 3) frames; returns arrays keyed by name (vertices into `out` if given)."""
     def bundle_positions(self, meshes: ArrayLike) -> NDArray[np.float64]:
         """(F, V, 3) meshes -> (F, B, 3) bundle surface positions."""
     def bundle_stats(self) -> dict[str, NDArray[np.int64]]:

@@ -244,6 +244,7 @@ class Model:
         jaw: str | ArrayLike | None = None,
         smooth_window: int = 0,
         quiet: bool = False,
+        out: NDArray[np.float64] | None = None,
     ) -> SolveResult:
         """Solves frames (F, B, 3) of marker positions (a single (B, 3) frame gives F = 1).
         NaN rows are missing markers. With `temporal` (a performance), frames are solved in
@@ -257,7 +258,11 @@ class Model:
 
         `smooth_window` > 1 averages each marker's shape weights over that many frames
         (centred) before sewing, in the jaw-unskinned space so jaw motion is kept; markers are
-        still interpolated exactly. `result.choices` are the choices before smoothing."""
+        still interpolated exactly. `result.choices` are the choices before smoothing.
+
+        `out`: a C-contiguous, writeable float64 array of shape (F, V, 3) that receives the
+        vertices (`result.vertices` is then `out`), for pipelines that solve chunk after chunk
+        into one buffer instead of allocating a new one per call."""
         if smooth_window < 0:
             raise InputError(f"smooth_window must be >= 0, got {smooth_window}")
         arr = np.asarray(frames)
@@ -272,6 +277,7 @@ class Model:
                 temporal=temporal,
                 jaw_theta=theta,
                 smooth_window=smooth_window,
+                out=out,
             )
         return SolveResult(
             vertices=out["vertices"],

@@ -7,7 +7,7 @@ use crate::error::{input_error, PyLgiError};
 use glam::{DMat3, DVec3};
 use lgi_core::jaw::{JawBins, JawParams, JawRig};
 use lgi_core::model::{BuildConfig, JawInput, Model as CoreModel};
-use numpy::{PyArray3, PyArrayDyn, PyArrayMethods};
+use numpy::{PyArray3, PyArrayDyn, PyArrayMethods, PyUntypedArrayMethods};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use std::sync::Arc;
@@ -186,7 +186,10 @@ impl Model {
 
     /// Solves frames (F, B, 3); returns a dict of arrays. `progress(f)` is called after each
     /// frame with the GIL held. `temporal=False` solves frames independently (in parallel).
-    #[pyo3(signature = (frames, progress=None, temporal=true, jaw_theta=None, smooth_window=0))]
+    /// `out`: a C-contiguous, writeable float64 (F, V, 3) array that receives the vertices
+    /// (and is returned as `vertices`) instead of a new one.
+    #[pyo3(signature = (frames, progress=None, temporal=true, jaw_theta=None, smooth_window=0, out=None))]
+    #[allow(clippy::too_many_arguments)]
     fn solve<'py>(
         &self,
         py: Python<'py>,
@@ -195,6 +198,7 @@ impl Model {
         temporal: bool,
         jaw_theta: Option<&Bound<'py, PyAny>>,
         smooth_window: usize,
+        out: Option<&Bound<'py, PyAny>>,
     ) -> PyResult<Bound<'py, PyDict>> {
         let b = self.inner.num_bundles();
         let frames = point_sets(frames, "frames", ("frame", "bundle"), Some(b), true)?;
@@ -212,9 +216,14 @@ impl Model {
         let nv = self.inner.dataset().num_vertices();
         // The vertices go straight into the numpy array the caller gets (no copy, no second
         // F × V × 3 buffer).
-        let vertices = PyArray3::<f64>::zeros(py, [nf, nv, 3], false);
+        let vertices = match out {
+            None => PyArray3::<f64>::zeros(py, [nf, nv, 3], false),
+            Some(o) => output_array(o, [nf, nv, 3])?,
+        };
         let solved = {
-            let mut rw = vertices.readwrite();
+            let mut rw = vertices
+                .try_readwrite()
+                .map_err(|e| input_error(format!("out: {e}")))?;
             let flat = rw
                 .as_slice_mut()
                 .map_err(|e| pyo3::exceptions::PyRuntimeError::new_err(format!("internal: {e}")))?;
@@ -441,4 +450,35 @@ impl Model {
     fn markers_rest<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
         points_to_array(py, self.inner.markers_rest())
     }
+}
+
+/// A caller's output array for `solve(out=...)`: float64, C-contiguous, writeable, of `shape`.
+fn output_array<'py>(
+    o: &Bound<'py, PyAny>,
+    shape: [usize; 3],
+) -> PyResult<Bound<'py, PyArray3<f64>>> {
+    let arr = o.cast::<PyArray3<f64>>().map_err(|_| {
+        let dtype = o
+            .getattr("dtype")
+            .map(|d| d.to_string())
+            .unwrap_or_else(|_| "not a numpy array".into());
+        input_error(format!(
+            "out: expected a float64 numpy array of shape {shape:?}, got {dtype}"
+        ))
+    })?;
+    if arr.shape() != shape {
+        return Err(input_error(format!(
+            "out: expected shape {shape:?}, got {:?}",
+            arr.shape()
+        )));
+    }
+    if !arr.is_c_contiguous() {
+        return Err(input_error("out: the array must be C-contiguous"));
+    }
+    if arr.try_readwrite().is_err() {
+        return Err(input_error(
+            "out: the array is not writeable (read-only, or borrowed elsewhere)",
+        ));
+    }
+    Ok(arr.clone())
 }
