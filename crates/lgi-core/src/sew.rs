@@ -222,20 +222,25 @@ impl ResidualPass {
                 tri.map(|v| (v as usize, map(v as usize, input.vertex(v as usize))))
             })
             .collect();
-        let corrected = |v: usize, x: DVec3, rounds: &[Vec<[f64; 3]>]| {
+        // A round's corrections by bundle id (the weights' columns are present bundles only).
+        let by_bundle = |c: Vec<[f64; 3]>| -> Vec<DVec3> {
+            let mut out = vec![DVec3::ZERO; self.slot.len()];
+            for (&b, c) in self.present.iter().zip(c) {
+                out[b as usize] = DVec3::from_array(c);
+            }
+            out
+        };
+        let corrected = |v: usize, x: DVec3, rounds: &[Vec<DVec3>]| {
             let mut x = x;
             let (cols, vals) = weights.row(v);
             for c in rounds {
                 for (&b, &w) in cols.iter().zip(vals) {
-                    let s = self.slot[b as usize];
-                    if s != u32::MAX {
-                        x += DVec3::from_array(c[s as usize]) * w;
-                    }
+                    x += c[b as usize] * w;
                 }
             }
             x
         };
-        let residuals = |rounds: &[Vec<[f64; 3]>]| -> Vec<[f64; 3]> {
+        let residuals = |rounds: &[Vec<DVec3>]| -> Vec<[f64; 3]> {
             self.present
                 .iter()
                 .zip(corners.chunks(3))
@@ -247,14 +252,14 @@ impl ResidualPass {
                 .collect()
         };
         // As in `apply`: a second round only when the first left more than the tolerance.
-        let mut rounds = vec![self.lu.solve3(&residuals(&[]))];
+        let mut rounds = vec![by_bundle(self.lu.solve3(&residuals(&[])))];
         let r = residuals(&rounds);
         let worst = r
             .iter()
             .map(|v| DVec3::from_array(*v).length())
             .fold(0.0, f64::max);
         if worst.is_nan() || worst > at.tolerance {
-            rounds.push(self.lu.solve3(&r));
+            rounds.push(by_bundle(self.lu.solve3(&r)));
         }
         out.par_chunks_mut(CHUNK)
             .enumerate()
