@@ -30,9 +30,10 @@ rm -rf target/wheels
 maturin build --release --quiet --out target/wheels
 python -m pip install --quiet "$(ls target/wheels/lgi-*.whl)[test]"
 
-echo "== python: ruff, stubs, pytest"
+echo "== python: ruff, mypy, stubs, pytest"
 ruff check python tests scripts
 ruff format --check python tests scripts
+python -m mypy python/lgi
 python -m mypy.stubtest lgi._lgi --allowlist scripts/stubtest-allowlist.txt
 # Run from outside the checkout so tests import the installed wheel, not python/lgi.
 (cd tests && python -m pytest -q -p no:cacheprovider .)

@@ -98,7 +98,7 @@ def _compare(out: Path, sample, data: Dataset, model: Model, result, t_solve: fl
     from lgi.baselines import BlendshapeFit, DisplacementInterpolation, LgiRbf
 
     _say(quiet, "comparing with the baselines ...")
-    methods = {
+    methods: dict[str, DisplacementInterpolation | BlendshapeFit | LgiRbf] = {
         "displacement interpolation": DisplacementInterpolation(data, sample.markers_rest),
         "blendshape fit": BlendshapeFit(data, sample.markers_rest),
         "LGI-RBF": LgiRbf(data, sample.markers_rest),

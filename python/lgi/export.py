@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -31,4 +32,5 @@ def write_obj(
 
 def write_sequence_npz(path: str | os.PathLike[str], **arrays: NDArray[np.generic]) -> None:
     """Writes named arrays (e.g. `vertices` (F, V, 3), `bundle_residuals` (F, B)) to `.npz`."""
-    np.savez_compressed(Path(path), **arrays)
+    named: dict[str, Any] = dict(arrays)
+    np.savez_compressed(Path(path), **named)

@@ -271,7 +271,7 @@ class Model:
         theta = self._jaw_theta(arr, jaw)
         total = int(arr.shape[0]) if arr.ndim == 3 else 0
         with _progress_bar(total, "lgi solve", quiet) as bar:
-            out = self._core.solve(
+            res = self._core.solve(
                 arr,
                 progress=lambda _f: bar.update(1),
                 temporal=temporal,
@@ -280,17 +280,17 @@ class Model:
                 out=out,
             )
         return SolveResult(
-            vertices=out["vertices"],
-            bundle_residuals=out["bundle_residuals"],
-            bundle_positions=out["bundle_positions"],
-            missing=out["missing"],
+            vertices=res["vertices"],
+            bundle_residuals=res["bundle_residuals"],
+            bundle_positions=res["bundle_positions"],
+            missing=res["missing"],
             jaw_theta=theta,
-            jaw_bin=None if theta is None else out["jaw_bin"],
+            jaw_bin=None if theta is None else res["jaw_bin"],
             choices=Choices(
-                shapes=out["choice_shapes"],
-                weights=out["choice_weights"],
-                tets=out["choice_tets"],
-                projected=out["choice_projected"],
+                shapes=res["choice_shapes"],
+                weights=res["choice_weights"],
+                tets=res["choice_tets"],
+                projected=res["choice_projected"],
             ),
         )
 
