@@ -13,7 +13,7 @@ use glam::DVec3;
 use rayon::prelude::*;
 
 /// Vertices per parallel task: large enough to amortise scheduling, small enough to balance.
-const CHUNK: usize = 2048;
+const CHUNK: usize = 512;
 
 /// Each bundle's piece of geometry as a sparse shape-weight vector (shape id 0 = neutral):
 /// a choice's 4 weights, or more after temporal smoothing.
