@@ -884,15 +884,31 @@ impl Model {
             // Frame by frame: each frame is finished (and reported) before the next starts.
             let mut out: Vec<FrameInfo> = Vec::with_capacity(frames.len());
             if temporal {
+                // Frame f + 1's choice needs only frame f's choices, not its vertices: it runs
+                // beside frame f's sewing (rayon::join), which fills the gaps of either stage.
+                let mut current = prepared.first().map(|p| self.choose_all(p, None));
                 for (f, (prep, slot)) in prepared.iter().zip(slots).enumerate() {
-                    let lookup = &self.lookups[prep.bin];
-                    let previous = out
-                        .last()
-                        .filter(|fr| fr.bin == prep.bin)
-                        .map(|fr| lookup.localize(&fr.choices));
-                    let frame = self.solve_prepared_into(prep, previous.as_deref(), slot);
-                    out.push(frame.map_err(|e| frame_context(e, f))?);
+                    let choices = current.take().unwrap_or_default();
+                    let pieces = Pieces::from_choices(&choices);
+                    let next = prepared.get(f + 1);
+                    // What the next frame prefers: this frame's choices as reported (dataset
+                    // ids), in the next frame's bin, when it stays in this bin.
+                    let previous = next.filter(|n| n.bin == prep.bin).map(|n| {
+                        let lk = &self.lookups[prep.bin];
+                        let reported: Vec<Option<Choice>> = if lk.reference.is_some() {
+                            choices.iter().map(|c| c.map(|c| lk.globalize(c))).collect()
+                        } else {
+                            choices.clone()
+                        };
+                        self.lookups[n.bin].localize(&reported).into_owned()
+                    });
+                    let (sewn, chosen) = rayon::join(
+                        || self.sew_frame_into(prep, choices, &pieces, slot),
+                        || next.map(|n| self.choose_all(n, previous.as_deref())),
+                    );
+                    out.push(sewn.map_err(|e| frame_context(e, f))?);
                     on_frame(f);
+                    current = chosen;
                 }
             } else {
                 out = prepared
