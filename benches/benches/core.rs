@@ -5,7 +5,7 @@
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};
 use glam::DVec3;
 use lgi_benches::{build_model, load_workload, make_frames, Workload};
-use lgi_core::choose::{choose, pure_errors, Choice, ChoiceParams, Scoring, Scratch};
+use lgi_core::choose::{choose, pure_errors, Choice, Scoring, Scratch};
 use lgi_core::model::{FrameState, Model};
 use lgi_core::sew::{blend, Pieces};
 use lgi_core::sibson::SibsonWeights;
@@ -48,16 +48,6 @@ fn fixture() -> Fixture {
     }
 }
 
-fn params(model: &Model) -> ChoiceParams {
-    let c = model.config();
-    ChoiceParams {
-        eps: c.containment_eps,
-        projection_candidates: c.projection_candidates,
-        hit_distance: c.prune_motion.max(c.duplicate_distance) * model.diagonal(),
-        ..ChoiceParams::default()
-    }
-}
-
 fn stages(c: &mut Criterion) {
     let fx = fixture();
     let model = &fx.model;
@@ -85,8 +75,8 @@ fn stages(c: &mut Criterion) {
         })
     });
 
-    let p = params(model);
-    let tw = model.config().temporal_weight * model.diagonal() * model.diagonal();
+    let p = model.choice_params();
+    let tw = model.temporal_penalty();
     let mut scratch = Scratch::default();
     let mut f = 0;
     g.bench_function("choose_all_bundles", |bench| {

@@ -4,7 +4,7 @@
 
 use glam::DVec3;
 use lgi_benches::{build_model, load_workload, make_frames};
-use lgi_core::choose::{choose, pure_errors, ChoiceParams, Scoring, Scratch};
+use lgi_core::choose::{choose, pure_errors, Scoring, Scratch};
 use lgi_core::model::FrameState;
 use lgi_core::sew::{blend, Pieces};
 use std::hint::black_box;
@@ -18,14 +18,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let model = build_model(&workload)?;
     let frames = make_frames(&model, FRAMES, 1)?;
     let b = model.num_bundles();
-    let c = model.config();
-    let params = ChoiceParams {
-        eps: c.containment_eps,
-        projection_candidates: c.projection_candidates,
-        hit_distance: c.prune_motion.max(c.duplicate_distance) * model.diagonal(),
-        ..ChoiceParams::default()
-    };
-    let tw = c.temporal_weight * model.diagonal() * model.diagonal();
+    let params = model.choice_params();
+    let tw = model.temporal_penalty();
     let mut scratch = Scratch::default();
     let (mut choose_best, mut solve_best, mut blend_best) =
         (f64::INFINITY, f64::INFINITY, f64::INFINITY);

@@ -696,14 +696,8 @@ impl Model {
         let b = self.bundles.len();
         let lookup_targets = &prep.lookup;
         let lk = &self.lookups[prep.bin];
-        let params = ChoiceParams {
-            eps: self.config.containment_eps,
-            projection_candidates: self.config.projection_candidates,
-            hit_distance: self.config.prune_motion.max(self.config.duplicate_distance)
-                * self.diagonal,
-            ..ChoiceParams::default()
-        };
-        let temporal_weight = self.config.temporal_weight * self.diagonal * self.diagonal;
+        let params = self.choice_params();
+        let temporal_weight = self.temporal_penalty();
         let pure = pure_errors(&lk.shape_positions, b, lookup_targets);
         (0..b)
             .into_par_iter()
@@ -732,6 +726,23 @@ impl Model {
                 ))
             })
             .collect()
+    }
+
+    /// The choice's tuning from the build config, in data units.
+    pub fn choice_params(&self) -> ChoiceParams {
+        let c = &self.config;
+        ChoiceParams {
+            eps: c.containment_eps,
+            projection_candidates: c.projection_candidates,
+            hit_distance: c.prune_motion.max(c.duplicate_distance) * self.diagonal,
+            ..ChoiceParams::default()
+        }
+    }
+
+    /// Penalty per shape not shared with the previous frame's choice, in data units²
+    /// ([`Scoring::temporal_weight`](crate::choose::Scoring)).
+    pub fn temporal_penalty(&self) -> f64 {
+        self.config.temporal_weight * self.diagonal * self.diagonal
     }
 
     /// Blends `pieces`, maps them out of the bin and to the frame's jaw pose, and runs the
