@@ -173,12 +173,11 @@ impl TetIndex {
         Ok(index)
     }
 
-    /// Fast projection for targets outside every tet: the tets incident to the `k` cloud
-    /// points nearest to `p`, each with its closest point to `p` (barycentric, distance),
-    /// appended to `out` sorted by distance then tet index. Not the exact `n` nearest tets of
-    /// [`nearest`](Self::nearest) — which must enumerate every tet tied at a shared vertex —
-    /// but the tets around where `p` left the cloud, in O(points + incident tets).
-    pub fn nearest_around(&self, p: DVec3, k: usize, out: &mut Vec<(u32, [f64; 4], f64)>) {
+    /// The unpruned reference of [`project_around`](Self::project_around) (tests only): the
+    /// tets incident to the `k` cloud points nearest to `p`, each with its closest point to `p`
+    /// (barycentric, distance), appended to `out` sorted by distance then tet index.
+    #[cfg(test)]
+    pub(crate) fn nearest_around(&self, p: DVec3, k: usize, out: &mut Vec<(u32, [f64; 4], f64)>) {
         let base = out.len();
         let k = k.min(self.points.len());
         if k == 0 {
@@ -229,9 +228,11 @@ impl TetIndex {
     /// incident to the cloud point nearest to `p` (ties: lowest index), whose closest point to
     /// `p` is not one of their vertices (that point is scored on its own) — appended to `out`
     /// sorted by distance then tet index, with the closest point's barycentric and distance.
-    /// Equal to [`nearest_around`](Self::nearest_around) with `k = 1`, filtered and truncated,
-    /// but exact closest points are computed only for tets whose face-plane lower bound can
-    /// still beat the current `n`-th distance (`bounds` is scratch).
+    /// Not the exact `n` nearest tets of [`nearest`](Self::nearest) — which must enumerate
+    /// every tet tied at a shared vertex — but the tets around where `p` left the cloud. Exact
+    /// closest points are computed only for tets whose face-plane lower bound can still beat
+    /// the current `n`-th distance (`bounds` is scratch); a test checks the result equals
+    /// projecting every incident tet.
     pub fn project_around(
         &self,
         p: DVec3,
@@ -335,8 +336,9 @@ impl TetIndex {
         if p.cmplt(self.lo).any() || p.cmpgt(self.hi).any() {
             return;
         }
-        // Outside the hull (with a margin beyond the reach of `eps`): nothing can contain p.
-        let margin = (8.0 * FAST_EPS.max(eps) + 1e-12) * self.extent;
+        // Outside the hull (with a margin beyond the reach of any `eps` the grid answers):
+        // nothing can contain p.
+        let margin = (8.0 * FAST_EPS + 1e-12) * self.extent;
         if self
             .slabs
             .iter()

@@ -201,8 +201,8 @@ impl ResidualPass {
     }
 
     /// The whole of sewing in one pass over the vertices: `out[v] = map(v, blend(v))` plus the
-    /// residual corrections, bit for bit what [`blend`], `map` over every vertex and
-    /// [`apply`](Self::apply) give one after another. The corrections only need the bundles'
+    /// residual corrections, bit for bit what [`blend`], `map` over every vertex and the
+    /// staged residual pass (`apply`, kept as the tests' reference) give one after another. The corrections only need the bundles'
     /// triangle corners, so those are blended first and every other vertex is written once.
     /// Returns the first vertex that is not finite, if any.
     pub fn sew(
@@ -277,8 +277,10 @@ impl ResidualPass {
             .reduce(|| None, |a, b| a.or(b))
     }
 
-    /// Moves `x` so that every present bundle's surface point equals its target.
-    pub fn apply(
+    /// Moves `x` so that every present bundle's surface point equals its target: the staged
+    /// residual pass, the reference [`sew`](Self::sew) is tested against (tests only).
+    #[cfg(test)]
+    pub(crate) fn apply(
         &self,
         triangles: &[[u32; 3]],
         bundles: &[SurfacePoint],

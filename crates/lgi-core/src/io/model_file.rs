@@ -28,16 +28,19 @@ const HEADER: usize = 8 + 4 + 8 + 8;
 /// FNV-1a 64 over bytes: the checksum of version 2 files (one multiply per byte, ~0.1 s for
 /// a 100 MB model).
 pub(crate) fn checksum_v2(bytes: &[u8]) -> u64 {
-    checksum_v2_from(0xcbf2_9ce4_8422_2325, bytes)
+    checksum_v2_from(FNV_OFFSET, bytes)
 }
+
+/// FNV-1a 64 offset basis and prime.
+const FNV_OFFSET: u64 = 0xcbf2_9ce4_8422_2325;
+const FNV_PRIME: u64 = 0x0000_0100_0000_01b3;
 
 /// The checksum of version 3 files: FNV-1a over little-endian 8-byte words in four
 /// interleaved lanes (independent multiplies), the lanes and the tail bytes folded together
 /// with the length. Catches truncation and bit rot like byte-wise FNV at ~1/10 of its cost.
 pub(crate) fn checksum(bytes: &[u8]) -> u64 {
-    const PRIME: u64 = 0x0000_0100_0000_01b3;
     let mut lanes = [
-        0xcbf2_9ce4_8422_2325u64,
+        FNV_OFFSET,
         0x8422_2325_cbf2_9ce4,
         0x9ce4_8422_2325_cbf2,
         0x2325_cbf2_9ce4_8422,
@@ -47,12 +50,12 @@ pub(crate) fn checksum(bytes: &[u8]) -> u64 {
         for (lane, word) in lanes.iter_mut().zip(block.chunks_exact(8)) {
             let mut w = [0u8; 8];
             w.copy_from_slice(word);
-            *lane = (*lane ^ u64::from_le_bytes(w)).wrapping_mul(PRIME);
+            *lane = (*lane ^ u64::from_le_bytes(w)).wrapping_mul(FNV_PRIME);
         }
     }
-    let mut h = (bytes.len() as u64).wrapping_mul(PRIME);
+    let mut h = (bytes.len() as u64).wrapping_mul(FNV_PRIME);
     for lane in lanes {
-        h = (h ^ lane).wrapping_mul(PRIME);
+        h = (h ^ lane).wrapping_mul(FNV_PRIME);
         h ^= h >> 29;
     }
     checksum_v2_from(h, blocks.remainder())
@@ -60,9 +63,9 @@ pub(crate) fn checksum(bytes: &[u8]) -> u64 {
 
 /// Byte-wise FNV-1a continued from `h`.
 fn checksum_v2_from(h: u64, bytes: &[u8]) -> u64 {
-    bytes.iter().fold(h, |h, &b| {
-        (h ^ b as u64).wrapping_mul(0x0000_0100_0000_01b3)
-    })
+    bytes
+        .iter()
+        .fold(h, |h, &b| (h ^ b as u64).wrapping_mul(FNV_PRIME))
 }
 
 #[derive(Default)]
