@@ -1,7 +1,7 @@
 //! numpy <-> Rust conversions, with every shape, dtype and finiteness check at the boundary.
 //! No other module converts arrays by hand.
 
-use crate::error::input_error;
+use crate::error::{input_error, internal_error};
 use glam::DVec3;
 use numpy::ndarray::{ArrayD, IxDyn};
 use numpy::{IntoPyArray, PyArrayDyn, PyArrayMethods, PyUntypedArrayMethods};
@@ -122,7 +122,7 @@ pub fn flat_to_array<'py, T: numpy::Element>(
 ) -> PyResult<Bound<'py, PyArrayDyn<T>>> {
     ArrayD::from_shape_vec(IxDyn(shape), flat)
         .map(|a| a.into_pyarray(py))
-        .map_err(|e| pyo3::exceptions::PyRuntimeError::new_err(format!("internal: {e}")))
+        .map_err(internal_error)
 }
 
 /// Reads an integer array-like of shape `(N, cols)` (any signed or unsigned integer dtype)
@@ -146,26 +146,21 @@ pub fn index_array(obj: &Bound<'_, PyAny>, name: &str, cols: usize) -> PyResult<
         )));
     }
     // uint64 does not fit int64: read it as such; every other integer dtype fits int64.
-    let wide: Vec<i128> = if dtype == "uint64" {
-        let a = arr.call_method1("astype", ("uint64",))?;
+    fn widened<T: numpy::Element + Copy + Into<i128>>(
+        arr: &Bound<'_, PyAny>,
+        dtype: &str,
+        name: &str,
+    ) -> PyResult<Vec<i128>> {
+        let a = arr.call_method1("astype", (dtype,))?;
         let a = a
-            .cast::<PyArrayDyn<u64>>()
+            .cast::<PyArrayDyn<T>>()
             .map_err(|_| input_error(format!("{name}: not a numeric array")))?;
-        a.readonly()
-            .as_array()
-            .iter()
-            .map(|&x| i128::from(x))
-            .collect()
+        Ok(a.readonly().as_array().iter().map(|&x| x.into()).collect())
+    }
+    let wide = if dtype == "uint64" {
+        widened::<u64>(&arr, "uint64", name)?
     } else {
-        let a = arr.call_method1("astype", ("int64",))?;
-        let a = a
-            .cast::<PyArrayDyn<i64>>()
-            .map_err(|_| input_error(format!("{name}: not a numeric array")))?;
-        a.readonly()
-            .as_array()
-            .iter()
-            .map(|&x| i128::from(x))
-            .collect()
+        widened::<i64>(&arr, "int64", name)?
     };
     wide.iter()
         .enumerate()

@@ -2,7 +2,7 @@
 //! from numpy arrays, or from an `.npz` archive. File reading runs with the GIL released.
 
 use crate::convert::{flat_to_array, float_array, index_array, points, points_to_array};
-use crate::error::{input_error, lgi_exception, PyLgiError, PyLgiResult};
+use crate::error::{input_error, internal_error, lgi_exception, PyLgiError, PyLgiResult};
 use lgi_core::{DVec2, LgiError, Mesh};
 use numpy::PyArrayDyn;
 use pyo3::prelude::*;
@@ -292,9 +292,7 @@ fn read_npz(py: Python<'_>, path: &Path, npz: &Bound<'_, PyAny>) -> PyResult<Dat
         }
     }
     let [neutral, triangles, shapes, names, mut uvs, mut uv_triangles]: [Option<Bound<'_, PyAny>>;
-        6] = arrays
-        .try_into()
-        .map_err(|_| pyo3::exceptions::PyRuntimeError::new_err("internal: npz keys"))?;
+        6] = arrays.try_into().map_err(|_| internal_error("npz keys"))?;
     let empty = |a: &Option<Bound<'_, PyAny>>| -> PyResult<bool> {
         Ok(match a {
             Some(a) => a.getattr("size")?.extract::<usize>()? == 0,
@@ -306,9 +304,7 @@ fn read_npz(py: Python<'_>, path: &Path, npz: &Bound<'_, PyAny>) -> PyResult<Dat
         uv_triangles = None;
     }
     let (Some(neutral), Some(triangles)) = (neutral, triangles) else {
-        return Err(pyo3::exceptions::PyRuntimeError::new_err(
-            "internal: npz keys",
-        ));
+        return Err(internal_error("npz keys"));
     };
     let built = build(
         py,

@@ -46,6 +46,11 @@ impl From<PyLgiError> for PyErr {
 /// Result type of binding functions that call the core.
 pub type PyLgiResult<T> = Result<T, PyLgiError>;
 
+/// A `RuntimeError` for a broken invariant of the binding itself (a bug, not bad input).
+pub fn internal_error(msg: impl std::fmt::Display) -> PyErr {
+    pyo3::exceptions::PyRuntimeError::new_err(format!("internal: {msg}"))
+}
+
 /// An `lgi.InputError` raised by the binding itself (shape and dtype checks).
 pub fn input_error(msg: impl Into<String>) -> PyErr {
     lgi_exception("InputError", msg.into())

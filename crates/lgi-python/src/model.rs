@@ -3,7 +3,7 @@
 
 use crate::convert::{flat_to_array, float_array, point_sets, points, points_to_array};
 use crate::dataset::Dataset;
-use crate::error::{input_error, PyLgiError};
+use crate::error::{input_error, internal_error, PyLgiError};
 use glam::{DMat3, DVec3};
 use lgi_core::jaw::{JawBins, JawParams, JawRig};
 use lgi_core::model::{BuildConfig, JawInput, Model as CoreModel};
@@ -221,14 +221,13 @@ impl Model {
             Some(o) => output_array(o, [nf, nv, 3])?,
         };
         let solved = {
-            let mut rw = vertices
-                .try_readwrite()
-                .map_err(|e| input_error(format!("out: {e}")))?;
-            let flat = rw
-                .as_slice_mut()
-                .map_err(|e| pyo3::exceptions::PyRuntimeError::new_err(format!("internal: {e}")))?;
-            let out: &mut [DVec3] = bytemuck::try_cast_slice_mut(flat)
-                .map_err(|e| pyo3::exceptions::PyRuntimeError::new_err(format!("internal: {e}")))?;
+            let mut rw = vertices.try_readwrite().map_err(|e| {
+                input_error(format!(
+                    "out: the array is not writeable (read-only, or borrowed elsewhere): {e}"
+                ))
+            })?;
+            let flat = rw.as_slice_mut().map_err(internal_error)?;
+            let out: &mut [DVec3] = bytemuck::try_cast_slice_mut(flat).map_err(internal_error)?;
             py.detach(move || {
                 model.solve_sequence_into(
                     &frames,
@@ -475,10 +474,6 @@ fn output_array<'py>(
     if !arr.is_c_contiguous() {
         return Err(input_error("out: the array must be C-contiguous"));
     }
-    if arr.try_readwrite().is_err() {
-        return Err(input_error(
-            "out: the array is not writeable (read-only, or borrowed elsewhere)",
-        ));
-    }
+    // Writeability is checked where the solve borrows it.
     Ok(arr.clone())
 }
