@@ -633,6 +633,15 @@ mod tests {
         DVec3::new(r[0], r[1], r[2])
     }
 
+    /// Points and poses (open, lateral, forward) of the closed-form rigid-motion tests.
+    const RIGID_POINTS: [DVec3; 4] = [
+        DVec3::new(0.0, -6.0, 9.0),
+        DVec3::new(3.0, -4.0, 8.0),
+        DVec3::new(-2.5, -2.0, 7.5),
+        DVec3::new(1.0, 2.0, -3.0),
+    ];
+    const RIGID_POSES: [(f64, f64, f64); 3] = [(0.4, 0.0, 0.0), (0.0, -0.2, 0.0), (0.3, 0.15, 0.7)];
+
     fn rig(weights: Vec<f64>) -> JawRig {
         JawRig::new(DVec3::new(0.0, -1.5, 3.0), weights).unwrap()
     }
@@ -640,13 +649,8 @@ mod tests {
     #[test]
     fn weight_one_vertices_move_by_the_closed_form_rigid_motion() {
         let r = rig(vec![1.0; 4]);
-        let pts = [
-            DVec3::new(0.0, -6.0, 9.0),
-            DVec3::new(3.0, -4.0, 8.0),
-            DVec3::new(-2.5, -2.0, 7.5),
-            DVec3::new(1.0, 2.0, -3.0),
-        ];
-        for (open, lateral, forward) in [(0.4, 0.0, 0.0), (0.0, -0.2, 0.0), (0.3, 0.15, 0.7)] {
+        let pts = RIGID_POINTS;
+        for (open, lateral, forward) in RIGID_POSES {
             let theta = JawParams {
                 open,
                 lateral,
@@ -806,13 +810,8 @@ mod tests {
         let r = tilted_rig(vec![1.0; 4], f);
         // The frame's columns: the open axis, the lateral axis and the forward direction.
         let col = |j: usize| [f[0][j], f[1][j], f[2][j]];
-        let pts = [
-            DVec3::new(0.0, -6.0, 9.0),
-            DVec3::new(3.0, -4.0, 8.0),
-            DVec3::new(-2.5, -2.0, 7.5),
-            DVec3::new(1.0, 2.0, -3.0),
-        ];
-        for (open, lateral, forward) in [(0.4, 0.0, 0.0), (0.0, -0.2, 0.0), (0.3, 0.15, 0.7)] {
+        let pts = RIGID_POINTS;
+        for (open, lateral, forward) in RIGID_POSES {
             let theta = JawParams {
                 open,
                 lateral,
