@@ -23,6 +23,61 @@ const LEAF_SIZE: usize = 4;
 /// Fixed traversal stack: the median-split hierarchy is at most ~33 levels deep for 2³² tets.
 const STACK: usize = 96;
 
+/// Marks a flat tet (no usable frame) in [`Incident::tag`].
+const FLAT: u32 = 1 << 31;
+/// [`Incident::tag`] holds the point's slot in the tet (0..4) from this bit.
+const SLOT_SHIFT: u32 = 29;
+/// The tet index in [`Incident::tag`]; also the most tets an index holds.
+const TET_MASK: u32 = (1 << SLOT_SHIFT) - 1;
+
+/// A tet incident to a point, with its other three corners inline: the projection filters and
+/// bounds the tets around a point from the (few, cached) points alone.
+#[derive(Debug, Clone, Copy)]
+struct Incident {
+    /// Tet index | slot of the point in the tet << [`SLOT_SHIFT`] | [`FLAT`] for a flat tet.
+    tag: u32,
+    /// The tet's corners after the point's slot, cyclically.
+    others: [u32; 3],
+}
+
+impl Incident {
+    fn tet(&self) -> u32 {
+        self.tag & TET_MASK
+    }
+
+    /// The tet's corners in tet order, given the point's own position `o`.
+    fn corners(&self, o: DVec3, points: &[DVec3]) -> [DVec3; 4] {
+        let slot = ((self.tag >> SLOT_SHIFT) & 3) as usize;
+        let mut c = [o; 4];
+        for (k, &w) in self.others.iter().enumerate() {
+            c[(slot + 1 + k) % 4] = points[w as usize];
+        }
+        c
+    }
+}
+
+/// How many candidates ahead the projection prefetches a frame.
+const LOOKAHEAD: usize = 4;
+
+/// Hints the cache to load `x` (its first two lines) ahead of use.
+#[inline(always)]
+#[allow(unsafe_code)]
+fn prefetch<T>(x: &T) {
+    #[cfg(target_arch = "x86_64")]
+    {
+        use std::arch::x86_64::{_mm_prefetch, _MM_HINT_T0};
+        let ptr = (x as *const T).cast::<i8>();
+        // SAFETY: a prefetch is only a hint: it never faults, whatever the address, and SSE
+        // is part of every x86_64 target.
+        unsafe {
+            _mm_prefetch::<_MM_HINT_T0>(ptr);
+            _mm_prefetch::<_MM_HINT_T0>(ptr.wrapping_add(64));
+        }
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    let _ = x;
+}
+
 /// Affine map from a point to the last three barycentric coordinates of one tet.
 #[derive(Debug, Clone, Copy)]
 struct Frame {
@@ -61,7 +116,7 @@ pub struct TetIndex {
     scale: f64,
     /// Tets incident to each point (CSR), for the fast projection around the nearest points.
     incident_start: Vec<u32>,
-    incident: Vec<u32>,
+    incident: Vec<Incident>,
     /// Extent of the points along each of [`SLAB_DIRECTIONS`] and the cloud's thinnest axis:
     /// a point beyond one of these slabs is outside the hull, so no tet can contain it.
     slabs: Vec<(DVec3, f64, f64)>,
@@ -87,7 +142,7 @@ impl TetIndex {
     /// 20,000 tets).
     ///
     /// Errors: [`LgiError::Input`] when a tet refers to a missing point, a point is not finite,
-    /// or there are 2³² tets or more.
+    /// or there are 2²⁹ tets or more.
     pub fn new(points: Vec<DVec3>, tets: Vec<Tet>) -> Result<Self> {
         if let Some(i) = points.iter().position(|p| !p.is_finite()) {
             return Err(LgiError::Input(format!(
@@ -105,9 +160,9 @@ impl TetIndex {
                 points.len()
             )));
         }
-        if u32::try_from(tets.len()).is_err() {
+        if tets.len() > TET_MASK as usize {
             return Err(LgiError::Input(format!(
-                "tet index: {} tets is more than the 2^32 supported",
+                "tet index: {} tets is more than the 2^29 supported",
                 tets.len()
             )));
         }
@@ -138,10 +193,20 @@ impl TetIndex {
             incident_start[i + 1] += incident_start[i];
         }
         let mut fill = incident_start.clone();
-        let mut incident = vec![0u32; incident_start[points.len()] as usize];
-        for (ti, t) in tets.iter().enumerate() {
-            for &v in t {
-                incident[fill[v as usize] as usize] = ti as u32;
+        let mut incident = vec![
+            Incident {
+                tag: 0,
+                others: [0; 3]
+            };
+            incident_start[points.len()] as usize
+        ];
+        for (ti, (t, f)) in tets.iter().zip(&frames).enumerate() {
+            let flat = if f.inv.is_finite() { 0 } else { FLAT };
+            for (j, &v) in t.iter().enumerate() {
+                incident[fill[v as usize] as usize] = Incident {
+                    tag: ti as u32 | (j as u32) << SLOT_SHIFT | flat,
+                    others: [t[(j + 1) % 4], t[(j + 2) % 4], t[(j + 3) % 4]],
+                };
                 fill[v as usize] += 1;
             }
         }
@@ -193,8 +258,8 @@ impl TetIndex {
             // The common case, without allocating: the nearest point (ties: lowest index).
             let v = self.nearest_point(p);
             let (s, e) = (self.incident_start[v], self.incident_start[v + 1]);
-            for &t in &self.incident[s as usize..e as usize] {
-                project(t, out);
+            for inc in &self.incident[s as usize..e as usize] {
+                project(inc.tet(), out);
             }
         } else {
             let mut near: Vec<(f64, u32)> = self
@@ -211,7 +276,9 @@ impl TetIndex {
                         self.incident_start[v as usize],
                         self.incident_start[v as usize + 1],
                     );
-                    self.incident[s as usize..e as usize].iter().copied()
+                    self.incident[s as usize..e as usize]
+                        .iter()
+                        .map(Incident::tet)
                 })
                 .collect();
             // Tets shared by several of the points appear once per point.
@@ -246,14 +313,28 @@ impl TetIndex {
         }
         let v = self.nearest_point(p);
         let (s, e) = (self.incident_start[v], self.incident_start[v + 1]);
-        let pv = p - self.points[v];
+        let o = self.points[v];
+        let pv = p - o;
+        let lp = pv.length();
+        let incident = &self.incident[s as usize..e as usize];
         bounds.clear();
-        bounds.extend(
-            self.incident[s as usize..e as usize]
-                .iter()
-                .filter(|&&t| !closest_is_corner(&self.points, self.tets[t as usize], v, pv))
-                .map(|&t| (plane_lower_bound(&self.frames[t as usize], p), t)),
-        );
+        // Filter and bound from the inline corners, without loading the tets or their frames.
+        bounds.extend(incident.iter().enumerate().filter_map(|(i, inc)| {
+            let c = inc.others.map(|w| self.points[w as usize]);
+            let corner = (0..3).all(|j| {
+                let e = c[j] - o;
+                inc.others[j] as usize == v || pv.dot(e) < -1e-9 * lp * e.length()
+            });
+            if corner {
+                return None;
+            }
+            let lb = if inc.tag & FLAT != 0 {
+                0.0
+            } else {
+                plane_lower_bound([o, c[0], c[1], c[2]], p)
+            };
+            Some((lb, i as u32))
+        }));
         // The n lowest bounds first (a tight n-th distance early), the rest in any order: a
         // tet is skipped only when its bound exceeds the n-th distance, which only shrinks.
         if bounds.len() > n {
@@ -261,11 +342,27 @@ impl TetIndex {
         }
         // Rounding slack so a bound never prunes a tet whose computed distance ties.
         let slack = 1e-12 * (self.scale + p.abs().max_element());
-        for &(lb, t) in bounds.iter() {
-            if out.len() - base == n && lb - slack > out[out.len() - 1].2 {
+        // The frames are scattered: ask early for those of the n lowest bounds (always
+        // projected), and for the rest a few tets ahead, if not pruned by then.
+        let frame_of = |i: u32| &self.frames[incident[i as usize].tet() as usize];
+        for &(_, i) in bounds.iter().take(n) {
+            prefetch(frame_of(i));
+        }
+        for (k, &(lb, i)) in bounds.iter().enumerate() {
+            let full = out.len() - base == n;
+            if let Some(&(ahead_lb, ahead)) =
+                bounds.get(k + LOOKAHEAD).filter(|_| k + LOOKAHEAD >= n)
+            {
+                if !full || ahead_lb - slack <= out[out.len() - 1].2 {
+                    prefetch(frame_of(ahead));
+                }
+            }
+            if full && lb - slack > out[out.len() - 1].2 {
                 continue;
             }
-            let corners = self.tets[t as usize].map(|i| self.points[i as usize]);
+            let inc = &incident[i as usize];
+            let t = inc.tet();
+            let corners = inc.corners(o, &self.points);
             let inv = &self.frames[t as usize].inv;
             let (q, b) = closest_point_in_tet_with(p, corners, inv.is_finite().then_some(inv));
             if b.iter().all(|&x| x < 1.0 - 1e-12) {
@@ -352,7 +449,12 @@ impl TetIndex {
             self.cell_start[cell] as usize,
             self.cell_start[cell + 1] as usize,
         );
-        for &t in &self.cell_items[start..end] {
+        let items = &self.cell_items[start..end];
+        // The frames are scattered: ask for all of them before testing the first.
+        for &t in items {
+            prefetch(&self.frames[t as usize]);
+        }
+        for &t in items {
             test(t, out);
         }
     }
@@ -422,7 +524,8 @@ impl TetIndex {
             + self.cell_items.capacity() * size_of::<u32>()
             + self.nodes.capacity() * size_of::<Node>()
             + self.bvh_items.capacity() * size_of::<u32>()
-            + (self.incident_start.capacity() + self.incident.capacity()) * size_of::<u32>()
+            + self.incident_start.capacity() * size_of::<u32>()
+            + self.incident.capacity() * size_of::<Incident>()
     }
 
     /// Grid shape `[nx, ny, nz]` (all 0 when no tet is usable): for diagnostics and benchmarks.
@@ -763,35 +866,17 @@ fn slabs(points: &[DVec3]) -> Vec<(DVec3, f64, f64)> {
         .collect()
 }
 
-/// True when the closest point of `tet` (which has corner `v`) to `v + pv` is certainly `v`
-/// itself: `pv` makes an obtuse angle, with margin, with every edge leaving `v` (then `v + pv`
-/// lies in the tet's normal cone at `v`). Borderline cases answer false.
-fn closest_is_corner(points: &[DVec3], tet: Tet, v: usize, pv: DVec3) -> bool {
-    let o = points[v];
-    let lp = pv.length();
-    tet.iter().all(|&w| {
-        let e = points[w as usize] - o;
-        w as usize == v || pv.dot(e) < -1e-9 * lp * e.length()
-    })
-}
-
-/// A lower bound of the distance from `p` to the tet of `f`: the largest distance of `p` beyond
-/// one of the tet's face planes (the face opposite vertex j is where barycentric λ_j = 0, at
-/// distance −λ_j / |∇λ_j|). 0 for a flat tet or a point inside.
-fn plane_lower_bound(f: &Frame, p: DVec3) -> f64 {
-    if !f.inv.is_finite() {
-        return 0.0;
-    }
-    let l = f.inv * (p - f.p0);
-    let l0 = 1.0 - l.x - l.y - l.z;
-    let rows = [f.inv.row(0), f.inv.row(1), f.inv.row(2)];
+/// A lower bound of the distance from `p` to the non-flat tet with corners `c`: the largest
+/// distance of `p` beyond one of its face planes (on the side away from the opposite corner).
+/// 0 for a point inside.
+fn plane_lower_bound(c: [DVec3; 4], p: DVec3) -> f64 {
+    const FACES: [[usize; 3]; 4] = [[1, 2, 3], [0, 2, 3], [0, 1, 3], [0, 1, 2]];
     let mut lb = 0.0f64;
-    if l0 < 0.0 {
-        lb = lb.max(-l0 / (rows[0] + rows[1] + rows[2]).length());
-    }
-    for (lj, row) in [l.x, l.y, l.z].into_iter().zip(rows) {
-        if lj < 0.0 {
-            lb = lb.max(-lj / row.length());
+    for (opposite, [i, j, k]) in FACES.into_iter().enumerate() {
+        let n = (c[j] - c[i]).cross(c[k] - c[i]);
+        let beyond = n.dot(p - c[i]);
+        if beyond * n.dot(c[opposite] - c[i]) < 0.0 {
+            lb = lb.max(beyond.abs() / n.length());
         }
     }
     if lb.is_finite() {

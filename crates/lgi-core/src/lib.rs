@@ -3,7 +3,7 @@
 //! Sparse facial markers ("bundles") index local geometry that really occurred in a dataset of
 //! facial shapes; the pieces are sewn together with natural-neighbour weights so the surface
 //! passes through every marker. Pure Rust: the Python binding lives in `lgi-python`.
-#![forbid(unsafe_code)]
+#![deny(unsafe_code)]
 #![warn(missing_docs)]
 
 pub mod augment;
