@@ -5,6 +5,7 @@
 use glam::{DMat3, DVec3};
 
 use crate::error::{LgiError, Result};
+use crate::prefetch::prefetch;
 use crate::tets::{closest_point_in_tet_with, tet_inverse, Tet};
 
 /// Queries with `eps` up to this use the grid; larger ones scan every tet (exact, O(#tets)).
@@ -58,25 +59,6 @@ impl Incident {
 
 /// How many candidates ahead the projection prefetches a frame.
 const LOOKAHEAD: usize = 4;
-
-/// Hints the cache to load `x` (its first two lines) ahead of use.
-#[inline(always)]
-#[allow(unsafe_code)]
-fn prefetch<T>(x: &T) {
-    #[cfg(target_arch = "x86_64")]
-    {
-        use std::arch::x86_64::{_mm_prefetch, _MM_HINT_T0};
-        let ptr = (x as *const T).cast::<i8>();
-        // SAFETY: a prefetch is only a hint: it never faults, whatever the address, and SSE
-        // is part of every x86_64 target.
-        unsafe {
-            _mm_prefetch::<_MM_HINT_T0>(ptr);
-            _mm_prefetch::<_MM_HINT_T0>(ptr.wrapping_add(64));
-        }
-    }
-    #[cfg(not(target_arch = "x86_64"))]
-    let _ = x;
-}
 
 /// Affine map from a point to the last three barycentric coordinates of one tet.
 #[derive(Debug, Clone, Copy)]
@@ -315,15 +297,20 @@ impl TetIndex {
         let (s, e) = (self.incident_start[v], self.incident_start[v + 1]);
         let o = self.points[v];
         let pv = p - o;
-        let lp = pv.length();
+        // The corner test's margin, squared: pv·e < −1e-9 |pv| |e| without square roots.
+        let margin2 = 1e-18 * pv.length_squared();
         let incident = &self.incident[s as usize..e as usize];
         bounds.clear();
         // Filter and bound from the inline corners, without loading the tets or their frames.
         bounds.extend(incident.iter().enumerate().filter_map(|(i, inc)| {
             let c = inc.others.map(|w| self.points[w as usize]);
+            // The closest point is certainly the corner itself when pv makes an obtuse angle,
+            // with margin, with every edge leaving it (pv lies in the tet's normal cone there);
+            // such tets are dropped (the corner is scored on its own), borderline ones kept.
             let corner = (0..3).all(|j| {
                 let e = c[j] - o;
-                inc.others[j] as usize == v || pv.dot(e) < -1e-9 * lp * e.length()
+                let d = pv.dot(e);
+                inc.others[j] as usize == v || (d < 0.0 && d * d > margin2 * e.length_squared())
             });
             if corner {
                 return None;
@@ -366,6 +353,8 @@ impl TetIndex {
             let inv = &self.frames[t as usize].inv;
             let (q, b) = closest_point_in_tet_with(p, corners, inv.is_finite().then_some(inv));
             if b.iter().all(|&x| x < 1.0 - 1e-12) {
+                // The caller may read the corners of the nearest tets next.
+                prefetch(&self.tets[t as usize]);
                 insert_nearest(out, base, n, (t, b, p.distance(q)));
             }
         }
@@ -422,6 +411,8 @@ impl TetIndex {
         let test = |t: u32, out: &mut Vec<(u32, [f64; 4])>| {
             let b = bary(&self.frames[t as usize], p);
             if b.iter().all(|&x| x >= -eps) {
+                // The caller reads the corners of every containing tet next.
+                prefetch(&self.tets[t as usize]);
                 out.push((t, b));
             }
         };
@@ -871,14 +862,16 @@ fn slabs(points: &[DVec3]) -> Vec<(DVec3, f64, f64)> {
 /// 0 for a point inside.
 fn plane_lower_bound(c: [DVec3; 4], p: DVec3) -> f64 {
     const FACES: [[usize; 3]; 4] = [[1, 2, 3], [0, 2, 3], [0, 1, 3], [0, 1, 2]];
-    let mut lb = 0.0f64;
+    // The largest squared distance beyond a face plane, with one square root at the end.
+    let mut lb2 = 0.0f64;
     for (opposite, [i, j, k]) in FACES.into_iter().enumerate() {
         let n = (c[j] - c[i]).cross(c[k] - c[i]);
         let beyond = n.dot(p - c[i]);
         if beyond * n.dot(c[opposite] - c[i]) < 0.0 {
-            lb = lb.max(beyond.abs() / n.length());
+            lb2 = lb2.max(beyond * beyond / n.length_squared());
         }
     }
+    let lb = lb2.sqrt();
     if lb.is_finite() {
         lb
     } else {

@@ -21,6 +21,7 @@ pub mod jaw;
 pub mod linalg;
 pub mod mesh;
 pub mod model;
+mod prefetch;
 pub mod sew;
 pub mod sibson;
 pub mod smooth;
