@@ -5,7 +5,7 @@
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};
 use glam::DVec3;
 use lgi_benches::{build_model, load_workload, make_frames, Workload};
-use lgi_core::choose::{choose, pure_errors, Choice, Scoring, Scratch};
+use lgi_core::choose::{choose, Choice, FrameErrors, Scoring, Scratch};
 use lgi_core::model::{FrameState, Model};
 use lgi_core::sew::{blend, Pieces};
 use lgi_core::sibson::SibsonWeights;
@@ -84,7 +84,7 @@ fn stages(c: &mut Criterion) {
             f = (f + 1) % fx.frames.len();
             let prev = &fx.choices[(f + fx.frames.len() - 1) % fx.frames.len()];
             let targets = &fx.frames[f];
-            let pure = pure_errors(model.shape_positions(), b, targets);
+            let errors = FrameErrors::new(model.shape_positions(), b, targets);
             let mut acc = 0.0;
             for (i, &t) in targets.iter().enumerate() {
                 let scoring = Scoring {
@@ -94,7 +94,8 @@ fn stages(c: &mut Criterion) {
                     targets,
                     previous: prev[i].as_ref(),
                     temporal_weight: tw,
-                    pure_errors: &pure,
+                    pure_errors: &errors.pure,
+                    distances: &errors.distances,
                 };
                 let ch = choose(
                     &model.indices()[i],

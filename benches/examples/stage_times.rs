@@ -4,7 +4,7 @@
 
 use glam::DVec3;
 use lgi_benches::{build_model, load_workload, make_frames};
-use lgi_core::choose::{choose, pure_errors, Scoring, Scratch};
+use lgi_core::choose::{choose, FrameErrors, Scoring, Scratch};
 use lgi_core::model::FrameState;
 use lgi_core::sew::{blend, Pieces};
 use std::hint::black_box;
@@ -32,7 +32,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         // Serial choice of every bundle (no temporal preference).
         let t = Instant::now();
         for targets in frames.iter().filter(|_| !only_solve) {
-            let pure = pure_errors(model.shape_positions(), b, targets);
+            let errors = FrameErrors::new(model.shape_positions(), b, targets);
             for (i, &target) in targets.iter().enumerate() {
                 let scoring = Scoring {
                     shape_positions: model.shape_positions(),
@@ -41,7 +41,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                     targets,
                     previous: None,
                     temporal_weight: tw,
-                    pure_errors: &pure,
+                    pure_errors: &errors.pure,
+                    distances: &errors.distances,
                 };
                 black_box(choose(
                     &model.indices()[i],

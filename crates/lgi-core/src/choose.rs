@@ -44,25 +44,55 @@ pub struct Scoring<'a> {
     pub previous: Option<&'a Choice>,
     /// Penalty per shape of a candidate that the previous choice did not use (data units²).
     pub temporal_weight: f64,
-    /// Per shape id, the error over all bundles of that shape alone ([`pure_errors`]): the
-    /// same for every bundle of a frame, so the tie-break of pure candidates is a lookup.
-    /// Empty to compute on demand.
+    /// Per shape id, the error over all bundles of that shape alone
+    /// ([`FrameErrors::pure`]): the same for every bundle of a frame, so the tie-break of
+    /// pure candidates is a lookup. Empty to compute on demand.
     pub pure_errors: &'a [f64],
+    /// `|P[k][n] − t_n|²` for every shape id k and bundle n ([`FrameErrors::distances`]):
+    /// the neighbour error of a cloud point alone is then a sum of lookups. Empty to compute
+    /// on demand.
+    pub distances: &'a [f64],
 }
 
-/// `Σ_n |P[k][n] − t_n|²` over the present bundles, for every shape id k: the global error
-/// of a bundle choosing shape k alone. Computed once per frame.
-pub fn pure_errors(shape_positions: &[DVec3], num_bundles: usize, targets: &[DVec3]) -> Vec<f64> {
-    shape_positions
-        .chunks(num_bundles)
-        .map(|row| {
-            row.iter()
-                .zip(targets)
-                .filter(|(_, t)| !t.is_nan())
-                .map(|(p, t)| p.distance_squared(*t))
-                .sum()
-        })
-        .collect()
+/// The per-frame tables every bundle's choice shares: computed once per frame.
+#[derive(Debug, Clone, Default)]
+pub struct FrameErrors {
+    /// `|P[k][n] − t_n|²` for every shape id k and bundle n, `(S + 1) × B`, index
+    /// `[k * B + n]`; 0 where the target is missing.
+    pub distances: Vec<f64>,
+    /// `Σ_n |P[k][n] − t_n|²` over the present bundles, for every shape id k: the global
+    /// error of a bundle choosing shape k alone.
+    pub pure: Vec<f64>,
+}
+
+impl FrameErrors {
+    /// The tables for one frame's `targets` (NaN rows are missing).
+    pub fn new(shape_positions: &[DVec3], num_bundles: usize, targets: &[DVec3]) -> Self {
+        let b = num_bundles.max(1);
+        let distances: Vec<f64> = shape_positions
+            .chunks(b)
+            .flat_map(|row| {
+                row.iter().zip(targets).map(|(p, t)| {
+                    if t.is_nan() {
+                        0.0
+                    } else {
+                        p.distance_squared(*t)
+                    }
+                })
+            })
+            .collect();
+        let pure = distances
+            .chunks(b)
+            .map(|row| {
+                row.iter()
+                    .zip(targets)
+                    .filter(|(_, t)| !t.is_nan())
+                    .map(|(d, _)| *d)
+                    .sum()
+            })
+            .collect();
+        FrameErrors { distances, pure }
+    }
 }
 
 impl Scoring<'_> {
@@ -104,6 +134,22 @@ impl Scoring<'_> {
             err += x.distance_squared(t);
         }
         err
+    }
+
+    /// The score of cloud point `shape` alone at `own_distance`: bit for bit
+    /// [`score`](Self::score) of `[shape; 4]` with weights `[1, 0, 0, 0]`.
+    fn point_score(&self, shape: u32, own_distance: f64) -> f64 {
+        let (shapes, weights) = ([shape; 4], [1.0, 0.0, 0.0, 0.0]);
+        let (b, k) = (self.num_bundles, shape as usize);
+        let neighbour_error = match self.distances.get(k * b..(k + 1) * b) {
+            // A missing neighbour's entry is 0: adding it changes nothing, as skipping it.
+            Some(row) => self
+                .neighbours
+                .iter()
+                .fold(0.0, |e, &n| e + row[n as usize]),
+            None => self.neighbour_error(&shapes, &weights),
+        };
+        neighbour_error + own_distance * own_distance + self.temporal_penalty(&shapes, &weights)
     }
 
     fn temporal_penalty(&self, shapes: &[u32; 4], weights: &[f64; 4]) -> f64 {
@@ -244,9 +290,8 @@ pub fn choose(
             if d <= params.hit_distance {
                 let tet = [p as u32; 4];
                 let w = [1.0, 0.0, 0.0, 0.0];
-                scratch
-                    .scored
-                    .push((scoring.score(&reps(&tet), &w, d), NO_TET, tet, w, d));
+                let s = scoring.point_score(cloud.aliases[p][0], d);
+                scratch.scored.push((s, NO_TET, tet, w, d));
             }
         }
     } else if index.num_tets() > 0 {
@@ -280,7 +325,7 @@ pub fn choose(
             }
             let tet = [p as u32; 4];
             let w = [1.0, 0.0, 0.0, 0.0];
-            let s = scoring.score(&reps(&tet), &w, d);
+            let s = scoring.point_score(cloud.aliases[p][0], d);
             best.add(s);
             scratch.scored.push((s, NO_TET, tet, w, d));
         }
@@ -463,6 +508,100 @@ fn lower_simplices(
                     q,
                 );
             }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+
+    /// Shape positions `(S + 1) × B` and targets (every third one missing) from `seed`.
+    fn frame(shapes: usize, bundles: usize, seed: u64) -> (Vec<DVec3>, Vec<DVec3>) {
+        let mut state = seed | 1;
+        let mut next = || {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            (state >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
+        };
+        let positions = (0..(shapes + 1) * bundles)
+            .map(|_| DVec3::new(next(), next(), next()))
+            .collect();
+        let targets = (0..bundles)
+            .map(|n| {
+                let t = DVec3::new(next(), next(), next());
+                if n % 3 == 2 {
+                    DVec3::NAN
+                } else {
+                    t
+                }
+            })
+            .collect();
+        (positions, targets)
+    }
+
+    proptest! {
+        /// The table lookups give bit for bit the score the general formula gives a cloud
+        /// point alone, with missing targets and a temporal preference.
+        #[test]
+        fn point_score_from_the_frame_tables_equals_the_general_score(
+            seed in any::<u64>(),
+            shapes in 1usize..12,
+            bundles in 2usize..20,
+            d in 0.0f64..2.0,
+        ) {
+            let (positions, targets) = frame(shapes, bundles, seed);
+            let errors = FrameErrors::new(&positions, bundles, &targets);
+            let neighbours: Vec<u32> = (0..bundles as u32).filter(|n| n % 2 == 0).collect();
+            let previous = Choice {
+                shapes: [1, 0, 0, 0],
+                weights: [1.0, 0.0, 0.0, 0.0],
+                tet: NO_TET,
+                projected: false,
+                distance: 0.0,
+            };
+            let mut scoring = Scoring {
+                shape_positions: &positions,
+                num_bundles: bundles,
+                neighbours: &neighbours,
+                targets: &targets,
+                previous: Some(&previous),
+                temporal_weight: 0.25,
+                pure_errors: &errors.pure,
+                distances: &errors.distances,
+            };
+            for k in 0..=shapes as u32 {
+                let general = scoring.score(&[k; 4], &[1.0, 0.0, 0.0, 0.0], d);
+                prop_assert_eq!(scoring.point_score(k, d).to_bits(), general.to_bits());
+            }
+            scoring.distances = &[];
+            for k in 0..=shapes as u32 {
+                let general = scoring.score(&[k; 4], &[1.0, 0.0, 0.0, 0.0], d);
+                prop_assert_eq!(scoring.point_score(k, d).to_bits(), general.to_bits());
+            }
+        }
+    }
+
+    #[test]
+    fn frame_errors_are_squared_distances_and_their_sums_over_present_targets() {
+        let (positions, targets) = frame(3, 5, 7);
+        let errors = FrameErrors::new(&positions, 5, &targets);
+        assert_eq!(errors.distances.len(), 4 * 5);
+        for k in 0..4 {
+            let mut sum = 0.0;
+            for n in 0..5 {
+                let d = errors.distances[k * 5 + n];
+                if targets[n].is_nan() {
+                    assert_eq!(d, 0.0);
+                } else {
+                    let e = positions[k * 5 + n] - targets[n];
+                    assert!((d - (e.x * e.x + e.y * e.y + e.z * e.z)).abs() < 1e-15);
+                    sum += d;
+                }
+            }
+            assert!((errors.pure[k] - sum).abs() < 1e-14);
         }
     }
 }

@@ -3,7 +3,7 @@
 //! so frames are solved with `&self` in parallel (rayon over bundles, then over vertices).
 
 use crate::choose::{
-    alias_groups, choose, pure_errors, AliasGroups, Choice, ChoiceParams, Scoring, Scratch,
+    alias_groups, choose, AliasGroups, Choice, ChoiceParams, FrameErrors, Scoring, Scratch,
 };
 use crate::cloud::{build_cloud, BundleCloud};
 use crate::correspond::{correspond, SurfacePoint};
@@ -698,7 +698,7 @@ impl Model {
         let lk = &self.lookups[prep.bin];
         let params = self.choice_params();
         let temporal_weight = self.temporal_penalty();
-        let pure = pure_errors(&lk.shape_positions, b, lookup_targets);
+        let errors = FrameErrors::new(&lk.shape_positions, b, lookup_targets);
         (0..b)
             .into_par_iter()
             .map_init(Scratch::default, |scratch, i| {
@@ -713,7 +713,8 @@ impl Model {
                     targets: lookup_targets,
                     previous: previous.and_then(|p| p.get(i)).and_then(|c| c.as_ref()),
                     temporal_weight,
-                    pure_errors: &pure,
+                    pure_errors: &errors.pure,
+                    distances: &errors.distances,
                 };
                 Some(choose(
                     &lk.indices[i],
