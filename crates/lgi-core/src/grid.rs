@@ -325,7 +325,8 @@ impl TetIndex {
         // The n lowest bounds first (a tight n-th distance early), the rest in any order: a
         // tet is skipped only when its bound exceeds the n-th distance, which only shrinks.
         if bounds.len() > n {
-            bounds.select_nth_unstable_by(n - 1, |a, b| a.0.total_cmp(&b.0));
+            // Bounds are finite and ≥ 0, so their bits order as the numbers do.
+            bounds.select_nth_unstable_by_key(n - 1, |a| a.0.to_bits());
         }
         // Rounding slack so a bound never prunes a tet whose computed distance ties.
         let slack = 1e-12 * (self.scale + p.abs().max_element());
