@@ -120,8 +120,8 @@ impl TetIndex {
     /// [`tets`](Self::tets) and in [`nearest`](Self::nearest), but never contain a point.
     ///
     /// Cost: O(#tets × cells per tet box) time; memory ≈ 96 bytes per tet for the barycentric
-    /// frames, 16 for the tet, ~60 for the hierarchy and ~4 × 32 for the grid (about 6 MiB for
-    /// 20,000 tets).
+    /// frames, 16 for the tet, 4 × 16 for the incidence lists (corners inline), ~60 for the
+    /// hierarchy and ~4 × 32 for the grid (about 7 MiB for 20,000 tets).
     ///
     /// Errors: [`LgiError::Input`] when a tet refers to a missing point, a point is not finite,
     /// or there are 2²⁹ tets or more.
