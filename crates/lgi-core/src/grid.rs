@@ -1224,5 +1224,41 @@ mod tests {
                 }
             }
         }
+
+        /// The same on arbitrary tets over a cloud with a coplanar part: flat tets (singular
+        /// frames, bound 0), tets with a repeated corner and sliver tets go through the inline
+        /// corners and the bound like any other.
+        #[test]
+        fn project_around_equals_the_unpruned_projection_with_flat_and_degenerate_tets(
+            npts in 5usize..40,
+            seed in any::<u64>(),
+            picks in prop::collection::vec(any::<[u16; 4]>(), 1..120),
+            n in 1usize..10,
+            samples in prop::collection::vec(
+                (-1.5f64..1.5, -1.5f64..1.5, -1.5f64..1.5), 1..10),
+        ) {
+            let mut pts = lcg_points(npts, seed);
+            // A third of the points on the plane z = 0: tets among them are flat.
+            for p in pts.iter_mut().step_by(3) {
+                p.z = 0.0;
+            }
+            let tets: Vec<Tet> = picks
+                .iter()
+                .map(|c| c.map(|i| u32::from(i) % npts as u32))
+                .collect();
+            let ix = TetIndex::new(pts, tets).unwrap();
+            let (mut bounds, mut got, mut all) = (Vec::new(), Vec::new(), Vec::new());
+            for (x, y, z) in samples {
+                for q in [DVec3::new(x, y, z), DVec3::new(x, y, 0.0), DVec3::new(x, y, z) * 3.0] {
+                    got.clear();
+                    all.clear();
+                    ix.project_around(q, n, &mut bounds, &mut got);
+                    ix.nearest_around(q, 1, &mut all);
+                    all.retain(|c| c.1.iter().all(|&b| b < 1.0 - 1e-12));
+                    all.truncate(n);
+                    prop_assert_eq!(&got, &all);
+                }
+            }
+        }
     }
 }
