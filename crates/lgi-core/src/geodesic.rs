@@ -8,6 +8,7 @@ use crate::correspond::SurfacePoint;
 use crate::mesh::Mesh;
 use std::cmp::Ordering;
 use std::collections::{BinaryHeap, HashMap};
+use std::sync::{Arc, Mutex};
 
 /// Vertex adjacency of a set of triangles, with edge lengths (CSR).
 #[derive(Debug, Clone)]
@@ -75,6 +76,70 @@ impl EdgeGraph {
             }
         }
         dist
+    }
+}
+
+/// Distances from one source to every vertex within `radius` ([`EdgeGraph::distances_from`]).
+#[derive(Debug, Clone)]
+pub struct Field {
+    /// The radius the field was computed to.
+    pub radius: f64,
+    /// Vertex → shortest edge-path distance, for every vertex within `radius`.
+    pub distances: HashMap<u32, f64>,
+}
+
+/// Distance fields by source, kept across calls: a field computed to radius R answers every
+/// radius ≤ R exactly (Dijkstra settles a vertex by its shortest path alone, so a vertex's
+/// distance does not depend on how far the search went), and a vertex beyond the asked
+/// radius is just farther than it. Sewing plans for new sets of missing bundles ask the same
+/// neighbouring bundles again and again.
+#[derive(Debug, Default)]
+pub struct FieldCache {
+    fields: Mutex<HashMap<u32, Arc<Field>>>,
+}
+
+impl FieldCache {
+    /// The field of `source` to at least `radius`: the cached one when it reaches that far,
+    /// else `compute(r)` for `r = max(radius, 1.5 × the cached radius)` (growing in steps, so a
+    /// source asked a little farther each time is not recomputed each time), then cached.
+    pub fn field(
+        &self,
+        source: u32,
+        radius: f64,
+        compute: impl FnOnce(f64) -> HashMap<u32, f64>,
+    ) -> Arc<Field> {
+        let cached = self
+            .fields
+            .lock()
+            .ok()
+            .and_then(|f| f.get(&source).cloned());
+        if let Some(f) = &cached {
+            if f.radius >= radius {
+                return f.clone();
+            }
+        }
+        let r = cached.map_or(radius, |f| radius.max(1.5 * f.radius));
+        let field = Arc::new(Field {
+            radius: r,
+            distances: compute(r),
+        });
+        if let Ok(mut fields) = self.fields.lock() {
+            let keep = fields.get(&source).is_some_and(|f| f.radius >= r);
+            if !keep {
+                fields.insert(source, field.clone());
+            }
+        }
+        field
+    }
+
+    /// Number of cached fields (for tests and diagnostics).
+    pub fn len(&self) -> usize {
+        self.fields.lock().map_or(0, |f| f.len())
+    }
+
+    /// True when nothing is cached.
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
     }
 }
 

@@ -9,7 +9,7 @@ use crate::cloud::{build_cloud, BundleCloud};
 use crate::correspond::{correspond, SurfacePoint};
 use crate::dataset::Dataset;
 use crate::error::{LgiError, Result};
-use crate::geodesic::{is_detour, EdgeGraph};
+use crate::geodesic::{is_detour, EdgeGraph, FieldCache};
 use crate::grid::TetIndex;
 use crate::jaw::{JawBins, JawParams, JawRig};
 use crate::mesh::Mesh;
@@ -348,6 +348,8 @@ pub struct Model {
     /// (rows of the sewn vertices in order): which rows a missing bundle can change.
     support: SparseWeights,
     plans: Mutex<HashMap<Vec<u32>, Arc<SewPlan>>>,
+    /// Bundles' surface-distance fields, reused by the plans of new missing sets.
+    fields: FieldCache,
 }
 
 /// Round-off left at a bundle after the residual pass that triggers a refinement round
@@ -439,11 +441,13 @@ impl Model {
         let uv_neighbours = SibsonWeights::new(&space.bundle_uv, &space.barriers)
             .map_err(|e| bundle_context(e, "bundle UV layout"))?
             .neighbours();
+        let fields = FieldCache::default();
         let sew = SewContext {
             dataset: &dataset,
             bundles: &bundles,
             space: &space,
             graph: &graph,
+            fields: &fields,
             detour_ratio: config.detour_ratio,
             slack: DETOUR_SLACK * diagonal,
         };
@@ -515,6 +519,7 @@ impl Model {
             full_plan,
             support,
             plans: Mutex::new(HashMap::new()),
+            fields,
         })
     }
 
@@ -976,6 +981,7 @@ impl Model {
             bundles: &self.bundles,
             space: &self.space,
             graph: &self.graph,
+            fields: &self.fields,
             detour_ratio: self.config.detour_ratio,
             slack: DETOUR_SLACK * self.diagonal,
         }
@@ -1094,6 +1100,7 @@ struct SewContext<'a> {
     bundles: &'a [SurfacePoint],
     space: &'a SewingSpace,
     graph: &'a EdgeGraph,
+    fields: &'a FieldCache,
     detour_ratio: f64,
     slack: f64,
 }
@@ -1225,13 +1232,19 @@ impl SewContext<'_> {
                     .map(|&r| origin.distance(pos[sewn[r]]))
                     .fold(0.0, f64::max);
                 let radius = self.detour_ratio * reach + self.slack;
-                let dist = self.graph.distances_from(mesh, b, radius);
+                // A cached field may reach farther: a vertex beyond `radius` is a detour
+                // either way (its path exceeds ratio × reach + slack ≥ ratio × straight + slack).
+                let field = self.fields.field(present[c], radius, |r| {
+                    self.graph.distances_from(mesh, b, r)
+                });
                 rows.iter()
                     .copied()
                     .filter(|&r| {
                         let v = sewn[r];
                         let straight = origin.distance(pos[v]);
-                        dist.get(&(v as u32))
+                        field
+                            .distances
+                            .get(&(v as u32))
                             .is_none_or(|&d| is_detour(d, straight, self.detour_ratio, self.slack))
                     })
                     .collect()
@@ -1534,6 +1547,64 @@ mod tests {
             for (a, b) in fresh.weights.vals.iter().zip(&derived.weights.vals) {
                 assert!((a - b).abs() <= 1e-12, "{missing:?}: {a} vs {b}");
             }
+        }
+    }
+
+    /// A cached distance field may reach farther than a plan asks: plans for a sequence of
+    /// missing sets built with the model's warm cache equal those built with an empty one, bit
+    /// for bit, with a detour ratio tight enough that edge-path zigzag drops weights.
+    #[test]
+    fn plans_from_cached_distance_fields_equal_plans_from_fresh_fields() {
+        let data = patch(24);
+        let mut markers = Vec::new();
+        let mut s = 11u64;
+        let mut next = || {
+            s = s
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            0.05 + 0.9 * ((s >> 11) as f64 / (1u64 << 53) as f64)
+        };
+        for _ in 0..30 {
+            let (u, v) = (next(), next());
+            markers.push(DVec3::new(u, v, 0.1 * (3.0 * u).sin() * (2.0 * v).cos()));
+        }
+        let config = BuildConfig {
+            detour_ratio: 1.02,
+            ..BuildConfig::default()
+        };
+        let model = Model::build(&data, &markers, &config).unwrap();
+        let loose = Model::build(&data, &markers, &BuildConfig::default()).unwrap();
+        assert!(
+            model.full_plan.weights.cols.len() < loose.full_plan.weights.cols.len(),
+            "the tight ratio drops weights"
+        );
+        assert!(!model.fields.is_empty(), "the full plan filled the cache");
+        for missing in [
+            vec![4u32],
+            vec![4, 5],
+            vec![3, 4, 5, 6],
+            vec![4],
+            vec![20, 21, 22],
+        ] {
+            let present: Vec<u32> = (0..30).filter(|b| !missing.contains(b)).collect();
+            let warm = model
+                .sew_context()
+                .plan_without(&present, &model.full_plan, &model.support)
+                .unwrap();
+            let empty = FieldCache::default();
+            let cold = SewContext {
+                fields: &empty,
+                ..model.sew_context()
+            }
+            .plan_without(&present, &model.full_plan, &model.support)
+            .unwrap();
+            assert_eq!(
+                warm.weights.row_start, cold.weights.row_start,
+                "{missing:?}"
+            );
+            assert_eq!(warm.weights.cols, cold.weights.cols, "{missing:?}");
+            let bits = |w: &SparseWeights| w.vals.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+            assert_eq!(bits(&warm.weights), bits(&cold.weights), "{missing:?}");
         }
     }
 
