@@ -1196,6 +1196,18 @@ mod tests {
         }
     }
 
+    /// `project_around(q, n)` equals projecting every tet around the nearest point, dropping
+    /// closest points at a vertex and keeping the n nearest.
+    fn projection_equals_unpruned(ix: &TetIndex, q: DVec3, n: usize) -> Result<(), TestCaseError> {
+        let (mut bounds, mut got, mut all) = (Vec::new(), Vec::new(), Vec::new());
+        ix.project_around(q, n, &mut bounds, &mut got);
+        ix.nearest_around(q, 1, &mut all);
+        all.retain(|c| c.1.iter().all(|&b| b < 1.0 - 1e-12));
+        all.truncate(n);
+        prop_assert_eq!(&got, &all);
+        Ok(())
+    }
+
     proptest! {
         #![proptest_config(config(96, 0x9e1d_0007))]
 
@@ -1210,17 +1222,10 @@ mod tests {
                 (-1.5f64..1.5, -1.5f64..1.5, -1.5f64..1.5), 1..16),
         ) {
             let ix = index(npts, seed, &TetConfig::default());
-            let (mut bounds, mut got, mut all) = (Vec::new(), Vec::new(), Vec::new());
             for (x, y, z) in samples {
                 // Far and near points, outside and inside the cloud.
                 for q in [DVec3::new(x, y, z), DVec3::new(x, y, z) * 3.0] {
-                    got.clear();
-                    all.clear();
-                    ix.project_around(q, n, &mut bounds, &mut got);
-                    ix.nearest_around(q, 1, &mut all);
-                    all.retain(|c| c.1.iter().all(|&b| b < 1.0 - 1e-12));
-                    all.truncate(n);
-                    prop_assert_eq!(&got, &all);
+                    projection_equals_unpruned(&ix, q, n)?;
                 }
             }
         }
@@ -1247,16 +1252,9 @@ mod tests {
                 .map(|c| c.map(|i| u32::from(i) % npts as u32))
                 .collect();
             let ix = TetIndex::new(pts, tets).unwrap();
-            let (mut bounds, mut got, mut all) = (Vec::new(), Vec::new(), Vec::new());
             for (x, y, z) in samples {
                 for q in [DVec3::new(x, y, z), DVec3::new(x, y, 0.0), DVec3::new(x, y, z) * 3.0] {
-                    got.clear();
-                    all.clear();
-                    ix.project_around(q, n, &mut bounds, &mut got);
-                    ix.nearest_around(q, 1, &mut all);
-                    all.retain(|c| c.1.iter().all(|&b| b < 1.0 - 1e-12));
-                    all.truncate(n);
-                    prop_assert_eq!(&got, &all);
+                    projection_equals_unpruned(&ix, q, n)?;
                 }
             }
         }
