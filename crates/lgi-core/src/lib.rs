@@ -3,6 +3,8 @@
 //! Sparse facial markers ("bundles") index local geometry that really occurred in a dataset of
 //! facial shapes; the pieces are sewn together with natural-neighbour weights so the surface
 //! passes through every marker. Pure Rust: the Python binding lives in `lgi-python`.
+// `deny`, not `forbid`: the one measured exception is the cache prefetch hint in `prefetch.rs`
+// (serial choice 2.31 -> 1.99 ms per frame on ICT-300, docs/performance.md).
 #![deny(unsafe_code)]
 #![warn(missing_docs)]
 
