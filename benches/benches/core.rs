@@ -5,7 +5,7 @@
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};
 use glam::DVec3;
 use lgi_benches::{build_model, load_workload, make_frames, Workload};
-use lgi_core::choose::{choose, Choice, FrameErrors, Scoring, Scratch};
+use lgi_core::choose::{Choice, Scratch};
 use lgi_core::model::{FrameState, Model};
 use lgi_core::sew::{blend, Pieces};
 use lgi_core::sibson::SibsonWeights;
@@ -75,8 +75,6 @@ fn stages(c: &mut Criterion) {
         })
     });
 
-    let p = model.choice_params();
-    let tw = model.temporal_penalty();
     let mut scratch = Scratch::default();
     let mut f = 0;
     g.bench_function("choose_all_bundles", |bench| {
@@ -84,28 +82,10 @@ fn stages(c: &mut Criterion) {
             f = (f + 1) % fx.frames.len();
             let prev = &fx.choices[(f + fx.frames.len() - 1) % fx.frames.len()];
             let targets = &fx.frames[f];
-            let errors = FrameErrors::new(model.shape_positions(), b, targets);
+            let errors = model.frame_errors(0, targets);
             let mut acc = 0.0;
-            for (i, &t) in targets.iter().enumerate() {
-                let scoring = Scoring {
-                    shape_positions: model.shape_positions(),
-                    num_bundles: b,
-                    neighbours: &model.neighbours()[i],
-                    targets,
-                    previous: prev[i].as_ref(),
-                    temporal_weight: tw,
-                    pure_errors: &errors.pure,
-                    distances: &errors.distances,
-                };
-                let ch = choose(
-                    &model.indices()[i],
-                    &model.clouds()[i],
-                    &model.alias_groups()[i],
-                    t,
-                    &scoring,
-                    &p,
-                    &mut scratch,
-                );
+            for (i, p) in prev.iter().enumerate() {
+                let ch = model.choose_bundle(0, i, targets, &errors, p.as_ref(), &mut scratch);
                 acc += ch.distance;
             }
             black_box(acc)

@@ -4,7 +4,7 @@
 
 use glam::DVec3;
 use lgi_benches::{build_model, load_workload, make_frames};
-use lgi_core::choose::{choose, FrameErrors, Scoring, Scratch};
+use lgi_core::choose::Scratch;
 use lgi_core::model::FrameState;
 use lgi_core::sew::{blend, Pieces};
 use std::hint::black_box;
@@ -17,9 +17,6 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let workload = load_workload()?;
     let model = build_model(&workload)?;
     let frames = make_frames(&model, FRAMES, 1)?;
-    let b = model.num_bundles();
-    let params = model.choice_params();
-    let tw = model.temporal_penalty();
     let mut scratch = Scratch::default();
     let (mut choose_best, mut solve_best, mut blend_best) =
         (f64::INFINITY, f64::INFINITY, f64::INFINITY);
@@ -32,27 +29,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         // Serial choice of every bundle (no temporal preference).
         let t = Instant::now();
         for targets in frames.iter().filter(|_| !only_solve) {
-            let errors = FrameErrors::new(model.shape_positions(), b, targets);
-            for (i, &target) in targets.iter().enumerate() {
-                let scoring = Scoring {
-                    shape_positions: model.shape_positions(),
-                    num_bundles: b,
-                    neighbours: &model.neighbours()[i],
-                    targets,
-                    previous: None,
-                    temporal_weight: tw,
-                    pure_errors: &errors.pure,
-                    distances: &errors.distances,
-                };
-                black_box(choose(
-                    &model.indices()[i],
-                    &model.clouds()[i],
-                    &model.alias_groups()[i],
-                    target,
-                    &scoring,
-                    &params,
-                    &mut scratch,
-                ));
+            let errors = model.frame_errors(0, targets);
+            for i in 0..targets.len() {
+                black_box(model.choose_bundle(0, i, targets, &errors, None, &mut scratch));
             }
         }
         choose_best = choose_best.min(t.elapsed().as_secs_f64() / FRAMES as f64);

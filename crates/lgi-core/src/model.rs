@@ -698,40 +698,69 @@ impl Model {
         prep: &Prepared,
         previous: Option<&[Option<Choice>]>,
     ) -> Vec<Option<Choice>> {
-        let b = self.bundles.len();
-        let lookup_targets = &prep.lookup;
-        let lk = &self.lookups[prep.bin];
-        let params = self.choice_params();
-        let temporal_weight = self.temporal_penalty();
-        let errors = FrameErrors::new(&lk.shape_positions, b, lookup_targets);
-        (0..b)
+        let targets = &prep.lookup;
+        let errors = self.frame_errors(prep.bin, targets);
+        (0..self.bundles.len())
             .into_par_iter()
             .map_init(Scratch::default, |scratch, i| {
-                let t = lookup_targets[i];
-                if t.is_nan() {
+                if targets[i].is_nan() {
                     return None;
                 }
-                let scoring = Scoring {
-                    shape_positions: &lk.shape_positions,
-                    num_bundles: b,
-                    neighbours: &self.neighbours[i],
-                    targets: lookup_targets,
-                    previous: previous.and_then(|p| p.get(i)).and_then(|c| c.as_ref()),
-                    temporal_weight,
-                    pure_errors: &errors.pure,
-                    distances: &errors.distances,
-                };
-                Some(choose(
-                    &lk.indices[i],
-                    &lk.clouds[i],
-                    &lk.groups[i],
-                    t,
-                    &scoring,
-                    &params,
-                    scratch,
-                ))
+                let previous = previous.and_then(|p| p.get(i)).and_then(|c| c.as_ref());
+                Some(self.choose_bundle(prep.bin, i, targets, &errors, previous, scratch))
             })
             .collect()
+    }
+
+    /// The per-frame tables the choices of one frame share ([`FrameErrors`]), for `targets` in
+    /// the space of jaw bin `bin` (0 when unbinned).
+    ///
+    /// # Panics
+    /// If `bin` is not one of the model's bins.
+    pub fn frame_errors(&self, bin: usize, targets: &[DVec3]) -> FrameErrors {
+        FrameErrors::new(
+            &self.lookups[bin].shape_positions,
+            self.bundles.len(),
+            targets,
+        )
+    }
+
+    /// Bundle `i`'s choice for its target `targets[i]` in jaw bin `bin`, scored against the
+    /// frame's `targets` and their [`frame_errors`](Self::frame_errors), preferring the shapes
+    /// of `previous` (the bundle's previous choice, bin-local ids). What a solve does for each
+    /// present bundle, without the sewing (for benchmarks and profiling).
+    ///
+    /// # Panics
+    /// If `bin` or `i` is out of range.
+    pub fn choose_bundle(
+        &self,
+        bin: usize,
+        i: usize,
+        targets: &[DVec3],
+        errors: &FrameErrors,
+        previous: Option<&Choice>,
+        scratch: &mut Scratch,
+    ) -> Choice {
+        let lk = &self.lookups[bin];
+        let scoring = Scoring {
+            shape_positions: &lk.shape_positions,
+            num_bundles: self.bundles.len(),
+            neighbours: &self.neighbours[i],
+            targets,
+            previous,
+            temporal_weight: self.temporal_penalty(),
+            pure_errors: &errors.pure,
+            distances: &errors.distances,
+        };
+        choose(
+            &lk.indices[i],
+            &lk.clouds[i],
+            &lk.groups[i],
+            targets[i],
+            &scoring,
+            &self.choice_params(),
+            scratch,
+        )
     }
 
     /// The choice's tuning from the build config, in data units.
