@@ -3,7 +3,7 @@
 
 use crate::error::{input_error, internal_error};
 use glam::DVec3;
-use numpy::ndarray::{ArrayD, IxDyn};
+use numpy::ndarray::{ArrayD, ArrayViewD, IxDyn};
 use numpy::{IntoPyArray, PyArrayDyn, PyArrayMethods, PyUntypedArrayMethods};
 use pyo3::prelude::*;
 
@@ -48,11 +48,25 @@ pub fn float_array(
     Ok(arr.readonly().as_array().to_owned())
 }
 
-/// A row of three coordinates as a point, or `None` when it is not acceptable: NaN (a
-/// missing marker) only when `allow_nan`, infinity never.
-fn checked_point(p: DVec3, allow_nan: bool) -> Option<DVec3> {
+/// A row of three coordinates as a point: NaN (a missing marker) only when `allow_nan`,
+/// infinity never; the error says the `place` (e.g. "markers: row 3") has a non-finite coordinate.
+fn row_point(
+    r: ArrayViewD<'_, f64>,
+    allow_nan: bool,
+    place: impl FnOnce() -> String,
+) -> PyResult<DVec3> {
+    let p = DVec3::new(r[0], r[1], r[2]);
     let has_inf = p.to_array().iter().any(|x| x.is_infinite());
-    (!has_inf && (p.is_finite() || (allow_nan && p.is_nan()))).then_some(p)
+    if !has_inf && (p.is_finite() || (allow_nan && p.is_nan())) {
+        return Ok(p);
+    }
+    Err(input_error(format!(
+        "{} has a non-finite coordinate [{}, {}, {}]",
+        place(),
+        r[0],
+        r[1],
+        r[2]
+    )))
 }
 
 /// An `(N, 3)` float array as points; `allow_nan` lets NaN through (missing markers) but
@@ -66,14 +80,7 @@ pub fn points(
     let a = float_array(obj, name, &[rows, Some(3)])?;
     a.outer_iter()
         .enumerate()
-        .map(|(i, r)| {
-            checked_point(DVec3::new(r[0], r[1], r[2]), allow_nan).ok_or_else(|| {
-                input_error(format!(
-                    "{name}: row {i} has a non-finite coordinate [{}, {}, {}]",
-                    r[0], r[1], r[2]
-                ))
-            })
-        })
+        .map(|(i, r)| row_point(r, allow_nan, || format!("{name}: row {i}")))
         .collect()
 }
 
@@ -93,11 +100,8 @@ pub fn point_sets(
             set.outer_iter()
                 .enumerate()
                 .map(|(i, r)| {
-                    checked_point(DVec3::new(r[0], r[1], r[2]), allow_nan).ok_or_else(|| {
-                        input_error(format!(
-                            "{name}: {} {f}, {} {i} has a non-finite coordinate [{}, {}, {}]",
-                            labels.0, labels.1, r[0], r[1], r[2]
-                        ))
+                    row_point(r, allow_nan, || {
+                        format!("{name}: {} {f}, {} {i}", labels.0, labels.1)
                     })
                 })
                 .collect()
