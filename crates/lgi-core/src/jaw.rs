@@ -955,6 +955,22 @@ mod tests {
         }
     }
 
+    /// Skinning a point and unskinning it (and the reverse) gives it back to 1e-12 of its
+    /// scale; returns that scale for the caller's further checks.
+    fn point_round_trips(
+        r: &JawRig,
+        p: DVec3,
+        w: f64,
+        theta: JawParams,
+    ) -> Result<f64, TestCaseError> {
+        let scale = 1.0 + p.length() + r.pivot.length();
+        let back = r.unskin_point(r.skin_point(p, w, theta), w, theta);
+        prop_assert!((back - p).length() <= 1e-12 * scale, "{back} vs {p}");
+        let fwd = r.skin_point(r.unskin_point(p, w, theta), w, theta);
+        prop_assert!((fwd - p).length() <= 1e-12 * scale, "{fwd} vs {p}");
+        Ok(scale)
+    }
+
     proptest! {
         #![proptest_config(ProptestConfig { cases: 2000, rng_seed: proptest::test_runner::RngSeed::Fixed(0x7f3), ..ProptestConfig::default() })]
         #[test]
@@ -970,11 +986,7 @@ mod tests {
             let theta = JawParams { open: open.to_radians(), lateral: lateral.to_radians(), forward };
             let r = tilted_rig(vec![w], axis_angle([ax, ay, az], angle));
             let p = DVec3::new(x, y, z);
-            let scale = 1.0 + p.length() + r.pivot.length();
-            let back = r.unskin_point(r.skin_point(p, w, theta), w, theta);
-            prop_assert!((back - p).length() <= 1e-12 * scale, "{back} vs {p}");
-            let fwd = r.skin_point(r.unskin_point(p, w, theta), w, theta);
-            prop_assert!((fwd - p).length() <= 1e-12 * scale, "{fwd} vs {p}");
+            let scale = point_round_trips(&r, p, w, theta)?;
             let mut out = [DVec3::ZERO];
             r.skin(&[p], theta, &mut out).unwrap();
             let mut back2 = [DVec3::ZERO];
@@ -1002,11 +1014,7 @@ mod tests {
             let theta = JawParams { open: open.to_radians(), lateral: lateral.to_radians(), forward };
             let r = rig(vec![w]);
             let p = DVec3::new(x, y, z);
-            let scale = 1.0 + p.length() + r.pivot.length();
-            let back = r.unskin_point(r.skin_point(p, w, theta), w, theta);
-            prop_assert!((back - p).length() <= 1e-12 * scale, "{back} vs {p}");
-            let fwd = r.skin_point(r.unskin_point(p, w, theta), w, theta);
-            prop_assert!((fwd - p).length() <= 1e-12 * scale, "{fwd} vs {p}");
+            let scale = point_round_trips(&r, p, w, theta)?;
             let mut out = [DVec3::ZERO];
             r.skin_weighted(&[p], &[w], theta, &mut out).unwrap();
             let mut back2 = [DVec3::ZERO];
