@@ -177,14 +177,10 @@ pub struct FrameState {
 /// (its jaw motion is unskinned before indexing) and each bundle's jaw weight.
 #[derive(Debug, Clone)]
 pub struct JawSetup {
-    /// Two-bone skinning rig (skull fixed, jaw rigid about a pivot).
-    pub rig: JawRig,
-    /// Jaw parameters θ_k of every dataset shape.
-    pub shape_thetas: Vec<JawParams>,
+    /// What the model was built with: the rig, the shapes' jaw poses and the bins.
+    pub input: JawInput,
     /// Jaw weight of every bundle (barycentric blend of its triangle's vertex weights).
     pub bundle_weights: Vec<f64>,
-    /// Jaw-opening bins of the point clouds (`None`: one set, every shape at the rest pose).
-    pub bins: Option<JawBins>,
 }
 
 /// The jaw part of a build: the rig, every dataset shape's jaw pose, and optionally bins of
@@ -488,20 +484,18 @@ impl Model {
         let support = sew.support()?;
         let jaw = match jaw {
             None => None,
-            Some(JawInput {
-                rig,
-                shape_thetas,
-                bins,
-            }) => {
+            Some(input) => {
                 let bundle_weights = bundles
                     .iter()
-                    .map(|b| rig.interpolate_weight(mesh.triangles[b.triangle as usize], b.bary))
+                    .map(|b| {
+                        input
+                            .rig
+                            .interpolate_weight(mesh.triangles[b.triangle as usize], b.bary)
+                    })
                     .collect::<Result<_>>()?;
                 Some(JawSetup {
-                    rig,
-                    shape_thetas,
+                    input,
                     bundle_weights,
-                    bins,
                 })
             }
         };
@@ -654,7 +648,7 @@ impl Model {
             }
             _ => None,
         };
-        let bin = match self.jaw.as_ref().and_then(|j| j.bins.as_ref()) {
+        let bin = match self.jaw.as_ref().and_then(|j| j.input.bins.as_ref()) {
             Some(bins) => bins.select(theta.unwrap_or(JawParams::ZERO).open, previous_bin),
             None => 0,
         };
@@ -681,12 +675,14 @@ impl Model {
         };
         let mut out = targets.to_vec();
         if let Some(t) = theta {
-            j.rig
+            j.input
+                .rig
                 .unskin_weighted(targets, &j.bundle_weights, t, &mut out)?;
         }
         if let Some(r) = self.lookups[bin].reference {
             let unskinned = out.clone();
-            j.rig
+            j.input
+                .rig
                 .skin_weighted(&unskinned, &j.bundle_weights, r, &mut out)?;
         }
         Ok(out)
@@ -807,9 +803,11 @@ impl Model {
             tolerance: RESIDUAL_TOLERANCE * self.diagonal,
         };
         let jaw_map = match &self.jaw {
-            Some(j) if lk.reference.is_some() || theta.is_some() => {
-                Some(j.rig.vertex_map(lk.reference, theta, mesh.num_vertices())?)
-            }
+            Some(j) if lk.reference.is_some() || theta.is_some() => Some(j.input.rig.vertex_map(
+                lk.reference,
+                theta,
+                mesh.num_vertices(),
+            )?),
             _ => None,
         };
         let bad = match &jaw_map {
@@ -1721,11 +1719,11 @@ mod tests {
         if let Some(j) = &model.jaw {
             if let Some(r) = lk.reference {
                 let c = v.clone();
-                j.rig.unskin(&c, r, &mut v).unwrap();
+                j.input.rig.unskin(&c, r, &mut v).unwrap();
             }
             if let Some(t) = prep.theta {
                 let c = v.clone();
-                j.rig.skin(&c, t, &mut v).unwrap();
+                j.input.rig.skin(&c, t, &mut v).unwrap();
             }
         }
         plan.residual.apply(
@@ -1949,7 +1947,10 @@ mod tests {
         let loaded = crate::io::model_file::load(&path);
         std::fs::remove_file(&path).unwrap();
         let loaded = loaded.unwrap();
-        assert_eq!(loaded.jaw().unwrap().bins, model.jaw().unwrap().bins);
+        assert_eq!(
+            loaded.jaw().unwrap().input.bins,
+            model.jaw().unwrap().input.bins
+        );
         assert_eq!(loaded.lookups().len(), 2);
         let frames: Vec<Vec<DVec3>> = [0, 3, 5, 7, 9]
             .iter()
@@ -1993,7 +1994,7 @@ mod tests {
             Some(jaw),
         )
         .unwrap();
-        assert_eq!(model.jaw().unwrap().rig.frame, frame);
+        assert_eq!(model.jaw().unwrap().input.rig.frame, frame);
         let diag = model.diagonal();
         for k in [0usize, 3, 5, 7, 9] {
             let mesh = shape_mesh(&data, k);
@@ -2031,7 +2032,10 @@ mod tests {
         let corrupt = crate::io::model_file::load(&path);
         std::fs::remove_file(&path).unwrap();
         let loaded = loaded.unwrap();
-        assert_eq!(loaded.jaw().unwrap().rig, model.jaw().unwrap().rig);
+        assert_eq!(
+            loaded.jaw().unwrap().input.rig,
+            model.jaw().unwrap().input.rig
+        );
         let frames: Vec<Vec<DVec3>> = [0, 4, 8]
             .iter()
             .map(|&k| model.bundle_positions(&shape_mesh(&data, k)).unwrap())
@@ -2083,7 +2087,7 @@ mod tests {
         let loaded = crate::io::model_file::load(&path);
         std::fs::remove_file(&path).unwrap();
         let loaded = loaded.unwrap();
-        assert!(loaded.jaw().unwrap().bins.is_none());
+        assert!(loaded.jaw().unwrap().input.bins.is_none());
         let t = model
             .bundle_positions(&shape_mesh(model.dataset(), 5))
             .unwrap();

@@ -378,9 +378,10 @@ impl Model {
     /// `weights` (V,), `shape_theta` (S, 3), `bundle_weights` (B,)), or None for a model
     /// without a jaw rig.
     fn jaw<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyDict>>> {
-        let Some(j) = self.inner.jaw() else {
+        let Some(setup) = self.inner.jaw() else {
             return Ok(None);
         };
+        let j = &setup.input;
         let d = PyDict::new(py);
         d.set_item(
             "pivot",
@@ -396,10 +397,10 @@ impl Model {
             "shape_theta",
             flat_to_array(py, t, &[j.shape_thetas.len(), 3])?,
         )?;
-        let bw = j.bundle_weights.clone();
+        let bw = setup.bundle_weights.clone();
         d.set_item(
             "bundle_weights",
-            flat_to_array(py, bw, &[j.bundle_weights.len()])?,
+            flat_to_array(py, bw, &[setup.bundle_weights.len()])?,
         )?;
         if let Some(bins) = &j.bins {
             let n = bins.edges.len();
@@ -426,19 +427,19 @@ impl Model {
         theta: &Bound<'py, PyAny>,
         inverse: bool,
     ) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
-        let Some(j) = self.inner.jaw() else {
+        let Some(rig) = self.inner.jaw().map(|j| &j.input.rig) else {
             return Err(input_error(
                 "jaw_skin: this model was built without a jaw rig",
             ));
         };
-        let p = crate::convert::points(points, "points", Some(j.rig.num_vertices()), false)?;
+        let p = crate::convert::points(points, "points", Some(rig.num_vertices()), false)?;
         let t = float_array(theta, "theta", &[Some(3)])?;
         let theta = JawParams::from_array([t[0], t[1], t[2]]);
         let mut out = vec![DVec3::ZERO; p.len()];
         if inverse {
-            j.rig.unskin(&p, theta, &mut out)
+            rig.unskin(&p, theta, &mut out)
         } else {
-            j.rig.skin(&p, theta, &mut out)
+            rig.skin(&p, theta, &mut out)
         }
         .map_err(PyLgiError)?;
         points_to_array(py, &out)

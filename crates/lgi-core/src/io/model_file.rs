@@ -252,7 +252,8 @@ pub fn save(model: &Model, path: &Path) -> Result<()> {
     // weights, shape poses. Identity frames keep layout 1 so their files stay as before.
     match model.jaw() {
         None => w.u64(0),
-        Some(j) => {
+        Some(setup) => {
+            let j = &setup.input;
             let identity = j.rig.frame == DMat3::IDENTITY;
             w.u64(if identity { 1 } else { 2 });
             for x in j.rig.pivot.to_array() {
@@ -275,7 +276,7 @@ pub fn save(model: &Model, path: &Path) -> Result<()> {
     }
     // Version 3: the jaw bins section (0 = none; 1 = edges, overlap, then the clouds and tets
     // of bins 1.. — bin 0's are the ones above).
-    match model.jaw().and_then(|j| j.bins.as_ref()) {
+    match model.jaw().and_then(|j| j.input.bins.as_ref()) {
         None => w.u64(0),
         Some(bins) => {
             w.u64(1);
