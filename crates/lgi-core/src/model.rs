@@ -1681,18 +1681,35 @@ mod tests {
 
     fn binned_model(edges: Vec<f64>, overlap: f64) -> Result<(Model, Dataset, Vec<JawParams>)> {
         let (data, rig, thetas, markers) = jaw_patch();
-        let jaw = JawInput {
-            rig,
-            shape_thetas: thetas.clone(),
-            bins: Some(JawBins { edges, overlap }),
-        };
-        let model = Model::build_shared(
-            Arc::new(data.clone()),
+        let model = jaw_model(
+            &data,
             &markers,
-            &BuildConfig::default(),
-            Some(jaw),
+            rig,
+            &thetas,
+            Some(JawBins { edges, overlap }),
         )?;
         Ok((model, data, thetas))
+    }
+
+    /// A model of `data` (default config) with the jaw `rig`, the shapes' poses and `bins`.
+    fn jaw_model(
+        data: &Dataset,
+        markers: &[DVec3],
+        rig: JawRig,
+        thetas: &[JawParams],
+        bins: Option<JawBins>,
+    ) -> Result<Model> {
+        let jaw = JawInput {
+            rig,
+            shape_thetas: thetas.to_vec(),
+            bins,
+        };
+        Model::build_shared(
+            Arc::new(data.clone()),
+            markers,
+            &BuildConfig::default(),
+            Some(jaw),
+        )
     }
 
     fn shape_mesh(data: &Dataset, k: usize) -> Vec<DVec3> {
@@ -1812,17 +1829,7 @@ mod tests {
     fn one_bin_holding_every_shape_matches_the_unbinned_model_to_f32_round_off() {
         let (binned, data, thetas) = binned_model(vec![0.0, 0.5], 0.0).unwrap();
         let (_, rig, _, markers) = jaw_patch();
-        let plain = Model::build_shared(
-            Arc::new(data.clone()),
-            &markers,
-            &BuildConfig::default(),
-            Some(JawInput {
-                rig,
-                shape_thetas: thetas.clone(),
-                bins: None,
-            }),
-        )
-        .unwrap();
+        let plain = jaw_model(&data, &markers, rig, &thetas, None).unwrap();
         // Frames between shapes: blends of two shapes' meshes at an intermediate pose.
         for (a, b, t) in [(0, 5, 0.3), (3, 8, 0.6), (1, 7, 0.5)] {
             let (ma, mb) = (shape_mesh(&data, a), shape_mesh(&data, b));
@@ -1979,21 +1986,11 @@ mod tests {
     fn a_tilted_frame_jaw_model_reproduces_its_shapes_and_its_frame_survives_save_load() {
         let frame = tilted_frame();
         let (data, rig, thetas, markers) = jaw_patch_in(frame);
-        let jaw = JawInput {
-            rig,
-            shape_thetas: thetas.clone(),
-            bins: Some(JawBins {
-                edges: vec![0.0, 0.25, 0.5],
-                overlap: 0.06,
-            }),
+        let bins = JawBins {
+            edges: vec![0.0, 0.25, 0.5],
+            overlap: 0.06,
         };
-        let model = Model::build_shared(
-            Arc::new(data.clone()),
-            &markers,
-            &BuildConfig::default(),
-            Some(jaw),
-        )
-        .unwrap();
+        let model = jaw_model(&data, &markers, rig, &thetas, Some(bins)).unwrap();
         assert_eq!(model.jaw().unwrap().input.rig.frame, frame);
         let diag = model.diagonal();
         for k in [0usize, 3, 5, 7, 9] {
@@ -2061,17 +2058,7 @@ mod tests {
     #[test]
     fn a_version_2_file_still_loads_as_an_unbinned_model() {
         let (data, rig, thetas, markers) = jaw_patch();
-        let model = Model::build_shared(
-            Arc::new(data),
-            &markers,
-            &BuildConfig::default(),
-            Some(JawInput {
-                rig,
-                shape_thetas: thetas.clone(),
-                bins: None,
-            }),
-        )
-        .unwrap();
+        let model = jaw_model(&data, &markers, rig, &thetas, None).unwrap();
         let path = std::env::temp_dir().join(format!("lgi-v2-{}.lgi", std::process::id()));
         crate::io::model_file::save(&model, &path).unwrap();
         // Version 2 is version 3 without the trailing bins section (a u64 0 when unbinned).
