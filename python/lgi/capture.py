@@ -37,7 +37,7 @@ def _rotation(axis: F64, angle: float) -> F64:
 @dataclass(frozen=True)
 class HingeJaw:
     """A jaw-open shape split into a rotation about a hinge and a linear remainder:
-    `s(v) = w(v) (R x0(v) + t − x0(v)) + r(v)`, with `R` the rotation by `angle` about `axis`
+    `s(v) = w(v) (R x0(v) + t - x0(v)) + r(v)`, with `R` the rotation by `angle` about `axis`
     through `pivot`."""
 
     shape: int
@@ -67,7 +67,7 @@ class HingeJaw:
             raise InputError("rigid: expected at least 3 vertex indices of the neutral")
         r, t = fit_rigid(x0[idx], x0[idx] + s[idx])
         axis, angle = rotation_axis_angle(r)
-        # The pivot: the point on the axis that the motion moves least ((I − R) p = t in the
+        # The pivot: the point on the axis that the motion moves least ((I - R) p = t in the
         # plane normal to the axis, least squares).
         pivot = np.linalg.lstsq(np.eye(3) - r, t - axis * (axis @ t), rcond=None)[0]
         pivot = pivot - axis * (axis @ (pivot - x0[idx].mean(axis=0)))
@@ -173,7 +173,7 @@ def make_capture(
 ) -> CaptureTake:
     """A capture take from shape weights (F, S) on `dataset` with markers at rest `markers`
     (B, 3): Gaussian noise of `sigma` (data units) per coordinate, a `dropout` fraction of
-    marker samples lost in runs of 2–8 frames, and a `holdout` fraction of the shapes (never
+    marker samples lost in runs of 2 to 8 frames, and a `holdout` fraction of the shapes (never
     those named in `keep`) removed from the dataset the methods get. Seeded: the same
     arguments give the same take."""
     from lgi.evaluate import marker_samples  # the protocols' one marker sampler
