@@ -142,7 +142,8 @@ pub(super) fn locate_bundles(
     .collect())
 }
 
-/// Bundle positions on every shape, `(S + 1) × B` with shape id 0 the neutral.
+/// Bundle positions on every shape, `(S + 1) × B` with shape id 0 the neutral (the
+/// dataset's ids, which are the bin-local ids of a lookup built from it).
 pub(super) fn shape_bundle_positions(dataset: &Dataset, bundles: &[SurfacePoint]) -> Vec<DVec3> {
     let mesh = dataset.neutral();
     let b = bundles.len();

@@ -10,7 +10,8 @@ use glam::DVec3;
 pub struct Frame {
     /// Reconstructed vertices (V).
     pub vertices: Vec<DVec3>,
-    /// Per bundle: the chosen geometry (`None` for a missing bundle).
+    /// Per bundle: the chosen geometry (`None` for a missing bundle), in dataset shape ids
+    /// ([`ShapeId`](super::ShapeId)).
     pub choices: Vec<Option<Choice>>,
     /// Per bundle: distance from target to reconstructed surface point (0 for missing).
     pub residuals: Vec<f64>,
@@ -24,7 +25,8 @@ pub struct Frame {
 /// [`Model::solve_sequence_into`](super::Model::solve_sequence_into)).
 #[derive(Debug, Clone)]
 pub struct FrameInfo {
-    /// Per bundle: the chosen geometry (`None` for a missing bundle).
+    /// Per bundle: the chosen geometry (`None` for a missing bundle), in dataset shape ids
+    /// ([`ShapeId`](super::ShapeId)).
     pub choices: Vec<Option<Choice>>,
     /// Per bundle: distance from target to reconstructed surface point (0 for missing).
     pub residuals: Vec<f64>,
@@ -49,7 +51,8 @@ impl Frame {
 /// What the next frame needs from the previous one.
 #[derive(Debug, Clone, Default)]
 pub struct FrameState {
-    /// Previous choices per bundle (dataset shape ids, as in [`Frame::choices`]).
+    /// Previous choices per bundle (dataset shape ids, [`ShapeId`](super::ShapeId), as in
+    /// [`Frame::choices`]).
     pub choices: Vec<Option<Choice>>,
     /// The previous frame's jaw bin ([`Frame::bin`]): kept while the opening allows, and the
     /// choices are only preferred within the same bin. `None`: no bin hysteresis.

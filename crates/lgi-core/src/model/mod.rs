@@ -2,11 +2,13 @@
 //! tets and their grid indices, UV sewing weights), immutable after build and `Send + Sync`,
 //! so frames are solved with `&self` in parallel (rayon over bundles, then over vertices).
 //!
-//! The rooms: [`config`] (build parameters), [`lookup`] (jaw-bin lookups and the shape-id
+//! The rooms: `config` (build parameters), [`lookup`] (jaw-bin lookups and the shape-id
 //! spaces), `build` (build and assembly), `parts` (what a saved model is made of), `solve`
 //! (per-frame and sequence solves) and `frame` (what a solve returns). A solve goes down the
-//! layers once: checks and jaw mapping here, choice in [`choose`](crate::choose) and the tet
-//! index, sewing in [`sew`](crate::sew), the jaw map inside the sewing pass.
+//! layers once: `solve` checks the targets and maps them into the jaw bin, the choice is
+//! [`choose`](crate::choose)'s over the bin's tet indices, then one call into
+//! [`sew`](crate::sew) (plan and sewing pass, the jaw map applied inside it) writes the
+//! vertices.
 
 use crate::choose::AliasGroups;
 use crate::cloud::BundleCloud;
@@ -22,7 +24,7 @@ use glam::DVec3;
 use std::sync::Arc;
 
 mod build;
-pub mod config;
+mod config;
 mod frame;
 pub mod lookup;
 mod parts;

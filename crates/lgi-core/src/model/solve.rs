@@ -210,7 +210,8 @@ impl Model {
 
     /// Bundle `i`'s choice for its target `targets[i]` in jaw bin `bin`, scored against the
     /// frame's `targets` and their [`frame_errors`](Self::frame_errors), preferring the shapes
-    /// of `previous` (the bundle's previous choice, bin-local ids). What a solve does for each
+    /// of `previous` (the bundle's previous choice, bin-local ids:
+    /// [`LocalShapeId`](super::LocalShapeId)). What a solve does for each
     /// present bundle, without the sewing (for benchmarks and profiling).
     ///
     /// # Panics
