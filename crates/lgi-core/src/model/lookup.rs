@@ -15,7 +15,9 @@
 //!   [`FrameState::choices`](super::FrameState::choices) are in these. For an unbinned model
 //!   the two spaces coincide (every shape is a member, in order).
 //! - **Python**: -1 is the neutral, `k ≥ 0` dataset shape k (the binding subtracts 1 when it
-//!   writes `choices.shapes`); it never reaches the core.
+//!   writes `choices.shapes`); it never reaches the core as an id. The core's 0-based dataset
+//!   shape *indices* (`Dataset::displacement(k, _)`, [`Lookup::members`], the shapes' jaw poses)
+//!   are the same numbers for the shapes, and have no neutral.
 //!
 //! [`Lookup::global_id`] and [`Lookup::local_id`] (and `localize`, which maps whole choices
 //! with the latter) are the only crossings between the first two.

@@ -467,6 +467,64 @@ fn a_temporal_solve_picks_bins_by_hysteresis_and_reports_dataset_shape_ids() {
     assert_eq!(fr.bin, 0);
 }
 
+/// The owned copy of a model's borrowed parts (what a reader of the file produces).
+fn owned_parts(model: &Model) -> ModelParts {
+    let p = model.parts();
+    ModelParts {
+        dataset: model.dataset_shared(),
+        jaw: p.jaw.cloned(),
+        config: p.config.clone(),
+        markers_rest: p.markers_rest.to_vec(),
+        bins: p
+            .bins
+            .iter()
+            .map(|b| BinParts {
+                clouds: b.clouds.to_vec(),
+                tets: b.tets.iter().map(|t| t.to_vec()).collect(),
+            })
+            .collect(),
+    }
+}
+
+#[test]
+fn a_binned_model_rebuilt_from_its_parts_gives_identical_frames_and_bad_parts_are_named() {
+    let (model, data, thetas) = binned_model(vec![0.0, 0.25, 0.5], 0.06).unwrap();
+    let rebuilt = Model::from_parts(owned_parts(&model)).unwrap();
+    let ks = [0, 3, 5, 7, 9];
+    let frames: Vec<Vec<DVec3>> = ks
+        .iter()
+        .map(|&k| model.bundle_positions(&shape_mesh(&data, k)).unwrap())
+        .collect();
+    let poses: Vec<JawParams> = ks.iter().map(|&k| thetas[k]).collect();
+    let a = model
+        .solve_sequence(&frames, Some(&poses), true, 0, |_| {})
+        .unwrap();
+    let b = rebuilt
+        .solve_sequence(&frames, Some(&poses), true, 0, |_| {})
+        .unwrap();
+    for (fa, fb) in a.iter().zip(&b) {
+        assert_eq!(fa.vertices, fb.vertices);
+        assert_eq!(fa.choices, fb.choices);
+        assert_eq!(fa.bin, fb.bin);
+    }
+    // One stored bin short of the jaw's bins.
+    let mut short = owned_parts(&model);
+    short.bins.pop();
+    match Model::from_parts(short) {
+        Err(PartsError::Inconsistent(m)) => assert!(m.contains("number of jaw bins"), "{m}"),
+        other => panic!("expected inconsistent parts, got {other:?}"),
+    }
+    // A cloud naming a shape its bin does not have.
+    let mut foreign = owned_parts(&model);
+    foreign.bins[1].clouds[2].aliases[0].push(99);
+    match Model::from_parts(foreign) {
+        Err(PartsError::Inconsistent(m)) => {
+            assert!(m.contains("bin 1, bundle 2: shape id out of range"), "{m}")
+        }
+        other => panic!("expected inconsistent parts, got {other:?}"),
+    }
+}
+
 #[test]
 fn binned_model_save_load_round_trip_gives_identical_frames() {
     let (model, data, thetas) = binned_model(vec![0.0, 0.25, 0.5], 0.06).unwrap();
@@ -622,5 +680,22 @@ fn invalid_bin_specs_are_rejected_with_named_errors() {
         let e = binned_model(edges.clone(), overlap).unwrap_err();
         assert!(matches!(e, LgiError::Input(_)), "{edges:?}: {e:?}");
         assert!(e.to_string().contains(want), "{edges:?}: {e}");
+    }
+}
+
+#[test]
+fn local_and_dataset_shape_ids_round_trip_and_non_members_have_no_local_id() {
+    let (model, data, _) = binned_model(vec![0.0, 0.25, 0.5], 0.06).unwrap();
+    for lk in model.lookups() {
+        assert_eq!(lk.global_id(LocalShapeId(0)), ShapeId::NEUTRAL);
+        for j in 0..=lk.members().len() as u32 {
+            let g = lk.global_id(LocalShapeId(j));
+            assert_eq!(lk.local_id(g), Some(LocalShapeId(j)));
+        }
+        for k in 0..data.num_shapes() as u32 {
+            let member = lk.members().contains(&k);
+            assert_eq!(lk.local_id(ShapeId(k + 1)).is_some(), member, "shape {k}");
+        }
+        assert_eq!(lk.local_id(ShapeId(data.num_shapes() as u32 + 1)), None);
     }
 }
