@@ -28,6 +28,9 @@ pub(super) struct Prepared {
 }
 
 impl Model {
+    /// Solves one frame. `targets` (B) are bundle positions; a row with a NaN is missing.
+    /// `jaw` is the frame's jaw pose for a model built with a jaw rig (`None` = rest).
+    /// With jaw bins, `previous.bin` is kept while the opening allows (hysteresis), and the
     /// previous choices are preferred only when the frame stays in that bin.
     pub fn solve_frame(
         &self,
