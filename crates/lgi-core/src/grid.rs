@@ -62,7 +62,7 @@ const LOOKAHEAD: usize = 4;
 
 /// Affine map from a point to the last three barycentric coordinates of one tet.
 #[derive(Debug, Clone, Copy)]
-struct Frame {
+struct BaryMap {
     inv: DMat3,
     p0: DVec3,
 }
@@ -84,7 +84,7 @@ struct Node {
 pub struct TetIndex {
     points: Vec<DVec3>,
     tets: Vec<Tet>,
-    frames: Vec<Frame>,
+    frames: Vec<BaryMap>,
     /// Grid box and shape; `dims == [0; 3]` when no tet is usable.
     lo: DVec3,
     hi: DVec3,
@@ -148,7 +148,7 @@ impl TetIndex {
                 tets.len()
             )));
         }
-        let frames: Vec<Frame> = tets
+        let frames: Vec<BaryMap> = tets
             .iter()
             .map(|t| frame(t.map(|v| points[v as usize])))
             .collect();
@@ -511,7 +511,7 @@ impl TetIndex {
         use std::mem::size_of;
         self.points.capacity() * size_of::<DVec3>()
             + self.tets.capacity() * size_of::<Tet>()
-            + self.frames.capacity() * size_of::<Frame>()
+            + self.frames.capacity() * size_of::<BaryMap>()
             + self.cell_start.capacity() * size_of::<u32>()
             + self.cell_items.capacity() * size_of::<u32>()
             + self.nodes.capacity() * size_of::<Node>()
@@ -800,8 +800,8 @@ fn cell_inverse(dims: u32, extent: f64) -> f64 {
     }
 }
 
-fn frame(v: [DVec3; 4]) -> Frame {
-    Frame {
+fn frame(v: [DVec3; 4]) -> BaryMap {
+    BaryMap {
         // NaN makes every containment test false for a flat tet.
         inv: tet_inverse(v).unwrap_or(DMat3::NAN),
         p0: v[0],
@@ -809,7 +809,7 @@ fn frame(v: [DVec3; 4]) -> Frame {
 }
 
 #[inline]
-fn bary(f: &Frame, p: DVec3) -> [f64; 4] {
+fn bary(f: &BaryMap, p: DVec3) -> [f64; 4] {
     let l = f.inv * (p - f.p0);
     [1.0 - l.x - l.y - l.z, l.x, l.y, l.z]
 }

@@ -6,12 +6,10 @@
 use crate::cloud::BundleCloud;
 use crate::dataset::Dataset;
 use crate::error::{LgiError, Result};
-use crate::grid::TetIndex;
 use crate::jaw::{JawBins, JawParams, JawRig};
 use crate::mesh::Mesh;
 use crate::model::{
-    locate_bundles, lookup_sources, shape_bundle_positions, BuildConfig, JawInput, LookupParts,
-    Model,
+    BinParts, BinPartsRef, BuildConfig, JawInput, Model, ModelParts, ModelPartsRef, PartsError,
 };
 use crate::tets::Tet;
 use glam::{DMat3, DVec2, DVec3};
@@ -196,8 +194,13 @@ fn to_tris(r: &Reader<'_>, v: Vec<u32>) -> Result<Vec<[u32; 3]>> {
 
 /// Writes `model` to `path` (overwrites).
 pub fn save(model: &Model, path: &Path) -> Result<()> {
+    write(&model.parts(), path)
+}
+
+/// Writes a model's parts to `path`.
+fn write(parts: &ModelPartsRef<'_>, path: &Path) -> Result<()> {
     let mut w = Writer::default();
-    let c = model.config();
+    let c = parts.config;
     for x in [
         c.surface_tolerance,
         c.prune_motion,
@@ -213,7 +216,7 @@ pub fn save(model: &Model, path: &Path) -> Result<()> {
     for n in [c.tet_neighbours, c.max_tets, c.projection_candidates] {
         w.u64(n as u64);
     }
-    let d = model.dataset();
+    let d = parts.dataset;
     let m = d.neutral();
     w.f64s(vec3s(&m.positions));
     w.u32s(
@@ -244,16 +247,14 @@ pub fn save(model: &Model, path: &Path) -> Result<()> {
         w.str(n);
     }
     w.f32s(d.displacements());
-    w.f64s(vec3s(model.markers_rest()));
-    let lookups = model.lookups();
-    write_clouds(&mut w, lookups[0].clouds(), lookups[0].indices());
+    w.f64s(vec3s(parts.markers_rest));
+    write_clouds(&mut w, &parts.bins[0]);
     // The jaw section: 0 = none; 1 = pivot, vertex weights, shape poses (identity frame, the
     // version 2 layout); 2 (version 3) = pivot, frame (9 values, column-major), vertex
     // weights, shape poses. Identity frames keep layout 1 so their files stay as before.
-    match model.jaw() {
+    match parts.jaw {
         None => w.u64(0),
-        Some(setup) => {
-            let j = &setup.input;
+        Some(j) => {
             let identity = j.rig.frame == DMat3::IDENTITY;
             w.u64(if identity { 1 } else { 2 });
             for x in j.rig.pivot.to_array() {
@@ -276,14 +277,14 @@ pub fn save(model: &Model, path: &Path) -> Result<()> {
     }
     // Version 3: the jaw bins section (0 = none; 1 = edges, overlap, then the clouds and tets
     // of bins 1.. — bin 0's are the ones above).
-    match model.jaw().and_then(|j| j.input.bins.as_ref()) {
+    match parts.jaw.and_then(|j| j.bins.as_ref()) {
         None => w.u64(0),
         Some(bins) => {
             w.u64(1);
             w.f64s(bins.edges.clone().into_iter());
             w.f64(bins.overlap);
-            for lk in &lookups[1..] {
-                write_clouds(&mut w, lk.clouds(), lk.indices());
+            for bin in &parts.bins[1..] {
+                write_clouds(&mut w, bin);
             }
         }
     }
@@ -459,47 +460,29 @@ pub fn load(path: &Path) -> Result<Model> {
         }),
         (None, Some(_)) => return Err(bad("jaw bins without a jaw rig")),
     };
-    config.validate().map_err(|e| bad(&e.to_string()))?;
-    let given = Arc::new(dataset);
-    let sources = lookup_sources(&given, jaw.as_ref()).map_err(|e| bad(&e.to_string()))?;
-    if sources.len() != built.len() {
-        return Err(bad("number of jaw bins does not match the stored clouds"));
-    }
-    let bundles = locate_bundles(given.neutral(), &markers, &config)?;
-    let mut parts = Vec::with_capacity(sources.len());
-    for (bin, (source, (clouds, tets))) in sources.into_iter().zip(built).enumerate() {
-        let ns = source.num_shapes() as u32;
-        if let Some(i) = clouds
-            .iter()
-            .position(|c| c.aliases.iter().flatten().any(|&s| s > ns))
-        {
-            return Err(bad(&format!(
-                "bin {bin}, bundle {i}: shape id out of range"
-            )));
-        }
-        let shape_positions = shape_bundle_positions(source.data(), &bundles);
-        parts.push(LookupParts {
-            source,
-            shape_positions,
-            clouds,
-            tets,
-        });
-    }
-    Model::assemble(given, jaw, &markers, &config, bundles, parts)
+    let parts = ModelParts {
+        dataset: Arc::new(dataset),
+        jaw,
+        config,
+        markers_rest: markers,
+        bins: built,
+    };
+    Model::from_parts(parts).map_err(|e| match e {
+        PartsError::Inconsistent(m) => bad(&m),
+        PartsError::Build(e) => e,
+    })
 }
 
 /// One bin's clouds and tets, bundle after bundle.
-fn write_clouds(w: &mut Writer, clouds: &[BundleCloud], indices: &[TetIndex]) {
-    for (cloud, index) in clouds.iter().zip(indices) {
+fn write_clouds(w: &mut Writer, bin: &BinPartsRef<'_>) {
+    for (cloud, tets) in bin.clouds.iter().zip(&bin.tets) {
         w.f64s(vec3s(&cloud.points));
         w.u64(cloud.aliases.len() as u64);
         for a in &cloud.aliases {
             w.u32s(a.iter().copied());
         }
         w.u32s(
-            index
-                .tets()
-                .iter()
+            tets.iter()
                 .flatten()
                 .copied()
                 .collect::<Vec<_>>()
@@ -510,10 +493,7 @@ fn write_clouds(w: &mut Writer, clouds: &[BundleCloud], indices: &[TetIndex]) {
 
 /// Reads what [`write_clouds`] wrote for `num_bundles` bundles; tets must index their cloud and
 /// every point must have an alias (shape ids are checked against the bin's shapes later).
-fn read_clouds(
-    r: &mut Reader<'_>,
-    num_bundles: usize,
-) -> Result<(Vec<BundleCloud>, Vec<Vec<Tet>>)> {
+fn read_clouds(r: &mut Reader<'_>, num_bundles: usize) -> Result<BinParts> {
     let mut clouds = Vec::with_capacity(num_bundles);
     let mut tets = Vec::with_capacity(num_bundles);
     for i in 0..num_bundles {
@@ -538,7 +518,7 @@ fn read_clouds(
         clouds.push(BundleCloud { points, aliases });
         tets.push(t);
     }
-    Ok((clouds, tets))
+    Ok(BinParts { clouds, tets })
 }
 
 #[cfg(test)]

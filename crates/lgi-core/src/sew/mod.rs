@@ -1,7 +1,8 @@
 //! Sewing: every vertex blends the bundles' chosen local geometries with its natural-neighbour
 //! weights, `x(v) = x0(v) + Σ_i W_vi Σ_j α_ij s_{k_ij}(v)`; then a residual pass spreads what
 //! is left at the bundles with the same weights, solving the small B×B system exactly so that
-//! every bundle's surface position matches its target.
+//! every bundle's surface position matches its target. Which weights a frame uses (its plan,
+//! per set of present bundles) is [`plan`]'s job.
 
 use crate::choose::Choice;
 use crate::correspond::SurfacePoint;
@@ -11,6 +12,10 @@ use crate::linalg::Lu;
 use crate::sibson::SparseWeights;
 use glam::DVec3;
 use rayon::prelude::*;
+
+pub mod plan;
+
+pub use plan::{SewGeometry, SewPlan, SewPlans};
 
 /// Vertices per parallel task: large enough to amortise scheduling, small enough to balance.
 const CHUNK: usize = 512;

@@ -1,0 +1,60 @@
+//! What a solve returns and what the next frame needs from it: the solved [`Frame`], the same
+//! without its vertices ([`FrameInfo`], when the caller owns the vertex buffer) and the
+//! [`FrameState`] a temporal solve carries from frame to frame.
+
+use crate::choose::Choice;
+use glam::DVec3;
+
+/// One solved frame.
+#[derive(Debug, Clone)]
+pub struct Frame {
+    /// Reconstructed vertices (V).
+    pub vertices: Vec<DVec3>,
+    /// Per bundle: the chosen geometry (`None` for a missing bundle), in dataset shape ids
+    /// ([`ShapeId`](super::ShapeId)).
+    pub choices: Vec<Option<Choice>>,
+    /// Per bundle: distance from target to reconstructed surface point (0 for missing).
+    pub residuals: Vec<f64>,
+    /// Per bundle: the reconstructed surface position (for missing bundles, the estimate).
+    pub bundle_positions: Vec<DVec3>,
+    /// The jaw bin whose clouds the frame was looked up in (0 for an unbinned model).
+    pub bin: usize,
+}
+
+/// A solved frame without its vertices (those went to the caller's buffer, see
+/// [`Model::solve_sequence_into`](super::Model::solve_sequence_into)).
+#[derive(Debug, Clone)]
+pub struct FrameInfo {
+    /// Per bundle: the chosen geometry (`None` for a missing bundle), in dataset shape ids
+    /// ([`ShapeId`](super::ShapeId)).
+    pub choices: Vec<Option<Choice>>,
+    /// Per bundle: distance from target to reconstructed surface point (0 for missing).
+    pub residuals: Vec<f64>,
+    /// Per bundle: the reconstructed surface position (for missing bundles, the estimate).
+    pub bundle_positions: Vec<DVec3>,
+    /// The jaw bin whose clouds the frame was looked up in (0 for an unbinned model).
+    pub bin: usize,
+}
+
+impl Frame {
+    pub(super) fn from_parts(vertices: Vec<DVec3>, info: FrameInfo) -> Frame {
+        Frame {
+            vertices,
+            choices: info.choices,
+            residuals: info.residuals,
+            bundle_positions: info.bundle_positions,
+            bin: info.bin,
+        }
+    }
+}
+
+/// What the next frame needs from the previous one.
+#[derive(Debug, Clone, Default)]
+pub struct FrameState {
+    /// Previous choices per bundle (dataset shape ids, [`ShapeId`](super::ShapeId), as in
+    /// [`Frame::choices`]).
+    pub choices: Vec<Option<Choice>>,
+    /// The previous frame's jaw bin ([`Frame::bin`]): kept while the opening allows, and the
+    /// choices are only preferred within the same bin. `None`: no bin hysteresis.
+    pub bin: Option<usize>,
+}

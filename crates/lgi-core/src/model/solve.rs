@@ -1,0 +1,539 @@
+//! Solving frames: each frame's targets checked and mapped into its jaw bin's space, every
+//! present bundle's choice (rayon over bundles), then one sewing pass over the vertices with
+//! the frame's plan and jaw map. Sequences run one of three pipelines: temporal (frame by frame,
+//! the next frame's choice beside this frame's sewing), independent (frames in parallel) or
+//! smoothed (all choices, then temporal smoothing of the shape weights, then sewing).
+
+use super::{Frame, FrameInfo, FrameState, Model};
+use crate::choose::{choose, Choice, ChoiceParams, FrameErrors, Scoring, Scratch};
+use crate::error::{LgiError, Result};
+use crate::jaw::JawParams;
+use crate::sew::{BundleTargets, Pieces};
+use crate::smooth::smooth_choices_in_bins;
+use glam::DVec3;
+use rayon::prelude::*;
+
+/// Round-off left at a bundle after the residual pass that triggers a refinement round
+/// (relative to the diagonal; the promise to users is 1e-6).
+pub(super) const RESIDUAL_TOLERANCE: f64 = 1e-12;
+
+/// A frame's targets after the checks: as given (NaN rows missing) and as looked up (jaw
+/// unskinned), with the present bundles and the jaw pose.
+pub(super) struct Prepared {
+    pub(super) targets: Vec<DVec3>,
+    pub(super) lookup: Vec<DVec3>,
+    pub(super) present: Vec<u32>,
+    pub(super) theta: Option<JawParams>,
+    pub(super) bin: usize,
+}
+
+impl Model {
+    /// Solves one frame. `targets` (B) are bundle positions; a row with a NaN is missing.
+    /// `jaw` is the frame's jaw pose for a model built with a jaw rig (`None` = rest).
+    /// With jaw bins, `previous.bin` is kept while the opening allows (hysteresis), and the
+    /// previous choices are preferred only when the frame stays in that bin.
+    pub fn solve_frame(
+        &self,
+        targets: &[DVec3],
+        previous: Option<&FrameState>,
+        jaw: Option<JawParams>,
+    ) -> Result<Frame> {
+        let prep = self.prepare(targets, jaw, previous.and_then(|p| p.bin))?;
+        let lookup = &self.lookups[prep.bin];
+        let previous = previous
+            .filter(|p| p.bin.is_none_or(|b| b == prep.bin))
+            .map(|p| lookup.localize(&p.choices));
+        self.solve_prepared(&prep, previous.as_deref())
+    }
+
+    /// As [`Model::solve_frame`] in a given jaw bin (no previous frame): what a frame would
+    /// give if hysteresis had kept it in `bin`.
+    pub fn solve_frame_in_bin(
+        &self,
+        targets: &[DVec3],
+        jaw: Option<JawParams>,
+        bin: usize,
+    ) -> Result<Frame> {
+        if bin >= self.lookups.len() {
+            return Err(LgiError::Input(format!(
+                "jaw bin {bin} out of range: the model has {}",
+                self.lookups.len()
+            )));
+        }
+        let mut prep = self.prepare(targets, jaw, None)?;
+        if prep.bin != bin {
+            prep.bin = bin;
+            prep.lookup = self.lookup_targets(&prep.targets, prep.theta, bin)?;
+        }
+        self.solve_prepared(&prep, None)
+    }
+
+    /// Choice, then sewing of the unsmoothed choices, for a checked frame.
+    fn solve_prepared(
+        &self,
+        prep: &Prepared,
+        previous: Option<&[Option<Choice>]>,
+    ) -> Result<Frame> {
+        let mut vertices = vec![DVec3::ZERO; self.dataset.num_vertices()];
+        let info = self.solve_prepared_into(prep, previous, &mut vertices)?;
+        Ok(Frame::from_parts(vertices, info))
+    }
+
+    /// [`solve_prepared`](Self::solve_prepared) writing the vertices into `out` (V).
+    fn solve_prepared_into(
+        &self,
+        prep: &Prepared,
+        previous: Option<&[Option<Choice>]>,
+        out: &mut [DVec3],
+    ) -> Result<FrameInfo> {
+        let choices = self.choose_all(prep, previous);
+        let pieces = Pieces::from_choices(&choices);
+        self.sew_frame_into(prep, choices, &pieces, out)
+    }
+
+    /// Checks a frame's targets, picks its jaw bin and, with a jaw, maps them into the bin's
+    /// space for the lookup.
+    pub(super) fn prepare(
+        &self,
+        targets: &[DVec3],
+        jaw: Option<JawParams>,
+        previous_bin: Option<usize>,
+    ) -> Result<Prepared> {
+        let b = self.bundles.len();
+        if targets.len() != b {
+            return Err(LgiError::Input(format!(
+                "frame has {} bundles, the model has {b}",
+                targets.len()
+            )));
+        }
+        let mut present = Vec::with_capacity(b);
+        let mut targets_clean = targets.to_vec();
+        for (i, t) in targets.iter().enumerate() {
+            if t.to_array().iter().any(|x| x.is_infinite()) {
+                return Err(LgiError::Input(format!(
+                    "bundle {i} has an infinite coordinate {t:?}"
+                )));
+            } else if t.is_nan() {
+                targets_clean[i] = DVec3::NAN;
+            } else {
+                present.push(i as u32);
+            }
+        }
+        if present.len() < 3 {
+            return Err(LgiError::Input(format!(
+                "only {} bundles present: at least 3 are needed",
+                present.len()
+            )));
+        }
+        // With a jaw, bundles are indexed in the unskinned space of the dataset's pieces.
+        let theta = match (&self.jaw, jaw) {
+            (None, Some(_)) => {
+                return Err(LgiError::Input(
+                    "a jaw pose was given but the model was built without a jaw rig".into(),
+                ))
+            }
+            (Some(_), Some(t)) => {
+                t.validate()?;
+                Some(t)
+            }
+            _ => None,
+        };
+        let bin = match self.jaw.as_ref().and_then(|j| j.input.bins.as_ref()) {
+            Some(bins) => bins.select(theta.unwrap_or(JawParams::ZERO).open, previous_bin),
+            None => 0,
+        };
+        let lookup = self.lookup_targets(&targets_clean, theta, bin)?;
+        Ok(Prepared {
+            targets: targets_clean,
+            lookup,
+            present,
+            theta,
+            bin,
+        })
+    }
+
+    /// Targets in bin `bin`'s space: unskinned with the frame's pose, then skinned to the
+    /// bin's reference pose, `T(θ_b) T(θ)⁻¹` with each bundle's jaw weight.
+    fn lookup_targets(
+        &self,
+        targets: &[DVec3],
+        theta: Option<JawParams>,
+        bin: usize,
+    ) -> Result<Vec<DVec3>> {
+        let Some(j) = &self.jaw else {
+            return Ok(targets.to_vec());
+        };
+        let mut out = targets.to_vec();
+        if let Some(t) = theta {
+            j.input
+                .rig
+                .unskin_weighted(targets, &j.bundle_weights, t, &mut out)?;
+        }
+        if let Some(r) = self.lookups[bin].reference {
+            let unskinned = out.clone();
+            j.input
+                .rig
+                .skin_weighted(&unskinned, &j.bundle_weights, r, &mut out)?;
+        }
+        Ok(out)
+    }
+
+    /// Every present bundle's choice (rayon over bundles).
+    pub(super) fn choose_all(
+        &self,
+        prep: &Prepared,
+        previous: Option<&[Option<Choice>]>,
+    ) -> Vec<Option<Choice>> {
+        let targets = &prep.lookup;
+        let errors = self.frame_errors(prep.bin, targets);
+        (0..self.bundles.len())
+            .into_par_iter()
+            .map_init(Scratch::default, |scratch, i| {
+                if targets[i].is_nan() {
+                    return None;
+                }
+                let previous = previous.and_then(|p| p.get(i)).and_then(|c| c.as_ref());
+                Some(self.choose_bundle(prep.bin, i, targets, &errors, previous, scratch))
+            })
+            .collect()
+    }
+
+    /// The per-frame tables the choices of one frame share ([`FrameErrors`]), for `targets` in
+    /// the space of jaw bin `bin` (0 when unbinned).
+    ///
+    /// # Panics
+    /// If `bin` is not one of the model's bins.
+    pub fn frame_errors(&self, bin: usize, targets: &[DVec3]) -> FrameErrors {
+        FrameErrors::new(
+            &self.lookups[bin].shape_positions,
+            self.bundles.len(),
+            targets,
+        )
+    }
+
+    /// Bundle `i`'s choice for its target `targets[i]` in jaw bin `bin`, scored against the
+    /// frame's `targets` and their [`frame_errors`](Self::frame_errors), preferring the shapes
+    /// of `previous` (the bundle's previous choice, bin-local ids:
+    /// [`LocalShapeId`](super::LocalShapeId)). What a solve does for each
+    /// present bundle, without the sewing (for benchmarks and profiling).
+    ///
+    /// # Panics
+    /// If `bin` or `i` is out of range.
+    pub fn choose_bundle(
+        &self,
+        bin: usize,
+        i: usize,
+        targets: &[DVec3],
+        errors: &FrameErrors,
+        previous: Option<&Choice>,
+        scratch: &mut Scratch,
+    ) -> Choice {
+        let lk = &self.lookups[bin];
+        let scoring = Scoring {
+            shape_positions: &lk.shape_positions,
+            num_bundles: self.bundles.len(),
+            neighbours: &self.neighbours[i],
+            targets,
+            previous,
+            temporal_weight: self.temporal_penalty(),
+            pure_errors: &errors.pure,
+            distances: &errors.distances,
+        };
+        choose(
+            &lk.indices[i],
+            &lk.clouds[i],
+            &lk.groups[i],
+            targets[i],
+            &scoring,
+            &self.choice_params(),
+            scratch,
+        )
+    }
+
+    /// The choice's tuning from the build config, in data units.
+    pub fn choice_params(&self) -> ChoiceParams {
+        let c = &self.config;
+        ChoiceParams {
+            eps: c.containment_eps,
+            projection_candidates: c.projection_candidates,
+            hit_distance: c.prune_motion.max(c.duplicate_distance) * self.diagonal,
+            ..ChoiceParams::default()
+        }
+    }
+
+    /// Penalty per shape not shared with the previous frame's choice, in data units²
+    /// ([`Scoring::temporal_weight`](crate::choose::Scoring)).
+    pub fn temporal_penalty(&self) -> f64 {
+        self.config.temporal_weight * self.diagonal * self.diagonal
+    }
+
+    /// Blends `pieces`, maps them out of the bin and to the frame's jaw pose, and runs the
+    /// residual pass — one pass over the vertices, written into `out` (V).
+    pub(super) fn sew_frame_into(
+        &self,
+        prep: &Prepared,
+        choices: Vec<Option<Choice>>,
+        pieces: &Pieces,
+        out: &mut [DVec3],
+    ) -> Result<FrameInfo> {
+        let b = self.bundles.len();
+        let (targets_clean, theta) = (&prep.targets, prep.theta);
+        let plan = self
+            .sewing
+            .plan_for(&self.dataset, &self.bundles, &prep.present)?;
+        let mesh = self.dataset.neutral();
+        let lk = &self.lookups[prep.bin];
+        let at = BundleTargets {
+            triangles: &mesh.triangles,
+            bundles: &self.bundles,
+            targets: targets_clean,
+            tolerance: RESIDUAL_TOLERANCE * self.diagonal,
+        };
+        let jaw_map = match &self.jaw {
+            Some(j) if lk.reference.is_some() || theta.is_some() => Some(j.input.rig.vertex_map(
+                lk.reference,
+                theta,
+                mesh.num_vertices(),
+            )?),
+            _ => None,
+        };
+        let bad = plan.sew_into(
+            &lk.data.neutral().positions,
+            lk.data.displacements(),
+            pieces,
+            jaw_map.as_ref(),
+            &at,
+            out,
+        );
+        if let Some(v) = bad {
+            return Err(LgiError::Input(format!(
+                "the solve produced a non-finite vertex {v}: targets are probably far outside \
+                 the dataset's range"
+            )));
+        }
+        let bundle_positions: Vec<DVec3> = self
+            .bundles
+            .iter()
+            .map(|sp| sp.evaluate(&mesh.triangles, out))
+            .collect();
+        let residuals = (0..b)
+            .map(|i| {
+                if targets_clean[i].is_nan() {
+                    0.0
+                } else {
+                    targets_clean[i].distance(bundle_positions[i])
+                }
+            })
+            .collect();
+        let choices = if lk.reference.is_some() {
+            choices
+                .into_iter()
+                .map(|c| c.map(|c| lk.globalize(c)))
+                .collect()
+        } else {
+            choices
+        };
+        Ok(FrameInfo {
+            choices,
+            residuals,
+            bundle_positions,
+            bin: prep.bin,
+        })
+    }
+
+    /// Solves a sequence. With `temporal`, frames are solved in order, each preferring tets
+    /// that share shapes with the previous frame's choice; without, frames are independent and
+    /// solved in parallel. `smooth_window` > 1 averages each bundle's shape weights over that
+    /// many frames (centred) before sewing, in the jaw-unskinned space so jaw motion is not
+    /// smoothed; the residual pass still interpolates every marker. `jaw` gives each frame's
+    /// jaw pose for a model with a jaw rig. `on_frame` is called as frames finish (progress).
+    pub fn solve_sequence(
+        &self,
+        frames: &[Vec<DVec3>],
+        jaw: Option<&[JawParams]>,
+        temporal: bool,
+        smooth_window: usize,
+        on_frame: impl FnMut(usize),
+    ) -> Result<Vec<Frame>> {
+        let nv = self.dataset.num_vertices();
+        let mut vertices = vec![DVec3::ZERO; frames.len() * nv];
+        let infos = self.solve_sequence_into(
+            frames,
+            jaw,
+            temporal,
+            smooth_window,
+            &mut vertices,
+            on_frame,
+        )?;
+        Ok(infos
+            .into_iter()
+            .zip(vertices.chunks(nv.max(1)))
+            .map(|(info, v)| Frame::from_parts(v.to_vec(), info))
+            .collect())
+    }
+
+    /// As [`Model::solve_sequence`], writing frame f's vertices into
+    /// `vertices[f * V..(f + 1) * V]` (a caller's buffer, e.g. a numpy array: no per-frame
+    /// allocation) and returning the rest of each frame.
+    pub fn solve_sequence_into(
+        &self,
+        frames: &[Vec<DVec3>],
+        jaw: Option<&[JawParams]>,
+        temporal: bool,
+        smooth_window: usize,
+        vertices: &mut [DVec3],
+        on_frame: impl FnMut(usize),
+    ) -> Result<Vec<FrameInfo>> {
+        let nv = self.dataset.num_vertices();
+        if vertices.len() != frames.len() * nv {
+            return Err(LgiError::Input(format!(
+                "output buffer holds {} vertices, {} frames of {nv} need {}",
+                vertices.len(),
+                frames.len(),
+                frames.len() * nv
+            )));
+        }
+        if let Some(j) = jaw {
+            if j.len() != frames.len() {
+                return Err(LgiError::Input(format!(
+                    "{} jaw poses for {} frames",
+                    j.len(),
+                    frames.len()
+                )));
+            }
+        }
+        let theta = |f: usize| jaw.map(|j| j[f]);
+        // Bins are picked in order: in a temporal solve a frame keeps the previous frame's bin
+        // while its opening allows (hysteresis).
+        let mut prepared: Vec<Prepared> = Vec::with_capacity(frames.len());
+        for (f, t) in frames.iter().enumerate() {
+            let previous_bin = prepared.last().filter(|_| temporal).map(|p| p.bin);
+            let prep = self
+                .prepare(t, theta(f), previous_bin)
+                .map_err(|e| frame_context(e, f))?;
+            prepared.push(prep);
+        }
+        match (smooth_window <= 1, temporal) {
+            (true, true) => self.solve_temporal_pipelined(&prepared, vertices, on_frame),
+            (true, false) => self.solve_independent(&prepared, vertices, on_frame),
+            (false, _) => {
+                self.solve_smoothed(&prepared, temporal, smooth_window, vertices, on_frame)
+            }
+        }
+    }
+
+    /// Frame by frame in order, each preferring the previous frame's choices; every frame is
+    /// finished (and reported) before the next starts. Frame f + 1's choice needs only frame
+    /// f's choices, not its vertices: it runs beside frame f's sewing (`rayon::join`), which
+    /// fills the gaps of either stage.
+    fn solve_temporal_pipelined(
+        &self,
+        prepared: &[Prepared],
+        vertices: &mut [DVec3],
+        mut on_frame: impl FnMut(usize),
+    ) -> Result<Vec<FrameInfo>> {
+        // An empty mesh still gets one (empty) slot per frame.
+        let slots = vertices.chunks_mut(self.dataset.num_vertices().max(1));
+        let mut out: Vec<FrameInfo> = Vec::with_capacity(prepared.len());
+        let mut current = prepared.first().map(|p| self.choose_all(p, None));
+        for (f, (prep, slot)) in prepared.iter().zip(slots).enumerate() {
+            let choices = current.take().unwrap_or_default();
+            let pieces = Pieces::from_choices(&choices);
+            let next = prepared.get(f + 1);
+            // What the next frame prefers: this frame's choices as reported (dataset
+            // ids), in the next frame's bin, when it stays in this bin.
+            let previous = next.filter(|n| n.bin == prep.bin).map(|n| {
+                let lk = &self.lookups[prep.bin];
+                let reported: Vec<Option<Choice>> = if lk.reference.is_some() {
+                    choices.iter().map(|c| c.map(|c| lk.globalize(c))).collect()
+                } else {
+                    choices.clone()
+                };
+                self.lookups[n.bin].localize(&reported).into_owned()
+            });
+            let (sewn, chosen) = rayon::join(
+                || self.sew_frame_into(prep, choices, &pieces, slot),
+                || next.map(|n| self.choose_all(n, previous.as_deref())),
+            );
+            out.push(sewn.map_err(|e| frame_context(e, f))?);
+            on_frame(f);
+            current = chosen;
+        }
+        Ok(out)
+    }
+
+    /// Independent frames, solved in parallel; reported once all are done.
+    fn solve_independent(
+        &self,
+        prepared: &[Prepared],
+        vertices: &mut [DVec3],
+        mut on_frame: impl FnMut(usize),
+    ) -> Result<Vec<FrameInfo>> {
+        let nv = self.dataset.num_vertices();
+        let out: Vec<FrameInfo> = prepared
+            .par_iter()
+            .zip(vertices.par_chunks_mut(nv.max(1)))
+            .enumerate()
+            .map(|(f, (prep, slot))| {
+                self.solve_prepared_into(prep, None, slot)
+                    .map_err(|e| frame_context(e, f))
+            })
+            .collect::<Result<_>>()?;
+        (0..out.len()).for_each(&mut on_frame);
+        Ok(out)
+    }
+
+    /// Every frame's choice first (in order with `temporal`, else in parallel), then each
+    /// bundle's shape weights averaged over `smooth_window` frames within the same bin, then
+    /// the frames sewn in order.
+    fn solve_smoothed(
+        &self,
+        prepared: &[Prepared],
+        temporal: bool,
+        smooth_window: usize,
+        vertices: &mut [DVec3],
+        mut on_frame: impl FnMut(usize),
+    ) -> Result<Vec<FrameInfo>> {
+        let choices: Vec<Vec<Option<Choice>>> = if temporal {
+            // Local shape ids: the previous choices count only within the same bin.
+            let mut out: Vec<Vec<Option<Choice>>> = Vec::with_capacity(prepared.len());
+            for (f, prep) in prepared.iter().enumerate() {
+                let same_bin = f > 0 && prepared[f - 1].bin == prep.bin;
+                let previous = out.last().filter(|_| same_bin).map(|c| c.as_slice());
+                let chosen = self.choose_all(prep, previous);
+                out.push(chosen);
+            }
+            out
+        } else {
+            prepared
+                .par_iter()
+                .map(|p| self.choose_all(p, None))
+                .collect()
+        };
+        let bins: Vec<usize> = prepared.iter().map(|p| p.bin).collect();
+        let pieces = smooth_choices_in_bins(&choices, &bins, smooth_window);
+        // An empty mesh still gets one (empty) slot per frame.
+        let slots = vertices.chunks_mut(self.dataset.num_vertices().max(1));
+        let mut out = Vec::with_capacity(prepared.len());
+        for (f, ((prep, (ch, pc)), slot)) in prepared
+            .iter()
+            .zip(choices.into_iter().zip(&pieces))
+            .zip(slots)
+            .enumerate()
+        {
+            out.push(
+                self.sew_frame_into(prep, ch, pc, slot)
+                    .map_err(|e| frame_context(e, f))?,
+            );
+            on_frame(f);
+        }
+        Ok(out)
+    }
+}
+
+fn frame_context(e: LgiError, frame: usize) -> LgiError {
+    match e {
+        LgiError::Input(m) => LgiError::Input(format!("frame {frame}: {m}")),
+        other => other,
+    }
+}

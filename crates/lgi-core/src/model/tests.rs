@@ -1,0 +1,701 @@
+//! Tests of the model: sewing plans for missing bundles against plans from scratch, the fused
+//! sewing pass against the staged one, jaw bins (members, hysteresis, reported ids) and saved
+//! models of every kind loading back to identical frames.
+
+use super::solve::{Prepared, RESIDUAL_TOLERANCE};
+use super::*;
+use crate::geodesic::FieldCache;
+use crate::jaw::{JawBins, JawParams, JawRig};
+use crate::mesh::Mesh;
+use crate::sew::plan::SewContext;
+use crate::sew::Pieces;
+use glam::DVec2;
+
+/// A wavy n×n grid patch with UVs = xy and a few smooth shapes.
+fn patch(n: usize) -> Dataset {
+    let mut positions = Vec::new();
+    let mut uvs = Vec::new();
+    for y in 0..n {
+        for x in 0..n {
+            let (u, v) = (x as f64 / (n - 1) as f64, y as f64 / (n - 1) as f64);
+            positions.push(DVec3::new(u, v, 0.1 * (3.0 * u).sin() * (2.0 * v).cos()));
+            uvs.push(DVec2::new(u, v));
+        }
+    }
+    let mut triangles = Vec::new();
+    for y in 0..n - 1 {
+        for x in 0..n - 1 {
+            let a = (y * n + x) as u32;
+            let (b, c, d) = (a + 1, a + n as u32 + 1, a + n as u32);
+            triangles.push([a, b, c]);
+            triangles.push([a, c, d]);
+        }
+    }
+    let mesh = Mesh {
+        positions: positions.clone(),
+        uv_triangles: triangles.clone(),
+        triangles,
+        uvs,
+    };
+    let shapes = (0..6)
+        .map(|k| {
+            let f = k as f64 + 1.0;
+            let pos = positions
+                .iter()
+                .map(|p| *p + DVec3::new(0.0, 0.0, 0.05 * (f * p.x + 0.3 * f * p.y).sin()))
+                .collect();
+            (format!("s{k}"), pos)
+        })
+        .collect();
+    Dataset::from_shape_positions(mesh, shapes).unwrap()
+}
+
+/// Same sparsity pattern, values within `tol` (0: equal).
+fn assert_weights_match(a: &SparseWeights, b: &SparseWeights, tol: f64, missing: &[u32]) {
+    assert_eq!(a.row_start, b.row_start, "{missing:?}");
+    assert_eq!(a.cols, b.cols, "{missing:?}");
+    for (x, y) in a.vals.iter().zip(&b.vals) {
+        assert!((x - y).abs() <= tol, "{missing:?}: {x} vs {y}");
+    }
+}
+
+/// `n` markers on the surface of [`patch`] at seeded pseudo-random (u, v) in [0.05, 0.95]².
+fn patch_markers(seed: u64, n: usize) -> Vec<DVec3> {
+    let mut s = seed;
+    let mut next = || {
+        s = s
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        0.05 + 0.9 * ((s >> 11) as f64 / (1u64 << 53) as f64)
+    };
+    (0..n)
+        .map(|_| {
+            let (u, v) = (next(), next());
+            DVec3::new(u, v, 0.1 * (3.0 * u).sin() * (2.0 * v).cos())
+        })
+        .collect()
+}
+
+#[test]
+fn plan_for_missing_bundles_equals_the_plan_built_from_scratch() {
+    let data = patch(24);
+    let markers = patch_markers(3, 30);
+    let model = Model::build(&data, &markers, &BuildConfig::default()).unwrap();
+    let ctx = model
+        .sewing
+        .geometry()
+        .context(&model.dataset, &model.bundles);
+    for missing in [vec![0u32], vec![3, 17], vec![5, 6, 7, 29]] {
+        let present: Vec<u32> = (0..30).filter(|b| !missing.contains(b)).collect();
+        let fresh = ctx.plan(&present).unwrap();
+        let derived = ctx
+            .plan_without(&present, model.sewing.full(), model.sewing.support())
+            .unwrap();
+        assert_weights_match(&fresh.weights, &derived.weights, 1e-12, &missing);
+    }
+}
+
+/// A cached distance field may reach farther than a plan asks: plans for a sequence of
+/// missing sets built with the model's warm cache equal those built with an empty one
+/// exactly, with a detour ratio tight enough that edge-path zigzag drops weights.
+#[test]
+fn plans_from_cached_distance_fields_equal_plans_from_fresh_fields() {
+    let data = patch(24);
+    let markers = patch_markers(11, 30);
+    let config = BuildConfig {
+        detour_ratio: 1.02,
+        ..BuildConfig::default()
+    };
+    let model = Model::build(&data, &markers, &config).unwrap();
+    let loose = Model::build(&data, &markers, &BuildConfig::default()).unwrap();
+    assert!(
+        model.sewing.full().weights.cols.len() < loose.sewing.full().weights.cols.len(),
+        "the tight ratio drops weights"
+    );
+    assert!(
+        !model.sewing.geometry().fields().is_empty(),
+        "the full plan filled the cache"
+    );
+    for missing in [
+        vec![4u32],
+        vec![4, 5],
+        vec![3, 4, 5, 6],
+        vec![4],
+        vec![20, 21, 22],
+    ] {
+        let present: Vec<u32> = (0..30).filter(|b| !missing.contains(b)).collect();
+        let warm = model
+            .sewing
+            .geometry()
+            .context(&model.dataset, &model.bundles)
+            .plan_without(&present, model.sewing.full(), model.sewing.support())
+            .unwrap();
+        let empty = FieldCache::default();
+        let cold = SewContext {
+            fields: &empty,
+            ..model
+                .sewing
+                .geometry()
+                .context(&model.dataset, &model.bundles)
+        }
+        .plan_without(&present, model.sewing.full(), model.sewing.support())
+        .unwrap();
+        assert_weights_match(&warm.weights, &cold.weights, 0.0, &missing);
+    }
+}
+
+/// The patch's jaw: a hinge about the frame's first axis (x for the identity) through a
+/// pivot behind and above the patch, weight 1 below y = 0.35, 0 above y = 0.65, linear
+/// between.
+fn patch_rig(data: &Dataset, frame: glam::DMat3) -> JawRig {
+    let weights = data
+        .neutral()
+        .positions
+        .iter()
+        .map(|p| ((0.65 - p.y) / 0.3).clamp(0.0, 1.0))
+        .collect();
+    JawRig::with_frame(DVec3::new(0.5, 0.8, -0.6), weights, frame).unwrap()
+}
+
+/// Dataset shape jaw openings of [`jaw_patch`] (radians).
+const OPENINGS: [f64; 10] = [0.0, 0.0, 0.0, 0.2, 0.2, 0.3, 0.3, 0.4, 0.5, 0.5];
+
+/// The patch's expressions, each at its opening from [`OPENINGS`] (skinned with the rig),
+/// plus markers only where the jaw weight is constant over their triangle (so a marker's
+/// own weight skins it exactly like its triangle's vertices).
+fn jaw_patch() -> (Dataset, JawRig, Vec<JawParams>, Vec<DVec3>) {
+    jaw_patch_in(glam::DMat3::IDENTITY)
+}
+
+/// [`jaw_patch`] with the rig's axes the columns of `frame`.
+fn jaw_patch_in(frame: glam::DMat3) -> (Dataset, JawRig, Vec<JawParams>, Vec<DVec3>) {
+    let base = patch(24);
+    let rig = patch_rig(&base, frame);
+    let x0 = &base.neutral().positions;
+    let mut shapes = Vec::new();
+    let mut thetas = Vec::new();
+    for (k, &open) in OPENINGS.iter().enumerate() {
+        let theta = JawParams {
+            open,
+            ..JawParams::ZERO
+        };
+        let expr: Vec<DVec3> = (0..x0.len())
+            .map(|v| x0[v] + base.displacement(k % base.num_shapes(), v))
+            .collect();
+        let mut posed = expr.clone();
+        rig.skin(&expr, theta, &mut posed).unwrap();
+        shapes.push((format!("e{k}_open{open}"), posed));
+        thetas.push(theta);
+    }
+    let data = Dataset::from_shape_positions(base.neutral().clone(), shapes).unwrap();
+    let mut markers = Vec::new();
+    for &y in &[0.08, 0.17, 0.26, 0.74, 0.83, 0.92] {
+        for &x in &[0.1, 0.3, 0.5, 0.7, 0.9] {
+            let (u, v) = (x + 0.013 * y, y);
+            markers.push(DVec3::new(u, v, 0.1 * (3.0 * u).sin() * (2.0 * v).cos()));
+        }
+    }
+    (data, rig, thetas, markers)
+}
+
+fn binned_model(edges: Vec<f64>, overlap: f64) -> Result<(Model, Dataset, Vec<JawParams>)> {
+    let (data, rig, thetas, markers) = jaw_patch();
+    let model = jaw_model(
+        &data,
+        &markers,
+        rig,
+        &thetas,
+        Some(JawBins { edges, overlap }),
+    )?;
+    Ok((model, data, thetas))
+}
+
+/// A model of `data` (default config) with the jaw `rig`, the shapes' poses and `bins`.
+fn jaw_model(
+    data: &Dataset,
+    markers: &[DVec3],
+    rig: JawRig,
+    thetas: &[JawParams],
+    bins: Option<JawBins>,
+) -> Result<Model> {
+    let jaw = JawInput {
+        rig,
+        shape_thetas: thetas.to_vec(),
+        bins,
+    };
+    Model::build_shared(
+        Arc::new(data.clone()),
+        markers,
+        &BuildConfig::default(),
+        Some(jaw),
+    )
+}
+
+fn shape_mesh(data: &Dataset, k: usize) -> Vec<DVec3> {
+    let x0 = &data.neutral().positions;
+    (0..x0.len())
+        .map(|v| x0[v] + data.displacement(k, v))
+        .collect()
+}
+
+/// The old sewing, one stage after another over every vertex: blend, jaw maps, residual
+/// pass (the reference of the fused one-pass sewing).
+fn staged_sewing(model: &Model, prep: &Prepared, pieces: &Pieces) -> Vec<DVec3> {
+    let plan = model
+        .sewing
+        .plan_for(&model.dataset, &model.bundles, &prep.present)
+        .unwrap();
+    let lk = &model.lookups[prep.bin];
+    let mesh = model.dataset.neutral();
+    let mut v = vec![DVec3::ZERO; mesh.num_vertices()];
+    crate::sew::blend(
+        &lk.data.neutral().positions,
+        lk.data.displacements(),
+        &plan.weights,
+        pieces,
+        &mut v,
+    );
+    if let Some(j) = &model.jaw {
+        if let Some(r) = lk.reference {
+            let c = v.clone();
+            j.input.rig.unskin(&c, r, &mut v).unwrap();
+        }
+        if let Some(t) = prep.theta {
+            let c = v.clone();
+            j.input.rig.skin(&c, t, &mut v).unwrap();
+        }
+    }
+    plan.residual().apply(
+        &mesh.triangles,
+        &model.bundles,
+        &plan.weights,
+        &prep.targets,
+        RESIDUAL_TOLERANCE * model.diagonal,
+        &mut v,
+    );
+    v
+}
+
+#[test]
+fn fused_sewing_equals_blend_then_jaw_maps_then_residual_pass_bit_for_bit() {
+    let (binned, data, thetas) = binned_model(vec![0.0, 0.25, 0.5], 0.06).unwrap();
+    let plain = Model::build(&patch(24), binned.markers_rest(), &BuildConfig::default()).unwrap();
+    let mut checked = 0;
+    for (model, jaw) in [(&binned, true), (&plain, false)] {
+        for k in [2usize, 5, 8] {
+            let mesh = shape_mesh(if jaw { &data } else { plain.dataset() }, k % 6);
+            let mut targets = model.bundle_positions(&mesh).unwrap();
+            // Off the dataset (noise), and one marker missing in the second case.
+            for (i, t) in targets.iter_mut().enumerate() {
+                *t += DVec3::new(0.003, -0.002, 0.004) * ((i * 7 + k) % 5) as f64;
+            }
+            for missing in [None, Some(3usize)] {
+                let mut t = targets.clone();
+                if let Some(m) = missing {
+                    t[m] = DVec3::NAN;
+                }
+                let theta = jaw.then(|| thetas[k]);
+                let prep = model.prepare(&t, theta, None).unwrap();
+                let choices = model.choose_all(&prep, None);
+                let pieces = Pieces::from_choices(&choices);
+                let mut fused = vec![DVec3::ZERO; model.dataset.num_vertices()];
+                model
+                    .sew_frame_into(&prep, choices, &pieces, &mut fused)
+                    .unwrap();
+                assert_eq!(fused, staged_sewing(model, &prep, &pieces), "k {k}");
+                checked += 1;
+            }
+        }
+    }
+    assert_eq!(checked, 12);
+}
+
+#[test]
+fn every_member_shape_of_every_bin_is_reproduced_at_its_own_jaw_pose() {
+    let (model, data, thetas) = binned_model(vec![0.0, 0.25, 0.5], 0.06).unwrap();
+    assert_eq!(model.lookups()[0].members(), &[0, 1, 2, 3, 4, 5, 6]);
+    assert_eq!(model.lookups()[1].members(), &[3, 4, 5, 6, 7, 8, 9]);
+    let diag = model.diagonal();
+    for (bin, lk) in model.lookups().iter().enumerate() {
+        for &k in lk.members() {
+            let k = k as usize;
+            let mesh = shape_mesh(&data, k);
+            let targets = model.bundle_positions(&mesh).unwrap();
+            let frame = model
+                .solve_frame_in_bin(&targets, Some(thetas[k]), bin)
+                .unwrap();
+            assert_eq!(frame.bin, bin);
+            for (i, c) in frame.choices.iter().enumerate() {
+                let c = c.unwrap();
+                let w: f64 = (0..4)
+                    .filter(|&j| c.shapes[j] == k as u32 + 1)
+                    .map(|j| c.weights[j])
+                    .sum();
+                // The target matches the cloud point up to the f32 storage of shapes.
+                assert!(w > 1.0 - 1e-6, "bin {bin} shape {k} bundle {i}: {c:?}");
+            }
+            // f32 storage of the re-posed displacements (like the dataset's) bounds the
+            // round trip T(θ_k) T(θ_b)⁻¹ (T(θ_b) T(θ_k)⁻¹ x) at ~1e-7 of the motion.
+            let err = (0..mesh.len())
+                .filter(|&v| model.sewing_space().contains(v))
+                .map(|v| frame.vertices[v].distance(mesh[v]))
+                .fold(0.0, f64::max);
+            assert!(err <= 1e-6 * diag, "bin {bin} shape {k}: {err:e}");
+            assert!(frame.residuals.iter().all(|&r| r <= 1e-9 * diag));
+        }
+    }
+}
+
+#[test]
+fn one_bin_holding_every_shape_matches_the_unbinned_model_to_f32_round_off() {
+    let (binned, data, thetas) = binned_model(vec![0.0, 0.5], 0.0).unwrap();
+    let (_, rig, _, markers) = jaw_patch();
+    let plain = jaw_model(&data, &markers, rig, &thetas, None).unwrap();
+    // Frames between shapes: blends of two shapes' meshes at an intermediate pose.
+    for (a, b, t) in [(0, 5, 0.3), (3, 8, 0.6), (1, 7, 0.5)] {
+        let (ma, mb) = (shape_mesh(&data, a), shape_mesh(&data, b));
+        let mesh: Vec<DVec3> = ma.iter().zip(&mb).map(|(p, q)| p.lerp(*q, t)).collect();
+        let targets = plain.bundle_positions(&mesh).unwrap();
+        let theta = JawParams {
+            open: (1.0 - t) * thetas[a].open + t * thetas[b].open,
+            ..JawParams::ZERO
+        };
+        let f0 = plain.solve_frame(&targets, None, Some(theta)).unwrap();
+        let f1 = binned.solve_frame(&targets, None, Some(theta)).unwrap();
+        let err = f0
+            .vertices
+            .iter()
+            .zip(&f1.vertices)
+            .map(|(p, q)| p.distance(*q))
+            .fold(0.0, f64::max);
+        assert!(err <= 1e-5 * plain.diagonal(), "{a}-{b}: {err:e}");
+    }
+}
+
+#[test]
+fn bin_selection_follows_a_hand_written_sequence_with_hysteresis() {
+    let bins = JawBins {
+        edges: vec![0.0, 0.2, 0.4, 0.6],
+        overlap: 0.05,
+    };
+    bins.validate().unwrap();
+    // (opening, expected bin) in order; each frame sees the previous frame's bin.
+    let script = [
+        (0.0, 0), // core of bin 0
+        (0.19, 0),
+        (0.23, 0), // past edge 0.2 but inside bin 0's overlap (to 0.25): kept
+        (0.26, 1), // outside: core bin 1
+        (0.17, 1), // inside bin 1's overlap (from 0.15): kept
+        (0.14, 0), // outside: core bin 0
+        (-0.3, 0), // below the first edge: clamped to bin 0
+        (0.9, 2),  // above the last edge: clamped to the last bin
+        (0.36, 2), // inside bin 2's overlap (from 0.35): kept
+        (0.34, 1), // outside: core bin 1
+        (0.4, 1),  // on an edge, inside bin 1's range: kept
+        (0.46, 2), // outside bin 1's overlap (to 0.45)
+    ];
+    let mut previous = None;
+    for (f, &(open, want)) in script.iter().enumerate() {
+        let got = bins.select(open, previous);
+        assert_eq!(got, want, "frame {f}, opening {open}");
+        previous = Some(got);
+    }
+    // Without a previous frame: the core bin (an edge belongs to the bin above it).
+    assert_eq!(bins.select(0.2, None), 1);
+    assert_eq!(bins.select(0.6, None), 2);
+}
+
+#[test]
+fn a_temporal_solve_picks_bins_by_hysteresis_and_reports_dataset_shape_ids() {
+    let (model, data, _) = binned_model(vec![0.0, 0.25, 0.5], 0.06).unwrap();
+    let opens = [0.0, 0.2, 0.29, 0.32, 0.2, 0.18, 0.5];
+    let want = [0, 0, 0, 1, 1, 0, 1];
+    let frames: Vec<Vec<DVec3>> = opens
+        .iter()
+        .enumerate()
+        .map(|(f, _)| {
+            let k = [0, 3, 5, 7, 4, 1, 9][f];
+            model.bundle_positions(&shape_mesh(&data, k)).unwrap()
+        })
+        .collect();
+    let poses: Vec<JawParams> = opens
+        .iter()
+        .map(|&open| JawParams {
+            open,
+            ..JawParams::ZERO
+        })
+        .collect();
+    for window in [0, 3] {
+        let out = model
+            .solve_sequence(&frames, Some(&poses), true, window, |_| {})
+            .unwrap();
+        let bins: Vec<usize> = out.iter().map(|f| f.bin).collect();
+        assert_eq!(bins, want, "window {window}");
+        for (f, fr) in out.iter().enumerate() {
+            let members = model.lookups()[fr.bin].members();
+            for c in fr.choices.iter().flatten() {
+                for j in 0..4 {
+                    let s = c.shapes[j];
+                    assert!(c.weights[j] == 0.0 || s == 0 || members.contains(&(s - 1)));
+                }
+            }
+            assert!(
+                fr.residuals.iter().all(|&r| r <= 1e-9 * model.diagonal()),
+                "{f}"
+            );
+        }
+    }
+    // Frame 1 is shape 3 at its own pose (0.2): it chooses that shape (id 4), purely.
+    let out = model
+        .solve_sequence(&frames[..2], Some(&poses[..2]), true, 0, |_| {})
+        .unwrap();
+    for c in out[1].choices.iter().flatten() {
+        let w: f64 = (0..4)
+            .filter(|&j| c.shapes[j] == 4)
+            .map(|j| c.weights[j])
+            .sum();
+        assert!(w > 1.0 - 1e-6, "{c:?}");
+    }
+    // solve_frame with a FrameState applies the same rule.
+    let state = FrameState {
+        choices: out[1].choices.clone(),
+        bin: Some(out[1].bin),
+    };
+    let fr = model
+        .solve_frame(&frames[2], Some(&state), Some(poses[2]))
+        .unwrap();
+    assert_eq!(fr.bin, 0);
+}
+
+/// The owned copy of a model's borrowed parts (what a reader of the file produces).
+fn owned_parts(model: &Model) -> ModelParts {
+    let p = model.parts();
+    ModelParts {
+        dataset: model.dataset_shared(),
+        jaw: p.jaw.cloned(),
+        config: p.config.clone(),
+        markers_rest: p.markers_rest.to_vec(),
+        bins: p
+            .bins
+            .iter()
+            .map(|b| BinParts {
+                clouds: b.clouds.to_vec(),
+                tets: b.tets.iter().map(|t| t.to_vec()).collect(),
+            })
+            .collect(),
+    }
+}
+
+#[test]
+fn a_binned_model_rebuilt_from_its_parts_gives_identical_frames_and_bad_parts_are_named() {
+    let (model, data, thetas) = binned_model(vec![0.0, 0.25, 0.5], 0.06).unwrap();
+    let rebuilt = Model::from_parts(owned_parts(&model)).unwrap();
+    let ks = [0, 3, 5, 7, 9];
+    let frames: Vec<Vec<DVec3>> = ks
+        .iter()
+        .map(|&k| model.bundle_positions(&shape_mesh(&data, k)).unwrap())
+        .collect();
+    let poses: Vec<JawParams> = ks.iter().map(|&k| thetas[k]).collect();
+    let a = model
+        .solve_sequence(&frames, Some(&poses), true, 0, |_| {})
+        .unwrap();
+    let b = rebuilt
+        .solve_sequence(&frames, Some(&poses), true, 0, |_| {})
+        .unwrap();
+    for (fa, fb) in a.iter().zip(&b) {
+        assert_eq!(fa.vertices, fb.vertices);
+        assert_eq!(fa.choices, fb.choices);
+        assert_eq!(fa.bin, fb.bin);
+    }
+    // One stored bin short of the jaw's bins.
+    let mut short = owned_parts(&model);
+    short.bins.pop();
+    match Model::from_parts(short) {
+        Err(PartsError::Inconsistent(m)) => assert!(m.contains("number of jaw bins"), "{m}"),
+        other => panic!("expected inconsistent parts, got {other:?}"),
+    }
+    // A cloud naming a shape its bin does not have.
+    let mut foreign = owned_parts(&model);
+    foreign.bins[1].clouds[2].aliases[0].push(99);
+    match Model::from_parts(foreign) {
+        Err(PartsError::Inconsistent(m)) => {
+            assert!(m.contains("bin 1, bundle 2: shape id out of range"), "{m}")
+        }
+        other => panic!("expected inconsistent parts, got {other:?}"),
+    }
+}
+
+#[test]
+fn binned_model_save_load_round_trip_gives_identical_frames() {
+    let (model, data, thetas) = binned_model(vec![0.0, 0.25, 0.5], 0.06).unwrap();
+    let path = std::env::temp_dir().join(format!("lgi-bins-{}.lgi", std::process::id()));
+    crate::io::model_file::save(&model, &path).unwrap();
+    let loaded = crate::io::model_file::load(&path);
+    std::fs::remove_file(&path).unwrap();
+    let loaded = loaded.unwrap();
+    assert_eq!(
+        loaded.jaw().unwrap().input.bins,
+        model.jaw().unwrap().input.bins
+    );
+    assert_eq!(loaded.lookups().len(), 2);
+    let frames: Vec<Vec<DVec3>> = [0, 3, 5, 7, 9]
+        .iter()
+        .map(|&k| model.bundle_positions(&shape_mesh(&data, k)).unwrap())
+        .collect();
+    let poses: Vec<JawParams> = [0, 3, 5, 7, 9].iter().map(|&k| thetas[k]).collect();
+    let a = model
+        .solve_sequence(&frames, Some(&poses), true, 3, |_| {})
+        .unwrap();
+    let b = loaded
+        .solve_sequence(&frames, Some(&poses), true, 3, |_| {})
+        .unwrap();
+    for (fa, fb) in a.iter().zip(&b) {
+        assert_eq!(fa.vertices, fb.vertices);
+        assert_eq!(fa.choices, fb.choices);
+        assert_eq!(fa.bin, fb.bin);
+    }
+}
+
+/// A jaw frame tilted 0.3 rad about (1, 2, -1), built from the axis-angle formula.
+fn tilted_frame() -> glam::DMat3 {
+    glam::DMat3::from_axis_angle(DVec3::new(1.0, 2.0, -1.0).normalize(), 0.3)
+}
+
+#[test]
+fn a_tilted_frame_jaw_model_reproduces_its_shapes_and_its_frame_survives_save_load() {
+    let frame = tilted_frame();
+    let (data, rig, thetas, markers) = jaw_patch_in(frame);
+    let bins = JawBins {
+        edges: vec![0.0, 0.25, 0.5],
+        overlap: 0.06,
+    };
+    let model = jaw_model(&data, &markers, rig, &thetas, Some(bins)).unwrap();
+    assert_eq!(model.jaw().unwrap().input.rig.frame, frame);
+    let diag = model.diagonal();
+    for k in [0usize, 3, 5, 7, 9] {
+        let mesh = shape_mesh(&data, k);
+        let targets = model.bundle_positions(&mesh).unwrap();
+        let fr = model.solve_frame(&targets, None, Some(thetas[k])).unwrap();
+        let err = (0..mesh.len())
+            .filter(|&v| model.sewing_space().contains(v))
+            .map(|v| fr.vertices[v].distance(mesh[v]))
+            .fold(0.0, f64::max);
+        assert!(err <= 1e-6 * diag, "shape {k}: {err:e}");
+        assert!(fr.residuals.iter().all(|&r| r <= 1e-9 * diag));
+    }
+    let path = std::env::temp_dir().join(format!("lgi-frame-{}.lgi", std::process::id()));
+    crate::io::model_file::save(&model, &path).unwrap();
+    let bytes = std::fs::read(&path).unwrap();
+    let loaded = crate::io::model_file::load(&path);
+    // A frame that is no rotation (its first axis doubled), checksum fixed: a format error.
+    let cols: Vec<u8> = frame
+        .to_cols_array()
+        .iter()
+        .flat_map(|x| x.to_le_bytes())
+        .collect();
+    let at = bytes
+        .windows(cols.len())
+        .position(|w| w == &cols[..])
+        .unwrap();
+    let mut bad = bytes.clone();
+    for i in 0..3 {
+        let x = f64::from_le_bytes(bad[at + 8 * i..at + 8 * i + 8].try_into().unwrap());
+        bad[at + 8 * i..at + 8 * i + 8].copy_from_slice(&(2.0 * x).to_le_bytes());
+    }
+    let sum = crate::io::model_file::checksum(&bad[28..]);
+    bad[20..28].copy_from_slice(&sum.to_le_bytes());
+    std::fs::write(&path, bad).unwrap();
+    let corrupt = crate::io::model_file::load(&path);
+    std::fs::remove_file(&path).unwrap();
+    let loaded = loaded.unwrap();
+    assert_eq!(
+        loaded.jaw().unwrap().input.rig,
+        model.jaw().unwrap().input.rig
+    );
+    let frames: Vec<Vec<DVec3>> = [0, 4, 8]
+        .iter()
+        .map(|&k| model.bundle_positions(&shape_mesh(&data, k)).unwrap())
+        .collect();
+    let poses: Vec<JawParams> = [0, 4, 8].iter().map(|&k| thetas[k]).collect();
+    let a = model
+        .solve_sequence(&frames, Some(&poses), true, 0, |_| {})
+        .unwrap();
+    let b = loaded
+        .solve_sequence(&frames, Some(&poses), true, 0, |_| {})
+        .unwrap();
+    for (fa, fb) in a.iter().zip(&b) {
+        assert_eq!(fa.vertices, fb.vertices);
+    }
+    match corrupt {
+        Err(LgiError::ModelFormat { message, .. }) => {
+            assert!(message.contains("jaw frame"), "{message}")
+        }
+        other => panic!("expected a format error, got {other:?}"),
+    }
+}
+
+#[test]
+fn a_version_2_file_still_loads_as_an_unbinned_model() {
+    let (data, rig, thetas, markers) = jaw_patch();
+    let model = jaw_model(&data, &markers, rig, &thetas, None).unwrap();
+    let path = std::env::temp_dir().join(format!("lgi-v2-{}.lgi", std::process::id()));
+    crate::io::model_file::save(&model, &path).unwrap();
+    // Version 2 is version 3 without the trailing bins section (a u64 0 when unbinned).
+    let bytes = std::fs::read(&path).unwrap();
+    let payload = &bytes[28..bytes.len() - 8];
+    assert_eq!(&bytes[bytes.len() - 8..], &[0u8; 8]);
+    let mut v2 = bytes[..8].to_vec();
+    v2.extend_from_slice(&2u32.to_le_bytes());
+    v2.extend_from_slice(&(payload.len() as u64).to_le_bytes());
+    v2.extend_from_slice(&crate::io::model_file::checksum_v2(payload).to_le_bytes());
+    v2.extend_from_slice(payload);
+    std::fs::write(&path, v2).unwrap();
+    let loaded = crate::io::model_file::load(&path);
+    std::fs::remove_file(&path).unwrap();
+    let loaded = loaded.unwrap();
+    assert!(loaded.jaw().unwrap().input.bins.is_none());
+    let t = model
+        .bundle_positions(&shape_mesh(model.dataset(), 5))
+        .unwrap();
+    let a = model.solve_frame(&t, None, Some(thetas[5])).unwrap();
+    let b = loaded.solve_frame(&t, None, Some(thetas[5])).unwrap();
+    assert_eq!(a.vertices, b.vertices);
+}
+
+#[test]
+fn invalid_bin_specs_are_rejected_with_named_errors() {
+    let cases: [(Vec<f64>, f64, &str); 6] = [
+        (vec![0.1], 0.0, "at least 2 edges"),
+        (vec![0.0, f64::NAN], 0.0, "edge 1 must be finite"),
+        (vec![0.0, 0.3, 0.2], 0.0, "edge 2 (0.2) <= edge 1 (0.3)"),
+        (vec![0.0, 0.5], -0.1, "overlap must be finite and >= 0"),
+        (vec![0.0, 0.5], f64::INFINITY, "overlap must be finite"),
+        (
+            vec![0.0, 0.1, 0.15, 0.5],
+            0.0,
+            "jaw bin 1 (opening 0.1 to 0.15 rad",
+        ),
+    ];
+    for (edges, overlap, want) in cases {
+        let e = binned_model(edges.clone(), overlap).unwrap_err();
+        assert!(matches!(e, LgiError::Input(_)), "{edges:?}: {e:?}");
+        assert!(e.to_string().contains(want), "{edges:?}: {e}");
+    }
+}
+
+#[test]
+fn local_and_dataset_shape_ids_round_trip_and_non_members_have_no_local_id() {
+    let (model, data, _) = binned_model(vec![0.0, 0.25, 0.5], 0.06).unwrap();
+    for lk in model.lookups() {
+        assert_eq!(lk.global_id(LocalShapeId(0)), ShapeId::NEUTRAL);
+        for j in 0..=lk.members().len() as u32 {
+            let g = lk.global_id(LocalShapeId(j));
+            assert_eq!(lk.local_id(g), Some(LocalShapeId(j)));
+        }
+        for k in 0..data.num_shapes() as u32 {
+            let member = lk.members().contains(&k);
+            assert_eq!(lk.local_id(ShapeId(k + 1)).is_some(), member, "shape {k}");
+        }
+        assert_eq!(lk.local_id(ShapeId(data.num_shapes() as u32 + 1)), None);
+    }
+}
