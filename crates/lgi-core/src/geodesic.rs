@@ -4,8 +4,7 @@
 //! corner (where the lips really join) it does not. Distances are shortest paths along mesh
 //! edges (Dijkstra), bounded by a radius so each bundle explores only its neighbourhood.
 
-use crate::correspond::SurfacePoint;
-use crate::mesh::Mesh;
+use crate::mesh::{Mesh, SurfacePoint};
 use std::cmp::Ordering;
 use std::collections::{BinaryHeap, HashMap};
 use std::sync::{Arc, Mutex};

@@ -27,6 +27,7 @@ mod prefetch;
 pub mod sew;
 pub mod sibson;
 pub mod smooth;
+pub mod sparse;
 pub mod tets;
 pub mod uvspace;
 

@@ -6,16 +6,17 @@ use crate::choose::{
     alias_groups, choose, AliasGroups, Choice, ChoiceParams, FrameErrors, Scoring, Scratch,
 };
 use crate::cloud::{build_cloud, BundleCloud};
-use crate::correspond::{correspond, SurfacePoint};
+use crate::correspond::correspond;
 use crate::dataset::Dataset;
 use crate::error::{LgiError, Result};
 use crate::geodesic::{is_detour, EdgeGraph, FieldCache};
 use crate::grid::TetIndex;
 use crate::jaw::{JawBins, JawParams, JawRig};
-use crate::mesh::Mesh;
+use crate::mesh::{Mesh, SurfacePoint};
 use crate::sew::{BlendInput, BundleTargets, Pieces, ResidualPass};
-use crate::sibson::{SibsonWeights, SparseWeights};
+use crate::sibson::SibsonWeights;
 use crate::smooth::smooth_choices_in_bins;
+use crate::sparse::SparseWeights;
 use crate::tets::{generate_tets, Tet, TetConfig};
 use crate::uvspace::{self, SewingSpace};
 use glam::DVec3;

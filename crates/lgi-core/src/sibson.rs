@@ -4,41 +4,12 @@
 
 use crate::error::{LgiError, Result};
 use crate::mesh::Mesh;
+use crate::sparse::SparseWeights;
 use glam::DVec2;
 use rayon::prelude::*;
 use spade::handles::FixedVertexHandle;
 use spade::{DelaunayTriangulation, HasPosition, NaturalNeighbor, Point2, Triangulation};
 use std::collections::HashMap;
-
-/// Sparse row-major weights: row `r` has entries `cols[row_start[r]..row_start[r + 1]]` with
-/// `vals` at the same positions (f64, > 0, summing to 1 in every non-empty row, columns sorted).
-#[derive(Debug, Clone, PartialEq)]
-pub struct SparseWeights {
-    /// Start of each row in `cols`/`vals`, plus one final entry (num_rows + 1 entries).
-    pub row_start: Vec<u32>,
-    /// Column (site) index of each entry.
-    pub cols: Vec<u32>,
-    /// Weight of each entry.
-    pub vals: Vec<f64>,
-    /// Number of columns (sites).
-    pub num_cols: usize,
-}
-
-impl SparseWeights {
-    /// Number of rows (query points).
-    pub fn num_rows(&self) -> usize {
-        self.row_start.len().saturating_sub(1)
-    }
-
-    /// Columns and weights of row `r`.
-    ///
-    /// # Panics
-    /// If `r >= self.num_rows()`, like slice indexing.
-    pub fn row(&self, r: usize) -> (&[u32], &[f64]) {
-        let (a, b) = (self.row_start[r] as usize, self.row_start[r + 1] as usize);
-        (&self.cols[a..b], &self.vals[a..b])
-    }
-}
 
 /// A 2D segment that weights must not see across (a hole boundary edge in UV, e.g. the mouth
 /// slit or an eye).
@@ -1192,6 +1163,7 @@ mod tests {
             let w = SibsonWeights::new(&s, &[]).unwrap().weights(&q);
             prop_assert_eq!(w.num_rows(), q.len());
             prop_assert_eq!(w.num_cols, s.len());
+            w.sanity_check();
             for r in 0..q.len() {
                 check_row(&w, r)?;
             }

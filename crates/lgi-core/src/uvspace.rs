@@ -4,9 +4,8 @@
 //! weights of its nearest sewn vertex in 3D. UV atlases often stack unrelated parts on top of
 //! each other (ICT's eyeballs share the face's UV tile), so UV distance alone is not enough.
 
-use crate::correspond::SurfacePoint;
 use crate::error::{LgiError, Result};
-use crate::mesh::Mesh;
+use crate::mesh::{Mesh, SurfacePoint};
 use glam::{DVec2, DVec3};
 use rayon::prelude::*;
 use std::collections::HashMap;

@@ -273,7 +273,7 @@ fn ict_face_weights_do_not_leak_across_mouth_and_eyes() {
         })
         .collect();
     // (number of pairs over the bound, their total weight, worst ratio, bundles involved)
-    let leaks = |w: &lgi_core::sibson::SparseWeights, bound: f64| {
+    let leaks = |w: &lgi_core::sparse::SparseWeights, bound: f64| {
         let (mut over, mut mass, mut worst) = (0usize, 0.0f64, 0.0f64);
         let mut bundles = std::collections::BTreeSet::new();
         for (r, &v) in face_vertices.iter().enumerate() {
@@ -337,7 +337,7 @@ fn ict_face_weights_do_not_leak_across_mouth_and_eyes() {
         .filter(|&(_, &v)| rim_uv.contains(&charts[v as usize]))
         .map(|(r, _)| r)
         .collect();
-    let err = |w: &lgi_core::sibson::SparseWeights| {
+    let err = |w: &lgi_core::sparse::SparseWeights| {
         let mut sum = 0.0;
         for &r in &rim {
             let v = face_vertices[r] as usize;
