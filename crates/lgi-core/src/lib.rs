@@ -17,7 +17,6 @@ pub mod dataset;
 pub mod error;
 pub mod geodesic;
 pub mod geom;
-pub mod grid;
 pub mod io;
 pub mod jaw;
 pub mod linalg;
@@ -28,6 +27,7 @@ pub mod sew;
 pub mod sibson;
 pub mod smooth;
 pub mod sparse;
+pub mod tet_index;
 pub mod tets;
 pub mod uvspace;
 

@@ -6,13 +6,13 @@
 use crate::cloud::BundleCloud;
 use crate::dataset::Dataset;
 use crate::error::{LgiError, Result};
-use crate::grid::TetIndex;
 use crate::jaw::{JawBins, JawParams, JawRig};
 use crate::mesh::Mesh;
 use crate::model::{
     locate_bundles, lookup_sources, shape_bundle_positions, BuildConfig, JawInput, LookupParts,
     Model,
 };
+use crate::tet_index::TetIndex;
 use crate::tets::Tet;
 use glam::{DMat3, DVec2, DVec3};
 use std::path::Path;

@@ -5,7 +5,7 @@
 use std::time::Instant;
 
 use lgi_core::cloud::build_cloud;
-use lgi_core::grid::TetIndex;
+use lgi_core::tet_index::TetIndex;
 use lgi_core::tets::{closest_point_in_tet, generate_tets, TetConfig};
 use lgi_core::DVec3;
 
