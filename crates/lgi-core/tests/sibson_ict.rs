@@ -3,7 +3,8 @@
 //! mouth or the eyes and that the lips follow jawOpen; skipped when the data is absent.
 
 use lgi_core::geom::{closest_point_on_triangle, interpolate3};
-use lgi_core::sibson::{boundary_barriers, vertex_charts, Barrier, SibsonWeights, UvIslands};
+use lgi_core::sibson::{Barrier, SibsonWeights};
+use lgi_core::uvspace::{boundary_barriers, vertex_charts, UvIslands};
 use lgi_core::{DVec2, DVec3, Mesh};
 use std::collections::{BinaryHeap, HashMap};
 mod common;
@@ -185,10 +186,13 @@ fn ict_face_weights_do_not_leak_across_mouth_and_eyes() {
             u[0] * w[0] + u[1] * w[1] + u[2] * w[2]
         })
         .collect();
+    // The face chart's vertices and their UVs, by the sewing space's rule with the face
+    // island as the space.
+    let face_uvs = islands.vertex_uvs(&mesh, |i| i == face);
     let face_vertices: Vec<u32> = (0..mesh.num_vertices() as u32)
-        .filter(|&v| islands.vertex_island[v as usize] == Some(face))
+        .filter(|&v| face_uvs[v as usize].is_some())
         .collect();
-    let queries: Vec<DVec2> = face_vertices.iter().map(|&v| charts[v as usize]).collect();
+    let queries: Vec<DVec2> = face_uvs.iter().flatten().copied().collect();
 
     let barriers = islands.island_barriers(&mesh, face);
     let groups = loops(&barriers);
