@@ -131,12 +131,14 @@ impl FieldCache {
         field
     }
 
-    /// Number of cached fields (for tests and diagnostics).
+    /// Number of cached fields (for tests).
+    #[cfg(test)]
     pub fn len(&self) -> usize {
         self.fields.lock().map_or(0, |f| f.len())
     }
 
     /// True when nothing is cached.
+    #[cfg(test)]
     pub fn is_empty(&self) -> bool {
         self.len() == 0
     }

@@ -58,7 +58,7 @@ impl HasPosition for Site {
 ///   others are renormalised. If every natural neighbour is hidden, q takes weight 1 on the
 ///   nearest visible site (ties: lowest index); if no site at all is visible (q enclosed by
 ///   barriers), the barrier-free weights are kept;
-/// - non-finite queries (e.g. vertices without UVs, see [`vertex_charts`]) get an empty row.
+/// - non-finite queries (e.g. vertices without UVs, see [`vertex_charts`](crate::uvspace::vertex_charts)) get an empty row.
 ///
 /// Weights below 1e-14 are dropped and rows renormalised (sum 1 within 1e-12, all > 0).
 ///

@@ -176,7 +176,7 @@ impl UvIslands {
 ///
 /// Caution: UV islands may overlap in UV space (ICT: the head and face charts both span the
 /// unit square), so only vertices of the bundles' islands should be weighted against them
-/// (ask [`UvIslands::vertex_uvs`] about those islands only, as [`build`] does).
+/// (ask [`UvIslands::vertex_uvs`] about those islands only, as the sewing space does).
 pub fn vertex_charts(mesh: &Mesh) -> Vec<DVec2> {
     UvIslands::new(mesh)
         .vertex_uvs(mesh, |_| true)

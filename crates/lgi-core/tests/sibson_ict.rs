@@ -2,10 +2,10 @@
 //! chart's own boundary (mouth, eyes, rim) as barriers. Checks that no weight leaks across the
 //! mouth or the eyes and that the lips follow jawOpen; skipped when the data is absent.
 
-use lgi_core::geom::{closest_point_on_triangle, interpolate3};
-use lgi_core::sibson::{Barrier, SibsonWeights};
-use lgi_core::uvspace::{boundary_barriers, vertex_charts, UvIslands};
-use lgi_core::{DVec2, DVec3, Mesh};
+use lgi_core::{
+    boundary_barriers, closest_point_on_triangle, interpolate3, vertex_charts, Barrier, DVec2,
+    DVec3, Mesh, SibsonWeights, SparseWeights, UvIslands,
+};
 use std::collections::{BinaryHeap, HashMap};
 mod common;
 
@@ -277,7 +277,7 @@ fn ict_face_weights_do_not_leak_across_mouth_and_eyes() {
         })
         .collect();
     // (number of pairs over the bound, their total weight, worst ratio, bundles involved)
-    let leaks = |w: &lgi_core::sparse::SparseWeights, bound: f64| {
+    let leaks = |w: &SparseWeights, bound: f64| {
         let (mut over, mut mass, mut worst) = (0usize, 0.0f64, 0.0f64);
         let mut bundles = std::collections::BTreeSet::new();
         for (r, &v) in face_vertices.iter().enumerate() {
@@ -341,7 +341,7 @@ fn ict_face_weights_do_not_leak_across_mouth_and_eyes() {
         .filter(|&(_, &v)| rim_uv.contains(&charts[v as usize]))
         .map(|(r, _)| r)
         .collect();
-    let err = |w: &lgi_core::sparse::SparseWeights| {
+    let err = |w: &SparseWeights| {
         let mut sum = 0.0;
         for &r in &rim {
             let v = face_vertices[r] as usize;
