@@ -16,7 +16,7 @@ const STACK: usize = 96;
 /// How many candidates ahead the projection prefetches a frame.
 const LOOKAHEAD: usize = 4;
 
-/// A node of the nearest-tet hierarchy (a tet box).
+/// A node of the nearest-tet hierarchy: the box of a range of `bvh_items`.
 #[derive(Debug, Clone, Copy)]
 pub(super) struct Node {
     lo: DVec3,
