@@ -12,13 +12,13 @@
 
 use crate::choose::AliasGroups;
 use crate::cloud::BundleCloud;
-use crate::correspond::SurfacePoint;
 use crate::dataset::Dataset;
 use crate::error::{LgiError, Result};
-use crate::grid::TetIndex;
 use crate::jaw::{JawBins, JawParams, JawRig};
+use crate::mesh::SurfacePoint;
 use crate::sew::SewPlans;
-use crate::sibson::SparseWeights;
+use crate::sparse::SparseWeights;
+use crate::tet_index::TetIndex;
 use crate::uvspace::SewingSpace;
 use glam::DVec3;
 use std::sync::Arc;
