@@ -33,27 +33,14 @@ NOISE = 0.05
 SEED = 1
 
 
-def shared_data() -> Path:
-    env = os.environ.get("LGI_SHARED_DATA")
-    if env:
-        return Path(env)
-    for p in [ROOT, *ROOT.parents]:
-        c = p / "shared" / "data"
-        if (c / "ict-facekit" / "generic_neutral_mesh.obj").is_file():
-            return c
-    return ROOT.parent / "shared" / "data"
-
-
 def load_workload() -> tuple[str, Any, np.ndarray]:
-    import lgi
+    from lgi import ict
 
-    ict = shared_data() / "ict-facekit"
-    if (ict / "generic_neutral_mesh.obj").is_file():
-        base = lgi.Dataset.from_obj(ict / "generic_neutral_mesh.obj", str(ict / "shapes" / "*.obj"))
+    folder = ict.find(os.environ.get(ict.ENV), start=ROOT)
+    if folder is not None:
+        base = ict.load_dataset(folder)
         data = base.augmented(ICT_SHAPES)
-        markers = np.loadtxt(
-            ict / "markers_120.csv", delimiter=",", skiprows=1, usecols=(1, 2, 3)
-        ).reshape(-1, 3)
+        markers = ict.load_markers(folder)
         name = (
             f"ICT-{ICT_SHAPES}: ICT-FaceKit neutral ({data.num_vertices} vertices) + "
             f"{base.num_shapes} shapes augmented to {data.num_shapes}, {len(markers)} markers"

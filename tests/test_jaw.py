@@ -14,6 +14,9 @@ from hypothesis import strategies as st
 
 from lgi import jaw
 from lgi.errors import InputError
+from lgi.ict import ENV as ICT_ENV
+from lgi.ict import LOWER_TEETH
+from lgi.ict import find as find_ict
 from lgi.sample import jaw_transform, make_sample, skin_jaw
 
 PIVOT = np.array([0.3, -1.2, 2.5])
@@ -250,17 +253,7 @@ def test_track_jaw_is_exact_on_clean_pure_jaw_frames_with_dropouts() -> None:
 
 
 def _ict_root() -> Path | None:
-    candidates = []
-    if os.environ.get("LGI_SHARED_DATA"):
-        candidates.append(Path(os.environ["LGI_SHARED_DATA"]))
-    candidates += [
-        Path(__file__).resolve().parents[2] / "shared" / "data",
-        Path("/work/shared/data"),
-    ]
-    for c in candidates:
-        if (c / "ict-facekit" / "generic_neutral_mesh.obj").is_file():
-            return c / "ict-facekit"
-    return None
+    return find_ict(os.environ.get(ICT_ENV), start=Path(__file__).parent)
 
 
 def _obj_vertices(path: Path) -> np.ndarray:
@@ -282,7 +275,7 @@ def ict():
 
 def test_ict_jaw_open_is_a_25_degree_hinge_near_the_documented_pivot(ict) -> None:
     x0, shapes, names = ict
-    lo, hi = jaw.ICT_LOWER_TEETH
+    lo, hi = LOWER_TEETH
     rig, theta, rep = jaw.estimate_rig(
         x0, shapes, names, rigid_vertices=np.arange(lo, hi + 1), return_report=True
     )
@@ -317,7 +310,7 @@ def test_ict_jaw_open_is_a_25_degree_hinge_near_the_documented_pivot(ict) -> Non
 
 def test_ict_every_shape_unskins_and_reskins_exactly(ict) -> None:
     x0, shapes, names = ict
-    lo, hi = jaw.ICT_LOWER_TEETH
+    lo, hi = LOWER_TEETH
     rig, theta = jaw.estimate_rig(x0, shapes, names, rigid_vertices=np.arange(lo, hi + 1))
     diag = np.linalg.norm(x0.max(axis=0) - x0.min(axis=0))
     worst = 0.0

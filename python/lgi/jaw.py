@@ -35,10 +35,6 @@ __all__ = [
     "track_jaw",
 ]
 
-# Lower teeth of the ICT-FaceKit model (0-based, inclusive): the jaw's only truly rigid part.
-ICT_LOWER_TEETH = (19247, 21450)
-
-
 def _rx(a: float) -> F64:
     c, s = np.cos(a), np.sin(a)
     return np.array([[1.0, 0.0, 0.0], [0.0, c, -s], [0.0, s, c]])
