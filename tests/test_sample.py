@@ -12,16 +12,9 @@ from hypothesis import strategies as st
 from numpy.typing import NDArray
 from scipy.spatial.transform import Rotation
 
+from jaw_oracle import jaw_transform, skin_jaw
 from lgi.errors import DatasetError, DatasetFileError, InputError
-from lgi.sample import (
-    Sample,
-    describe,
-    jaw_transform,
-    load_sample,
-    make_sample,
-    save_sample,
-    skin_jaw,
-)
+from lgi.sample import Sample, describe, load_sample, make_sample, save_sample
 
 F64 = NDArray[np.float64]
 
