@@ -252,9 +252,9 @@ def default_methods(dataset: Dataset, markers: ArrayLike) -> dict[str, Solver]:
 
     lgi_rbf = LgiRbf(dataset, markers)
     return {
-        "displacement interpolation": DisplacementInterpolation(dataset, markers),
-        "blendshape fit": BlendshapeFit(dataset, markers),
-        "LGI-RBF": lgi_rbf,
+        DisplacementInterpolation.label: DisplacementInterpolation(dataset, markers),
+        BlendshapeFit.label: BlendshapeFit(dataset, markers),
+        LgiRbf.label: lgi_rbf,
         "LGI": lgi_rbf.model,
     }
 
