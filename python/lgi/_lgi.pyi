@@ -2,11 +2,11 @@
 
 import os
 from collections.abc import Callable, Sequence
-from typing import Any, final
+from typing import TypedDict, final
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from typing_extensions import Self, disjoint_base
+from typing_extensions import NotRequired, Self, disjoint_base
 
 __all__ = [
     "BlendshapeSolver",
@@ -168,6 +168,28 @@ class SolveOutput:
     @property
     def jaw_bin(self) -> NDArray[np.int64]: ...
 
+# The dicts the inspection methods return, key by key (they exist only in this stub).
+class _BundleStats(TypedDict):
+    points: NDArray[np.int64]
+    tets: NDArray[np.int64]
+    index_bytes: NDArray[np.int64]
+
+class _SewWeights(TypedDict):
+    indptr: NDArray[np.int64]
+    indices: NDArray[np.int64]
+    data: NDArray[np.float64]
+
+class _SurfacePoints(TypedDict):
+    triangles: NDArray[np.int64]
+    barycentrics: NDArray[np.float64]
+
+class _JawSetup(TypedDict):
+    shape_theta: NDArray[np.float64]
+    bundle_weights: NDArray[np.float64]
+    bin_edges: NotRequired[NDArray[np.float64]]
+    bin_overlap: NotRequired[float]
+    bin_members: NotRequired[list[list[int]]]
+
 @final
 class Model:
     """A built LGI model (immutable, thread-safe). Use ``lgi.Model``, which wraps this."""
@@ -218,15 +240,15 @@ class Model:
         """Solves (F, B, 3) frames (vertices into `out` if given)."""
     def bundle_positions(self, meshes: ArrayLike) -> NDArray[np.float64]:
         """(F, V, 3) meshes -> (F, B, 3) bundle surface positions."""
-    def bundle_stats(self) -> dict[str, NDArray[np.int64]]:
+    def bundle_stats(self) -> _BundleStats:
         """Per bundle: ``points``, ``tets``, ``index_bytes``."""
-    def sew_weights(self) -> dict[str, NDArray[Any]]:
+    def sew_weights(self) -> _SewWeights:
         """CSR sewing weights: ``indptr``, ``indices``, ``data``."""
     def neighbours(self) -> list[list[int]]:
         """Natural neighbours of each bundle."""
-    def bundle_surface_points(self) -> dict[str, NDArray[Any]]:
+    def bundle_surface_points(self) -> _SurfacePoints:
         """``triangles`` (B,) and ``barycentrics`` (B, 3)."""
-    def jaw(self) -> dict[str, Any] | None:
+    def jaw(self) -> _JawSetup | None:
         """``shape_theta``, ``bundle_weights`` and, for a binned model, ``bin_edges``,
         ``bin_overlap``, ``bin_members`` (dataset shapes per bin); None without a jaw (the rig
         itself is ``jaw_rig``)."""
