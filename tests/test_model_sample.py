@@ -134,7 +134,7 @@ def test_build_config_defaults_are_the_cores_and_every_field_survives_save_and_l
     assert custom.to_dict() == changed
     model = lgi.Model.build(sample_dataset, sample.markers_rest, custom)
     model.save(tmp_path / "custom.lgi")
-    assert lgi.Model.load(tmp_path / "custom.lgi").core.config == custom
+    assert lgi.Model.load(tmp_path / "custom.lgi").config == custom
 
 
 def test_build_config_is_a_frozen_value_with_keyword_fields():

@@ -189,6 +189,11 @@ class Model:
         return self._core.markers_rest
 
     @property
+    def config(self) -> BuildConfig:
+        """The build parameters (a loaded model's too)."""
+        return self._core.config
+
+    @property
     def jaw_rig(self) -> JawRig | None:
         """The jaw rig the model was built with (None without one)."""
         rig = self._core.jaw_rig
