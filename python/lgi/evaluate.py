@@ -280,7 +280,10 @@ def run_protocol(
         perf: tuple[F64, F64] | None = (s.performance, s.truth)
     elif data == "ict":
         if ict_dir is None:
-            raise InputError(f"no ICT-FaceKit folder given (--ict-dir, or ${ict.ENV})")
+            raise InputError(
+                f"ICT-FaceKit data not found: give its folder (--ict-dir) or set ${ict.ENV} "
+                "to the folder above it"
+            )
         ds = ict.load_dataset(ict_dir)
         markers = ict.load_markers(ict_dir)
         perf = None
