@@ -33,27 +33,14 @@ NOISE = 0.05
 SEED = 1
 
 
-def shared_data() -> Path:
-    env = os.environ.get("LGI_SHARED_DATA")
-    if env:
-        return Path(env)
-    for p in [ROOT, *ROOT.parents]:
-        c = p / "shared" / "data"
-        if (c / "ict-facekit" / "generic_neutral_mesh.obj").is_file():
-            return c
-    return ROOT.parent / "shared" / "data"
-
-
 def load_workload() -> tuple[str, Any, np.ndarray]:
-    import lgi
+    from lgi import ict
 
-    ict = shared_data() / "ict-facekit"
-    if (ict / "generic_neutral_mesh.obj").is_file():
-        base = lgi.Dataset.from_obj(ict / "generic_neutral_mesh.obj", str(ict / "shapes" / "*.obj"))
+    folder = ict.find(os.environ.get(ict.ENV), start=ROOT)
+    if folder is not None:
+        base = ict.load_dataset(folder)
         data = base.augmented(ICT_SHAPES)
-        markers = np.loadtxt(
-            ict / "markers_120.csv", delimiter=",", skiprows=1, usecols=(1, 2, 3)
-        ).reshape(-1, 3)
+        markers = ict.load_markers(folder)
         name = (
             f"ICT-{ICT_SHAPES}: ICT-FaceKit neutral ({data.num_vertices} vertices) + "
             f"{base.num_shapes} shapes augmented to {data.num_shapes}, {len(markers)} markers"
@@ -148,7 +135,7 @@ def worker(args: argparse.Namespace) -> dict[str, Any]:
     out["fps"] = len(frames) / total
     # Again into the now-warm result array (`out=`): what a pipeline solving chunk after chunk
     # into one buffer sees, without the first touch of fresh pages.
-    warm = np.asarray(res["vertices"])
+    warm = np.asarray(res.vertices)
     stamps = []
     t0 = time.perf_counter()
     model.core.solve(
@@ -158,7 +145,7 @@ def worker(args: argparse.Namespace) -> dict[str, Any]:
     out["solve_out_ms_median"] = float(np.median(per_warm))
     out["solve_out_ms_p95"] = float(np.percentile(per_warm, 95))
     out["frames"] = len(frames)
-    out["projected_fraction"] = float(np.asarray(res["choice_projected"]).mean())
+    out["projected_fraction"] = float(np.asarray(res.choice_projected).mean())
     out["peak_rss_mib"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
     # Messy capture, after the RSS reading (its result would add to the peak): a new set of
     # 1-3 missing markers on every frame (seeded), the worst case for the sewing plans (each
@@ -202,8 +189,8 @@ def worker(args: argparse.Namespace) -> dict[str, Any]:
     }
     x0 = data.neutral
     shapes0 = np.concatenate([np.zeros((1, *x0.shape), np.float32), data.shapes])
-    ch_s = np.asarray(res["choice_shapes"], dtype=np.int64)
-    ch_w = np.asarray(res["choice_weights"], dtype=np.float64)
+    ch_s = np.asarray(res.choice_shapes, dtype=np.int64)
+    ch_w = np.asarray(res.choice_weights, dtype=np.float64)
     nref = min(len(frames), 20 if args.quick else 50)
     times = []
     touched = []

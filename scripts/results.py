@@ -8,24 +8,25 @@ the machine that runs it (timings included).
 from __future__ import annotations
 
 import argparse
+import os
 import platform
 import time
 from pathlib import Path
 
-import numpy as np
-
 import lgi
 from lgi import evaluate as ev
+from lgi import ict as ict_data
 from lgi.dataset import sample_dataset
 from lgi.sample import make_sample
 
-ICT_SKIN = np.arange(9409)
+ICT_SKIN = ict_data.skin()
 
 
 def main() -> int:
     p = argparse.ArgumentParser()
     root = Path(__file__).resolve().parents[1]
-    p.add_argument("--ict-dir", default=str(root.parent / "shared" / "data" / "ict-facekit"))
+    found = ict_data.find(os.environ.get(ict_data.ENV), start=root)
+    p.add_argument("--ict-dir", default=str(found) if found else None)
     p.add_argument("--loo-shapes", type=int, default=0, help="0: every shape")
     p.add_argument("--out", default=str(root / "docs" / "results.md"))
     args = p.parse_args()
@@ -58,10 +59,9 @@ def main() -> int:
         "",
         ev.to_markdown(rows),
     ]
-    d = Path(args.ict_dir)
-    if (d / "generic_neutral_mesh.obj").is_file():
-        ict = lgi.Dataset.from_obj(d / "generic_neutral_mesh.obj", str(d / "shapes" / "*.obj"))
-        markers = np.loadtxt(d / "markers_120.csv", delimiter=",", skiprows=1, usecols=(1, 2, 3))
+    if args.ict_dir is not None and ict_data.is_ict(args.ict_dir):
+        ict = ict_data.load_dataset(args.ict_dir)
+        markers = ict_data.load_markers(args.ict_dir)
         frames, truth = ev.verification(ict, markers)
         methods = ev.default_methods(ict, markers)
         rows = ev.noise_sweep(
@@ -89,7 +89,7 @@ def main() -> int:
             ev.to_markdown(rows),
         ]
     else:
-        parts += [f"ICT-FaceKit not found at {d}: ICT sections skipped.", ""]
+        parts += [f"ICT-FaceKit not found at {args.ict_dir}: ICT sections skipped.", ""]
     parts.append(f"Total run time {time.perf_counter() - t_start:.0f} s.\n")
     Path(args.out).write_text("\n".join(parts))
     print("\n".join(parts))

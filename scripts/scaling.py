@@ -15,6 +15,7 @@ Usage: python scripts/scaling.py [--frames 60]
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 import time
 from pathlib import Path
@@ -22,6 +23,7 @@ from pathlib import Path
 import numpy as np
 
 import lgi
+from lgi import ict as ict_data
 from lgi.dataset import sample_dataset
 from lgi.sample import make_sample
 
@@ -55,7 +57,7 @@ def extra_markers(data: lgi.Dataset, n: int, seed: int = 1) -> np.ndarray:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--frames", type=int, default=60)
-    default = Path(__file__).resolve().parents[2] / "shared" / "data" / "ict-facekit"
+    default = ict_data.find(os.environ.get(ict_data.ENV), start=Path(__file__).parent)
     ap.add_argument("--ict", type=Path, default=default)
     args = ap.parse_args()
     print("| axis | size | vertices | shapes | markers | build (s) | solve median (ms/frame) |")
@@ -75,10 +77,8 @@ def main() -> None:
     for res in (110, 220, 440):
         s = make_sample(0, resolution=res, num_frames=args.frames)
         row("vertices", f"res {res}", sample_dataset(s), s.markers_rest, s.performance)
-    ict = lgi.Dataset.from_obj(
-        args.ict / "generic_neutral_mesh.obj", str(args.ict / "shapes" / "*.obj")
-    )
-    markers = np.loadtxt(args.ict / "markers_120.csv", delimiter=",", skiprows=1, usecols=(1, 2, 3))
+    ict = ict_data.load_dataset(args.ict)
+    markers = ict_data.load_markers(args.ict)
     # The 57 ICT shapes themselves stand for "60"; augmentation adds in-betweens first.
     for n in (57, 300, 1000):
         row("shapes", n, ict if n == ict.num_shapes else ict.augmented(n), markers)

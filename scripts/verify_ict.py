@@ -8,6 +8,7 @@ Usage: python scripts/verify_ict.py [--data ../shared/data/ict-facekit] [--out d
 from __future__ import annotations
 
 import argparse
+import os
 import resource
 import time
 from pathlib import Path
@@ -15,9 +16,10 @@ from pathlib import Path
 import numpy as np
 
 import lgi
+from lgi import ict as ict_data
 from lgi.dataset import without_shapes
 
-SKIN = 9409  # face skin: vertices 0..9408
+SKIN = ict_data.SKIN_VERTICES
 MOVED = 1e-3  # cm
 
 
@@ -39,20 +41,16 @@ def region(p: np.ndarray) -> str:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__)
-    default = Path(__file__).resolve().parents[2] / "shared" / "data" / "ict-facekit"
+    default = ict_data.find(os.environ.get(ict_data.ENV), start=Path(__file__).parent)
     ap.add_argument("--data", type=Path, default=default)
     ap.add_argument("--out", type=Path)
     ap.add_argument("--skip-loo", action="store_true")
     args = ap.parse_args()
 
     t0 = time.perf_counter()
-    data = lgi.Dataset.from_obj(
-        args.data / "generic_neutral_mesh.obj", str(args.data / "shapes" / "*.obj")
-    )
+    data = ict_data.load_dataset(args.data)
     t_load = time.perf_counter() - t0
-    markers = np.loadtxt(
-        args.data / "markers_120.csv", delimiter=",", skiprows=1, usecols=(1, 2, 3)
-    )
+    markers = ict_data.load_markers(args.data)
     t0 = time.perf_counter()
     model = lgi.Model.build(data, markers)
     t_build = time.perf_counter() - t0

@@ -14,20 +14,13 @@ settings.register_profile("ci", max_examples=60, deadline=None, derandomize=True
 settings.register_profile("dev", max_examples=30, deadline=None)
 settings.load_profile("ci" if os.environ.get("CI") else "dev")
 
-ICT_SKIN = 9409  # face skin is vertices 0..9408 (../shared/data/README.md)
-
-
-def shared_data() -> Path:
-    env = os.environ.get("LGI_SHARED_DATA")
-    if env:
-        return Path(env)
-    return Path(__file__).resolve().parents[2] / "shared" / "data"
-
 
 def ict_dir() -> Path:
-    d = shared_data() / "ict-facekit"
-    if not (d / "generic_neutral_mesh.obj").is_file():
-        pytest.skip(f"ICT-FaceKit data not found at {d} (set LGI_SHARED_DATA to its parent)")
+    from lgi import ict
+
+    d = ict.find(os.environ.get(ict.ENV), start=Path(__file__).parent)
+    if d is None:
+        pytest.skip(f"ICT-FaceKit data not found (set {ict.ENV} to its parent folder)")
     return d
 
 
@@ -38,16 +31,16 @@ def ict_path() -> Path:
 
 @pytest.fixture(scope="session")
 def ict_dataset(ict_path: Path):  # type: ignore[no-untyped-def]
-    import lgi
+    from lgi import ict
 
-    return lgi.Dataset.from_obj(
-        ict_path / "generic_neutral_mesh.obj", str(ict_path / "shapes" / "*.obj")
-    )
+    return ict.load_dataset(ict_path)
 
 
 @pytest.fixture(scope="session")
 def ict_markers(ict_path: Path) -> np.ndarray:
-    return np.loadtxt(ict_path / "markers_120.csv", delimiter=",", skiprows=1, usecols=(1, 2, 3))
+    from lgi import ict
+
+    return ict.load_markers(ict_path)
 
 
 @pytest.fixture(scope="session")

@@ -10,26 +10,11 @@ import numpy as np
 import pytest
 
 import lgi
+import lgi.ict
 
-
-def _shared_data() -> Path | None:
-    """The shared data folder: $LGI_SHARED_DATA, else ../shared/data next to the repository
-    (or next to any ancestor, for git worktrees)."""
-    candidates = []
-    if os.environ.get("LGI_SHARED_DATA"):
-        candidates.append(Path(os.environ["LGI_SHARED_DATA"]))
-    here = Path(__file__).resolve()
-    candidates.append(here.parents[1] / ".." / "shared" / "data")
-    candidates += [p / "shared" / "data" for p in here.parents]
-    for c in candidates:
-        if (c / "ict-facekit" / "generic_neutral_mesh.obj").is_file():
-            return c
-    return None
-
-
-SHARED = _shared_data()
+ICT = lgi.ict.find(os.environ.get(lgi.ict.ENV), start=Path(__file__).parent)
 needs_ict = pytest.mark.skipif(
-    SHARED is None, reason="ICT FaceKit data not found (set LGI_SHARED_DATA or ../shared/data)"
+    ICT is None, reason=f"ICT FaceKit data not found (set {lgi.ict.ENV} or ../shared/data)"
 )
 
 NEUTRAL = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], dtype=np.float64)
@@ -52,7 +37,8 @@ def _write_obj(path: Path, verts, faces: str = "f 1 2 3\n") -> Path:
 
 @needs_ict
 def test_ict_neutral_and_shapes_load_by_glob():
-    ict = SHARED / "ict-facekit"
+    ict = ICT
+    assert ict is not None
     t = time.perf_counter()
     d = lgi.Dataset.from_obj(ict / "generic_neutral_mesh.obj", str(ict / "shapes" / "*.obj"))
     elapsed = time.perf_counter() - t
@@ -67,7 +53,8 @@ def test_ict_neutral_and_shapes_load_by_glob():
 
 @needs_ict
 def test_ict_shape_list_equals_glob_and_displacements_match_the_files():
-    ict = SHARED / "ict-facekit"
+    ict = ICT
+    assert ict is not None
     files = sorted((ict / "shapes").glob("jaw*.obj"))
     d = lgi.Dataset.from_obj(ict / "generic_neutral_mesh.obj", files)
     g = lgi.Dataset.from_obj(ict / "generic_neutral_mesh.obj", ict / "shapes" / "jaw*.obj")

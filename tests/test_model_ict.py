@@ -8,7 +8,7 @@ import pytest
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
-from conftest import ICT_SKIN
+from lgi.ict import SKIN_VERTICES as ICT_SKIN
 
 MOVED = 1e-3  # cm: a bundle "moved" by a shape (issue acceptance)
 

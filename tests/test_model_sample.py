@@ -120,6 +120,43 @@ def test_bad_build_config_raises_input_error_naming_the_field(sample, sample_dat
         )
 
 
+def test_build_config_defaults_are_the_cores_and_every_field_survives_save_and_load(  # type: ignore[no-untyped-def]
+    sample, sample_dataset, sample_model, tmp_path
+):
+    # A model built without a config uses the core's Default; lgi.BuildConfig() must equal it.
+    assert sample_model.core.config == lgi.BuildConfig()
+    fields = lgi.BuildConfig().to_dict()
+    changed = {
+        k: (v + 1 if isinstance(v, int) else (v * 1.5 if np.isfinite(v) else 3.0))
+        for k, v in fields.items()
+    }
+    custom = lgi.BuildConfig(**changed)
+    assert custom.to_dict() == changed
+    model = lgi.Model.build(sample_dataset, sample.markers_rest, custom)
+    model.save(tmp_path / "custom.lgi")
+    assert lgi.Model.load(tmp_path / "custom.lgi").config == custom
+
+
+def test_build_config_is_a_frozen_value_with_keyword_fields():
+    import copy
+    import pickle
+
+    c = lgi.BuildConfig(max_tets=5000, detour_ratio=float("inf"))
+    assert c.max_tets == 5000 and c.detour_ratio == float("inf")
+    assert c == lgi.BuildConfig().replace(max_tets=5000, detour_ratio=float("inf"))
+    assert c != lgi.BuildConfig() and hash(c) == hash(copy.copy(c))
+    assert pickle.loads(pickle.dumps(c)) == c
+    assert repr(c).startswith("BuildConfig(surface_tolerance=0.02, ") and "max_tets=5000" in repr(c)
+    with pytest.raises(AttributeError):
+        c.max_tets = 1  # type: ignore[misc]
+    with pytest.raises(lgi.InputError, match=r"BuildConfig\.max_tets: expected a non-negative"):
+        lgi.BuildConfig(max_tets=-1)
+    with pytest.raises(lgi.InputError, match=r"BuildConfig\.min_quality: expected a number"):
+        lgi.BuildConfig(min_quality="high")  # type: ignore[arg-type]
+    with pytest.raises(lgi.InputError, match="no field 'tets'"):
+        c.replace(tets=3)
+
+
 def test_inputs_are_not_modified(sample, sample_model):  # type: ignore[no-untyped-def]
     frames = sample.performance[:5].copy()
     before = frames.copy()

@@ -13,15 +13,8 @@ from numpy.typing import NDArray
 from scipy.spatial.transform import Rotation
 
 from lgi.errors import DatasetError, DatasetFileError, InputError
-from lgi.sample import (
-    Sample,
-    describe,
-    jaw_transform,
-    load_sample,
-    make_sample,
-    save_sample,
-    skin_jaw,
-)
+from lgi.jaw import JawRig
+from lgi.sample import Sample, describe, load_sample, make_sample, save_sample
 
 F64 = NDArray[np.float64]
 
@@ -244,7 +237,7 @@ def test_jaw_shapes_are_rigid_motions_about_the_pivot(sample: Sample) -> None:
     i, j = chin[0], chin[-1]
     d0 = np.linalg.norm(sample.neutral[i] - sample.neutral[j])
     assert abs(np.linalg.norm(moved[0] - moved[-1]) - d0) < 1e-5
-    exact = skin_jaw(sample.neutral, theta, sample.jaw_pivot, sample.jaw_weights)
+    exact = JawRig(sample.jaw_pivot, sample.jaw_weights).skin(sample.neutral, theta)
     assert abs(np.linalg.norm(exact[i] - exact[j]) - d0) < 1e-9
     others = ~np.isin(sample.names, ["jawOpen", "jawLeft", "jawRight", "jawForward"])
     assert np.all(sample.shape_jaw_theta[others] == 0.0)
@@ -268,14 +261,15 @@ def test_jaw_weights_split_the_lips_and_hold_chin_and_brow(sample: Sample) -> No
 def test_skin_jaw_with_full_weight_is_rigid(theta: tuple[float, float, float], seed: int) -> None:
     pts = np.random.default_rng(seed).normal(0.0, 5.0, (6, 3))
     th = np.array(theta)
-    out = skin_jaw(pts, th, np.array([0.0, -1.5, 3.0]), np.ones(6))
+    rig = JawRig(np.array([0.0, -1.5, 3.0]), np.ones(6))
+    out = rig.skin(pts, th)
     d_in = np.linalg.norm(pts[:, None] - pts[None], axis=2)
     d_out = np.linalg.norm(out[:, None] - out[None], axis=2)
     np.testing.assert_allclose(d_out, d_in, atol=1e-9)
-    r, _ = jaw_transform(th)
+    r, _ = rig.transform(th)
     np.testing.assert_allclose(r @ r.T, np.eye(3), atol=1e-12)
     assert np.linalg.det(r) == pytest.approx(1.0)
-    np.testing.assert_array_equal(skin_jaw(pts, np.zeros(3), np.zeros(3), np.ones(6)), pts)
+    np.testing.assert_array_equal(JawRig(np.zeros(3), np.ones(6)).skin(pts, np.zeros(3)), pts)
 
 
 def test_left_and_right_shapes_mirror_each_other(sample: Sample) -> None:

@@ -2,12 +2,22 @@
 
 import os
 from collections.abc import Callable, Sequence
-from typing import Any, final
+from typing import TypedDict, final
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
+from typing_extensions import NotRequired, Self, disjoint_base
 
-__all__ = ["BlendshapeSolver", "Dataset", "Model", "RbfInterpolator", "__version__"]
+__all__ = [
+    "BlendshapeSolver",
+    "BuildConfig",
+    "Dataset",
+    "JawRig",
+    "Model",
+    "RbfInterpolator",
+    "SolveOutput",
+    "__version__",
+]
 
 __version__: str
 
@@ -64,6 +74,123 @@ class Dataset:
         """(T, 3) UV indices (empty when the mesh has no UVs)."""
 
 @final
+class BuildConfig:
+    """Build parameters (the core's defaults; fields documented on the class at runtime)."""
+
+    def __new__(
+        cls,
+        surface_tolerance: float | None = None,
+        prune_motion: float | None = None,
+        duplicate_distance: float | None = None,
+        tet_neighbours: int | None = None,
+        max_tets: int | None = None,
+        min_quality: float | None = None,
+        max_edge: float | None = None,
+        containment_eps: float | None = None,
+        projection_candidates: int | None = None,
+        temporal_weight: float | None = None,
+        detour_ratio: float | None = None,
+    ) -> BuildConfig: ...
+    @property
+    def surface_tolerance(self) -> float: ...
+    @property
+    def prune_motion(self) -> float: ...
+    @property
+    def duplicate_distance(self) -> float: ...
+    @property
+    def tet_neighbours(self) -> int: ...
+    @property
+    def max_tets(self) -> int: ...
+    @property
+    def min_quality(self) -> float: ...
+    @property
+    def max_edge(self) -> float: ...
+    @property
+    def containment_eps(self) -> float: ...
+    @property
+    def projection_candidates(self) -> int: ...
+    @property
+    def temporal_weight(self) -> float: ...
+    @property
+    def detour_ratio(self) -> float: ...
+    def replace(self, **changes: float) -> BuildConfig: ...
+    def to_dict(self) -> dict[str, float | int]: ...
+    def __eq__(self, other: object, /) -> bool: ...
+    def __hash__(self) -> int: ...
+    def __getnewargs_ex__(self) -> tuple[tuple[()], dict[str, float | int]]: ...
+
+@disjoint_base
+class JawRig:
+    """Two-bone jaw rig: pivot, per-vertex weights, axes (``frame`` columns)."""
+
+    def __new__(
+        cls, pivot: ArrayLike, weights: ArrayLike, frame: ArrayLike | None = None
+    ) -> Self: ...
+    @property
+    def pivot(self) -> NDArray[np.float64]: ...
+    @property
+    def weights(self) -> NDArray[np.float64]: ...
+    @property
+    def frame(self) -> NDArray[np.float64]: ...
+    @property
+    def num_vertices(self) -> int: ...
+    def transform(self, theta: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """R (3, 3), t (3,): a weight-1 point moves to R (p - pivot) + pivot + t."""
+    def skin(
+        self, points: ArrayLike, theta: ArrayLike, weights: ArrayLike | None = None
+    ) -> NDArray[np.float64]:
+        """(N, 3) points to pose (3,), or (F, N, 3) to (3,) or (F, 3) poses."""
+    def unskin(
+        self, points: ArrayLike, theta: ArrayLike, weights: ArrayLike | None = None
+    ) -> NDArray[np.float64]:
+        """The exact inverse of ``skin``."""
+
+@final
+class SolveOutput:
+    """What ``Model.solve`` returns (``lgi.Model.solve`` turns it into ``lgi.SolveResult``)."""
+
+    @property
+    def vertices(self) -> NDArray[np.float64]: ...
+    @property
+    def bundle_residuals(self) -> NDArray[np.float64]: ...
+    @property
+    def bundle_positions(self) -> NDArray[np.float64]: ...
+    @property
+    def choice_shapes(self) -> NDArray[np.int64]: ...
+    @property
+    def choice_weights(self) -> NDArray[np.float64]: ...
+    @property
+    def choice_tets(self) -> NDArray[np.int64]: ...
+    @property
+    def choice_projected(self) -> NDArray[np.bool_]: ...
+    @property
+    def missing(self) -> NDArray[np.bool_]: ...
+    @property
+    def jaw_bin(self) -> NDArray[np.int64]: ...
+
+# The dicts the inspection methods return, key by key (they exist only in this stub).
+class _BundleStats(TypedDict):
+    points: NDArray[np.int64]
+    tets: NDArray[np.int64]
+    index_bytes: NDArray[np.int64]
+
+class _SewWeights(TypedDict):
+    indptr: NDArray[np.int64]
+    indices: NDArray[np.int64]
+    data: NDArray[np.float64]
+
+class _SurfacePoints(TypedDict):
+    triangles: NDArray[np.int64]
+    barycentrics: NDArray[np.float64]
+
+class _JawSetup(TypedDict):
+    shape_theta: NDArray[np.float64]
+    bundle_weights: NDArray[np.float64]
+    bin_edges: NotRequired[NDArray[np.float64]]
+    bin_overlap: NotRequired[float]
+    bin_members: NotRequired[list[list[int]]]
+
+@final
 class Model:
     """A built LGI model (immutable, thread-safe). Use ``lgi.Model``, which wraps this."""
 
@@ -71,7 +198,7 @@ class Model:
     def build(
         dataset: Dataset,
         markers_rest: ArrayLike,
-        config: dict[str, Any] | None = None,
+        config: BuildConfig | None = None,
         jaw_pivot: ArrayLike | None = None,
         jaw_weights: ArrayLike | None = None,
         shape_theta: ArrayLike | None = None,
@@ -79,7 +206,7 @@ class Model:
         bin_overlap: float = 0.0,
         jaw_frame: ArrayLike | None = None,
     ) -> Model:
-        """Builds a model; ``config`` holds ``lgi.BuildConfig`` fields; ``jaw_bins`` are bin
+        """Builds a model (``config`` None: the defaults); ``jaw_bins`` are bin
         edges over the jaw opening (radians); ``jaw_frame`` (3, 3) is the jaw rig's rotation
         (columns: open, lateral, forward axes; None: identity)."""
     @staticmethod
@@ -97,6 +224,10 @@ class Model:
     def dataset(self) -> Dataset: ...
     @property
     def markers_rest(self) -> NDArray[np.float64]: ...
+    @property
+    def jaw_rig(self) -> JawRig | None: ...
+    @property
+    def config(self) -> BuildConfig: ...
     def solve(
         self,
         frames: ArrayLike,
@@ -105,27 +236,22 @@ class Model:
         jaw_theta: ArrayLike | None = None,
         smooth_window: int = 0,
         out: NDArray[np.float64] | None = None,
-    ) -> dict[str, NDArray[Any]]:
-        """Solves (F, B, 3) frames; returns arrays keyed by name (vertices into `out` if given)."""
+    ) -> SolveOutput:
+        """Solves (F, B, 3) frames (vertices into `out` if given)."""
     def bundle_positions(self, meshes: ArrayLike) -> NDArray[np.float64]:
         """(F, V, 3) meshes -> (F, B, 3) bundle surface positions."""
-    def bundle_stats(self) -> dict[str, NDArray[np.int64]]:
+    def bundle_stats(self) -> _BundleStats:
         """Per bundle: ``points``, ``tets``, ``index_bytes``."""
-    def sew_weights(self) -> dict[str, NDArray[Any]]:
+    def sew_weights(self) -> _SewWeights:
         """CSR sewing weights: ``indptr``, ``indices``, ``data``."""
     def neighbours(self) -> list[list[int]]:
         """Natural neighbours of each bundle."""
-    def bundle_surface_points(self) -> dict[str, NDArray[Any]]:
+    def bundle_surface_points(self) -> _SurfacePoints:
         """``triangles`` (B,) and ``barycentrics`` (B, 3)."""
-    def jaw(self) -> dict[str, Any] | None:
-        """``pivot``, ``frame`` (3, 3; columns the jaw's axes), ``weights``, ``shape_theta``,
-        ``bundle_weights`` and, for a binned model, ``bin_edges``, ``bin_overlap``,
-        ``bin_members`` (dataset shapes per bin); None without a jaw."""
-    def jaw_skin(
-        self, points: ArrayLike, theta: ArrayLike, inverse: bool = False
-    ) -> NDArray[np.float64]:
-        """(V, 3) vertices skinned to jaw pose ``theta`` (3,) with the rig's weights
-        (``inverse``: unskinned)."""
+    def jaw(self) -> _JawSetup | None:
+        """``shape_theta``, ``bundle_weights`` and, for a binned model, ``bin_edges``,
+        ``bin_overlap``, ``bin_members`` (dataset shapes per bin); None without a jaw (the rig
+        itself is ``jaw_rig``)."""
     def bundle_uvs(self) -> NDArray[np.float64]:
         """(B, 2) bundle positions in UV."""
 

@@ -11,13 +11,17 @@
   UV distance (no Sibson sewing), plus an RBF correction of the residuals so every marker is
   interpolated: isolates what LGI's sewing contributes.
 
+Each baseline has one name: the class name here, with `label` the name in result tables (and
+`lgi.evaluate`'s method keys). The Rust kernels behind them are named for what they compute
+(`RbfInterpolator`, `BlendshapeSolver`, in `lgi_core::baselines` and `lgi._lgi` alike).
+
 Every result's `Choices` holds -1 shapes and 0 weights where the method has no choice
 (`DisplacementInterpolation`, `BlendshapeFit`); `LgiRbf` reports LGI's choices.
 """
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -104,6 +108,8 @@ class DisplacementInterpolation:
     so the output passes through every present marker exactly. Missing markers (NaN) are
     refitted without them (the factorisation is cached per missing set)."""
 
+    label: ClassVar[str] = "displacement interpolation"
+
     def __init__(
         self, dataset: Dataset, markers_rest: ArrayLike, surface_tolerance: float = 0.02
     ) -> None:
@@ -130,6 +136,8 @@ class BlendshapeFit:
     + penalty * sum(min(w, 0)^2 + max(w - 1, 0)^2), A (3B x S) the shapes' displacements at the
     markers. `l2` and `penalty` are relative to the mean diagonal of A^T A. Missing markers drop
     their rows. Output: x0 + sum_k w_k s_k."""
+
+    label: ClassVar[str] = "blendshape fit"
 
     def __init__(
         self,
@@ -193,6 +201,8 @@ class LgiRbf:
     """LGI's per-bundle choices spread by normalised Gaussian weights over UV distance, then a
     biharmonic RBF correction of the residuals so the result interpolates every marker.
     `sigma` (UV units) defaults to the mean nearest-neighbour distance between bundle UVs."""
+
+    label: ClassVar[str] = "LGI-RBF"
 
     def __init__(
         self,

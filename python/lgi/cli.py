@@ -1,8 +1,10 @@
-"""The `lgi` command line: `lgi demo` runs the whole pipeline on the built-in sample."""
+"""The `lgi` command line: argument (and environment) handling only. `lgi demo` runs the whole
+pipeline on the built-in sample (`lgi.demo`); `lgi evaluate` a protocol (`lgi.evaluate`)."""
 
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 from collections.abc import Sequence
 from pathlib import Path
@@ -17,9 +19,12 @@ def _cmd_demo(args: argparse.Namespace) -> int:
 
 
 def _cmd_evaluate(args: argparse.Namespace) -> int:
-    from lgi import evaluate
+    from lgi import evaluate, ict
 
-    rows = evaluate.run_protocol(args.data, args.protocol, args.out, args.ict_dir)
+    ict_dir = args.ict_dir
+    if args.data == "ict" and ict_dir is None:
+        ict_dir = ict.find(os.environ.get(ict.ENV))
+    rows = evaluate.run_protocol(args.data, args.protocol, args.out, ict_dir)
     print(evaluate.to_markdown(rows), end="")
     print(f"wrote {args.out}/results.md and {args.out}/results.csv")
     return 0
@@ -50,7 +55,12 @@ def build_parser() -> argparse.ArgumentParser:
         default="performance",
     )
     ev.add_argument("--out", default="lgi-evaluate-output", help="output folder (created)")
-    ev.add_argument("--ict-dir", default=None, help="ICT-FaceKit folder (for --data ict)")
+    ev.add_argument(
+        "--ict-dir",
+        default=None,
+        help="ICT-FaceKit folder (for --data ict; default: ict-facekit under $LGI_SHARED_DATA, "
+        "else under shared/data beside the working directory)",
+    )
     ev.set_defaults(func=_cmd_evaluate)
     return p
 

@@ -1,17 +1,85 @@
-"""Dataset tooling on top of `lgi.Dataset`: the built-in sample as a dataset, and datasets with
-shapes left out (leave-one-out protocols)."""
+"""Dataset tooling on top of `lgi.Dataset`: the `.npz` layout (numpy's format, so read and
+written here; `Dataset.from_npz`/`to_npz` forward to `read_npz`/`write_npz`), the built-in
+sample as a dataset, and datasets with shapes left out (leave-one-out protocols)."""
 
 from __future__ import annotations
 
+import os
 from collections.abc import Iterable
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from lgi._lgi import Dataset
+from lgi.errors import DatasetError, DatasetFileError, InputError
 
 if TYPE_CHECKING:
     from lgi.sample import Sample
+
+
+NPZ_KEYS = ("neutral", "triangles", "shapes", "names", "uvs", "uv_triangles")
+"""Arrays of the `.npz` layout: `neutral` (V, 3) float and `triangles` (T, 3) int, then the
+optional `shapes` (S, V, 3) float displacements, `names` (S,) str, `uvs` (U, 2) float and
+`uv_triangles` (T, 3) int (empty `uvs` and `uv_triangles` mean no UVs)."""
+
+
+def read_npz(path: str | os.PathLike[str]) -> Dataset:
+    """Loads an `.npz` archive of the `NPZ_KEYS` layout (read with `allow_pickle=False`).
+    Errors name the file: `DatasetFileError` when it cannot be read, `DatasetError` when it is
+    not an archive or its content is invalid."""
+    name = os.fspath(path)
+    try:
+        npz = np.load(name, allow_pickle=False)
+    except OSError as e:
+        raise DatasetFileError(f"cannot read {name}: {e}") from e
+    except Exception as e:  # garbled archive, pickled data: numpy raises various classes
+        raise DatasetError(f"{name}: not a readable .npz archive: {e}") from e
+    if not isinstance(npz, np.lib.npyio.NpzFile):
+        raise DatasetError(f"{name}: not an .npz archive (a single .npy array?)")
+    with npz:
+        arrays: dict[str, Any] = {}
+        for key in NPZ_KEYS:
+            if key in npz.files:
+                try:
+                    arrays[key] = npz[key]
+                except Exception as e:
+                    raise DatasetError(f"{name}: array '{key}': {e}") from e
+    for key in NPZ_KEYS[:2]:
+        if key not in arrays:
+            raise DatasetError(f"{name}: missing array '{key}' (the archive has {npz.files})")
+    uvs, uv_triangles = arrays.get("uvs"), arrays.get("uv_triangles")
+    if (uvs is None or uvs.size == 0) and (uv_triangles is None or uv_triangles.size == 0):
+        uvs = uv_triangles = None
+    try:
+        return Dataset.from_arrays(
+            arrays["neutral"],
+            arrays["triangles"],
+            arrays.get("shapes"),
+            names=arrays.get("names"),
+            uvs=uvs,
+            uv_triangles=uv_triangles,
+        )
+    except InputError as e:
+        # Bad content is a fault of the file, not of an argument: re-raise naming the file.
+        raise DatasetError(f"{name}: {e}") from e
+
+
+def write_npz(dataset: Dataset, path: str | os.PathLike[str]) -> None:
+    """Writes `dataset` as a compressed `.npz` archive of the `NPZ_KEYS` layout (numpy appends
+    `.npz` to `path` when it has no such suffix)."""
+    name = os.fspath(path)
+    try:
+        np.savez_compressed(
+            name,
+            neutral=dataset.neutral,
+            triangles=dataset.triangles,
+            shapes=dataset.shapes,
+            names=np.array(dataset.names).astype("str"),
+            uvs=dataset.uvs,
+            uv_triangles=dataset.uv_triangles,
+        )
+    except OSError as e:
+        raise DatasetFileError(f"cannot read {name}: {e}") from e
 
 
 def sample_dataset(sample: Sample) -> Dataset:

@@ -99,9 +99,9 @@ def _compare(out: Path, sample, data: Dataset, model: Model, result, t_solve: fl
 
     _say(quiet, "comparing with the baselines ...")
     methods: dict[str, DisplacementInterpolation | BlendshapeFit | LgiRbf] = {
-        "displacement interpolation": DisplacementInterpolation(data, sample.markers_rest),
-        "blendshape fit": BlendshapeFit(data, sample.markers_rest),
-        "LGI-RBF": LgiRbf(data, sample.markers_rest),
+        DisplacementInterpolation.label: DisplacementInterpolation(data, sample.markers_rest),
+        BlendshapeFit.label: BlendshapeFit(data, sample.markers_rest),
+        LgiRbf.label: LgiRbf(data, sample.markers_rest),
     }
     perf, truth = sample.performance, sample.truth
     rows, verts = [], {}

@@ -97,7 +97,7 @@ def evaluate(
     temporal: bool = True,
 ) -> list[Row]:
     """Solves `frames` (F, B, 3) with every method and scores it against `truth` (F, V, 3) on
-    the vertices `region` (default all; ICT: the face skin, vertices 0..9408)."""
+    the vertices `region` (default all; ICT: the face skin, `lgi.ict.skin()`)."""
     fr = np.asarray(frames, dtype=np.float64)
     tr = np.asarray(truth, dtype=np.float64)
     rows = []
@@ -252,19 +252,21 @@ def default_methods(dataset: Dataset, markers: ArrayLike) -> dict[str, Solver]:
 
     lgi_rbf = LgiRbf(dataset, markers)
     return {
-        "displacement interpolation": DisplacementInterpolation(dataset, markers),
-        "blendshape fit": BlendshapeFit(dataset, markers),
-        "LGI-RBF": lgi_rbf,
+        DisplacementInterpolation.label: DisplacementInterpolation(dataset, markers),
+        BlendshapeFit.label: BlendshapeFit(dataset, markers),
+        LgiRbf.label: lgi_rbf,
         "LGI": lgi_rbf.model,
     }
 
 
 def run_protocol(
-    data: str, protocol: str, out: str | os.PathLike[str], ict_dir: str | None = None
+    data: str, protocol: str, out: str | os.PathLike[str], ict_dir: str | os.PathLike[str] | None
 ) -> list[Row]:
-    """The `lgi evaluate` command: writes results.md and results.csv into `out`."""
+    """Runs `protocol` on `data` ("sample", or "ict" read from the folder `ict_dir`) and writes
+    results.md and results.csv into `out`."""
     from pathlib import Path
 
+    from lgi import ict
     from lgi.errors import InputError
     from lgi.sample import make_sample
 
@@ -277,14 +279,15 @@ def run_protocol(
         markers: F64 = s.markers_rest
         perf: tuple[F64, F64] | None = (s.performance, s.truth)
     elif data == "ict":
-        d = Path(
-            ict_dir
-            or str(Path(os.environ.get("LGI_SHARED_DATA", "../shared/data")) / "ict-facekit")
-        )
-        ds = Dataset.from_obj(d / "generic_neutral_mesh.obj", str(d / "shapes" / "*.obj"))
-        markers = np.loadtxt(d / "markers_120.csv", delimiter=",", skiprows=1, usecols=(1, 2, 3))
+        if ict_dir is None:
+            raise InputError(
+                f"ICT-FaceKit data not found: give its folder (--ict-dir) or set ${ict.ENV} "
+                "to the folder above it"
+            )
+        ds = ict.load_dataset(ict_dir)
+        markers = ict.load_markers(ict_dir)
         perf = None
-        region = np.arange(9409)
+        region = ict.skin()
     else:
         raise InputError(f"unknown data '{data}' (sample or ict)")
     if protocol == "loo":

@@ -1,26 +1,28 @@
-"""Jaw rig tooling: two-bone skinning (skull fixed, jaw rigid about a pivot), rig estimation from a
-dataset's jaw shapes, and per-frame jaw tracking from bundles.
+"""Jaw rig tooling: rig estimation from a dataset's jaw shapes, jaw pose (theta) fitting and
+per-frame jaw tracking from bundles. The skinning itself (two bones: skull fixed, jaw rigid about
+a pivot) is the Rust core's, through `lgi._lgi.JawRig`, which `JawRig` extends.
 
-The conventions are those of `lgi.sample` and of the Rust core (`lgi_core::jaw`): theta =
-(open angle rad, lateral angle rad, forward translation) maps p to
+The conventions are the core's (`lgi_core::jaw`): theta = (open angle rad, lateral angle rad,
+forward translation) maps p to
 
     T(theta)(p) = F R(theta) F^T (p - pivot) + pivot + F (0, 0, forward),
     R(theta) = R_y(lateral) @ R_x(open),
 
-with F the rig's `frame` (identity by default; the Rust core takes any rotation). A vertex with
-jaw weight w is skinned to p + w (T(theta)(p) - p) (linear blend skinning, Eq. 2 of the paper);
-`unskin` inverts that blended affine map exactly. numpy only.
+with F the rig's `frame` (identity by default). A vertex with jaw weight w is skinned to
+p + w (T(theta)(p) - p) (linear blend skinning, Eq. 2 of the paper); `unskin` inverts that
+blended affine map exactly. `fit_theta` differentiates R(theta) here, for its Jacobian.
 """
 
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from lgi import _lgi
 from lgi.errors import InputError
 
 F64 = NDArray[np.float64]
@@ -35,10 +37,8 @@ __all__ = [
     "track_jaw",
 ]
 
-# Lower teeth of the ICT-FaceKit model (0-based, inclusive): the jaw's only truly rigid part.
-ICT_LOWER_TEETH = (19247, 21450)
 
-
+# R_x, R_y and their derivatives: the Jacobian of the core's rotation R_y(lateral) R_x(open).
 def _rx(a: float) -> F64:
     c, s = np.cos(a), np.sin(a)
     return np.array([[1.0, 0.0, 0.0], [0.0, c, -s], [0.0, s, c]])
@@ -75,86 +75,11 @@ def _points(points: ArrayLike, what: str = "points") -> F64:
     return p
 
 
-@dataclass(eq=False)
-class JawRig:
+class JawRig(_lgi.JawRig):
     """Pivot, per-vertex jaw weights and the jaw's axes (`frame` columns: open axis, lateral
-    axis, forward direction; identity means x, y, z as in `lgi.sample`)."""
-
-    pivot: F64
-    """(3,) centre of the jaw rotation."""
-    weights: F64
-    """(V,) jaw weight of each vertex in [0, 1]."""
-    frame: F64 = field(default_factory=lambda: np.eye(3))
-    """(3, 3) rotation whose columns are the open, lateral and forward axes."""
-
-    def __post_init__(self) -> None:
-        self.pivot = np.asarray(self.pivot, dtype=np.float64)
-        self.weights = np.asarray(self.weights, dtype=np.float64)
-        self.frame = np.asarray(self.frame, dtype=np.float64)
-        if self.pivot.shape != (3,) or not np.all(np.isfinite(self.pivot)):
-            raise InputError(f"pivot must be a finite (3,) vector, got {self.pivot!r}")
-        if self.weights.ndim != 1:
-            raise InputError(f"weights must have shape (V,), got {self.weights.shape}")
-        bad = np.flatnonzero(
-            ~(np.isfinite(self.weights) & (self.weights >= 0) & (self.weights <= 1))
-        )
-        if bad.size:
-            raise InputError(
-                f"jaw weight of vertex {bad[0]} must be finite and in [0, 1], "
-                f"got {self.weights[bad[0]]}"
-            )
-        f = self.frame
-        if (
-            f.shape != (3, 3)
-            or not np.all(np.isfinite(f))
-            or not np.allclose(f.T @ f, np.eye(3), atol=1e-9)
-            or np.linalg.det(f) < 0
-        ):
-            raise InputError("frame must be a (3, 3) rotation matrix")
-
-    @property
-    def num_vertices(self) -> int:
-        """Number of vertices V the rig has weights for."""
-        return int(self.weights.shape[0])
-
-    def transform(self, theta: ArrayLike) -> tuple[F64, F64]:
-        """World rotation R and translation t of the rigid jaw: T(p) = R (p - pivot) + pivot + t."""
-        th = _theta(theta)
-        f = self.frame
-        r = f @ _ry(th[1]) @ _rx(th[0]) @ f.T
-        return r, f[:, 2] * th[2]
-
-    def _weights_for(self, n: int, weights: ArrayLike | None) -> F64:
-        w = self.weights if weights is None else np.asarray(weights, dtype=np.float64)
-        if w.shape != (n,):
-            raise InputError(f"weights must have shape ({n},), got {w.shape}")
-        return w
-
-    def skin(self, points: ArrayLike, theta: ArrayLike, weights: ArrayLike | None = None) -> F64:
-        """Skin (N, 3) points with their jaw weights (default: the rig's, N = V).
-
-        Written as p + w (T(p) - p) so that theta = 0 or w = 0 returns the points bit for bit.
-        """
-        p = _points(points)
-        w = self._weights_for(p.shape[0], weights)
-        r, t = self.transform(theta)
-        moved = (p - self.pivot) @ (r - np.eye(3)).T + t
-        return p + w[:, None] * moved
-
-    def unskin(self, points: ArrayLike, theta: ArrayLike, weights: ArrayLike | None = None) -> F64:
-        """Exact inverse of `skin`: solves ((1 - w) I + w R) q = y - pivot - w t per point."""
-        y = _points(points)
-        w = self._weights_for(y.shape[0], weights)
-        r, t = self.transform(theta)
-        m = np.eye(3)[None] + w[:, None, None] * (r - np.eye(3))[None]
-        rhs = y - self.pivot - w[:, None] * t
-        q = np.linalg.solve(m, rhs[:, :, None])[:, :, 0]
-        # One step of iterative refinement brings the round trip to the forward map's rounding.
-        q += np.linalg.solve(m, (rhs - np.einsum("nij,nj->ni", m, q))[:, :, None])[:, :, 0]
-        out = self.pivot + q
-        still = w == 0
-        out[still] = y[still]
-        return out
+    axis, forward direction; identity means x, y, z as in `lgi.sample`): `JawRig(pivot,
+    weights, frame=None)`. Skinning (`skin`, `unskin`, `transform`) is the core's; this class
+    adds the dataset-side tooling."""
 
     def unskin_displacements(
         self, neutral: ArrayLike, displacements: ArrayLike, theta: ArrayLike
@@ -186,11 +111,7 @@ class JawRig:
 
     def to_dict(self) -> dict[str, F64]:
         """Arrays for `np.savez` (keys `jaw_pivot`, `jaw_weights`, `jaw_frame`)."""
-        return {
-            "jaw_pivot": self.pivot.copy(),
-            "jaw_weights": self.weights.copy(),
-            "jaw_frame": self.frame.copy(),
-        }
+        return {"jaw_pivot": self.pivot, "jaw_weights": self.weights, "jaw_frame": self.frame}
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> JawRig:
@@ -198,12 +119,13 @@ class JawRig:
         missing = [k for k in ("jaw_pivot", "jaw_weights") if k not in d]
         if missing:
             raise InputError(f"jaw rig is missing {', '.join(missing)}")
-        frame = d["jaw_frame"] if "jaw_frame" in d else np.eye(3)
-        return cls(
-            pivot=np.array(d["jaw_pivot"]),
-            weights=np.array(d["jaw_weights"]),
-            frame=np.array(frame),
-        )
+        frame = d["jaw_frame"] if "jaw_frame" in d else None
+        return cls(np.array(d["jaw_pivot"]), np.array(d["jaw_weights"]), frame)
+
+    @classmethod
+    def of(cls, rig: _lgi.JawRig) -> JawRig:
+        """The tooling class around a core rig (e.g. a model's)."""
+        return rig if isinstance(rig, JawRig) else cls(rig.pivot, rig.weights, rig.frame)
 
 
 # --------------------------------------------------------------------------------------------

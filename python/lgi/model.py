@@ -1,10 +1,11 @@
 """`lgi.Model`: build a Local Geometric Indexing model from a dataset and a marker layout, and
 solve frames of markers into dense meshes. The heavy lifting is in the Rust core (GIL
-released); this layer adds configuration, progress bars and a typed result."""
+released); this layer adds progress bars, jaw tracking and a typed result. `BuildConfig` is
+the binding's (`lgi._lgi.BuildConfig`: fields, the core's defaults and their documentation are
+defined there once)."""
 
 from __future__ import annotations
 
-import dataclasses
 import os
 from dataclasses import dataclass
 from typing import Any
@@ -13,38 +14,9 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from lgi import _lgi
-from lgi._lgi import Dataset
+from lgi._lgi import BuildConfig, Dataset
 from lgi.errors import InputError
 from lgi.jaw import JawRig, track_jaw
-
-
-@dataclass(frozen=True)
-class BuildConfig:
-    """Build parameters. Distances are relative to the neutral's bounding-box diagonal."""
-
-    surface_tolerance: float = 0.02
-    """Markers farther than this from the neutral surface raise `MarkerError`."""
-    prune_motion: float = 1e-5
-    """Shapes moving a bundle less than this count as the neutral for that bundle."""
-    duplicate_distance: float = 1e-7
-    """Cloud points closer than this are merged (their shapes become aliases)."""
-    tet_neighbours: int = 10
-    """Nearest neighbours of each cloud point used to form tets."""
-    max_tets: int = 20_000
-    """Tets kept per bundle, best quality first."""
-    min_quality: float = 0.02
-    """Tets below this quality (1 = regular tet) are dropped."""
-    max_edge: float = float("inf")
-    """Tets with a longer edge are dropped (relative)."""
-    containment_eps: float = 1e-9
-    """Barycentric tolerance of 'inside a tet'."""
-    projection_candidates: int = 8
-    """Nearest tets scored when a marker is outside every tet."""
-    temporal_weight: float = 1e-6
-    """Penalty per shape not shared with the previous frame's choice (relative to diagonal²)."""
-    detour_ratio: float = 1.4
-    """No weight between a bundle and a vertex whose surface path is this many times longer
-    than the straight line (it goes around a hole: the mouth, an eye). inf disables."""
 
 
 @dataclass(frozen=True)
@@ -159,13 +131,12 @@ class Model:
         to the bin's middle opening; each frame uses the bin of its jaw opening (keeping the
         previous frame's bin while the opening stays in its widened range). None (default):
         one set of clouds with every shape."""
-        cfg = dataclasses.asdict(config or BuildConfig())
         if jaw is None:
             if shape_theta is not None:
                 raise InputError("shape_theta was given without a jaw rig")
             if jaw_bins is not None:
                 raise InputError("jaw_bins needs a jaw rig (jaw=...) and shape_theta")
-            return cls(_lgi.Model.build(dataset, markers_rest, cfg))
+            return cls(_lgi.Model.build(dataset, markers_rest, config))
         if shape_theta is None:
             raise InputError("a jaw rig needs shape_theta: the jaw pose of every dataset shape")
         theta = np.asarray(shape_theta, dtype=np.float64)
@@ -177,7 +148,7 @@ class Model:
         core = _lgi.Model.build(
             dataset,
             markers_rest,
-            cfg,
+            config,
             jaw_pivot=jaw.pivot,
             jaw_weights=jaw.weights,
             shape_theta=theta,
@@ -218,12 +189,15 @@ class Model:
         return self._core.markers_rest
 
     @property
+    def config(self) -> BuildConfig:
+        """The build parameters (a loaded model's too)."""
+        return self._core.config
+
+    @property
     def jaw_rig(self) -> JawRig | None:
         """The jaw rig the model was built with (None without one)."""
-        j = self._core.jaw()
-        return (
-            None if j is None else JawRig(pivot=j["pivot"], weights=j["weights"], frame=j["frame"])
-        )
+        rig = self._core.jaw_rig
+        return None if rig is None else JawRig.of(rig)
 
     @property
     def jaw_bins(self) -> NDArray[np.float64] | None:
@@ -280,17 +254,17 @@ class Model:
                 out=out,
             )
         return SolveResult(
-            vertices=res["vertices"],
-            bundle_residuals=res["bundle_residuals"],
-            bundle_positions=res["bundle_positions"],
-            missing=res["missing"],
+            vertices=res.vertices,
+            bundle_residuals=res.bundle_residuals,
+            bundle_positions=res.bundle_positions,
+            missing=res.missing,
             jaw_theta=theta,
-            jaw_bin=None if theta is None else res["jaw_bin"],
+            jaw_bin=None if theta is None else res.jaw_bin,
             choices=Choices(
-                shapes=res["choice_shapes"],
-                weights=res["choice_weights"],
-                tets=res["choice_tets"],
-                projected=res["choice_projected"],
+                shapes=res.choice_shapes,
+                weights=res.choice_weights,
+                tets=res.choice_tets,
+                projected=res.choice_projected,
             ),
         )
 
@@ -299,13 +273,12 @@ class Model:
     ) -> NDArray[np.float64] | None:
         if jaw is None:
             return None
-        j = self._core.jaw()
-        if j is None:
+        j, rig = self._core.jaw(), self.jaw_rig
+        if j is None or rig is None:
             raise InputError("jaw: this model was built without a jaw rig")
         if isinstance(jaw, str):
             if jaw != "track":
                 raise InputError(f"jaw must be 'track', an (F, 3) array or None, got {jaw!r}")
-            rig = JawRig(pivot=j["pivot"], weights=j["weights"], frame=j["frame"])
             rest = self.bundle_positions(self.dataset.neutral)
             return track_jaw(rig, rest, j["bundle_weights"], frames)
         theta = np.asarray(jaw, dtype=np.float64)

@@ -12,7 +12,8 @@ How the ground truth of the performance is made (per frame f, weights w = truth_
                                                   + w_k ** 1.5 * wrinkles[k] )
     truth[f]  = pre_f + jaw_weights * (T(theta_f)(pre_f) - pre_f)      (jaw skinning, LBS)
 
-with T(theta)(p) = R_y(theta[1]) @ R_x(theta[0]) @ (p - jaw_pivot) + jaw_pivot + (0, 0, theta[2]).
+with T(theta)(p) = R_y(theta[1]) @ R_x(theta[0]) @ (p - jaw_pivot) + jaw_pivot + (0, 0, theta[2]),
+computed by the core's skinning (`lgi.jaw.JawRig.skin` with the identity frame).
 `shapes` and `wrinkles` enter promoted from their float32 storage, so the truth is reproducible
 from the saved arrays. The jaw shapes themselves are `T(shape_jaw_theta[k])` applied with full
 LBS to the neutral: a weight of 1 reproduces the shape, a weight of 0.5 is a rotation by half the
@@ -30,6 +31,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from lgi.errors import DatasetError, DatasetFileError, InputError
+from lgi.jaw import JawRig
 
 F64 = NDArray[np.float64]
 I64 = NDArray[np.int64]
@@ -37,11 +39,9 @@ I64 = NDArray[np.int64]
 __all__ = [
     "Sample",
     "describe",
-    "jaw_transform",
     "load_sample",
     "make_sample",
     "save_sample",
-    "skin_jaw",
 ]
 
 # Face layout (cm). The patch spans x in [-7, 7] and y in [-8, 8].
@@ -156,40 +156,6 @@ def _window(v: F64, lo: float, hi: float, soft: float) -> F64:
 
 def _vec(mask: F64, dx: float, dy: float, dz: float) -> F64:
     return mask[:, None] * np.array([dx, dy, dz])
-
-
-def jaw_transform(theta: NDArray[np.float64]) -> tuple[F64, F64]:
-    """Rotation R and translation t of the jaw for theta = (open, lateral, forward).
-
-    The jaw maps p to R @ (p - pivot) + pivot + t with R = R_y(lateral) @ R_x(open) and
-    t = (0, 0, forward). A positive open angle moves the chin down and back; a positive lateral
-    angle moves it towards the character's left (+x).
-    """
-    th = np.asarray(theta, dtype=np.float64)
-    if th.shape != (3,):
-        raise InputError(f"theta must have shape (3,), got {th.shape}")
-    ca, sa = np.cos(th[0]), np.sin(th[0])
-    cb, sb = np.cos(th[1]), np.sin(th[1])
-    rx = np.array([[1.0, 0.0, 0.0], [0.0, ca, -sa], [0.0, sa, ca]])
-    ry = np.array([[cb, 0.0, sb], [0.0, 1.0, 0.0], [-sb, 0.0, cb]])
-    return ry @ rx, np.array([0.0, 0.0, th[2]])
-
-
-def skin_jaw(points: F64, theta: F64, pivot: F64, weights: F64) -> F64:
-    """Two-bone linear blend skinning: skull (identity) and jaw `jaw_transform(theta)`.
-
-    Written as p + w * (T(p) - p) so that theta = 0 returns `points` bit for bit.
-    """
-    p = np.asarray(points, dtype=np.float64)
-    w = np.asarray(weights, dtype=np.float64)
-    if p.ndim != 2 or p.shape[1] != 3:
-        raise InputError(f"points must have shape (V, 3), got {p.shape}")
-    if w.shape != (p.shape[0],):
-        raise InputError(f"weights must have shape ({p.shape[0]},), got {w.shape}")
-    r, t = jaw_transform(theta)
-    piv = np.asarray(pivot, dtype=np.float64)
-    moved = (p - piv) @ (r - np.eye(3)).T + t
-    return p + w[:, None] * moved
 
 
 # --------------------------------------------------------------------------------------------
@@ -792,10 +758,7 @@ def _truth(
     pre = neutral.reshape(1, -1) + wn @ smooth + (wn**_WRINKLE_POWER) @ detail
     pre = pre.reshape(f, v, 3)
     theta = weights[:, jaw] @ shape_theta[jaw]
-    truth = np.empty_like(pre)
-    for i in range(f):
-        truth[i] = skin_jaw(pre[i], theta[i], pivot, jaw_weights)
-    return truth, theta
+    return JawRig(pivot, jaw_weights).skin(pre, theta), theta
 
 
 # --------------------------------------------------------------------------------------------
@@ -835,9 +798,10 @@ def make_sample(
     shapes = np.zeros((s, v, 3), dtype=np.float32)
     wrinkles = np.zeros((s, v, 3), dtype=np.float32)
     shape_theta = np.zeros((s, 3))
+    rig = JawRig(pivot, jaw_weights)
     for k, params in enumerate(_JAW_SHAPES.values()):
         shape_theta[k] = params
-        shapes[k] = skin_jaw(neutral, shape_theta[k], pivot, jaw_weights) - neutral
+        shapes[k] = rig.skin(neutral, shape_theta[k]) - neutral
     for k, (smooth, detail) in enumerate(fields, start=len(_JAW_SHAPES)):
         shapes[k] = smooth + detail
         wrinkles[k] = detail

@@ -2,10 +2,11 @@
 //! jaw a rigid motion about a pivot. Dataset shapes and captured bundles are unskinned before
 //! indexing so the index sees no jaw rotation, and the result is reskinned afterwards.
 //!
-//! Conventions match `python/lgi/jaw.py`: θ = (open, lateral, forward) maps `p` to
+//! The one implementation of the skinning: Python skins through it (`lgi._lgi.JawRig`, used by
+//! `lgi.jaw` and the sample generator). θ = (open, lateral, forward) maps `p` to
 //! `F R Fᵀ (p − pivot) + pivot + F t` with `R = R_y(lateral) · R_x(open)`, `t = (0, 0, forward)`
 //! and `F` the rig's frame (columns: open axis, lateral axis, forward direction; identity in
-//! `python/lgi/sample.py`).
+//! the sample).
 
 use glam::{DAffine3, DMat3, DVec3};
 use rayon::prelude::*;
@@ -152,10 +153,13 @@ impl Blend {
     }
 
     /// Written as `p + w · moved` (not `(1 − w) p + w T p`) so that θ = 0 or w = 0 returns `p`
-    /// bit for bit, like the sample generator.
+    /// bit for bit. Each row of `(R − I)(p − pivot)` is summed with fused multiply-adds, x term
+    /// first ([`fused_row`]): one rounding per term on every machine, and the order numpy's
+    /// matrix product takes, so the sample generator's truth (first written with numpy) is
+    /// reproduced bit for bit now that it skins through this function.
     #[inline]
     fn skin(&self, p: DVec3, w: f64) -> DVec3 {
-        let moved = self.rot_minus_id * (p - self.pivot) + self.translation;
+        let moved = fused_mul_vec(&self.rot_minus_id, p - self.pivot) + self.translation;
         p + w * moved
     }
 
@@ -174,6 +178,15 @@ impl Blend {
         q += inv * (rhs - m * q);
         self.pivot + q
     }
+}
+
+/// `m · d` with each row summed as `fma(d.z, m₂, fma(d.y, m₁, d.x · m₀))`.
+#[inline]
+fn fused_mul_vec(m: &DMat3, d: DVec3) -> DVec3 {
+    let row = |i: usize| {
+        d.z.mul_add(m.z_axis[i], d.y.mul_add(m.y_axis[i], d.x * m.x_axis[i]))
+    };
+    DVec3::new(row(0), row(1), row(2))
 }
 
 impl JawRig {
@@ -837,8 +850,12 @@ mod tests {
     fn identity_frame_is_bit_identical_to_the_frame_less_blend() {
         // The blend as it was before rigs had a frame, written out here.
         fn old_skin(pivot: DVec3, theta: JawParams, p: DVec3, w: f64) -> DVec3 {
-            let moved = (theta.rotation() - DMat3::IDENTITY) * (p - pivot) + theta.translation();
-            p + w * moved
+            let m = theta.rotation() - DMat3::IDENTITY;
+            let d = p - pivot;
+            let row = |r: glam::DVec3| r.z.mul_add(d.z, r.y.mul_add(d.y, r.x * d.x));
+            let t = m.transpose();
+            let moved = DVec3::new(row(t.x_axis), row(t.y_axis), row(t.z_axis));
+            p + w * (moved + theta.translation())
         }
         fn old_unskin(pivot: DVec3, theta: JawParams, y: DVec3, w: f64) -> DVec3 {
             if w == 0.0 {

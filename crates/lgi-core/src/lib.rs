@@ -47,12 +47,13 @@ pub use model::{
 };
 
 // Files: meshes, datasets and the `.lgi` model file.
+pub use io::glob::expand as expand_glob;
 pub use io::gltf::read_gltf;
 pub use io::model_file::{load as load_model, save as save_model};
 pub use io::obj::{parse_obj, read_obj, read_obj_positions, write_obj};
 
 // The jaw (Eq. 2) and the baselines.
-pub use baselines::{BlendshapeSolution, BlendshapeSolver, DisplacementInterpolation};
+pub use baselines::{BlendshapeSolution, BlendshapeSolver, RbfInterpolator};
 pub use jaw::{validate_frame, JawBins, JawParams, JawRig, VertexMap, FRAME_TOLERANCE};
 
 // The stages of build and solve, public for the benches, for tests against brute force and

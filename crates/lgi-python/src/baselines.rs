@@ -5,7 +5,7 @@ use crate::convert::{flat_to_array, float_array, points as read_points};
 use crate::dataset::Dataset;
 use crate::error::{input_error, PyLgiError};
 use glam::DVec3;
-use lgi_core::{BlendshapeSolver as CoreBlend, DisplacementInterpolation};
+use lgi_core::{BlendshapeSolver as CoreBlend, RbfInterpolator as CoreRbf};
 use numpy::PyArrayDyn;
 use pyo3::prelude::*;
 
@@ -15,7 +15,7 @@ type WeightsAndIterations<'py> = (Bound<'py, PyArrayDyn<f64>>, Bound<'py, PyArra
 /// Biharmonic RBF interpolation of marker values over mesh vertices (exact at the markers).
 #[pyclass(frozen, module = "lgi._lgi")]
 pub struct RbfInterpolator {
-    inner: DisplacementInterpolation,
+    inner: CoreRbf,
 }
 
 /// Active-set solver of the box-penalised blendshape least squares.
@@ -47,7 +47,7 @@ impl RbfInterpolator {
             })
             .collect();
         let inner = py
-            .detach(move || DisplacementInterpolation::new(pts, samples))
+            .detach(move || CoreRbf::new(pts, samples))
             .map_err(PyLgiError)?;
         Ok(RbfInterpolator { inner })
     }
@@ -63,7 +63,7 @@ impl RbfInterpolator {
         let markers = read_points(markers_rest, "markers_rest", None, false)?;
         let data = dataset.inner.clone();
         let inner = py
-            .detach(move || DisplacementInterpolation::from_dataset(&data, &markers, tolerance))
+            .detach(move || CoreRbf::from_dataset(&data, &markers, tolerance))
             .map_err(PyLgiError)?;
         Ok(RbfInterpolator { inner })
     }

@@ -48,6 +48,14 @@ pub fn float_array(
     Ok(arr.readonly().as_array().to_owned())
 }
 
+/// Any number array-like (ints, lists, bools) as a float64 array, for the arguments that
+/// accept integers as numbers (jaw poses, rig pivots, points); `name` names it in errors.
+pub fn any_numbers<'py>(obj: &Bound<'py, PyAny>, name: &str) -> PyResult<Bound<'py, PyAny>> {
+    let np = obj.py().import("numpy")?;
+    np.call_method1("asarray", (obj, "float64"))
+        .map_err(|e| input_error(format!("{name}: expected numbers: {}", e.value(obj.py()))))
+}
+
 /// A row of three coordinates as a point: NaN (a missing marker) only when `allow_nan`,
 /// infinity never; the error says the `place` (e.g. "markers: row 3") has a non-finite coordinate.
 fn row_point(

@@ -1,24 +1,15 @@
-//! `lgi.Dataset`: the neutral mesh and its shapes, loaded by the core's readers (OBJ, glTF),
-//! from numpy arrays, or from an `.npz` archive. File reading runs with the GIL released.
+//! `lgi.Dataset`: the neutral mesh and its shapes, loaded by the core's readers (OBJ, glTF) or
+//! from numpy arrays. File reading runs with the GIL released. The `.npz` layout is numpy's
+//! and is read and written in Python (`lgi.dataset`); `from_npz`/`to_npz` only forward there.
 
 use crate::convert::{flat_to_array, float_array, index_array, points, points_to_array};
-use crate::error::{input_error, internal_error, lgi_exception, PyLgiError, PyLgiResult};
+use crate::error::{input_error, lgi_exception, PyLgiError, PyLgiResult};
 use lgi_core::{DVec2, LgiError, Mesh};
 use numpy::PyArrayDyn;
 use pyo3::prelude::*;
-use pyo3::types::{PyDict, PyString};
-use std::path::{Path, PathBuf};
+use pyo3::types::PyString;
+use std::path::PathBuf;
 use std::sync::Arc;
-
-/// Keys of the `.npz` layout read by `from_npz` and written by `to_npz`.
-const NPZ_KEYS: [&str; 6] = [
-    "neutral",
-    "triangles",
-    "shapes",
-    "names",
-    "uvs",
-    "uv_triangles",
-];
 
 /// Neutral mesh plus S shapes (displacements). Immutable; cheap to share.
 #[pyclass(frozen, module = "lgi._lgi")]
@@ -78,44 +69,22 @@ impl Dataset {
     /// Loads an `.npz` archive (read with `allow_pickle=False`) with the arrays `neutral`
     /// (V, 3) float, `triangles` (T, 3) int, and optionally `shapes` (S, V, 3) float
     /// displacements, `names` (S,) str, `uvs` (U, 2) float and `uv_triangles` (T, 3) int
-    /// (empty `uvs`/`uv_triangles` mean no UVs). The layout written by `to_npz`.
+    /// (empty `uvs`/`uv_triangles` mean no UVs). The layout written by `to_npz`; both are
+    /// `lgi.dataset.read_npz`/`write_npz`.
     #[staticmethod]
-    fn from_npz(py: Python<'_>, path: PathBuf) -> PyResult<Dataset> {
-        let np = py.import("numpy")?;
-        let kwargs = PyDict::new(py);
-        kwargs.set_item("allow_pickle", false)?;
-        let npz = np
-            .call_method("load", (&path,), Some(&kwargs))
-            .map_err(|e| file_error(py, &path, &e))?;
-        if !npz.hasattr("files")? {
-            return Err(dataset_error(
-                &path,
-                "not an .npz archive (a single .npy array?)",
-            ));
-        }
-        let result = read_npz(py, &path, &npz);
-        // The archive holds an open file: close it whatever happened.
-        let closed = npz.call_method0("close");
-        let d = result?;
-        closed?;
-        Ok(d)
+    fn from_npz(py: Python<'_>, path: &Bound<'_, PyAny>) -> PyResult<Py<PyAny>> {
+        Ok(py
+            .import("lgi.dataset")?
+            .call_method1("read_npz", (path,))?
+            .unbind())
     }
 
     /// Writes the dataset as a compressed `.npz` archive with the keys read by `from_npz`
     /// (numpy appends `.npz` to `path` when it has no such suffix).
-    fn to_npz(&self, py: Python<'_>, path: PathBuf) -> PyResult<()> {
-        let np = py.import("numpy")?;
-        let kwargs = PyDict::new(py);
-        kwargs.set_item("neutral", self.neutral(py)?)?;
-        kwargs.set_item("triangles", self.triangles(py)?)?;
-        kwargs.set_item("shapes", self.shapes(py)?)?;
-        let names = np.call_method1("array", (self.names(),))?;
-        let names = names.call_method1("astype", ("str",))?;
-        kwargs.set_item("names", names)?;
-        kwargs.set_item("uvs", self.uvs(py)?)?;
-        kwargs.set_item("uv_triangles", self.uv_triangles(py)?)?;
-        np.call_method("savez_compressed", (&path,), Some(&kwargs))
-            .map_err(|e| file_error(py, &path, &e))?;
+    fn to_npz(slf: &Bound<'_, Self>, path: &Bound<'_, PyAny>) -> PyResult<()> {
+        slf.py()
+            .import("lgi.dataset")?
+            .call_method1("write_npz", (slf, path))?;
         Ok(())
     }
 
@@ -223,24 +192,16 @@ fn shape_files(shapes: &Bound<'_, PyAny>) -> PyResult<Vec<PathBuf>> {
         ))
     })?;
     let pattern = pattern.to_string_lossy().into_owned();
-    let entries = glob::glob(&pattern)
-        .map_err(|e| input_error(format!("shapes: bad glob pattern '{pattern}': {e}")))?;
-    let mut out = Vec::new();
-    for entry in entries {
-        out.push(entry.map_err(|e| {
-            lgi_exception(
-                "DatasetFileError",
-                format!("cannot read {}: {}", e.path().display(), e.error()),
-            )
-        })?);
-    }
+    let out = lgi_core::expand_glob(&pattern).map_err(|e| match e {
+        LgiError::Input(m) => input_error(format!("shapes: {m}")),
+        other => PyLgiError(other).into(),
+    })?;
     if out.is_empty() {
         return Err(lgi_exception(
             "DatasetFileError",
             format!("no shape file matches the pattern '{pattern}'"),
         ));
     }
-    out.sort();
     Ok(out)
 }
 
@@ -249,84 +210,6 @@ fn type_name(obj: &Bound<'_, PyAny>) -> String {
         .name()
         .map(|n| n.to_string())
         .unwrap_or_else(|_| "?".into())
-}
-
-/// An `lgi.DatasetError` about `path`.
-fn dataset_error(path: &Path, msg: impl std::fmt::Display) -> PyErr {
-    lgi_exception("DatasetError", format!("{}: {msg}", path.display()))
-}
-
-/// Maps a numpy file error: OS errors become `lgi.DatasetFileError`, anything else (garbled
-/// archive, pickled data) `lgi.DatasetError`; both name the file.
-fn file_error(py: Python<'_>, path: &Path, e: &PyErr) -> PyErr {
-    let msg = e.value(py).to_string();
-    if e.is_instance_of::<pyo3::exceptions::PyOSError>(py) {
-        lgi_exception(
-            "DatasetFileError",
-            format!("cannot read {}: {msg}", path.display()),
-        )
-    } else {
-        dataset_error(path, format!("not a readable .npz archive: {msg}"))
-    }
-}
-
-fn read_npz(py: Python<'_>, path: &Path, npz: &Bound<'_, PyAny>) -> PyResult<Dataset> {
-    let files: Vec<String> = npz.getattr("files")?.extract()?;
-    let mut arrays: Vec<Option<Bound<'_, PyAny>>> = Vec::with_capacity(NPZ_KEYS.len());
-    for key in NPZ_KEYS {
-        if files.iter().any(|f| f == key) {
-            let a = npz
-                .get_item(key)
-                .map_err(|e| dataset_error(path, format!("array '{key}': {}", e.value(py))))?;
-            arrays.push(Some(a));
-        } else {
-            arrays.push(None);
-        }
-    }
-    for (key, a) in NPZ_KEYS.iter().zip(&arrays).take(2) {
-        if a.is_none() {
-            return Err(dataset_error(
-                path,
-                format!("missing array '{key}' (the archive has {files:?})"),
-            ));
-        }
-    }
-    let [neutral, triangles, shapes, names, mut uvs, mut uv_triangles]: [Option<Bound<'_, PyAny>>;
-        6] = arrays.try_into().map_err(|_| internal_error("npz keys"))?;
-    let empty = |a: &Option<Bound<'_, PyAny>>| -> PyResult<bool> {
-        Ok(match a {
-            Some(a) => a.getattr("size")?.extract::<usize>()? == 0,
-            None => true,
-        })
-    };
-    if empty(&uvs)? && empty(&uv_triangles)? {
-        uvs = None;
-        uv_triangles = None;
-    }
-    let (Some(neutral), Some(triangles)) = (neutral, triangles) else {
-        return Err(internal_error("npz keys"));
-    };
-    let built = build(
-        py,
-        &neutral,
-        &triangles,
-        shapes.as_ref(),
-        names.as_ref(),
-        uvs.as_ref(),
-        uv_triangles.as_ref(),
-    );
-    // Bad content is a fault of the file, not of an argument: re-raise naming the file.
-    built.map_err(|e| {
-        let input = py
-            .import("lgi.errors")
-            .and_then(|m| m.getattr("InputError"))
-            .is_ok_and(|cls| e.is_instance(py, &cls));
-        if input {
-            dataset_error(path, e.value(py))
-        } else {
-            e
-        }
-    })
 }
 
 /// Checks and converts array arguments, then builds the core dataset with the GIL released.

@@ -2,9 +2,11 @@
 //! error mapping in `error.rs`; every heavy call releases the GIL with `py.detach`.
 
 mod baselines;
+mod config;
 mod convert;
 mod dataset;
 mod error;
+mod jaw;
 mod model;
 
 use pyo3::prelude::*;
@@ -14,7 +16,10 @@ use pyo3::prelude::*;
 fn _lgi(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     m.add_class::<dataset::Dataset>()?;
+    m.add_class::<config::BuildConfig>()?;
+    m.add_class::<jaw::JawRig>()?;
     m.add_class::<model::Model>()?;
+    m.add_class::<model::SolveOutput>()?;
     m.add_class::<baselines::RbfInterpolator>()?;
     m.add_class::<baselines::BlendshapeSolver>()?;
     Ok(())

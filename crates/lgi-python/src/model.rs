@@ -1,11 +1,13 @@
 //! `lgi._lgi.Model`: build and solve with the GIL released; the Python class `lgi.Model`
 //! (python/lgi/model.py) wraps it with progress bars and a typed result.
 
+use crate::config::BuildConfig;
 use crate::convert::{flat_to_array, float_array, point_sets, points, points_to_array};
 use crate::dataset::Dataset;
 use crate::error::{input_error, internal_error, PyLgiError};
+use crate::jaw::{frame_from_array, JawRig};
 use glam::{DMat3, DVec3};
-use lgi_core::{BuildConfig, JawBins, JawInput, JawParams, JawRig, Model as CoreModel};
+use lgi_core::{JawBins, JawInput, JawParams, JawRig as CoreRig, Model as CoreModel};
 use numpy::{PyArray3, PyArrayDyn, PyArrayMethods, PyUntypedArrayMethods};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
@@ -17,43 +19,9 @@ pub struct Model {
     pub inner: Arc<CoreModel>,
 }
 
-fn config_from_dict(d: Option<&Bound<'_, PyDict>>) -> PyResult<BuildConfig> {
-    let mut c = BuildConfig::default();
-    let Some(d) = d else { return Ok(c) };
-    for (k, v) in d.iter() {
-        let key: String = k.extract()?;
-        let f = |v: &Bound<'_, PyAny>| -> PyResult<f64> {
-            v.extract::<f64>()
-                .map_err(|_| input_error(format!("BuildConfig.{key}: expected a number, got {v}")))
-        };
-        let u = |v: &Bound<'_, PyAny>| -> PyResult<usize> {
-            v.extract::<usize>().map_err(|_| {
-                input_error(format!(
-                    "BuildConfig.{key}: expected a non-negative integer, got {v}"
-                ))
-            })
-        };
-        match key.as_str() {
-            "surface_tolerance" => c.surface_tolerance = f(&v)?,
-            "prune_motion" => c.prune_motion = f(&v)?,
-            "duplicate_distance" => c.duplicate_distance = f(&v)?,
-            "tet_neighbours" => c.tet_neighbours = u(&v)?,
-            "max_tets" => c.max_tets = u(&v)?,
-            "min_quality" => c.min_quality = f(&v)?,
-            "max_edge" => c.max_edge = f(&v)?,
-            "containment_eps" => c.containment_eps = f(&v)?,
-            "projection_candidates" => c.projection_candidates = u(&v)?,
-            "temporal_weight" => c.temporal_weight = f(&v)?,
-            "detour_ratio" => c.detour_ratio = f(&v)?,
-            other => return Err(input_error(format!("BuildConfig has no field '{other}'"))),
-        }
-    }
-    Ok(c)
-}
-
 #[pymethods]
 impl Model {
-    /// Builds a model (GIL released). `config` is a dict of BuildConfig fields; `jaw_frame`
+    /// Builds a model (GIL released) with `config` (None: the defaults); `jaw_frame`
     /// (3, 3) is the jaw rig's rotation (columns: open, lateral, forward axes; None: identity);
     /// `jaw_bins` (edges over the jaw opening, radians) and `bin_overlap` bin the clouds of a
     /// jaw model.
@@ -64,7 +32,7 @@ impl Model {
         py: Python<'_>,
         dataset: &Dataset,
         markers_rest: &Bound<'_, PyAny>,
-        config: Option<&Bound<'_, PyDict>>,
+        config: Option<PyRef<'_, BuildConfig>>,
         jaw_pivot: Option<&Bound<'_, PyAny>>,
         jaw_weights: Option<&Bound<'_, PyAny>>,
         shape_theta: Option<&Bound<'_, PyAny>>,
@@ -73,7 +41,7 @@ impl Model {
         jaw_frame: Option<&Bound<'_, PyAny>>,
     ) -> PyResult<Model> {
         let markers = points(markers_rest, "markers_rest", None, false)?;
-        let cfg = config_from_dict(config)?;
+        let cfg = config.map(|c| c.inner.clone()).unwrap_or_default();
         let data = dataset.inner.clone();
         if jaw_bins.is_some() && jaw_pivot.is_none() {
             return Err(input_error("jaw_bins: binning needs a jaw rig"));
@@ -91,14 +59,9 @@ impl Model {
                 let thetas = float_array(t, "shape_theta", &[Some(ns), Some(3)])?;
                 let frame = match jaw_frame {
                     None => DMat3::IDENTITY,
-                    Some(f) => {
-                        let f = float_array(f, "jaw_frame", &[Some(3), Some(3)])?;
-                        // Columns of the (3, 3) array are the jaw's axes.
-                        let col = |j: usize| DVec3::new(f[[0, j]], f[[1, j]], f[[2, j]]);
-                        DMat3::from_cols(col(0), col(1), col(2))
-                    }
+                    Some(f) => frame_from_array(f, "jaw_frame")?,
                 };
-                let rig = JawRig::with_frame(
+                let rig = CoreRig::with_frame(
                     DVec3::new(pivot[0], pivot[1], pivot[2]),
                     weights.iter().copied().collect(),
                     frame,
@@ -183,7 +146,7 @@ impl Model {
         }
     }
 
-    /// Solves frames (F, B, 3); returns a dict of arrays. `progress(f)` is called after each
+    /// Solves frames (F, B, 3) into a `SolveOutput`. `progress(f)` is called after each
     /// frame with the GIL held. `temporal=False` solves frames independently (in parallel).
     /// `out`: a C-contiguous, writeable float64 (F, V, 3) array that receives the vertices
     /// (and is returned as `vertices`) instead of a new one.
@@ -198,7 +161,7 @@ impl Model {
         jaw_theta: Option<&Bound<'py, PyAny>>,
         smooth_window: usize,
         out: Option<&Bound<'py, PyAny>>,
-    ) -> PyResult<Bound<'py, PyDict>> {
+    ) -> PyResult<SolveOutput> {
         let b = self.inner.num_bundles();
         let frames = point_sets(frames, "frames", ("frame", "bundle"), Some(b), true)?;
         let thetas: Option<Vec<JawParams>> = match jaw_theta {
@@ -276,17 +239,17 @@ impl Model {
                 }
             }
         }
-        let d = PyDict::new(py);
-        d.set_item("vertices", vertices)?;
-        d.set_item("bundle_residuals", flat_to_array(py, res, &[nf, b])?)?;
-        d.set_item("bundle_positions", flat_to_array(py, pos, &[nf, b, 3])?)?;
-        d.set_item("choice_shapes", flat_to_array(py, shapes, &[nf, b, 4])?)?;
-        d.set_item("choice_weights", flat_to_array(py, weights, &[nf, b, 4])?)?;
-        d.set_item("choice_tets", flat_to_array(py, tets, &[nf, b])?)?;
-        d.set_item("choice_projected", flat_to_array(py, projected, &[nf, b])?)?;
-        d.set_item("missing", flat_to_array(py, missing, &[nf, b])?)?;
-        d.set_item("jaw_bin", flat_to_array(py, bins, &[nf])?)?;
-        Ok(d)
+        Ok(SolveOutput {
+            vertices: vertices.into_any().unbind(),
+            bundle_residuals: flat_to_array(py, res, &[nf, b])?.into_any().unbind(),
+            bundle_positions: flat_to_array(py, pos, &[nf, b, 3])?.into_any().unbind(),
+            choice_shapes: flat_to_array(py, shapes, &[nf, b, 4])?.into_any().unbind(),
+            choice_weights: flat_to_array(py, weights, &[nf, b, 4])?.into_any().unbind(),
+            choice_tets: flat_to_array(py, tets, &[nf, b])?.into_any().unbind(),
+            choice_projected: flat_to_array(py, projected, &[nf, b])?.into_any().unbind(),
+            missing: flat_to_array(py, missing, &[nf, b])?.into_any().unbind(),
+            jaw_bin: flat_to_array(py, bins, &[nf])?.into_any().unbind(),
+        })
     }
 
     /// Bundle surface positions (F, B, 3) of meshes (F, V, 3) with the neutral's topology.
@@ -373,24 +336,15 @@ impl Model {
         )
     }
 
-    /// The jaw setup as a dict (`pivot` (3,), `frame` (3, 3) with the jaw's axes as columns,
-    /// `weights` (V,), `shape_theta` (S, 3), `bundle_weights` (B,)), or None for a model
-    /// without a jaw rig.
+    /// The jaw setup besides the rig (`jaw_rig`) as a dict: `shape_theta` (S, 3),
+    /// `bundle_weights` (B,) and, for a binned model, `bin_edges`, `bin_overlap` and
+    /// `bin_members`; None for a model without a jaw rig.
     fn jaw<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyDict>>> {
         let Some(setup) = self.inner.jaw() else {
             return Ok(None);
         };
         let j = &setup.input;
         let d = PyDict::new(py);
-        d.set_item(
-            "pivot",
-            flat_to_array(py, j.rig.pivot.to_array().to_vec(), &[3])?,
-        )?;
-        // Row-major (3, 3) whose columns are the frame's axes.
-        let frame = j.rig.frame.transpose().to_cols_array().to_vec();
-        d.set_item("frame", flat_to_array(py, frame, &[3, 3])?)?;
-        let nv = j.rig.weights.len();
-        d.set_item("weights", flat_to_array(py, j.rig.weights.clone(), &[nv])?)?;
         let t: Vec<f64> = j.shape_thetas.iter().flat_map(|t| t.to_array()).collect();
         d.set_item(
             "shape_theta",
@@ -416,32 +370,20 @@ impl Model {
         Ok(Some(d))
     }
 
-    /// The core's jaw skinning of (V, 3) vertex positions to pose `theta` (3,) with the rig's
-    /// per-vertex weights (`inverse`: unskinning); the reference of `lgi.jaw.JawRig.skin`.
-    #[pyo3(signature = (points, theta, inverse=false))]
-    fn jaw_skin<'py>(
-        &self,
-        py: Python<'py>,
-        points: &Bound<'py, PyAny>,
-        theta: &Bound<'py, PyAny>,
-        inverse: bool,
-    ) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
-        let Some(rig) = self.inner.jaw().map(|j| &j.input.rig) else {
-            return Err(input_error(
-                "jaw_skin: this model was built without a jaw rig",
-            ));
-        };
-        let p = crate::convert::points(points, "points", Some(rig.num_vertices()), false)?;
-        let t = float_array(theta, "theta", &[Some(3)])?;
-        let theta = JawParams::from_array([t[0], t[1], t[2]]);
-        let mut out = vec![DVec3::ZERO; p.len()];
-        if inverse {
-            rig.unskin(&p, theta, &mut out)
-        } else {
-            rig.skin(&p, theta, &mut out)
+    /// The jaw rig the model was built with (a copy), or None.
+    #[getter]
+    fn jaw_rig(&self) -> Option<JawRig> {
+        self.inner.jaw().map(|j| JawRig {
+            inner: j.input.rig.clone(),
+        })
+    }
+
+    /// The build parameters (also of a loaded model).
+    #[getter]
+    fn config(&self) -> BuildConfig {
+        BuildConfig {
+            inner: self.inner.config().clone(),
         }
-        .map_err(PyLgiError)?;
-        points_to_array(py, &out)
     }
 
     /// Marker rest positions (B, 3).
@@ -449,6 +391,39 @@ impl Model {
     fn markers_rest<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
         points_to_array(py, self.inner.markers_rest())
     }
+}
+
+/// What `Model.solve` returns: per-frame arrays (F frames, B bundles, V vertices). Shape ids in
+/// `choice_shapes` are dataset shape indices with -1 for the neutral (the core's 0).
+#[pyclass(frozen, module = "lgi._lgi")]
+pub struct SolveOutput {
+    /// (F, V, 3) float64 vertices (the `out` array when one was given).
+    #[pyo3(get)]
+    vertices: Py<PyAny>,
+    /// (F, B) float64 distance of each marker to the surface (0 where missing).
+    #[pyo3(get)]
+    bundle_residuals: Py<PyAny>,
+    /// (F, B, 3) float64 the markers' surface positions on the result.
+    #[pyo3(get)]
+    bundle_positions: Py<PyAny>,
+    /// (F, B, 4) int64 shapes of each bundle's chosen tet (-1: neutral or unused).
+    #[pyo3(get)]
+    choice_shapes: Py<PyAny>,
+    /// (F, B, 4) float64 convex weights of `choice_shapes`.
+    #[pyo3(get)]
+    choice_weights: Py<PyAny>,
+    /// (F, B) int64 chosen tet, -1 when none was used.
+    #[pyo3(get)]
+    choice_tets: Py<PyAny>,
+    /// (F, B) bool: the marker was outside every tet and projected.
+    #[pyo3(get)]
+    choice_projected: Py<PyAny>,
+    /// (F, B) bool: the marker was missing (NaN).
+    #[pyo3(get)]
+    missing: Py<PyAny>,
+    /// (F,) int64 jaw-opening bin of each frame (0 without bins).
+    #[pyo3(get)]
+    jaw_bin: Py<PyAny>,
 }
 
 /// A caller's output array for `solve(out=...)`: float64, C-contiguous, writeable, of `shape`.

@@ -1,9 +1,10 @@
-//! Baselines that LGI is evaluated against: smooth interpolation of marker displacements
-//! (`rbf`) and a global least-squares blendshape fit (`blendshape`). They share nothing with the
+//! Numerical kernels of the baselines that LGI is evaluated against: a biharmonic RBF
+//! interpolator (`rbf`; displacement interpolation, LGI-RBF's correction) and a global
+//! least-squares blendshape fit (`blendshape`). They share nothing with the
 //! LGI solve, so a comparison measures the method and not shared code.
 
 pub mod blendshape;
 pub mod rbf;
 
 pub use blendshape::{BlendshapeSolution, BlendshapeSolver};
-pub use rbf::DisplacementInterpolation;
+pub use rbf::RbfInterpolator;

@@ -1,6 +1,7 @@
-//! Displacement interpolation with a 3D biharmonic RBF (φ(r) = r plus a linear polynomial), the
-//! classic smooth-deformation baseline: simple, smooth, exact at the markers and linear in the
-//! data, so a V×B interpolation matrix is computed once and applied to every frame.
+//! The 3D biharmonic RBF interpolator (φ(r) = r plus a linear polynomial) of the baselines: the
+//! displacement-interpolation baseline spreads marker displacements with it, LGI-RBF its residual
+//! correction. Simple, smooth, exact at the markers and linear in the data, so a V×B
+//! interpolation matrix is computed once and applied to every frame.
 
 use crate::correspond::correspond;
 use crate::dataset::Dataset;
@@ -21,7 +22,7 @@ pub type Sample = ([u32; 3], [f64; 3]);
 /// mesh samples it (barycentric combination of its triangle's vertices), so applying the
 /// interpolated displacements to the vertices reproduces every present marker exactly.
 #[derive(Debug)]
-pub struct DisplacementInterpolation {
+pub struct RbfInterpolator {
     points: Vec<DVec3>,
     centres: Vec<DVec3>,
     samples: Vec<Sample>,
@@ -37,7 +38,7 @@ fn kernel(a: DVec3, b: DVec3) -> f64 {
     (a - b).length()
 }
 
-impl DisplacementInterpolation {
+impl RbfInterpolator {
     /// Interpolation over `points` (V) with one constraint per sample; the centres are the
     /// samples' positions on `points`. Errors: indices out of range, fewer than 4 samples, or
     /// a singular system (samples coplanar or coincident) as [`LgiError::Input`].
@@ -65,7 +66,7 @@ impl DisplacementInterpolation {
         if let Some(i) = points.iter().position(|p| !p.is_finite()) {
             return Err(LgiError::Input(format!("point {i} is not finite")));
         }
-        let mut me = DisplacementInterpolation {
+        let mut me = RbfInterpolator {
             points,
             centres,
             samples,
@@ -297,7 +298,7 @@ mod tests {
     fn interpolated_field_reproduces_every_sampled_marker_value() {
         let pts = cloud(60, 1);
         let samples = barycentric_samples(12, 60, 2);
-        let rbf = DisplacementInterpolation::new(pts, samples.clone()).unwrap();
+        let rbf = RbfInterpolator::new(pts, samples.clone()).unwrap();
         let vals = cloud(12, 3);
         let out = rbf.interpolate(&vals).unwrap();
         for ((vs, ws), want) in samples.iter().zip(&vals) {
@@ -312,8 +313,7 @@ mod tests {
     #[test]
     fn linear_fields_are_reproduced_exactly_everywhere() {
         let pts = cloud(50, 4);
-        let rbf =
-            DisplacementInterpolation::new(pts.clone(), barycentric_samples(10, 50, 5)).unwrap();
+        let rbf = RbfInterpolator::new(pts.clone(), barycentric_samples(10, 50, 5)).unwrap();
         let f = |p: DVec3| DVec3::new(2.0 * p.x - p.y + 0.5, p.z, 3.0 * p.y - 1.0);
         let vals: Vec<DVec3> = rbf.centres().iter().map(|&c| f(c)).collect();
         for (p, got) in pts.iter().zip(rbf.interpolate(&vals).unwrap()) {
@@ -325,13 +325,12 @@ mod tests {
     fn missing_markers_refit_equals_a_fresh_fit_without_them() {
         let pts = cloud(40, 6);
         let samples = barycentric_samples(10, 40, 7);
-        let rbf = DisplacementInterpolation::new(pts.clone(), samples.clone()).unwrap();
+        let rbf = RbfInterpolator::new(pts.clone(), samples.clone()).unwrap();
         let mut vals = cloud(10, 8);
         vals[3] = DVec3::NAN;
         let got = rbf.interpolate(&vals).unwrap();
         let keep: Vec<usize> = (0..10).filter(|&i| i != 3).collect();
-        let fresh = DisplacementInterpolation::new(pts, keep.iter().map(|&i| samples[i]).collect())
-            .unwrap();
+        let fresh = RbfInterpolator::new(pts, keep.iter().map(|&i| samples[i]).collect()).unwrap();
         let want = fresh
             .interpolate(&keep.iter().map(|&i| vals[i]).collect::<Vec<_>>())
             .unwrap();
@@ -347,12 +346,12 @@ mod tests {
             .collect();
         let samples: Vec<Sample> = (0..6).map(|i| ([i, i, i], [1.0, 0.0, 0.0])).collect();
         assert!(matches!(
-            DisplacementInterpolation::new(pts.clone(), samples),
+            RbfInterpolator::new(pts.clone(), samples),
             Err(LgiError::Input(_))
         ));
         let few: Vec<Sample> = (0..3).map(|i| ([i, i, i], [1.0, 0.0, 0.0])).collect();
-        assert!(DisplacementInterpolation::new(pts.clone(), few).is_err());
+        assert!(RbfInterpolator::new(pts.clone(), few).is_err());
         let bad: Vec<Sample> = (0..5).map(|i| ([i, 99, i], [1.0, 0.0, 0.0])).collect();
-        assert!(DisplacementInterpolation::new(pts, bad).is_err());
+        assert!(RbfInterpolator::new(pts, bad).is_err());
     }
 }

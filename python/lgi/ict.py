@@ -1,0 +1,80 @@
+"""The ICT-FaceKit data, the project's real face: where it lies, how it is read and what its
+vertex ranges mean, written once for the CLI, the evaluation scripts, the benches and the tests.
+
+The folder (`ict-facekit/` under the shared data folder) holds `generic_neutral_mesh.obj`, the
+expression shapes `shapes/*.obj` (same vertex order) and the marker layout `markers_120.csv`
+(header row, then name, x, y, z). Callers say where the shared data folder is (the CLI and the
+tests take it from the `LGI_SHARED_DATA` environment variable, `ENV`); `find` otherwise looks for
+`shared/data` beside the working directory and its parents.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import NDArray
+
+from lgi._lgi import Dataset
+
+__all__ = [
+    "ENV",
+    "LOWER_TEETH",
+    "SKIN_VERTICES",
+    "find",
+    "is_ict",
+    "load_dataset",
+    "load_markers",
+    "skin",
+]
+
+ENV = "LGI_SHARED_DATA"
+"""Environment variable naming the shared data folder (the parent of `ict-facekit/`)."""
+
+SKIN_VERTICES = 9409
+"""The face skin is vertices 0..9408; the rest are eyes, teeth, gums and the back of the head."""
+
+LOWER_TEETH = (19247, 21450)
+"""Lower teeth (0-based, inclusive): the jaw's only truly rigid part."""
+
+_FOLDER = "ict-facekit"
+_NEUTRAL = "generic_neutral_mesh.obj"
+
+
+def skin() -> NDArray[np.int64]:
+    """Indices of the face-skin vertices (the region errors are measured on)."""
+    return np.arange(SKIN_VERTICES)
+
+
+def is_ict(folder: str | os.PathLike[str]) -> bool:
+    """True when `folder` holds the ICT-FaceKit neutral mesh."""
+    return (Path(folder) / _NEUTRAL).is_file()
+
+
+def find(
+    shared_data: str | os.PathLike[str] | None = None, start: str | os.PathLike[str] | None = None
+) -> Path | None:
+    """The ICT-FaceKit folder under `shared_data`, or (None) under the first `shared/data` in
+    `start` (default: the working directory) or one of its parents; None when absent."""
+    if shared_data is not None:
+        d = Path(shared_data) / _FOLDER
+        return d if is_ict(d) else None
+    here = Path(start if start is not None else Path.cwd()).resolve()
+    for p in [here, *here.parents]:
+        d = p / "shared" / "data" / _FOLDER
+        if is_ict(d):
+            return d
+    return None
+
+
+def load_dataset(folder: str | os.PathLike[str]) -> Dataset:
+    """The neutral and its shapes (named after the shape files, in sorted order)."""
+    d = Path(folder)
+    return Dataset.from_obj(d / _NEUTRAL, str(d / "shapes" / "*.obj"))
+
+
+def load_markers(folder: str | os.PathLike[str]) -> NDArray[np.float64]:
+    """The 120 markers' rest positions (120, 3)."""
+    path = Path(folder) / "markers_120.csv"
+    return np.loadtxt(path, delimiter=",", skiprows=1, usecols=(1, 2, 3)).reshape(-1, 3)
