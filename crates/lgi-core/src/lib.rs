@@ -24,6 +24,7 @@ pub mod linalg;
 pub mod mesh;
 pub mod model;
 mod prefetch;
+pub mod prior;
 pub mod sew;
 pub mod sibson;
 pub mod smooth;

@@ -78,6 +78,7 @@ mod tests {
             tet: NO_TET,
             projected: false,
             distance: 0.0,
+            fit: false,
         })
     }
 

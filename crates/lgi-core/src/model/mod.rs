@@ -34,6 +34,7 @@ mod tests;
 
 pub use config::BuildConfig;
 pub use frame::{Frame, FrameInfo, FrameState};
+pub use solve::SolveOptions;
 pub use lookup::{LocalShapeId, Lookup, ShapeId};
 pub use parts::{BinParts, BinPartsRef, ModelParts, ModelPartsRef, PartsError};
 
