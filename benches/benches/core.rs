@@ -5,10 +5,7 @@
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};
 use glam::DVec3;
 use lgi_benches::{build_model, load_workload, make_frames, Workload};
-use lgi_core::choose::{Choice, Scratch};
-use lgi_core::model::{FrameState, Model};
-use lgi_core::sew::{blend, Pieces};
-use lgi_core::sibson::SibsonWeights;
+use lgi_core::{blend, Choice, FrameState, Model, Pieces, Scratch, SibsonWeights};
 use std::hint::black_box;
 use std::time::{Duration, Instant};
 

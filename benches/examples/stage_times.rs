@@ -4,9 +4,7 @@
 
 use glam::DVec3;
 use lgi_benches::{build_model, load_workload, make_frames};
-use lgi_core::choose::Scratch;
-use lgi_core::model::FrameState;
-use lgi_core::sew::{blend, Pieces};
+use lgi_core::{blend, FrameState, Pieces, Scratch};
 use std::hint::black_box;
 use std::time::Instant;
 

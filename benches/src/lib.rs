@@ -3,9 +3,7 @@
 //! present; otherwise a procedural face-like surface so `cargo bench` runs on a fresh clone.
 
 use glam::{DVec2, DVec3};
-use lgi_core::error::{LgiError, Result};
-use lgi_core::model::{BuildConfig, Model};
-use lgi_core::{Dataset, Mesh};
+use lgi_core::{BuildConfig, Dataset, LgiError, Mesh, Model, Result};
 use std::path::{Path, PathBuf};
 
 /// Frames in the default workload.
@@ -91,7 +89,7 @@ pub fn load_ict(dir: &Path) -> Result<Workload> {
         .collect();
     shapes.sort();
     let base = Dataset::from_obj_files(&dir.join("generic_neutral_mesh.obj"), &shapes)?;
-    let dataset = lgi_core::augment::augment(&base, ICT_SHAPES)?;
+    let dataset = lgi_core::augment(&base, ICT_SHAPES)?;
     let markers = read_markers(&dir.join("markers_120.csv"))?;
     Ok(Workload {
         name: format!(

@@ -319,3 +319,56 @@ def run_protocol(
     )
     to_csv(rows, outp / "results.csv")
     return rows
+
+
+def marker_samples(dataset: Dataset, markers: ArrayLike, meshes: ArrayLike) -> F64:
+    """(F, B, 3) markers (rest positions `markers` (B, 3) on the neutral) on meshes (F, V, 3):
+    barycentric on each marker's closest neutral triangle, as the protocols sample them."""
+    return _on_meshes(_samples(dataset, markers), np.asarray(meshes, dtype=np.float64))
+
+
+CAPTURE_COLUMNS = [
+    "method",
+    "frames",
+    "mean",
+    "p95",
+    "max",
+    "open_mean",
+    "open_p95",
+    "ms_per_frame",
+]
+"""Row keys of the capture protocol: per-vertex error over all frames, and over the jaw-open
+frames (`open_*`, NaN when the take has none), in data units."""
+
+
+def capture(
+    methods: Mapping[str, Solver],
+    frames: ArrayLike,
+    truth: ArrayLike,
+    jaw_open: ArrayLike,
+    region: ArrayLike | None = None,
+) -> list[Row]:
+    """Scores each method's solve of a capture take (`lgi.capture.make_capture`): mean, p95 and
+    max per-vertex error over `region`, overall and on the `jaw_open` frames (F,) bool."""
+    fr = np.asarray(frames, dtype=np.float64)
+    tr = np.asarray(truth, dtype=np.float64)
+    opened = np.asarray(jaw_open, dtype=bool)
+    idx = slice(None) if region is None else np.asarray(region)
+    rows: list[Row] = []
+    for name, m in methods.items():
+        t0 = time.perf_counter()
+        res = m.solve(fr, temporal=True, quiet=True)
+        seconds = time.perf_counter() - t0
+        err = np.linalg.norm(np.asarray(res.vertices)[:, idx] - tr[:, idx], axis=2)
+        row: Row = {
+            "method": name,
+            "frames": int(fr.shape[0]),
+            "mean": float(err.mean()),
+            "p95": float(np.percentile(err, 95)),
+            "max": float(err.max()),
+            "open_mean": float(err[opened].mean()) if opened.any() else float("nan"),
+            "open_p95": float(np.percentile(err[opened], 95)) if opened.any() else float("nan"),
+            "ms_per_frame": 1e3 * seconds / max(int(fr.shape[0]), 1),
+        }
+        rows.append(row)
+    return rows

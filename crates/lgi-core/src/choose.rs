@@ -8,7 +8,7 @@
 //! candidates also pick their aliases by the neighbour score.
 
 use crate::cloud::BundleCloud;
-use crate::grid::TetIndex;
+use crate::tet_index::TetIndex;
 use glam::DVec3;
 
 /// Marks "no tet" in [`Choice::tet`] (the cloud had no tets, or a point/segment/triangle was used).

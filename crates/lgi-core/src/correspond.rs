@@ -3,8 +3,8 @@
 //! the answer is bit-identical to brute force over all triangles (ties go to the lowest triangle).
 
 use crate::error::{LgiError, Result};
-use crate::geom::{closest_point_on_triangle, interpolate3};
-use crate::mesh::Mesh;
+use crate::geom::closest_point_on_triangle;
+use crate::mesh::{Mesh, SurfacePoint};
 use glam::{DVec3, Vec3A};
 use obvhs::aabb::Aabb;
 use obvhs::bvh2::builder::build_bvh2;
@@ -12,40 +12,6 @@ use obvhs::BvhBuildParams;
 use rayon::prelude::*;
 use std::cmp::Ordering;
 use std::collections::BinaryHeap;
-
-/// A point on the surface: triangle index + barycentric (u,v,w) of its corners.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct SurfacePoint {
-    /// Index of the triangle in the mesh's `triangles`.
-    pub triangle: u32,
-    /// Barycentric coordinates of the triangle's corners (sum 1, all `>= 0`).
-    pub bary: [f64; 3],
-}
-
-impl SurfacePoint {
-    /// The point on `mesh` (barycentric interpolation of the triangle's corners).
-    /// Out-of-range indices give a NaN vector rather than a panic.
-    pub fn position(&self, mesh: &Mesh) -> DVec3 {
-        self.evaluate(&mesh.triangles, &mesh.positions)
-    }
-
-    /// The point on any mesh with the same topology (`triangles`) and vertex `positions`, e.g. a
-    /// dataset shape. Out-of-range triangle or vertex indices give a NaN vector rather than a
-    /// panic, since a `SurfacePoint` can be built by hand against another mesh.
-    pub fn evaluate(&self, triangles: &[[u32; 3]], positions: &[DVec3]) -> DVec3 {
-        let Some(tri) = triangles.get(self.triangle as usize) else {
-            return DVec3::NAN;
-        };
-        let mut corners = [DVec3::ZERO; 3];
-        for (c, &i) in corners.iter_mut().zip(tri) {
-            match positions.get(i as usize) {
-                Some(p) => *c = *p,
-                None => return DVec3::NAN,
-            }
-        }
-        interpolate3(corners, self.bary)
-    }
-}
 
 /// A BVH node in f64, converted once from obvhs's f32 `Bvh2` so queries need no casts.
 #[derive(Debug, Clone, Copy)]

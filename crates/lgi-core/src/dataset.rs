@@ -4,11 +4,10 @@
 use crate::error::{LgiError, Result};
 use crate::mesh::Mesh;
 use glam::DVec3;
-use rayon::prelude::*;
-use std::path::{Path, PathBuf};
 
 /// Neutral mesh plus shapes as displacements. Construct with [`Dataset::new`] or
-/// [`Dataset::from_shape_positions`]; both validate.
+/// [`Dataset::from_shape_positions`]; both validate. Reading files is `io`'s job:
+/// [`Dataset::from_obj_files`] (in `io/obj.rs`) and `read_gltf` (`io/gltf.rs`) build on these.
 #[derive(Debug, Clone)]
 pub struct Dataset {
     neutral: Mesh,
@@ -73,30 +72,6 @@ impl Dataset {
             names.push(name);
         }
         Dataset::new(neutral, displacements, names)
-    }
-
-    /// Loads a dataset from OBJ files: the neutral (topology and UVs) and one OBJ per shape
-    /// with the same vertex order. Shapes are read in parallel (only their `v` lines); each
-    /// is named after its file stem. Errors name the file at fault.
-    pub fn from_obj_files(neutral: &Path, shapes: &[PathBuf]) -> Result<Dataset> {
-        let mesh = crate::io::obj::read_obj(neutral)?;
-        let v = mesh.num_vertices();
-        let read: Vec<Result<Vec<DVec3>>> = shapes
-            .par_iter()
-            .map(|p| crate::io::obj::read_obj_positions(p, v))
-            .collect();
-        let mut named = Vec::with_capacity(shapes.len());
-        // Sequential pass so the error reported is that of the first bad file, every run.
-        for (p, r) in shapes.iter().zip(read) {
-            let name = p
-                .file_stem()
-                .map(|s| s.to_string_lossy().into_owned())
-                .ok_or_else(|| {
-                    LgiError::Dataset(format!("shape file {} has no file name", p.display()))
-                })?;
-            named.push((name, r?));
-        }
-        Dataset::from_shape_positions(mesh, named)
     }
 
     /// The neutral mesh.

@@ -4,8 +4,7 @@
 //! corner (where the lips really join) it does not. Distances are shortest paths along mesh
 //! edges (Dijkstra), bounded by a radius so each bundle explores only its neighbourhood.
 
-use crate::correspond::SurfacePoint;
-use crate::mesh::Mesh;
+use crate::mesh::{Mesh, SurfacePoint};
 use std::cmp::Ordering;
 use std::collections::{BinaryHeap, HashMap};
 use std::sync::{Arc, Mutex};
@@ -132,12 +131,14 @@ impl FieldCache {
         field
     }
 
-    /// Number of cached fields (for tests and diagnostics).
+    /// Number of cached fields (for tests).
+    #[cfg(test)]
     pub fn len(&self) -> usize {
         self.fields.lock().map_or(0, |f| f.len())
     }
 
     /// True when nothing is cached.
+    #[cfg(test)]
     pub fn is_empty(&self) -> bool {
         self.len() == 0
     }

@@ -3,37 +3,75 @@
 //! Sparse facial markers ("bundles") index local geometry that really occurred in a dataset of
 //! facial shapes; the pieces are sewn together with natural-neighbour weights so the surface
 //! passes through every marker. Pure Rust: the Python binding lives in `lgi-python`.
+//!
+//! The public API is the list of re-exports below; the modules themselves are private, so a
+//! type's home can move without breaking users (docs/architecture.md maps the modules).
 // `deny`, not `forbid`: the one measured exception is the cache prefetch hint in `prefetch.rs`
 // (serial choice 2.31 -> 1.99 ms per frame on ICT-300, docs/performance.md).
 #![deny(unsafe_code)]
 #![warn(missing_docs)]
+// Every type reachable through the public API is in the list below.
+#![warn(unnameable_types)]
 
-pub mod augment;
-pub mod baselines;
-pub mod choose;
-pub mod cloud;
-pub mod correspond;
-pub mod dataset;
-pub mod error;
-pub mod geodesic;
-pub mod geom;
-pub mod grid;
-pub mod io;
-pub mod jaw;
-pub mod linalg;
-pub mod mesh;
-pub mod model;
+mod augment;
+mod baselines;
+mod choose;
+mod cloud;
+mod correspond;
+mod dataset;
+mod error;
+mod geodesic;
+mod geom;
+mod io;
+mod jaw;
+mod linalg;
+mod mesh;
+mod model;
 mod prefetch;
-pub mod prior;
-pub mod sew;
-pub mod sibson;
-pub mod smooth;
-pub mod tets;
-pub mod uvspace;
+mod prior;
+mod sew;
+mod sibson;
+mod smooth;
+mod sparse;
+mod tet_index;
+mod tets;
+mod uvspace;
 
+// Data in and the model: what the binding and most users need.
+pub use augment::{augment, recipes, Recipe};
 pub use dataset::Dataset;
 pub use error::{LgiError, Result};
-pub use mesh::Mesh;
+pub use mesh::{Mesh, SurfacePoint};
+pub use model::{
+    BinParts, BinPartsRef, BuildConfig, BundleStats, Frame, FrameInfo, FrameState, JawInput,
+    JawSetup, LocalShapeId, Lookup, Model, ModelParts, ModelPartsRef, PartsError, ShapeId,
+    SolveOptions,
+};
+pub use prior::{FitPrior, FrameFit, FIT_L2, FIT_PENALTY, RESIDUAL_LENGTH};
+
+// Files: meshes, datasets and the `.lgi` model file.
+pub use io::gltf::read_gltf;
+pub use io::model_file::{load as load_model, save as save_model};
+pub use io::obj::{parse_obj, read_obj, read_obj_positions, write_obj};
+
+// The jaw (Eq. 2) and the baselines.
+pub use baselines::{BlendshapeSolution, BlendshapeSolver, DisplacementInterpolation};
+pub use jaw::{validate_frame, JawBins, JawParams, JawRig, VertexMap, FRAME_TOLERANCE};
+
+// The stages of build and solve, public for the benches, for tests against brute force and
+// for tools built on the core.
+pub use choose::{
+    alias_groups, AliasGroups, Choice, ChoiceParams, FrameErrors, Scoring, Scratch, NO_TET,
+};
+pub use cloud::{build_cloud, BundleCloud};
+pub use correspond::{correspond, SurfaceIndex};
+pub use geom::{closest_point_on_triangle, interpolate3};
+pub use sew::{blend, BundleTargets, Pieces, SewPlan};
+pub use sibson::{Barrier, SibsonWeights};
+pub use sparse::SparseWeights;
+pub use tet_index::TetIndex;
+pub use tets::{all_tets, closest_point_in_tet, generate_tets, tet_quality, Tet, TetConfig};
+pub use uvspace::{boundary_barriers, vertex_charts, SewingSpace, UvIslands};
 
 /// Re-exported so users of the core need not pin glam themselves.
 pub use glam::{DVec2, DVec3};

@@ -56,11 +56,6 @@ impl Lu {
         Ok(Lu { n, lu: a, perm })
     }
 
-    /// Size of the system.
-    pub fn n(&self) -> usize {
-        self.n
-    }
-
     /// Solves `A x = b` for `b` given as `n` columns of 3-vectors stored as `[f64; 3]` rows.
     pub fn solve3(&self, b: &[[f64; 3]]) -> Vec<[f64; 3]> {
         let n = self.n;

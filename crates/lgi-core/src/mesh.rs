@@ -1,7 +1,10 @@
 //! Triangle mesh with per-corner UVs: the neutral face and its topology. Quads and n-gons are
 //! split into triangles by the readers; UV seams are kept (a vertex may have several UVs).
+//! A [`SurfacePoint`] (triangle + barycentric) names a point on it, and on every shape with
+//! its topology: bundles, sewing and hole-detour distances all address the surface that way.
 
 use crate::error::{LgiError, Result};
+use crate::geom::interpolate3;
 use glam::{DVec2, DVec3};
 
 /// A triangle mesh. `uv_triangles[t]` indexes `uvs` for the corners of `triangles[t]`
@@ -105,5 +108,39 @@ impl Mesh {
             self.positions[b as usize],
             self.positions[c as usize],
         ]
+    }
+}
+
+/// A point on the surface: triangle index + barycentric (u,v,w) of its corners.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SurfacePoint {
+    /// Index of the triangle in the mesh's `triangles`.
+    pub triangle: u32,
+    /// Barycentric coordinates of the triangle's corners (sum 1, all `>= 0`).
+    pub bary: [f64; 3],
+}
+
+impl SurfacePoint {
+    /// The point on `mesh` (barycentric interpolation of the triangle's corners).
+    /// Out-of-range indices give a NaN vector rather than a panic.
+    pub fn position(&self, mesh: &Mesh) -> DVec3 {
+        self.evaluate(&mesh.triangles, &mesh.positions)
+    }
+
+    /// The point on any mesh with the same topology (`triangles`) and vertex `positions`, e.g. a
+    /// dataset shape. Out-of-range triangle or vertex indices give a NaN vector rather than a
+    /// panic, since a `SurfacePoint` can be built by hand against another mesh.
+    pub fn evaluate(&self, triangles: &[[u32; 3]], positions: &[DVec3]) -> DVec3 {
+        let Some(tri) = triangles.get(self.triangle as usize) else {
+            return DVec3::NAN;
+        };
+        let mut corners = [DVec3::ZERO; 3];
+        for (c, &i) in corners.iter_mut().zip(tri) {
+            match positions.get(i as usize) {
+                Some(p) => *c = *p,
+                None => return DVec3::NAN,
+            }
+        }
+        interpolate3(corners, self.bary)
     }
 }

@@ -7,7 +7,8 @@ use crate::sew::Pieces;
 
 /// Averages each bundle's sparse shape weights over `window` frames centred on each frame
 /// (shrinking at the ends; frames where the bundle is missing are skipped). A bundle missing
-/// in a frame stays missing there.
+/// in a frame stays missing there. (Tests only: the model always smooths in bins.)
+#[cfg(test)]
 pub fn smooth_choices(choices: &[Vec<Option<Choice>>], window: usize) -> Vec<Pieces> {
     smooth_choices_in_bins(choices, &vec![0; choices.len()], window)
 }

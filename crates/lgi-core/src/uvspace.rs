@@ -3,10 +3,12 @@
 //! a proxy for every vertex outside them (teeth, eyeballs, back of the head), which copies the
 //! weights of its nearest sewn vertex in 3D. UV atlases often stack unrelated parts on top of
 //! each other (ICT's eyeballs share the face's UV tile), so UV distance alone is not enough.
+//! UV islands and the one rule for "the UV of a vertex" ([`UvIslands::vertex_uvs`]) live here
+//! too, so the sewing space and every other vertex-UV question agree.
 
-use crate::correspond::SurfacePoint;
 use crate::error::{LgiError, Result};
-use crate::mesh::Mesh;
+use crate::mesh::{Mesh, SurfacePoint};
+use crate::sibson::Barrier;
 use glam::{DVec2, DVec3};
 use rayon::prelude::*;
 use std::collections::HashMap;
@@ -21,7 +23,7 @@ pub struct SewingSpace {
     /// UV position of every bundle.
     pub bundle_uv: Vec<DVec2>,
     /// Hole-boundary edges of the sewn islands, in UV: weights never see across them.
-    pub barriers: Vec<[DVec2; 2]>,
+    pub barriers: Vec<Barrier>,
 }
 
 impl SewingSpace {
@@ -31,13 +33,210 @@ impl SewingSpace {
     }
 }
 
-fn find(parent: &mut [u32], mut x: u32) -> u32 {
-    while parent[x as usize] != x {
-        let p = parent[x as usize];
-        parent[x as usize] = parent[p as usize];
-        x = p;
+/// Disjoint sets of `0..n` with path halving; a union keeps the smaller root, so roots do not
+/// depend on the order of unions. The core's one union-find (UV islands need it).
+#[derive(Debug, Clone)]
+struct UnionFind {
+    parent: Vec<u32>,
+}
+
+impl UnionFind {
+    fn new(n: usize) -> Self {
+        UnionFind {
+            parent: (0..n as u32).collect(),
+        }
     }
-    x
+
+    fn find(&mut self, mut a: u32) -> u32 {
+        while self.parent[a as usize] != a {
+            let g = self.parent[self.parent[a as usize] as usize];
+            self.parent[a as usize] = g;
+            a = g;
+        }
+        a
+    }
+
+    fn union(&mut self, a: u32, b: u32) {
+        let (ra, rb) = (self.find(a), self.find(b));
+        if ra != rb {
+            self.parent[ra.max(rb) as usize] = ra.min(rb);
+        }
+    }
+}
+
+/// UV islands of a mesh: the connected components of `uv_triangles` through shared UV indices,
+/// numbered in order of their first triangle. Which UV a vertex takes is one rule,
+/// [`vertex_uvs`](Self::vertex_uvs), whatever islands the question is about.
+#[derive(Debug, Clone, PartialEq)]
+pub struct UvIslands {
+    /// Island of each triangle (empty when the mesh has no UVs; `u32::MAX` for a triangle with
+    /// an out-of-range index).
+    pub triangle_island: Vec<u32>,
+    /// Number of triangles in each island.
+    pub island_size: Vec<usize>,
+}
+
+impl UvIslands {
+    /// Computes the islands of `mesh`. Expects a validated mesh (`Mesh::validate`): triangles
+    /// with out-of-range indices are ignored rather than trusted.
+    pub fn new(mesh: &Mesh) -> Self {
+        let nv = mesh.positions.len();
+        let nu = mesh.uvs.len();
+        let mut out = UvIslands {
+            triangle_island: Vec::new(),
+            island_size: Vec::new(),
+        };
+        if !mesh.has_uvs() || mesh.uv_triangles.len() != mesh.triangles.len() {
+            return out;
+        }
+        let valid = |t: usize| {
+            mesh.triangles[t].iter().all(|&v| (v as usize) < nv)
+                && mesh.uv_triangles[t].iter().all(|&u| (u as usize) < nu)
+        };
+        let mut sets = UnionFind::new(nu);
+        for (t, ut) in mesh.uv_triangles.iter().enumerate() {
+            if valid(t) {
+                sets.union(ut[0], ut[1]);
+                sets.union(ut[0], ut[2]);
+            }
+        }
+        let mut id_of_root: HashMap<u32, u32> = HashMap::new();
+        out.triangle_island = vec![u32::MAX; mesh.triangles.len()];
+        for (t, ut) in mesh.uv_triangles.iter().enumerate() {
+            if !valid(t) {
+                continue;
+            }
+            let root = sets.find(ut[0]);
+            let next = id_of_root.len() as u32;
+            let id = *id_of_root.entry(root).or_insert(next);
+            if id as usize == out.island_size.len() {
+                out.island_size.push(0);
+            }
+            out.island_size[id as usize] += 1;
+            out.triangle_island[t] = id;
+        }
+        out
+    }
+
+    /// One UV per vertex, the rule every "UV of a vertex" in lgi follows: among the triangles of
+    /// the islands `in_space` accepts, a vertex takes its corner UV in the lowest-numbered
+    /// triangle using it (`None` where no such triangle uses it). The sewing space asks about
+    /// the islands carrying bundles, so a seam to any other island never moves a vertex out of
+    /// them; on a seam inside the space, triangle order decides. `self` must come from `mesh`.
+    pub fn vertex_uvs(&self, mesh: &Mesh, in_space: impl Fn(u32) -> bool) -> Vec<Option<DVec2>> {
+        let mut out = vec![None; mesh.positions.len()];
+        for (t, (tri, ut)) in mesh.triangles.iter().zip(&mesh.uv_triangles).enumerate() {
+            match self.triangle_island.get(t) {
+                Some(&island) if island != u32::MAX && in_space(island) => {}
+                _ => continue,
+            }
+            for (&v, &u) in tri.iter().zip(ut) {
+                if let Some(slot @ None) = out.get_mut(v as usize) {
+                    *slot = mesh.uvs.get(u as usize).copied();
+                }
+            }
+        }
+        out
+    }
+
+    /// Boundary of one island in its own UVs: the UV edges used by exactly one triangle of the
+    /// island. This is what a query in that chart must not see across: 3D holes inside the
+    /// island *and* seams to other islands (e.g. ICT's mouth and eyes are seams to the mouth
+    /// and eye-socket islands, not 3D boundaries). `self` must come from `mesh`.
+    pub fn island_barriers(&self, mesh: &Mesh, island: u32) -> Vec<Barrier> {
+        let mut count: HashMap<(u32, u32), u32> = HashMap::new();
+        let mut order = Vec::new();
+        for (t, ut) in mesh.uv_triangles.iter().enumerate() {
+            if self.triangle_island.get(t) != Some(&island) {
+                continue;
+            }
+            for k in 0..3 {
+                let (a, b) = (ut[k], ut[(k + 1) % 3]);
+                let key = (a.min(b), a.max(b));
+                let c = count.entry(key).or_insert(0);
+                if *c == 0 {
+                    order.push(key);
+                }
+                *c += 1;
+            }
+        }
+        order
+            .into_iter()
+            .filter(|key| count.get(key) == Some(&1))
+            // `get`: `self` may have been computed from another mesh.
+            .filter_map(|(a, b)| Some([*mesh.uvs.get(a as usize)?, *mesh.uvs.get(b as usize)?]))
+            .collect()
+    }
+}
+
+/// One UV per vertex over all islands ([`UvIslands::vertex_uvs`] with every island in the
+/// space): the query points of [`SibsonWeights::weights`](crate::sibson::SibsonWeights::weights).
+/// Vertices no triangle uses, and every vertex of a mesh without UVs, get NaN, which `weights`
+/// answers with an empty row (the caller decides what such a vertex does).
+///
+/// Caution: UV islands may overlap in UV space (ICT: the head and face charts both span the
+/// unit square), so only vertices of the bundles' islands should be weighted against them
+/// (ask [`UvIslands::vertex_uvs`] about those islands only, as the sewing space does).
+pub fn vertex_charts(mesh: &Mesh) -> Vec<DVec2> {
+    UvIslands::new(mesh)
+        .vertex_uvs(mesh, |_| true)
+        .into_iter()
+        .map(|uv| uv.unwrap_or(DVec2::NAN))
+        .collect()
+}
+
+/// Boundary edges of the 3D mesh topology (edges used by exactly one triangle) mapped to
+/// `vertex_uv` (normally [`vertex_charts`]).
+///
+/// An edge is skipped when an endpoint's UV is not finite or out of range, and, for a mesh with
+/// UVs, when it does not lie in the chart both its endpoints were mapped to (the edge's own
+/// corner UVs differ from the endpoints' chart UVs): such a segment would cut across unrelated
+/// UV space. Seam edges are not 3D boundary edges; where a hole is closed by another island
+/// (ICT's mouth and eyes) use [`UvIslands::island_barriers`] instead.
+pub fn boundary_barriers(mesh: &Mesh, vertex_uv: &[DVec2]) -> Vec<Barrier> {
+    let islands = UvIslands::new(mesh);
+    let with_uvs = !islands.triangle_island.is_empty();
+    let charts = islands.vertex_uvs(mesh, |_| true);
+    let mut count: HashMap<(u32, u32), (u32, usize, usize)> = HashMap::new();
+    let mut order = Vec::new();
+    for (t, tri) in mesh.triangles.iter().enumerate() {
+        for k in 0..3 {
+            let (a, b) = (tri[k], tri[(k + 1) % 3]);
+            let key = (a.min(b), a.max(b));
+            let e = count.entry(key).or_insert((0, t, k));
+            if e.0 == 0 {
+                order.push(key);
+            }
+            e.0 += 1;
+        }
+    }
+    let mut out = Vec::new();
+    for key in order {
+        let Some(&(1, t, k)) = count.get(&key) else {
+            continue;
+        };
+        let (a, b) = (
+            mesh.triangles[t][k] as usize,
+            mesh.triangles[t][(k + 1) % 3] as usize,
+        );
+        let (Some(&ua), Some(&ub)) = (vertex_uv.get(a), vertex_uv.get(b)) else {
+            continue;
+        };
+        if !(ua.is_finite() && ub.is_finite()) {
+            continue;
+        }
+        if with_uvs {
+            let ut = mesh.uv_triangles[t];
+            let corner = |j: usize| mesh.uvs.get(ut[j] as usize).copied();
+            let chart = |v: usize| charts.get(v).copied().flatten();
+            let in_chart = chart(a) == corner(k) && chart(b) == corner((k + 1) % 3);
+            if !in_chart {
+                continue;
+            }
+        }
+        out.push([ua, ub]);
+    }
+    out
 }
 
 /// Builds the sewing space of `mesh` for bundles at `bundles` (their closest points).
@@ -49,38 +248,25 @@ pub fn build(mesh: &Mesh, bundles: &[SurfacePoint]) -> Result<SewingSpace> {
                 .into(),
         ));
     }
-    // UV islands: connected components of UV indices through the UV triangles.
-    let mut parent: Vec<u32> = (0..mesh.uvs.len() as u32).collect();
-    for t in &mesh.uv_triangles {
-        let a = find(&mut parent, t[0]);
-        for &c in &t[1..] {
-            let b = find(&mut parent, c);
-            if a != b {
-                parent[b as usize] = a;
-            }
-        }
-    }
-    let island_of = |parent: &mut Vec<u32>, t: usize| find(parent, mesh.uv_triangles[t][0]);
-    let mut sewn_islands = std::collections::HashSet::new();
-    for b in bundles {
-        sewn_islands.insert(island_of(&mut parent, b.triangle as usize));
-    }
+    let islands = UvIslands::new(mesh);
+    let island_of = |t: usize| islands.triangle_island.get(t).copied();
+    let sewn_islands: std::collections::HashSet<u32> = bundles
+        .iter()
+        .filter_map(|b| island_of(b.triangle as usize))
+        .collect();
+    let sewn = |t: usize| island_of(t).is_some_and(|i| sewn_islands.contains(&i));
+    let uvs = islands.vertex_uvs(mesh, |i| sewn_islands.contains(&i));
+    let in_space: Vec<bool> = uvs.iter().map(Option::is_some).collect();
+    let vertex_uv: Vec<DVec2> = uvs.iter().map(|uv| uv.unwrap_or(DVec2::NAN)).collect();
     let nv = mesh.num_vertices();
-    let mut vertex_uv = vec![DVec2::NAN; nv];
-    let mut in_space = vec![false; nv];
     let mut edge_count: HashMap<(u32, u32), (u32, [DVec2; 2])> = HashMap::new();
     for t in 0..mesh.triangles.len() {
-        if !sewn_islands.contains(&island_of(&mut parent, t)) {
+        if !sewn(t) {
             continue;
         }
         let tri = mesh.triangles[t];
         let uvt = mesh.uv_triangles[t];
         for c in 0..3 {
-            let v = tri[c] as usize;
-            if !in_space[v] {
-                in_space[v] = true;
-                vertex_uv[v] = mesh.uvs[uvt[c] as usize];
-            }
             let (a, b) = (tri[c], tri[(c + 1) % 3]);
             let key = (a.min(b), a.max(b));
             let seg = [
@@ -187,40 +373,4 @@ fn proxies(pos: &[DVec3], in_space: &[bool], inside: &[u32]) -> Vec<u32> {
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn proxies_equal_brute_force_nearest() {
-        let mut s = 7u64;
-        let mut rnd = || {
-            s = s
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            (s >> 11) as f64 / (1u64 << 53) as f64
-        };
-        let pos: Vec<DVec3> = (0..600)
-            .map(|_| DVec3::new(rnd(), rnd(), rnd() * 0.3))
-            .collect();
-        let in_space: Vec<bool> = pos.iter().map(|p| p.x < 0.6).collect();
-        let inside: Vec<u32> = (0..600).filter(|&v| in_space[v as usize]).collect();
-        let got = proxies(&pos, &in_space, &inside);
-        for v in 0..600 {
-            if in_space[v] {
-                assert_eq!(got[v] as usize, v);
-                continue;
-            }
-            let want = inside
-                .iter()
-                .copied()
-                .min_by(|&a, &b| {
-                    pos[v]
-                        .distance_squared(pos[a as usize])
-                        .total_cmp(&pos[v].distance_squared(pos[b as usize]))
-                        .then(a.cmp(&b))
-                })
-                .unwrap();
-            assert_eq!(got[v], want, "vertex {v}");
-        }
-    }
-}
+mod tests;

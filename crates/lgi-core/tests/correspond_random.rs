@@ -2,9 +2,7 @@
 //! over all triangles, plus random queries; skipped when the data is absent. The OBJ parser here
 //! is deliberately minimal (v and f lines only) so this test does not depend on the io module.
 
-use lgi_core::correspond::{correspond, SurfaceIndex, SurfacePoint};
-use lgi_core::geom::closest_point_on_triangle;
-use lgi_core::{DVec3, Mesh};
+use lgi_core::{closest_point_on_triangle, correspond, DVec3, Mesh, SurfaceIndex, SurfacePoint};
 mod common;
 
 use std::path::PathBuf;

@@ -3,9 +3,10 @@
 
 mod common;
 
-use lgi_core::io::gltf::read_gltf;
-use lgi_core::io::obj::{parse_obj, read_obj, read_obj_positions, write_obj};
-use lgi_core::{DVec2, DVec3, Dataset, LgiError, Mesh};
+use lgi_core::{
+    parse_obj, read_gltf, read_obj, read_obj_positions, write_obj, DVec2, DVec3, Dataset, LgiError,
+    Mesh,
+};
 use proptest::prelude::*;
 use std::path::{Path, PathBuf};
 

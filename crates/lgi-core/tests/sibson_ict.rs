@@ -2,9 +2,10 @@
 //! chart's own boundary (mouth, eyes, rim) as barriers. Checks that no weight leaks across the
 //! mouth or the eyes and that the lips follow jawOpen; skipped when the data is absent.
 
-use lgi_core::geom::{closest_point_on_triangle, interpolate3};
-use lgi_core::sibson::{boundary_barriers, vertex_charts, Barrier, SibsonWeights, UvIslands};
-use lgi_core::{DVec2, DVec3, Mesh};
+use lgi_core::{
+    boundary_barriers, closest_point_on_triangle, interpolate3, vertex_charts, Barrier, DVec2,
+    DVec3, Mesh, SibsonWeights, SparseWeights, UvIslands,
+};
 use std::collections::{BinaryHeap, HashMap};
 mod common;
 
@@ -185,10 +186,13 @@ fn ict_face_weights_do_not_leak_across_mouth_and_eyes() {
             u[0] * w[0] + u[1] * w[1] + u[2] * w[2]
         })
         .collect();
+    // The face chart's vertices and their UVs, by the sewing space's rule with the face
+    // island as the space.
+    let face_uvs = islands.vertex_uvs(&mesh, |i| i == face);
     let face_vertices: Vec<u32> = (0..mesh.num_vertices() as u32)
-        .filter(|&v| islands.vertex_island[v as usize] == Some(face))
+        .filter(|&v| face_uvs[v as usize].is_some())
         .collect();
-    let queries: Vec<DVec2> = face_vertices.iter().map(|&v| charts[v as usize]).collect();
+    let queries: Vec<DVec2> = face_uvs.iter().flatten().copied().collect();
 
     let barriers = islands.island_barriers(&mesh, face);
     let groups = loops(&barriers);
@@ -273,7 +277,7 @@ fn ict_face_weights_do_not_leak_across_mouth_and_eyes() {
         })
         .collect();
     // (number of pairs over the bound, their total weight, worst ratio, bundles involved)
-    let leaks = |w: &lgi_core::sibson::SparseWeights, bound: f64| {
+    let leaks = |w: &SparseWeights, bound: f64| {
         let (mut over, mut mass, mut worst) = (0usize, 0.0f64, 0.0f64);
         let mut bundles = std::collections::BTreeSet::new();
         for (r, &v) in face_vertices.iter().enumerate() {
@@ -337,7 +341,7 @@ fn ict_face_weights_do_not_leak_across_mouth_and_eyes() {
         .filter(|&(_, &v)| rim_uv.contains(&charts[v as usize]))
         .map(|(r, _)| r)
         .collect();
-    let err = |w: &lgi_core::sibson::SparseWeights| {
+    let err = |w: &SparseWeights| {
         let mut sum = 0.0;
         for &r in &rim {
             let v = face_vertices[r] as usize;

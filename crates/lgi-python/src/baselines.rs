@@ -5,7 +5,7 @@ use crate::convert::{flat_to_array, float_array, points as read_points};
 use crate::dataset::Dataset;
 use crate::error::{input_error, PyLgiError};
 use glam::DVec3;
-use lgi_core::baselines::{BlendshapeSolver as CoreBlend, DisplacementInterpolation};
+use lgi_core::{BlendshapeSolver as CoreBlend, DisplacementInterpolation};
 use numpy::PyArrayDyn;
 use pyo3::prelude::*;
 

@@ -53,7 +53,7 @@ impl Dataset {
     #[staticmethod]
     fn from_gltf(py: Python<'_>, path: PathBuf) -> PyResult<Dataset> {
         let d = py
-            .detach(|| lgi_core::io::gltf::read_gltf(&path))
+            .detach(|| lgi_core::read_gltf(&path))
             .map_err(PyLgiError)?;
         Ok(Dataset { inner: Arc::new(d) })
     }
@@ -125,7 +125,7 @@ impl Dataset {
     fn augmented(&self, py: Python<'_>, min_shapes: usize) -> PyResult<Dataset> {
         let inner = self.inner.clone();
         let d = py
-            .detach(|| lgi_core::augment::augment(&inner, min_shapes))
+            .detach(|| lgi_core::augment(&inner, min_shapes))
             .map_err(PyLgiError)?;
         Ok(Dataset { inner: Arc::new(d) })
     }

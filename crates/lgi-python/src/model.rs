@@ -5,8 +5,7 @@ use crate::convert::{flat_to_array, float_array, point_sets, points, points_to_a
 use crate::dataset::Dataset;
 use crate::error::{input_error, internal_error, PyLgiError};
 use glam::{DMat3, DVec3};
-use lgi_core::jaw::{JawBins, JawParams, JawRig};
-use lgi_core::model::{BuildConfig, JawInput, Model as CoreModel};
+use lgi_core::{BuildConfig, JawBins, JawInput, JawParams, JawRig, Model as CoreModel};
 use numpy::{PyArray3, PyArrayDyn, PyArrayMethods, PyUntypedArrayMethods};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
@@ -143,7 +142,7 @@ impl Model {
     #[staticmethod]
     fn load(py: Python<'_>, path: std::path::PathBuf) -> PyResult<Model> {
         let model = py
-            .detach(move || lgi_core::io::model_file::load(&path))
+            .detach(move || lgi_core::load_model(&path))
             .map_err(PyLgiError)?;
         Ok(Model {
             inner: Arc::new(model),
@@ -153,7 +152,7 @@ impl Model {
     /// Writes the model to `path` (GIL released).
     fn save(&self, py: Python<'_>, path: std::path::PathBuf) -> PyResult<()> {
         let model = self.inner.clone();
-        py.detach(move || lgi_core::io::model_file::save(&model, &path))
+        py.detach(move || lgi_core::save_model(&model, &path))
             .map_err(PyLgiError)?;
         Ok(())
     }

@@ -1,4 +1,5 @@
-//! Mesh readers and writers: OBJ (text) and glTF/GLB (gltf crate; morph targets are shapes).
+//! File formats: OBJ (text) and glTF/GLB (gltf crate; morph targets are shapes) meshes and
+//! datasets, and the `.lgi` model file. `io` depends on the core types; they never read files.
 
 pub mod gltf;
 pub mod model_file;

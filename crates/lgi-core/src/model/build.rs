@@ -5,10 +5,11 @@
 use super::lookup::{lookup_sources, Lookup, LookupParts};
 use super::{BuildConfig, JawInput, JawSetup, Model};
 use crate::cloud::{build_cloud, BundleCloud};
-use crate::correspond::{correspond, SurfacePoint};
+use crate::correspond::correspond;
 use crate::dataset::Dataset;
 use crate::error::{LgiError, Result};
 use crate::mesh::Mesh;
+use crate::mesh::SurfacePoint;
 use crate::sew::{SewGeometry, SewPlans};
 use crate::tets::{generate_tets, Tet, TetConfig};
 use glam::DVec3;

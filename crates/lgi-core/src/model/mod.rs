@@ -12,13 +12,13 @@
 
 use crate::choose::AliasGroups;
 use crate::cloud::BundleCloud;
-use crate::correspond::SurfacePoint;
 use crate::dataset::Dataset;
 use crate::error::{LgiError, Result};
-use crate::grid::TetIndex;
 use crate::jaw::{JawBins, JawParams, JawRig};
+use crate::mesh::SurfacePoint;
 use crate::sew::SewPlans;
-use crate::sibson::SparseWeights;
+use crate::sparse::SparseWeights;
+use crate::tet_index::TetIndex;
 use crate::uvspace::SewingSpace;
 use glam::DVec3;
 use std::sync::Arc;
@@ -34,9 +34,9 @@ mod tests;
 
 pub use config::BuildConfig;
 pub use frame::{Frame, FrameInfo, FrameState};
-pub use solve::SolveOptions;
 pub use lookup::{LocalShapeId, Lookup, ShapeId};
 pub use parts::{BinParts, BinPartsRef, ModelParts, ModelPartsRef, PartsError};
+pub use solve::SolveOptions;
 
 /// Jaw articulation of a model (paper Eq. 2): the rig, each dataset shape's jaw parameters
 /// (its jaw motion is unskinned before indexing) and each bundle's jaw weight.

@@ -598,13 +598,10 @@ impl Model {
         if options.fit || options.marker_noise.is_some() {
             // Frames' fits are independent of each other: in parallel.
             let offer = options.fit && smooth_window <= 1;
-            prepared
-                .par_iter_mut()
-                .enumerate()
-                .try_for_each(|(f, p)| {
-                    self.add_fit(p, offer, options.marker_noise)
-                        .map_err(|e| frame_context(e, f))
-                })?;
+            prepared.par_iter_mut().enumerate().try_for_each(|(f, p)| {
+                self.add_fit(p, offer, options.marker_noise)
+                    .map_err(|e| frame_context(e, f))
+            })?;
         }
         match (smooth_window <= 1, temporal) {
             (true, true) => self.solve_temporal_pipelined(&prepared, vertices, on_frame),

@@ -5,11 +5,11 @@
 //! per set of present bundles) is [`plan`]'s job.
 
 use crate::choose::Choice;
-use crate::correspond::SurfacePoint;
 use crate::error::Result;
 use crate::geom::interpolate3;
 use crate::linalg::Lu;
-use crate::sibson::SparseWeights;
+use crate::mesh::SurfacePoint;
+use crate::sparse::SparseWeights;
 use glam::DVec3;
 use rayon::prelude::*;
 

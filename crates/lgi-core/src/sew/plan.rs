@@ -3,13 +3,14 @@
 //! bundles and per set of missing bundles on demand (derived from the full plan, cached).
 
 use super::{BlendInput, BundleTargets, Pieces, ResidualPass};
-use crate::correspond::SurfacePoint;
 use crate::dataset::Dataset;
 use crate::error::{LgiError, Result};
 use crate::geodesic::{is_detour, EdgeGraph, FieldCache};
 use crate::jaw::VertexMap;
 use crate::mesh::Mesh;
-use crate::sibson::{SibsonWeights, SparseWeights};
+use crate::mesh::SurfacePoint;
+use crate::sibson::SibsonWeights;
+use crate::sparse::SparseWeights;
 use crate::uvspace::{self, SewingSpace};
 use glam::DVec3;
 use rayon::prelude::*;
@@ -26,7 +27,8 @@ pub struct SewPlan {
 
 impl SewPlan {
     /// The residual pass of the plan's present bundles.
-    pub fn residual(&self) -> &ResidualPass {
+    #[cfg(test)]
+    pub(crate) fn residual(&self) -> &ResidualPass {
         &self.residual
     }
 
@@ -192,7 +194,8 @@ impl SewPlans {
         &self.geometry.space
     }
     /// What the plans are computed from.
-    pub fn geometry(&self) -> &SewGeometry {
+    #[cfg(test)]
+    pub(crate) fn geometry(&self) -> &SewGeometry {
         &self.geometry
     }
     /// Natural neighbours of every sewn vertex among all bundles (no barrier, no detour).

@@ -4,10 +4,7 @@
 
 use std::time::Instant;
 
-use lgi_core::cloud::build_cloud;
-use lgi_core::grid::TetIndex;
-use lgi_core::tets::{closest_point_in_tet, generate_tets, TetConfig};
-use lgi_core::DVec3;
+use lgi_core::{build_cloud, closest_point_in_tet, generate_tets, DVec3, TetConfig, TetIndex};
 
 /// Deterministic generator (SplitMix64) so the test needs no RNG crate.
 struct Rng(u64);

@@ -1,0 +1,129 @@
+//! Sparse row-major (CSR) weights over sites: the V×B sewing matrix W, the Sibson rows it is
+//! built from and the plans for missing markers. One general type so those stages share it;
+//! `sanity_check` states its invariants for tests and fuzzers.
+
+/// Sparse row-major weights: row `r` has entries `cols[row_start[r]..row_start[r + 1]]` with
+/// `vals` at the same positions (f64, > 0, summing to 1 in every non-empty row, columns sorted).
+#[derive(Debug, Clone, PartialEq)]
+pub struct SparseWeights {
+    /// Start of each row in `cols`/`vals`, plus one final entry (num_rows + 1 entries).
+    pub row_start: Vec<u32>,
+    /// Column (site) index of each entry.
+    pub cols: Vec<u32>,
+    /// Weight of each entry.
+    pub vals: Vec<f64>,
+    /// Number of columns (sites).
+    pub num_cols: usize,
+}
+
+impl SparseWeights {
+    /// Number of rows (query points).
+    pub fn num_rows(&self) -> usize {
+        self.row_start.len().saturating_sub(1)
+    }
+
+    /// Columns and weights of row `r`.
+    ///
+    /// # Panics
+    /// If `r >= self.num_rows()`, like slice indexing.
+    pub fn row(&self, r: usize) -> (&[u32], &[f64]) {
+        let (a, b) = (self.row_start[r] as usize, self.row_start[r + 1] as usize);
+        (&self.cols[a..b], &self.vals[a..b])
+    }
+
+    /// Checks the CSR invariants and panics naming the first one broken: `row_start` starts at
+    /// 0, never decreases and ends at `cols.len() == vals.len()`; in each row the columns are
+    /// strictly increasing and below `num_cols`, the weights finite and positive, and a
+    /// non-empty row sums to 1 (within 1e-9). For tests and fuzzers, like spade's
+    /// `sanity_check`: the solver trusts these invariants without checking them.
+    ///
+    /// # Panics
+    /// When an invariant does not hold.
+    pub fn sanity_check(&self) {
+        assert!(
+            self.row_start.first() == Some(&0),
+            "row_start must start at 0: {:?}",
+            self.row_start.first()
+        );
+        assert!(
+            self.row_start.windows(2).all(|w| w[0] <= w[1]),
+            "row_start decreases"
+        );
+        let nnz = self.row_start.last().map_or(0, |&n| n as usize);
+        assert!(
+            nnz == self.cols.len() && nnz == self.vals.len(),
+            "row_start ends at {nnz} for {} columns and {} weights",
+            self.cols.len(),
+            self.vals.len()
+        );
+        for r in 0..self.num_rows() {
+            let (cols, vals) = self.row(r);
+            assert!(
+                cols.windows(2).all(|c| c[0] < c[1]),
+                "row {r}: columns not strictly increasing {cols:?}"
+            );
+            assert!(
+                cols.iter().all(|&c| (c as usize) < self.num_cols),
+                "row {r}: a column is not below {} {cols:?}",
+                self.num_cols
+            );
+            assert!(
+                vals.iter().all(|&v| v.is_finite() && v > 0.0),
+                "row {r}: a weight is not finite and positive {vals:?}"
+            );
+            let sum: f64 = vals.iter().sum();
+            assert!(
+                cols.is_empty() || (sum - 1.0).abs() <= 1e-9,
+                "row {r}: weights sum to {sum}"
+            );
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn two_rows() -> SparseWeights {
+        SparseWeights {
+            row_start: vec![0, 2, 2, 3],
+            cols: vec![0, 2, 1],
+            vals: vec![0.25, 0.75, 1.0],
+            num_cols: 3,
+        }
+    }
+
+    #[test]
+    fn rows_are_the_csr_slices_and_empty_rows_are_allowed() {
+        let w = two_rows();
+        w.sanity_check();
+        assert_eq!(w.num_rows(), 3);
+        assert_eq!(w.row(0), (&[0, 2][..], &[0.25, 0.75][..]));
+        assert_eq!(w.row(1), (&[][..], &[][..]));
+        assert_eq!(w.row(2), (&[1][..], &[1.0][..]));
+    }
+
+    #[test]
+    #[should_panic(expected = "row 0: columns not strictly increasing")]
+    fn sanity_check_rejects_unsorted_columns() {
+        let mut w = two_rows();
+        w.cols.swap(0, 1);
+        w.sanity_check();
+    }
+
+    #[test]
+    #[should_panic(expected = "row 2: weights sum to 0.5")]
+    fn sanity_check_rejects_rows_not_summing_to_one() {
+        let mut w = two_rows();
+        w.vals[2] = 0.5;
+        w.sanity_check();
+    }
+
+    #[test]
+    #[should_panic(expected = "a column is not below 3")]
+    fn sanity_check_rejects_columns_out_of_range() {
+        let mut w = two_rows();
+        w.cols[2] = 3;
+        w.sanity_check();
+    }
+}
