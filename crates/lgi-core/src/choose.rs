@@ -28,6 +28,9 @@ pub struct Choice {
     pub projected: bool,
     /// Distance from the target to the chosen geometry's bundle position (0 inside).
     pub distance: f64,
+    /// True when the bundle took the frame's global fit ([`crate::prior`]) instead of a tet:
+    /// its geometry is the fit's weights, `shapes`/`weights` are then unused (weights 0).
+    pub fit: bool,
 }
 
 /// What the score of a candidate needs to know about the frame around the bundle.
@@ -153,6 +156,31 @@ impl Scoring<'_> {
             .filter(|&j| weights[j] != 0.0 && !used(shapes[j]))
             .count();
         self.temporal_weight * fresh as f64
+    }
+
+    /// The score [`choose`] gave `choice` (a tet's or a cloud point's): what another candidate
+    /// must beat.
+    pub fn choice_score(&self, choice: &Choice) -> f64 {
+        self.score(&choice.shapes, &choice.weights, choice.distance)
+    }
+
+    /// The score of a candidate whose bundle positions are `positions` (B): its squared
+    /// distances at the neighbours and at the bundle itself (`own`), plus the temporal
+    /// penalty of 4 fresh shapes unless the previous choice was the same kind (`fit`).
+    pub fn positions_score(&self, positions: &[DVec3], own: usize, fit: bool) -> f64 {
+        let mut err = 0.0;
+        for n in self.neighbours.iter().map(|&n| n as usize).chain([own]) {
+            let t = self.targets[n];
+            if !t.is_nan() {
+                err += positions[n].distance_squared(t);
+            }
+        }
+        let fresh = match self.previous {
+            Some(p) if p.fit == fit => 0.0,
+            Some(_) => 4.0,
+            None => 0.0,
+        };
+        err + self.temporal_weight * fresh
     }
 
     fn score(&self, shapes: &[u32; 4], weights: &[f64; 4], own_distance: f64) -> f64 {
@@ -351,6 +379,7 @@ pub fn choose(
             tet: t,
             projected,
             distance: d,
+            fit: false,
         };
         if best.as_ref().is_none_or(|(bs, _)| s < *bs) {
             best = Some((s, choice));
@@ -362,6 +391,7 @@ pub fn choose(
         tet: NO_TET,
         projected: true,
         distance: target.distance(cloud.points[0]),
+        fit: false,
     })
 }
 
@@ -553,6 +583,7 @@ mod tests {
                 tet: NO_TET,
                 projected: false,
                 distance: 0.0,
+                fit: false,
             };
             let mut scoring = Scoring {
                 shape_positions: &positions,

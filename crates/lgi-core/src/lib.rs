@@ -28,6 +28,7 @@ mod linalg;
 mod mesh;
 mod model;
 mod prefetch;
+mod prior;
 mod sew;
 mod sibson;
 mod smooth;
@@ -44,7 +45,9 @@ pub use mesh::{Mesh, SurfacePoint};
 pub use model::{
     BinParts, BinPartsRef, BuildConfig, BundleStats, Frame, FrameInfo, FrameState, JawInput,
     JawSetup, LocalShapeId, Lookup, Model, ModelParts, ModelPartsRef, PartsError, ShapeId,
+    SolveOptions,
 };
+pub use prior::{FitPrior, FrameFit, FIT_L2, FIT_PENALTY, RESIDUAL_LENGTH};
 
 // Files: meshes, datasets and the `.lgi` model file.
 pub use io::glob::expand as expand_glob;

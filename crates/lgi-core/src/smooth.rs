@@ -79,6 +79,7 @@ mod tests {
             tet: NO_TET,
             projected: false,
             distance: 0.0,
+            fit: false,
         })
     }
 

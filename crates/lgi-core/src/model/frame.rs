@@ -19,6 +19,12 @@ pub struct Frame {
     pub bundle_positions: Vec<DVec3>,
     /// The jaw bin whose clouds the frame was looked up in (0 for an unbinned model).
     pub bin: usize,
+    /// Per bundle: how far noise-aware solving moved the marker before interpolating it
+    /// (data units; empty when the solve was exact).
+    pub corrections: Vec<f64>,
+    /// The frame's global fit, a weight per dataset shape id (index 0, the neutral, is 0;
+    /// empty when no fit was made).
+    pub fit_weights: Vec<f64>,
 }
 
 /// A solved frame without its vertices (those went to the caller's buffer, see
@@ -34,6 +40,12 @@ pub struct FrameInfo {
     pub bundle_positions: Vec<DVec3>,
     /// The jaw bin whose clouds the frame was looked up in (0 for an unbinned model).
     pub bin: usize,
+    /// Per bundle: how far noise-aware solving moved the marker before interpolating it
+    /// (data units; empty when the solve was exact).
+    pub corrections: Vec<f64>,
+    /// The frame's global fit, a weight per dataset shape id (index 0, the neutral, is 0;
+    /// empty when no fit was made).
+    pub fit_weights: Vec<f64>,
 }
 
 impl Frame {
@@ -44,6 +56,8 @@ impl Frame {
             residuals: info.residuals,
             bundle_positions: info.bundle_positions,
             bin: info.bin,
+            corrections: info.corrections,
+            fit_weights: info.fit_weights,
         }
     }
 }

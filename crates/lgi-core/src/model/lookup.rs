@@ -28,6 +28,7 @@ use crate::dataset::Dataset;
 use crate::error::{LgiError, Result};
 use crate::jaw::{JawParams, JawRig};
 use crate::mesh::Mesh;
+use crate::prior::FitPrior;
 use crate::tet_index::TetIndex;
 use crate::tets::Tet;
 use glam::DVec3;
@@ -70,6 +71,9 @@ pub struct Lookup {
     pub(super) clouds: Vec<BundleCloud>,
     pub(super) groups: Vec<Vec<AliasGroups>>,
     pub(super) indices: Vec<TetIndex>,
+    /// The global fit of this bin's shapes at the bundles (`None` without shapes): derived
+    /// from `shape_positions`, not saved.
+    pub(super) prior: Option<FitPrior>,
 }
 
 impl Lookup {
@@ -199,7 +203,9 @@ impl Lookup {
         for (j, &k) in src.members.iter().enumerate() {
             local_of[k as usize + 1] = j as u32 + 1;
         }
+        let prior = FitPrior::new(&part.shape_positions, b)?;
         Ok(Lookup {
+            prior,
             reference: src.reference,
             members: src.members,
             local_of,

@@ -36,6 +36,7 @@ pub use config::BuildConfig;
 pub use frame::{Frame, FrameInfo, FrameState};
 pub use lookup::{LocalShapeId, Lookup, ShapeId};
 pub use parts::{BinParts, BinPartsRef, ModelParts, ModelPartsRef, PartsError};
+pub use solve::SolveOptions;
 
 /// Jaw articulation of a model (paper Eq. 2): the rig, each dataset shape's jaw parameters
 /// (its jaw motion is unskinned before indexing) and each bundle's jaw weight.

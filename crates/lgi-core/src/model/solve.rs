@@ -5,9 +5,10 @@
 //! smoothed (all choices, then temporal smoothing of the shape weights, then sewing).
 
 use super::{Frame, FrameInfo, FrameState, Model};
-use crate::choose::{choose, Choice, ChoiceParams, FrameErrors, Scoring, Scratch};
+use crate::choose::{choose, Choice, ChoiceParams, FrameErrors, Scoring, Scratch, NO_TET};
 use crate::error::{LgiError, Result};
 use crate::jaw::JawParams;
+use crate::prior::FrameFit;
 use crate::sew::{BundleTargets, Pieces};
 use crate::smooth::smooth_choices_in_bins;
 use glam::DVec3;
@@ -17,14 +18,79 @@ use rayon::prelude::*;
 /// (relative to the diagonal; the promise to users is 1e-6).
 pub(super) const RESIDUAL_TOLERANCE: f64 = 1e-12;
 
+/// How a sequence is solved.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SolveOptions {
+    /// Frames in order, each preferring the previous frame's choices (a performance); false:
+    /// independent frames, solved in parallel.
+    pub temporal: bool,
+    /// Average each bundle's shape weights over this many frames (centred) before sewing
+    /// when > 1; the global fit is then not offered as a candidate.
+    pub smooth_window: usize,
+    /// Offer every bundle the frame's global blendshape fit ([`crate::prior`]) beside its
+    /// tets, chosen by the same neighbour score. False is the paper's method.
+    pub fit: bool,
+    /// Marker noise σ (data units, per coordinate): markers are moved to the noise-aware
+    /// targets of [`FitPrior::denoise`](crate::prior::FitPrior::denoise) before the
+    /// solve, which then interpolates those. `None`: every marker is interpolated as given.
+    pub marker_noise: Option<f64>,
+}
+
+impl Default for SolveOptions {
+    fn default() -> Self {
+        SolveOptions {
+            temporal: true,
+            smooth_window: 0,
+            fit: true,
+            marker_noise: None,
+        }
+    }
+}
+
+impl SolveOptions {
+    /// The paper's exact interpolation of every marker with tets only.
+    pub fn exact(temporal: bool, smooth_window: usize) -> Self {
+        SolveOptions {
+            temporal,
+            smooth_window,
+            fit: false,
+            marker_noise: None,
+        }
+    }
+
+    fn validate(&self) -> Result<()> {
+        match self.marker_noise {
+            Some(s) if !(s.is_finite() && s >= 0.0) => Err(LgiError::Input(format!(
+                "marker_noise must be a finite distance >= 0 (data units), got {s}"
+            ))),
+            _ => Ok(()),
+        }
+    }
+}
+
 /// A frame's targets after the checks: as given (NaN rows missing) and as looked up (jaw
-/// unskinned), with the present bundles and the jaw pose.
+/// unskinned), with the present bundles and the jaw pose; with a fit, the frame's global fit
+/// and whether it is offered as a candidate, and how far noise-aware solving moved each
+/// marker (`corrections`, empty when it did not).
 pub(super) struct Prepared {
     pub(super) targets: Vec<DVec3>,
     pub(super) lookup: Vec<DVec3>,
     pub(super) present: Vec<u32>,
     pub(super) theta: Option<JawParams>,
     pub(super) bin: usize,
+    pub(super) fit: Option<FrameFit>,
+    pub(super) offer_fit: bool,
+    pub(super) corrections: Vec<f64>,
+}
+
+impl Prepared {
+    /// The fit's weights per local shape id, empty without a fit on offer.
+    fn fit_weights(&self) -> &[f64] {
+        match &self.fit {
+            Some(f) if self.offer_fit => &f.weights,
+            _ => &[],
+        }
+    }
 }
 
 impl Model {
@@ -87,7 +153,7 @@ impl Model {
         out: &mut [DVec3],
     ) -> Result<FrameInfo> {
         let choices = self.choose_all(prep, previous);
-        let pieces = Pieces::from_choices(&choices);
+        let pieces = Pieces::from_choices_with_fit(&choices, prep.fit_weights());
         self.sew_frame_into(prep, choices, &pieces, out)
     }
 
@@ -149,7 +215,62 @@ impl Model {
             present,
             theta,
             bin,
+            fit: None,
+            offer_fit: false,
+            corrections: Vec::new(),
         })
+    }
+
+    /// Adds the frame's global fit to a prepared frame (offered as a candidate with
+    /// `offer`) and, with `marker_noise`, moves its targets to the noise-aware ones, in the
+    /// bin's space and back to the frame's.
+    fn add_fit(&self, prep: &mut Prepared, offer: bool, marker_noise: Option<f64>) -> Result<()> {
+        let Some(prior) = &self.lookups[prep.bin].prior else {
+            return Ok(());
+        };
+        let fit = prior.fit(&prep.lookup)?;
+        if let Some(sigma) = marker_noise {
+            let denoised = prior.denoise(&prep.lookup, &fit, sigma)?;
+            let targets = self.frame_targets(&denoised, prep.theta, prep.bin)?;
+            prep.corrections = prep
+                .targets
+                .iter()
+                .zip(&targets)
+                .map(|(a, b)| if a.is_nan() { 0.0 } else { a.distance(*b) })
+                .collect();
+            prep.lookup = denoised;
+            prep.targets = targets;
+        }
+        prep.fit = Some(fit);
+        prep.offer_fit = offer;
+        Ok(())
+    }
+
+    /// The inverse of [`lookup_targets`](Self::lookup_targets): points of bin `bin`'s space
+    /// in the frame's (skinned) space.
+    fn frame_targets(
+        &self,
+        lookup: &[DVec3],
+        theta: Option<JawParams>,
+        bin: usize,
+    ) -> Result<Vec<DVec3>> {
+        let Some(j) = &self.jaw else {
+            return Ok(lookup.to_vec());
+        };
+        let mut out = lookup.to_vec();
+        if let Some(r) = self.lookups[bin].reference {
+            let posed = out.clone();
+            j.input
+                .rig
+                .unskin_weighted(&posed, &j.bundle_weights, r, &mut out)?;
+        }
+        if let Some(t) = theta {
+            let unskinned = out.clone();
+            j.input
+                .rig
+                .skin_weighted(&unskinned, &j.bundle_weights, t, &mut out)?;
+        }
+        Ok(out)
     }
 
     /// Targets in bin `bin`'s space: unskinned with the frame's pose, then skinned to the
@@ -186,6 +307,7 @@ impl Model {
     ) -> Vec<Option<Choice>> {
         let targets = &prep.lookup;
         let errors = self.frame_errors(prep.bin, targets);
+        let fit = prep.fit.as_ref().filter(|_| prep.offer_fit);
         (0..self.bundles.len())
             .into_par_iter()
             .map_init(Scratch::default, |scratch, i| {
@@ -193,7 +315,24 @@ impl Model {
                     return None;
                 }
                 let previous = previous.and_then(|p| p.get(i)).and_then(|c| c.as_ref());
-                Some(self.choose_bundle(prep.bin, i, targets, &errors, previous, scratch))
+                let tet = self.choose_bundle(prep.bin, i, targets, &errors, previous, scratch);
+                let Some(fit) = fit else {
+                    return Some(tet);
+                };
+                // The global fit against the tets, by the same score (ties keep the tet).
+                let scoring = self.scoring(prep.bin, i, targets, &errors, previous);
+                if scoring.positions_score(&fit.positions, i, true) < scoring.choice_score(&tet) {
+                    Some(Choice {
+                        shapes: [0; 4],
+                        weights: [0.0; 4],
+                        tet: NO_TET,
+                        projected: false,
+                        distance: fit.positions[i].distance(targets[i]),
+                        fit: true,
+                    })
+                } else {
+                    Some(tet)
+                }
             })
             .collect()
     }
@@ -229,16 +368,7 @@ impl Model {
         scratch: &mut Scratch,
     ) -> Choice {
         let lk = &self.lookups[bin];
-        let scoring = Scoring {
-            shape_positions: &lk.shape_positions,
-            num_bundles: self.bundles.len(),
-            neighbours: &self.neighbours[i],
-            targets,
-            previous,
-            temporal_weight: self.temporal_penalty(),
-            pure_errors: &errors.pure,
-            distances: &errors.distances,
-        };
+        let scoring = self.scoring(bin, i, targets, errors, previous);
         choose(
             &lk.indices[i],
             &lk.clouds[i],
@@ -248,6 +378,27 @@ impl Model {
             &self.choice_params(),
             scratch,
         )
+    }
+
+    /// How bundle `i`'s candidates are scored in bin `bin` (see [`choose_bundle`](Self::choose_bundle)).
+    fn scoring<'a>(
+        &'a self,
+        bin: usize,
+        i: usize,
+        targets: &'a [DVec3],
+        errors: &'a FrameErrors,
+        previous: Option<&'a Choice>,
+    ) -> Scoring<'a> {
+        Scoring {
+            shape_positions: &self.lookups[bin].shape_positions,
+            num_bundles: self.bundles.len(),
+            neighbours: &self.neighbours[i],
+            targets,
+            previous,
+            temporal_weight: self.temporal_penalty(),
+            pure_errors: &errors.pure,
+            distances: &errors.distances,
+        }
     }
 
     /// The choice's tuning from the build config, in data units.
@@ -333,11 +484,24 @@ impl Model {
         } else {
             choices
         };
+        let fit_weights = match &prep.fit {
+            Some(fit) if lk.reference.is_some() => {
+                let mut global = vec![0.0; self.dataset.num_shapes() + 1];
+                for (j, &w) in fit.weights.iter().enumerate().skip(1) {
+                    global[lk.members[j - 1] as usize + 1] = w;
+                }
+                global
+            }
+            Some(fit) => fit.weights.clone(),
+            None => Vec::new(),
+        };
         Ok(FrameInfo {
             choices,
             residuals,
             bundle_positions,
             bin: prep.bin,
+            corrections: prep.corrections.clone(),
+            fit_weights,
         })
     }
 
@@ -374,7 +538,9 @@ impl Model {
 
     /// As [`Model::solve_sequence`], writing frame f's vertices into
     /// `vertices[f * V..(f + 1) * V]` (a caller's buffer, e.g. a numpy array: no per-frame
-    /// allocation) and returning the rest of each frame.
+    /// allocation) and returning the rest of each frame. The paper's exact mode
+    /// ([`SolveOptions::exact`]); [`solve_sequence_with`](Self::solve_sequence_with) takes
+    /// every option.
     pub fn solve_sequence_into(
         &self,
         frames: &[Vec<DVec3>],
@@ -384,6 +550,22 @@ impl Model {
         vertices: &mut [DVec3],
         on_frame: impl FnMut(usize),
     ) -> Result<Vec<FrameInfo>> {
+        let options = SolveOptions::exact(temporal, smooth_window);
+        self.solve_sequence_with(frames, jaw, &options, vertices, on_frame)
+    }
+
+    /// Solves a sequence with `options` into `vertices` (as
+    /// [`solve_sequence_into`](Self::solve_sequence_into)).
+    pub fn solve_sequence_with(
+        &self,
+        frames: &[Vec<DVec3>],
+        jaw: Option<&[JawParams]>,
+        options: &SolveOptions,
+        vertices: &mut [DVec3],
+        on_frame: impl FnMut(usize),
+    ) -> Result<Vec<FrameInfo>> {
+        options.validate()?;
+        let (temporal, smooth_window) = (options.temporal, options.smooth_window);
         let nv = self.dataset.num_vertices();
         if vertices.len() != frames.len() * nv {
             return Err(LgiError::Input(format!(
@@ -413,6 +595,14 @@ impl Model {
                 .map_err(|e| frame_context(e, f))?;
             prepared.push(prep);
         }
+        if options.fit || options.marker_noise.is_some() {
+            // Frames' fits are independent of each other: in parallel.
+            let offer = options.fit && smooth_window <= 1;
+            prepared.par_iter_mut().enumerate().try_for_each(|(f, p)| {
+                self.add_fit(p, offer, options.marker_noise)
+                    .map_err(|e| frame_context(e, f))
+            })?;
+        }
         match (smooth_window <= 1, temporal) {
             (true, true) => self.solve_temporal_pipelined(&prepared, vertices, on_frame),
             (true, false) => self.solve_independent(&prepared, vertices, on_frame),
@@ -438,7 +628,7 @@ impl Model {
         let mut current = prepared.first().map(|p| self.choose_all(p, None));
         for (f, (prep, slot)) in prepared.iter().zip(slots).enumerate() {
             let choices = current.take().unwrap_or_default();
-            let pieces = Pieces::from_choices(&choices);
+            let pieces = Pieces::from_choices_with_fit(&choices, prep.fit_weights());
             let next = prepared.get(f + 1);
             // What the next frame prefers: this frame's choices as reported (dataset
             // ids), in the next frame's bin, when it stays in this bin.

@@ -41,12 +41,25 @@ impl Pieces {
 
     /// The pieces of per-bundle choices (a missing bundle has no entries).
     pub fn from_choices(choices: &[Option<Choice>]) -> Pieces {
+        Pieces::from_choices_with_fit(choices, &[])
+    }
+
+    /// As [`from_choices`](Self::from_choices), a bundle that took the frame's global fit
+    /// getting the fit's weights `fit` (per shape id; empty when no bundle took it).
+    pub fn from_choices_with_fit(choices: &[Option<Choice>], fit: &[f64]) -> Pieces {
         let mut p = Pieces {
             start: vec![0],
             ..Pieces::default()
         };
         for c in choices {
-            if let Some(c) = c {
+            if c.is_some_and(|c| c.fit) {
+                for (k, &w) in fit.iter().enumerate() {
+                    if w != 0.0 {
+                        p.shapes.push(k as u32);
+                        p.weights.push(w);
+                    }
+                }
+            } else if let Some(c) = c {
                 for j in 0..4 {
                     if c.weights[j] != 0.0 {
                         p.shapes.push(c.shapes[j]);

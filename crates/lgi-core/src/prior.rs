@@ -1,0 +1,277 @@
+//! The dataset's global prior for one frame: a box-penalised blendshape fit of all the present
+//! markers at once. It is offered to every bundle as one more candidate beside its tets (a real
+//! frame has 10–30 shapes active at once, more than a 4-shape tet can hold between markers),
+//! and it is what noise-aware solving measures markers against: noise is independent from
+//! marker to marker, while what the dataset cannot explain is shared by neighbouring markers.
+
+use crate::baselines::BlendshapeSolver;
+use crate::error::{LgiError, Result};
+use crate::linalg::Lu;
+use glam::DVec3;
+
+/// Ridge weight of the fit, relative to the mean squared column norm of its matrix.
+pub const FIT_L2: f64 = 1e-4;
+/// Penalty on weights outside [0, 1], relative like [`FIT_L2`].
+pub const FIT_PENALTY: f64 = 10.0;
+/// Correlation length of what the dataset misses, in median nearest-marker distances: the
+/// residual field is smooth over about one marker spacing.
+pub const RESIDUAL_LENGTH: f64 = 1.0;
+
+/// The fit of one frame (one jaw bin's space).
+#[derive(Debug, Clone, PartialEq)]
+pub struct FrameFit {
+    /// Weight of every shape id (index 0, the neutral, is 0).
+    pub weights: Vec<f64>,
+    /// Every bundle's position under the fitted weights (B).
+    pub positions: Vec<DVec3>,
+}
+
+/// What a fit and its residual smoothing need of one set of bundle clouds.
+#[derive(Debug, Clone)]
+pub struct FitPrior {
+    solver: BlendshapeSolver,
+    rest: Vec<DVec3>,
+    /// Shape displacements at the bundles, `S × B` (`[k * B + n]`, shape id k + 1).
+    displacements: Vec<DVec3>,
+    /// Unit-amplitude correlation of the residual field between bundles (B × B).
+    correlation: Vec<f64>,
+}
+
+impl FitPrior {
+    /// From the bundles' positions on every shape, `(S + 1) × B` (shape id 0 the neutral,
+    /// index `[k * B + n]`). `None` for a dataset without shapes.
+    pub fn new(shape_positions: &[DVec3], num_bundles: usize) -> Result<Option<FitPrior>> {
+        let b = num_bundles;
+        if b == 0 || shape_positions.len() % b != 0 {
+            return Err(LgiError::Input(format!(
+                "{} shape positions are not a multiple of {b} bundles",
+                shape_positions.len()
+            )));
+        }
+        let s = shape_positions.len() / b - 1;
+        if s == 0 {
+            return Ok(None);
+        }
+        let rest = shape_positions[..b].to_vec();
+        let displacements: Vec<DVec3> = shape_positions[b..]
+            .chunks(b)
+            .flat_map(|row| row.iter().zip(&rest).map(|(p, r)| *p - *r))
+            .collect();
+        // Row 3n + d of the fit's matrix is coordinate d of bundle n.
+        let mut a = vec![0.0; 3 * b * s];
+        for k in 0..s {
+            for n in 0..b {
+                let d = displacements[k * b + n].to_array();
+                for (c, v) in d.iter().enumerate() {
+                    a[(3 * n + c) * s + k] = *v;
+                }
+            }
+        }
+        let scale = (a.iter().map(|x| x * x).sum::<f64>() / s as f64).max(f64::MIN_POSITIVE);
+        let solver = BlendshapeSolver::new(a, 3 * b, s, FIT_L2 * scale, FIT_PENALTY * scale)?;
+        let correlation = correlation(&rest);
+        Ok(Some(FitPrior {
+            solver,
+            rest,
+            displacements,
+            correlation,
+        }))
+    }
+
+    /// Number of bundles B.
+    pub fn num_bundles(&self) -> usize {
+        self.rest.len()
+    }
+
+    /// The fit of `targets` (B, NaN rows missing).
+    pub fn fit(&self, targets: &[DVec3]) -> Result<FrameFit> {
+        let b = self.rest.len();
+        let mut rhs = Vec::with_capacity(3 * b);
+        for (t, r) in targets.iter().zip(&self.rest) {
+            rhs.extend_from_slice(&(*t - *r).to_array());
+        }
+        let solution = self.solver.solve(&rhs)?;
+        let mut positions = self.rest.clone();
+        for (k, &w) in solution.weights.iter().enumerate() {
+            if w != 0.0 {
+                for (p, d) in positions
+                    .iter_mut()
+                    .zip(&self.displacements[k * b..(k + 1) * b])
+                {
+                    *p += *d * w;
+                }
+            }
+        }
+        let mut weights = Vec::with_capacity(solution.weights.len() + 1);
+        weights.push(0.0);
+        weights.extend_from_slice(&solution.weights);
+        Ok(FrameFit { weights, positions })
+    }
+
+    /// Noise-aware targets: the fit's positions plus its residuals smoothed across
+    /// neighbouring markers, the posterior mean of a residual field with the correlation of
+    /// [`RESIDUAL_LENGTH`] under independent marker noise of `sigma` (data units, per
+    /// coordinate). The field's variance is what the residuals hold beyond the noise, so where
+    /// the dataset explains a frame the markers move to it by about their noise, and a
+    /// residual that neighbours share is kept. Missing rows stay missing.
+    pub fn denoise(&self, targets: &[DVec3], fit: &FrameFit, sigma: f64) -> Result<Vec<DVec3>> {
+        let b = self.rest.len();
+        let present: Vec<usize> = (0..b).filter(|&i| !targets[i].is_nan()).collect();
+        let n = present.len();
+        if sigma <= 0.0 || n == 0 {
+            return Ok(targets.to_vec());
+        }
+        let residual: Vec<[f64; 3]> = present
+            .iter()
+            .map(|&i| (targets[i] - fit.positions[i]).to_array())
+            .collect();
+        let noise = sigma * sigma;
+        let mean_square = residual.iter().flatten().map(|x| x * x).sum::<f64>() / (3 * n) as f64;
+        // A field of (almost) no variance: the markers sit at the fit.
+        let variance = (mean_square - noise).max(1e-6 * noise);
+        let mut system = vec![0.0; n * n];
+        for (r, &i) in present.iter().enumerate() {
+            for (c, &j) in present.iter().enumerate() {
+                system[r * n + c] = variance * self.correlation[i * b + j];
+            }
+            system[r * n + r] += noise;
+        }
+        let solved = Lu::factor(n, system)?.solve3(&residual);
+        let mut out = targets.to_vec();
+        for &i in &present {
+            let mut s = [0.0; 3];
+            for (&j, x) in present.iter().zip(&solved) {
+                let k = variance * self.correlation[i * b + j];
+                for d in 0..3 {
+                    s[d] += k * x[d];
+                }
+            }
+            out[i] = fit.positions[i] + DVec3::from_array(s);
+        }
+        Ok(out)
+    }
+}
+
+/// Gaussian correlation of the bundles' rest positions with length [`RESIDUAL_LENGTH`] times
+/// the median nearest-neighbour distance (B × B, unit diagonal).
+fn correlation(rest: &[DVec3]) -> Vec<f64> {
+    let b = rest.len();
+    let mut nearest: Vec<f64> = rest
+        .iter()
+        .enumerate()
+        .map(|(i, p)| {
+            rest.iter()
+                .enumerate()
+                .filter(|&(j, _)| j != i)
+                .map(|(_, q)| p.distance(*q))
+                .fold(f64::INFINITY, f64::min)
+        })
+        .filter(|d| d.is_finite())
+        .collect();
+    nearest.sort_by(f64::total_cmp);
+    let median = nearest.get(nearest.len() / 2).copied().unwrap_or(1.0);
+    let length = (RESIDUAL_LENGTH * median).max(f64::MIN_POSITIVE);
+    let mut out = vec![0.0; b * b];
+    for i in 0..b {
+        for j in 0..b {
+            let d2 = rest[i].distance_squared(rest[j]);
+            out[i * b + j] = (-0.5 * d2 / (length * length)).exp();
+        }
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Three shapes moving 12 bundles on a line in different directions.
+    fn positions() -> (Vec<DVec3>, usize) {
+        let b = 12;
+        let rest: Vec<DVec3> = (0..b).map(|i| DVec3::new(i as f64, 0.0, 0.0)).collect();
+        let mut out = rest.clone();
+        for k in 0..3 {
+            for (i, r) in rest.iter().enumerate() {
+                let x = i as f64 / b as f64;
+                let d = match k {
+                    0 => DVec3::new(0.0, 1.0, 0.0),
+                    1 => DVec3::new(0.0, 0.0, x),
+                    _ => DVec3::new(0.3 * x * x, 0.0, 0.0),
+                };
+                out.push(*r + d);
+            }
+        }
+        (out, b)
+    }
+
+    #[test]
+    fn the_fit_recovers_weights_inside_the_box_and_reproduces_the_markers() {
+        let (sp, b) = positions();
+        let prior = FitPrior::new(&sp, b).unwrap().unwrap();
+        let w = [0.3, 0.7, 0.5];
+        let targets: Vec<DVec3> = (0..b)
+            .map(|n| {
+                sp[n]
+                    + (0..3)
+                        .map(|k| (sp[(k + 1) * b + n] - sp[n]) * w[k])
+                        .sum::<DVec3>()
+            })
+            .collect();
+        let fit = prior.fit(&targets).unwrap();
+        for (got, want) in fit.weights[1..].iter().zip(w) {
+            assert!((got - want).abs() < 5e-3, "{:?}", fit.weights);
+        }
+        for (p, t) in fit.positions.iter().zip(&targets) {
+            assert!(p.distance(*t) < 1e-3);
+        }
+    }
+
+    #[test]
+    fn denoising_with_zero_noise_returns_the_targets_and_keeps_missing_rows() {
+        let (sp, b) = positions();
+        let prior = FitPrior::new(&sp, b).unwrap().unwrap();
+        let mut targets: Vec<DVec3> = sp[b..2 * b].to_vec();
+        targets[3] = DVec3::NAN;
+        let fit = prior.fit(&targets).unwrap();
+        assert_eq!(prior.denoise(&targets, &fit, 0.0).unwrap()[0], targets[0]);
+        let d = prior.denoise(&targets, &fit, 0.1).unwrap();
+        assert!(d[3].is_nan() && d.iter().enumerate().all(|(i, p)| i == 3 || p.is_finite()));
+    }
+
+    #[test]
+    fn denoising_pulls_independent_noise_toward_the_fit_and_keeps_a_shared_residual() {
+        let (sp, b) = positions();
+        let prior = FitPrior::new(&sp, b).unwrap().unwrap();
+        let truth: Vec<DVec3> = sp[b..2 * b].to_vec();
+        // Alternating ±0.05 in z: independent-looking noise the dataset does not explain.
+        let noisy: Vec<DVec3> = truth
+            .iter()
+            .enumerate()
+            .map(|(i, t)| *t + DVec3::new(0.0, 0.0, if i % 2 == 0 { 0.05 } else { -0.05 }))
+            .collect();
+        let fit = prior.fit(&noisy).unwrap();
+        let d = prior.denoise(&noisy, &fit, 0.05).unwrap();
+        let err = |p: &[DVec3]| {
+            p.iter()
+                .zip(&truth)
+                .map(|(a, t)| a.distance(*t))
+                .sum::<f64>()
+        };
+        assert!(
+            err(&d) < 0.5 * err(&noisy),
+            "{} vs {}",
+            err(&d),
+            err(&noisy)
+        );
+        // A smooth offset of all markers in x that no shape makes is kept (most of it).
+        let shifted: Vec<DVec3> = truth
+            .iter()
+            .map(|t| *t + DVec3::new(0.0, 0.0, -2.0))
+            .collect();
+        let fit = prior.fit(&shifted).unwrap();
+        let d = prior.denoise(&shifted, &fit, 0.05).unwrap();
+        for (p, s) in d.iter().zip(&shifted) {
+            assert!(p.distance(*s) < 0.2, "{p} vs {s}");
+        }
+    }
+}
