@@ -49,7 +49,7 @@ def main() -> None:
     model = lgi.Model.build(data, markers)
     frames = bench.make_frames(model, data, args.frames)
     out["workload"] = {"name": name}
-    out["temporal"] = digests(model.solve(frames, quiet=True))
+    out["temporal"] = digests(model.solve(frames, quiet=True, fit=False))
 
     from lgi.dataset import sample_dataset
     from lgi.sample import make_sample
@@ -57,7 +57,7 @@ def main() -> None:
     s = make_sample(0)
     sdata = sample_dataset(s)
     smodel = lgi.Model.build(sdata, s.markers_rest)
-    out["sample"] = digests(smodel.solve(s.performance, quiet=True))
+    out["sample"] = digests(smodel.solve(s.performance, quiet=True, fit=False))
     text = json.dumps(out, indent=1)
     print(text)
     if args.out:

@@ -14,7 +14,7 @@ from lgi.errors import (
     MarkerError,
     ModelFormatError,
 )
-from lgi.model import BuildConfig, Choices, Model, SolveResult
+from lgi.model import BuildConfig, Choices, Model, SolveResult, estimate_marker_noise
 
 __all__ = [
     "BuildConfig",
@@ -29,5 +29,6 @@ __all__ = [
     "ModelFormatError",
     "SolveResult",
     "__version__",
+    "estimate_marker_noise",
     "jaw",
 ]

@@ -167,6 +167,12 @@ class SolveOutput:
     def missing(self) -> NDArray[np.bool_]: ...
     @property
     def jaw_bin(self) -> NDArray[np.int64]: ...
+    @property
+    def choice_fit(self) -> NDArray[np.bool_]: ...
+    @property
+    def marker_corrections(self) -> NDArray[np.float64]: ...
+    @property
+    def fit_weights(self) -> NDArray[np.float64]: ...
 
 # The dicts the inspection methods return, key by key (they exist only in this stub).
 class _BundleStats(TypedDict):
@@ -236,8 +242,11 @@ class Model:
         jaw_theta: ArrayLike | None = None,
         smooth_window: int = 0,
         out: NDArray[np.float64] | None = None,
+        fit: bool = True,
+        marker_noise: float | None = None,
     ) -> SolveOutput:
-        """Solves (F, B, 3) frames (vertices into `out` if given)."""
+        """Solves (F, B, 3) frames (vertices into `out` if given); ``fit`` offers the global
+        fit as a candidate, ``marker_noise`` (data units) solves noise-aware."""
     def bundle_positions(self, meshes: ArrayLike) -> NDArray[np.float64]:
         """(F, V, 3) meshes -> (F, B, 3) bundle surface positions."""
     def bundle_stats(self) -> _BundleStats:

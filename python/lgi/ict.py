@@ -21,11 +21,14 @@ from lgi._lgi import Dataset
 __all__ = [
     "ENV",
     "LOWER_TEETH",
+    "NARROW_FACE",
     "SKIN_VERTICES",
     "find",
     "is_ict",
+    "livelinkface",
     "load_dataset",
     "load_markers",
+    "lower_teeth",
     "skin",
 ]
 
@@ -38,6 +41,9 @@ SKIN_VERTICES = 9409
 LOWER_TEETH = (19247, 21450)
 """Lower teeth (0-based, inclusive): the jaw's only truly rigid part."""
 
+NARROW_FACE = 6706
+"""Vertices 0..6705: the narrow face (no ears, neck or scalp), where a marker artist puts dots."""
+
 _FOLDER = "ict-facekit"
 _NEUTRAL = "generic_neutral_mesh.obj"
 
@@ -45,6 +51,18 @@ _NEUTRAL = "generic_neutral_mesh.obj"
 def skin() -> NDArray[np.int64]:
     """Indices of the face-skin vertices (the region errors are measured on)."""
     return np.arange(SKIN_VERTICES)
+
+
+def lower_teeth() -> NDArray[np.int64]:
+    """Indices of the lower teeth (what a jaw hinge is fitted to)."""
+    return np.arange(LOWER_TEETH[0], LOWER_TEETH[1] + 1)
+
+
+def livelinkface(shared_data: str | os.PathLike[str] | None = None) -> list[Path]:
+    """The shared Live Link Face recordings (`livelinkface/*.csv` beside `ict-facekit/`),
+    sorted; empty when absent."""
+    ict = find(shared_data)
+    return [] if ict is None else sorted((ict.parent / "livelinkface").glob("*.csv"))
 
 
 def is_ict(folder: str | os.PathLike[str]) -> bool:

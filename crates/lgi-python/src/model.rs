@@ -7,7 +7,7 @@ use crate::dataset::Dataset;
 use crate::error::{input_error, internal_error, PyLgiError};
 use crate::jaw::{frame_from_array, JawRig};
 use glam::{DMat3, DVec3};
-use lgi_core::{JawBins, JawInput, JawParams, JawRig as CoreRig, Model as CoreModel};
+use lgi_core::{JawBins, JawInput, JawParams, JawRig as CoreRig, Model as CoreModel, SolveOptions};
 use numpy::{PyArray3, PyArrayDyn, PyArrayMethods, PyUntypedArrayMethods};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
@@ -149,8 +149,10 @@ impl Model {
     /// Solves frames (F, B, 3) into a `SolveOutput`. `progress(f)` is called after each
     /// frame with the GIL held. `temporal=False` solves frames independently (in parallel).
     /// `out`: a C-contiguous, writeable float64 (F, V, 3) array that receives the vertices
-    /// (and is returned as `vertices`) instead of a new one.
-    #[pyo3(signature = (frames, progress=None, temporal=true, jaw_theta=None, smooth_window=0, out=None))]
+    /// (and is returned as `vertices`) instead of a new one. `fit` offers every bundle the
+    /// frame's global blendshape fit beside its tets; `marker_noise` (data units) solves
+    /// noise-aware (None: every marker interpolated as given).
+    #[pyo3(signature = (frames, progress=None, temporal=true, jaw_theta=None, smooth_window=0, out=None, fit=true, marker_noise=None))]
     #[allow(clippy::too_many_arguments)]
     fn solve<'py>(
         &self,
@@ -161,7 +163,15 @@ impl Model {
         jaw_theta: Option<&Bound<'py, PyAny>>,
         smooth_window: usize,
         out: Option<&Bound<'py, PyAny>>,
+        fit: bool,
+        marker_noise: Option<f64>,
     ) -> PyResult<SolveOutput> {
+        let options = SolveOptions {
+            temporal,
+            smooth_window,
+            fit,
+            marker_noise,
+        };
         let b = self.inner.num_bundles();
         let frames = point_sets(frames, "frames", ("frame", "bundle"), Some(b), true)?;
         let thetas: Option<Vec<JawParams>> = match jaw_theta {
@@ -191,20 +201,13 @@ impl Model {
             let flat = rw.as_slice_mut().map_err(internal_error)?;
             let out: &mut [DVec3] = bytemuck::try_cast_slice_mut(flat).map_err(internal_error)?;
             py.detach(move || {
-                model.solve_sequence_into(
-                    &frames,
-                    thetas.as_deref(),
-                    temporal,
-                    smooth_window,
-                    out,
-                    |f| {
-                        if let Some(cb) = &progress {
-                            Python::attach(|py| {
-                                let _ = cb.call1(py, (f,));
-                            });
-                        }
-                    },
-                )
+                model.solve_sequence_with(&frames, thetas.as_deref(), &options, out, |f| {
+                    if let Some(cb) = &progress {
+                        Python::attach(|py| {
+                            let _ = cb.call1(py, (f,));
+                        });
+                    }
+                })
             })
             .map_err(PyLgiError)?
         };
@@ -215,9 +218,21 @@ impl Model {
         let mut tets = Vec::with_capacity(nf * b);
         let mut projected = Vec::with_capacity(nf * b);
         let mut missing = Vec::with_capacity(nf * b);
+        let mut took_fit = Vec::with_capacity(nf * b);
+        let mut corrections = Vec::with_capacity(nf * b);
+        let ns = self.inner.dataset().num_shapes();
+        let mut fit_weights = Vec::with_capacity(nf * ns);
         let bins: Vec<i64> = solved.iter().map(|fr| fr.bin as i64).collect();
         for fr in &solved {
             res.extend_from_slice(&fr.residuals);
+            match fr.corrections.len() {
+                0 => corrections.extend(std::iter::repeat_n(0.0, b)),
+                _ => corrections.extend_from_slice(&fr.corrections),
+            }
+            match fr.fit_weights.get(1..) {
+                Some(w) if w.len() == ns => fit_weights.extend_from_slice(w),
+                _ => fit_weights.extend(std::iter::repeat_n(f64::NAN, ns)),
+            }
             pos.extend(fr.bundle_positions.iter().flat_map(|p| [p.x, p.y, p.z]));
             for c in &fr.choices {
                 match c {
@@ -228,6 +243,7 @@ impl Model {
                         tets.push(if c.tet == u32::MAX { -1 } else { c.tet as i64 });
                         projected.push(c.projected);
                         missing.push(false);
+                        took_fit.push(c.fit);
                     }
                     None => {
                         shapes.extend([-1i64; 4]);
@@ -235,6 +251,7 @@ impl Model {
                         tets.push(-1);
                         projected.push(false);
                         missing.push(true);
+                        took_fit.push(false);
                     }
                 }
             }
@@ -249,6 +266,13 @@ impl Model {
             choice_projected: flat_to_array(py, projected, &[nf, b])?.into_any().unbind(),
             missing: flat_to_array(py, missing, &[nf, b])?.into_any().unbind(),
             jaw_bin: flat_to_array(py, bins, &[nf])?.into_any().unbind(),
+            choice_fit: flat_to_array(py, took_fit, &[nf, b])?.into_any().unbind(),
+            marker_corrections: flat_to_array(py, corrections, &[nf, b])?
+                .into_any()
+                .unbind(),
+            fit_weights: flat_to_array(py, fit_weights, &[nf, ns])?
+                .into_any()
+                .unbind(),
         })
     }
 
@@ -424,6 +448,15 @@ pub struct SolveOutput {
     /// (F,) int64 jaw-opening bin of each frame (0 without bins).
     #[pyo3(get)]
     jaw_bin: Py<PyAny>,
+    /// (F, B) bool: the bundle took the frame's global fit instead of a tet.
+    #[pyo3(get)]
+    choice_fit: Py<PyAny>,
+    /// (F, B) float64: how far noise-aware solving moved each marker (0 when exact).
+    #[pyo3(get)]
+    marker_corrections: Py<PyAny>,
+    /// (F, S) float64: the frame's global fit weights per dataset shape (NaN without a fit).
+    #[pyo3(get)]
+    fit_weights: Py<PyAny>,
 }
 
 /// A caller's output array for `solve(out=...)`: float64, C-contiguous, writeable, of `shape`.
