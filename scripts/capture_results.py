@@ -56,7 +56,7 @@ def main() -> None:
                 data, n, seed, np.arange(ict.NARROW_FACE)
             )
     lines = [
-        "| recording | layout | σ (cm) | held out | displacement interp. | blendshape fit | "
+        "| recording | layout | sigma (cm) | held out | displacement interp. | blendshape fit | "
         "lgi (paper: exact, tets) | **lgi (recommended)** | lgi jaw-open frames | "
         "best baseline jaw-open |",
         "|---|---|---|---|---|---|---|---|---|---|",

@@ -112,11 +112,11 @@ def _noise(marker_noise: float) -> float:
 
 
 def estimate_marker_noise(frames: ArrayLike) -> float:
-    """Estimates the markers' noise σ (data units, per coordinate) from a take (F, B, 3), NaN
+    """Estimates the markers' noise sigma (data units, per coordinate) from a take (F, B, 3), NaN
     rows missing: the high-frequency part of each marker's track. The second difference of a
-    sample, x[f+1] - 2 x[f] + x[f-1], holds 6σ² of independent noise and almost none of a
+    sample, x[f+1] - 2 x[f] + x[f-1], holds 6 sigma^2 of independent noise and almost none of a
     face's motion at capture frame rates; its median absolute value (robust to the odd jump)
-    gives σ. Needs at least 3 frames; an over-estimate when the take is sampled so sparsely
+    gives sigma. Needs at least 3 frames; an over-estimate when the take is sampled so sparsely
     that motion changes within three frames."""
     arr = np.asarray(frames, dtype=np.float64)
     if arr.ndim != 3 or arr.shape[2] != 3:
@@ -280,10 +280,10 @@ class Model:
         vertices (`result.vertices` is then `out`), for pipelines that solve chunk after chunk
         into one buffer instead of allocating a new one per call.
 
-        `marker_noise`: the markers' noise σ (data units, per coordinate; e.g. 0.05 for 0.5 mm
+        `marker_noise`: the markers. noise sigma (data units, per coordinate; e.g. 0.05 for 0.5 mm
         in cm; `lgi.estimate_marker_noise` estimates it from a take). Each marker is first
         moved to the frame's global blendshape fit plus the fit's residual smoothed across
-        neighbouring markers (independent noise is pulled in by about σ, a residual that
+        neighbouring markers (independent noise is pulled in by about sigma, a residual that
         neighbours share is kept), then interpolated; `result.marker_corrections` says how far.
         None (default): every marker is interpolated as given (the paper's mode).
 

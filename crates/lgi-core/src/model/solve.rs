@@ -81,6 +81,9 @@ pub(super) struct Prepared {
     pub(super) fit: Option<FrameFit>,
     pub(super) offer_fit: bool,
     pub(super) corrections: Vec<f64>,
+    /// The targets as given when noise-aware solving moved them (residuals are measured
+    /// against what the user gave).
+    pub(super) given: Option<Vec<DVec3>>,
 }
 
 impl Prepared {
@@ -218,6 +221,7 @@ impl Model {
             fit: None,
             offer_fit: false,
             corrections: Vec::new(),
+            given: None,
         })
     }
 
@@ -239,7 +243,7 @@ impl Model {
                 .map(|(a, b)| if a.is_nan() { 0.0 } else { a.distance(*b) })
                 .collect();
             prep.lookup = denoised;
-            prep.targets = targets;
+            prep.given = Some(std::mem::replace(&mut prep.targets, targets));
         }
         prep.fit = Some(fit);
         prep.offer_fit = offer;
@@ -467,12 +471,13 @@ impl Model {
             .iter()
             .map(|sp| sp.evaluate(&mesh.triangles, out))
             .collect();
+        let given = prep.given.as_deref().unwrap_or(targets_clean);
         let residuals = (0..b)
             .map(|i| {
-                if targets_clean[i].is_nan() {
+                if given[i].is_nan() {
                     0.0
                 } else {
-                    targets_clean[i].distance(bundle_positions[i])
+                    given[i].distance(bundle_positions[i])
                 }
             })
             .collect();

@@ -1,0 +1,161 @@
+"""The capture protocol's pieces and noise-aware solving: the Live Link Face reader on the real
+recordings, the jaw hinge fitted on ICT, marker-noise estimation against a known sigma, and the
+noise-aware solve against the exact one."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import lgi
+from conftest import ict_dir
+from lgi.capture import HingeJaw, capture_truth, make_capture, random_layout
+from lgi.dataset import sample_dataset
+from lgi.sample import make_sample
+from lgi.takes import arkit_to_dataset, read_livelinkface
+
+
+def _recordings() -> list[Path]:
+    folder = ict_dir().parent / "livelinkface"
+    files = sorted(folder.glob("*.csv"))
+    if not files:
+        pytest.skip(f"no Live Link Face recordings in {folder}")
+    return files
+
+
+@pytest.fixture(scope="module")
+def sample_model():  # type: ignore[no-untyped-def]
+    s = make_sample(0)
+    return s, lgi.Model.build(sample_dataset(s), s.markers_rest)
+
+
+def test_livelinkface_reader_reads_both_shared_recordings_frame_counts_and_rates() -> None:
+    got = {p.name: read_livelinkface(p) for p in _recordings()}
+    alex, jm = got["alex_rom_4.csv"], got["jmtechart_myslate_3.csv"]
+    assert (alex.num_frames, jm.num_frames) == (3809, 328)
+    for c in (alex, jm):
+        assert len(c.names) == 61 and c.names[:2] == ["EyeBlinkLeft", "EyeLookDownLeft"]
+        assert np.all(np.diff(c.times) > 0) and c.times[0] == 0.0
+        # Real curves: 0..1 nominally, with overshoot to about 1.05 in the ROM take.
+        assert c.weights[:, :52].min() >= 0.0 and c.weights[:, :52].max() <= 1.1
+    assert alex.fps == pytest.approx(30.0, rel=0.01)
+    assert jm.fps == pytest.approx(59.94, rel=0.01)
+
+
+def test_arkit_names_map_onto_ict_shapes_with_sides_and_both_sided_curves(ict_dataset) -> None:  # type: ignore[no-untyped-def]
+    names = list(ict_dataset.names)
+    m = arkit_to_dataset(
+        ["EyeBlinkLeft", "JawOpen", "MouthLeft", "BrowInnerUp", "TongueOut"], names
+    )
+    assert [names[i] for i in m["EyeBlinkLeft"]] == ["eyeBlink_L"]
+    assert [names[i] for i in m["JawOpen"]] == ["jawOpen"]
+    assert [names[i] for i in m["MouthLeft"]] == ["mouthLeft"]
+    assert sorted(names[i] for i in m["BrowInnerUp"]) == ["browInnerUp_L", "browInnerUp_R"]
+    assert "TongueOut" not in m
+    # ARKit's left is the performer's left: ICT's eyeBlink_L closes the eye at +x.
+    blink = np.asarray(ict_dataset.shapes[names.index("eyeBlink_L")])
+    moved = np.linalg.norm(blink, axis=1) > 0.05
+    assert np.asarray(ict_dataset.neutral)[moved, 0].mean() > 0
+
+
+def test_livelinkface_reader_names_the_file_and_line_of_a_bad_csv(tmp_path: Path) -> None:
+    other = tmp_path / "markers.csv"
+    other.write_text("name,x,y,z\nm0,1,2,3\n")
+    with pytest.raises(lgi.InputError, match=r"markers\.csv: not a Live Link Face CSV"):
+        read_livelinkface(other)
+    bad = tmp_path / "take.csv"
+    bad.write_text(
+        "Timecode,BlendShapeCount,JawOpen\n00:00:00:01.000,1,0.5\n00:00:00:02.000,1,zero\n"
+    )
+    with pytest.raises(lgi.InputError, match=r"take\.csv, line 3: a weight is not a number"):
+        read_livelinkface(bad)
+    with pytest.raises(lgi.InputError, match="cannot read"):
+        read_livelinkface(tmp_path / "absent.csv")
+
+
+def test_hinge_fitted_to_ict_jaw_open_is_a_25_degree_turn_about_x_near_the_documented_hinge(
+    ict_dataset,  # type: ignore[no-untyped-def]
+) -> None:
+    from lgi import ict
+
+    jaw = HingeJaw.fit(ict_dataset, ict.lower_teeth())
+    assert abs(jaw.axis[0]) == pytest.approx(1.0, abs=1e-6)
+    assert np.rad2deg(jaw.angle) == pytest.approx(25.3, abs=0.5)
+    assert jaw.pivot[1:] == pytest.approx([-0.55, 1.82], abs=0.05)
+    # Fully open, the truth reproduces the jaw-open shape on the lower teeth (the rigid part).
+    w = np.zeros((1, ict_dataset.num_shapes))
+    w[0, jaw.shape] = 1.0
+    mesh = capture_truth(ict_dataset, w, jaw)[0]
+    teeth = ict.lower_teeth()
+    want = np.asarray(ict_dataset.neutral)[teeth] + np.asarray(ict_dataset.shapes[jaw.shape])[teeth]
+    # To 0.1 mm: the teeth's small non-rigid remainder turns with the jaw in the truth.
+    assert np.abs(mesh[teeth] - want).max() < 1e-2
+
+
+def test_estimate_marker_noise_recovers_a_known_sigma_within_20_percent() -> None:
+    rng = np.random.default_rng(5)
+    t = np.arange(600) / 60.0  # 10 s at 60 fps
+    rest = rng.normal(size=(40, 3))
+    motion = 0.8 * np.sin(2 * np.pi * 0.7 * t)[:, None, None] * rng.normal(size=(1, 40, 3))
+    for sigma in (0.02, 0.05, 0.1):
+        frames = rest[None] + motion + rng.normal(0.0, sigma, size=(600, 40, 3))
+        frames[rng.random((600, 40)) < 0.05] = np.nan
+        assert lgi.estimate_marker_noise(frames) == pytest.approx(sigma, rel=0.2)
+    with pytest.raises(lgi.InputError, match="at least 3 frames"):
+        lgi.estimate_marker_noise(rest[None])
+
+
+def test_noise_aware_solve_tends_to_the_exact_solve_as_sigma_goes_to_zero(sample_model) -> None:  # type: ignore[no-untyped-def]
+    s, model = sample_model
+    frames = s.performance[:12]
+    exact = model.solve(frames, quiet=True)
+    assert np.array_equal(
+        model.solve(frames, quiet=True, marker_noise=0.0).vertices, exact.vertices
+    )
+    gaps = [
+        np.abs(model.solve(frames, quiet=True, marker_noise=sigma).vertices - exact.vertices).max()
+        for sigma in (1e-3, 1e-5, 1e-7)
+    ]
+    assert gaps[0] > gaps[1] > gaps[2] and gaps[2] < 1e-6 * model.diagonal
+
+
+def test_exact_solve_with_the_fit_candidate_interpolates_every_marker(sample_model) -> None:  # type: ignore[no-untyped-def]
+    s, model = sample_model
+    res = model.solve(s.performance, quiet=True)
+    assert res.choices.fit is not None and res.choices.fit.any()
+    assert res.bundle_residuals.max() <= 1e-6 * model.diagonal
+    assert res.marker_corrections is not None and not res.marker_corrections.any()
+
+
+def test_noise_aware_solve_reports_corrections_and_misses_markers_by_about_them(
+    sample_model,
+) -> None:  # type: ignore[no-untyped-def]
+    s, model = sample_model
+    res = model.solve(s.performance, quiet=True, marker_noise=0.05)
+    present = ~res.missing
+    corr = res.marker_corrections
+    assert corr is not None and corr[present].mean() > 0.0 and not corr[res.missing].any()
+    assert np.allclose(res.bundle_residuals[present], corr[present], atol=1e-6 * model.diagonal)
+    assert np.isfinite(res.vertices).all()
+
+
+@pytest.mark.parametrize("bad", [-0.1, float("nan"), float("inf"), "loud"])
+def test_marker_noise_must_be_a_finite_non_negative_distance(sample_model, bad) -> None:  # type: ignore[no-untyped-def]
+    s, model = sample_model
+    with pytest.raises(lgi.InputError, match="marker_noise"):
+        model.solve(s.performance[:3], quiet=True, marker_noise=bad)
+
+
+def test_capture_take_is_seeded_and_holds_out_shapes_but_never_jaw_open(sample_model) -> None:  # type: ignore[no-untyped-def]
+    s, _ = sample_model
+    data = sample_dataset(s)
+    markers = random_layout(data, 30, 1, np.arange(data.num_vertices))
+    w = np.clip(np.random.default_rng(0).random((6, data.num_shapes)) - 0.5, 0, 1)
+    a = make_capture(data, w, markers, sigma=0.05, dropout=0.1, holdout=0.25, seed=9, jaw=None)
+    b = make_capture(data, w, markers, sigma=0.05, dropout=0.1, holdout=0.25, seed=9, jaw=None)
+    assert np.array_equal(a.frames, b.frames, equal_nan=True) and a.held_out == b.held_out
+    assert len(a.held_out) == round(0.25 * data.num_shapes) and "jawOpen" not in a.held_out
+    assert a.dataset.num_shapes == data.num_shapes - len(a.held_out)
+    assert np.isnan(a.frames).any(axis=2).mean() > 0.0
