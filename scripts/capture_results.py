@@ -78,7 +78,7 @@ def main() -> None:
                         "disp": DisplacementInterpolation(ds, markers),
                         "bsfit": BlendshapeFit(ds, markers),
                         "paper": Lgi(model, None, fit=False),
-                        "lgi": Lgi(model, sigma),
+                        "lgi": Lgi(model, sigma, fit=True),
                     }
                     rows = {
                         r["method"]: r

@@ -123,8 +123,9 @@ def test_noise_aware_solve_tends_to_the_exact_solve_as_sigma_goes_to_zero(sample
 
 def test_exact_solve_with_the_fit_candidate_interpolates_every_marker(sample_model) -> None:  # type: ignore[no-untyped-def]
     s, model = sample_model
-    res = model.solve(s.performance, quiet=True)
+    res = model.solve(s.performance, quiet=True, fit=True)
     assert res.choices.fit is not None and res.choices.fit.any()
+    assert not model.solve(s.performance[:5], quiet=True).choices.fit.any()  # paper by default
     assert res.bundle_residuals.max() <= 1e-6 * model.diagonal
     assert res.marker_corrections is not None and not res.marker_corrections.any()
 

@@ -260,7 +260,7 @@ class Model:
         quiet: bool = False,
         out: NDArray[np.float64] | None = None,
         marker_noise: float | None = None,
-        fit: bool = True,
+        fit: bool | None = None,
     ) -> SolveResult:
         """Solves frames (F, B, 3) of marker positions (a single (B, 3) frame gives F = 1).
         NaN rows are missing markers. With `temporal` (a performance), frames are solved in
@@ -287,9 +287,12 @@ class Model:
         neighbours share is kept), then interpolated; `result.marker_corrections` says how far.
         None (default): every marker is interpolated as given (the paper's mode).
 
-        `fit` (default True): every bundle may take the frame's global blendshape fit instead
-        of one of its tets, chosen by the same neighbour score (frames with many shapes active
-        at once); False is the paper's method, tets only. Not offered with `smooth_window`."""
+        `fit`: every bundle may take the frame's global blendshape fit instead of one of its
+        tets, chosen by the same neighbour score (frames with many shapes active at once);
+        False is the paper's method, tets only. Default (None): on exactly when `marker_noise`
+        is given (`marker_noise=0` for noise-free markers), so the recommended call on real
+        capture is `solve(frames, marker_noise=sigma)`. Not offered with `smooth_window`. The
+        fit costs time with many shapes (docs/performance.md)."""
         if smooth_window < 0:
             raise InputError(f"smooth_window must be >= 0, got {smooth_window}")
         arr = np.asarray(frames)
@@ -305,7 +308,7 @@ class Model:
                 jaw_theta=theta,
                 smooth_window=smooth_window,
                 out=out,
-                fit=bool(fit),
+                fit=(marker_noise is not None) if fit is None else bool(fit),
                 marker_noise=None if marker_noise is None else _noise(marker_noise),
             )
         return SolveResult(
