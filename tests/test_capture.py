@@ -110,7 +110,7 @@ def test_estimate_marker_noise_recovers_a_known_sigma_within_20_percent() -> Non
 def test_noise_aware_solve_tends_to_the_exact_solve_as_sigma_goes_to_zero(sample_model) -> None:  # type: ignore[no-untyped-def]
     s, model = sample_model
     frames = s.performance[:12]
-    exact = model.solve(frames, quiet=True)
+    exact = model.solve(frames, quiet=True, fit=True)
     assert np.array_equal(
         model.solve(frames, quiet=True, marker_noise=0.0).vertices, exact.vertices
     )
