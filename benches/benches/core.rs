@@ -31,9 +31,9 @@ fn fixture() -> Fixture {
         let frame = model
             .solve_frame(f, state.as_ref(), None)
             .unwrap_or_else(|e| panic!("solve failed: {e}"));
-        choices.push(frame.choices.clone());
+        choices.push(frame.info.choices.clone());
         state = Some(FrameState {
-            choices: frame.choices,
+            choices: frame.info.choices,
             bin: None,
         });
     }

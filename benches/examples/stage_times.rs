@@ -39,12 +39,12 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         for targets in &frames {
             let frame = model.solve_frame(targets, state.as_ref(), None)?;
             if pieces.len() < FRAMES {
-                pieces.push(Pieces::from_choices(&frame.choices));
+                pieces.push(Pieces::from_choices(&frame.info.choices));
             }
             let frame = black_box(frame);
             state = Some(FrameState {
-                choices: frame.choices,
-                bin: Some(frame.bin),
+                choices: frame.info.choices,
+                bin: Some(frame.info.bin),
             });
         }
         solve_best = solve_best.min(t.elapsed().as_secs_f64() / FRAMES as f64);

@@ -5,29 +5,17 @@
 use crate::choose::Choice;
 use glam::DVec3;
 
-/// One solved frame.
+/// One solved frame: its vertices and the rest of what the solve says about it.
 #[derive(Debug, Clone)]
 pub struct Frame {
     /// Reconstructed vertices (V).
     pub vertices: Vec<DVec3>,
-    /// Per bundle: the chosen geometry (`None` for a missing bundle), in dataset shape ids
-    /// ([`ShapeId`](super::ShapeId)).
-    pub choices: Vec<Option<Choice>>,
-    /// Per bundle: distance from target to reconstructed surface point (0 for missing).
-    pub residuals: Vec<f64>,
-    /// Per bundle: the reconstructed surface position (for missing bundles, the estimate).
-    pub bundle_positions: Vec<DVec3>,
-    /// The jaw bin whose clouds the frame was looked up in (0 for an unbinned model).
-    pub bin: usize,
-    /// Per bundle: how far noise-aware solving moved the marker before interpolating it
-    /// (data units; empty when the solve was exact).
-    pub corrections: Vec<f64>,
-    /// The frame's global fit, a weight per dataset shape id (index 0, the neutral, is 0;
-    /// empty when no fit was made).
-    pub fit_weights: Vec<f64>,
+    /// Choices, residuals, bundle positions, bin, corrections and fit of the frame.
+    pub info: FrameInfo,
 }
 
-/// A solved frame without its vertices (those went to the caller's buffer, see
+/// What a solve says about a frame besides its vertices (alone when the vertices went to the
+/// caller's buffer, see
 /// [`Model::solve_sequence_into`](super::Model::solve_sequence_into)).
 #[derive(Debug, Clone)]
 pub struct FrameInfo {
@@ -46,20 +34,6 @@ pub struct FrameInfo {
     /// The frame's global fit, a weight per dataset shape id (index 0, the neutral, is 0;
     /// empty when no fit was made).
     pub fit_weights: Vec<f64>,
-}
-
-impl Frame {
-    pub(super) fn from_parts(vertices: Vec<DVec3>, info: FrameInfo) -> Frame {
-        Frame {
-            vertices,
-            choices: info.choices,
-            residuals: info.residuals,
-            bundle_positions: info.bundle_positions,
-            bin: info.bin,
-            corrections: info.corrections,
-            fit_weights: info.fit_weights,
-        }
-    }
 }
 
 /// What the next frame needs from the previous one.

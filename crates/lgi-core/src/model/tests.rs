@@ -324,8 +324,8 @@ fn every_member_shape_of_every_bin_is_reproduced_at_its_own_jaw_pose() {
             let frame = model
                 .solve_frame_in_bin(&targets, Some(thetas[k]), bin)
                 .unwrap();
-            assert_eq!(frame.bin, bin);
-            for (i, c) in frame.choices.iter().enumerate() {
+            assert_eq!(frame.info.bin, bin);
+            for (i, c) in frame.info.choices.iter().enumerate() {
                 let c = c.unwrap();
                 let w: f64 = (0..4)
                     .filter(|&j| c.shapes[j] == k as u32 + 1)
@@ -341,7 +341,7 @@ fn every_member_shape_of_every_bin_is_reproduced_at_its_own_jaw_pose() {
                 .map(|v| frame.vertices[v].distance(mesh[v]))
                 .fold(0.0, f64::max);
             assert!(err <= 1e-6 * diag, "bin {bin} shape {k}: {err:e}");
-            assert!(frame.residuals.iter().all(|&r| r <= 1e-9 * diag));
+            assert!(frame.info.residuals.iter().all(|&r| r <= 1e-9 * diag));
         }
     }
 }
@@ -429,18 +429,21 @@ fn a_temporal_solve_picks_bins_by_hysteresis_and_reports_dataset_shape_ids() {
         let out = model
             .solve_sequence(&frames, Some(&poses), true, window, |_| {})
             .unwrap();
-        let bins: Vec<usize> = out.iter().map(|f| f.bin).collect();
+        let bins: Vec<usize> = out.iter().map(|f| f.info.bin).collect();
         assert_eq!(bins, want, "window {window}");
         for (f, fr) in out.iter().enumerate() {
-            let members = model.lookups()[fr.bin].members();
-            for c in fr.choices.iter().flatten() {
+            let members = model.lookups()[fr.info.bin].members();
+            for c in fr.info.choices.iter().flatten() {
                 for j in 0..4 {
                     let s = c.shapes[j];
                     assert!(c.weights[j] == 0.0 || s == 0 || members.contains(&(s - 1)));
                 }
             }
             assert!(
-                fr.residuals.iter().all(|&r| r <= 1e-9 * model.diagonal()),
+                fr.info
+                    .residuals
+                    .iter()
+                    .all(|&r| r <= 1e-9 * model.diagonal()),
                 "{f}"
             );
         }
@@ -449,7 +452,7 @@ fn a_temporal_solve_picks_bins_by_hysteresis_and_reports_dataset_shape_ids() {
     let out = model
         .solve_sequence(&frames[..2], Some(&poses[..2]), true, 0, |_| {})
         .unwrap();
-    for c in out[1].choices.iter().flatten() {
+    for c in out[1].info.choices.iter().flatten() {
         let w: f64 = (0..4)
             .filter(|&j| c.shapes[j] == 4)
             .map(|j| c.weights[j])
@@ -458,13 +461,13 @@ fn a_temporal_solve_picks_bins_by_hysteresis_and_reports_dataset_shape_ids() {
     }
     // solve_frame with a FrameState applies the same rule.
     let state = FrameState {
-        choices: out[1].choices.clone(),
-        bin: Some(out[1].bin),
+        choices: out[1].info.choices.clone(),
+        bin: Some(out[1].info.bin),
     };
     let fr = model
         .solve_frame(&frames[2], Some(&state), Some(poses[2]))
         .unwrap();
-    assert_eq!(fr.bin, 0);
+    assert_eq!(fr.info.bin, 0);
 }
 
 /// The owned copy of a model's borrowed parts (what a reader of the file produces).
@@ -504,8 +507,8 @@ fn a_binned_model_rebuilt_from_its_parts_gives_identical_frames_and_bad_parts_ar
         .unwrap();
     for (fa, fb) in a.iter().zip(&b) {
         assert_eq!(fa.vertices, fb.vertices);
-        assert_eq!(fa.choices, fb.choices);
-        assert_eq!(fa.bin, fb.bin);
+        assert_eq!(fa.info.choices, fb.info.choices);
+        assert_eq!(fa.info.bin, fb.info.bin);
     }
     // One stored bin short of the jaw's bins.
     let mut short = owned_parts(&model);
@@ -551,8 +554,8 @@ fn binned_model_save_load_round_trip_gives_identical_frames() {
         .unwrap();
     for (fa, fb) in a.iter().zip(&b) {
         assert_eq!(fa.vertices, fb.vertices);
-        assert_eq!(fa.choices, fb.choices);
-        assert_eq!(fa.bin, fb.bin);
+        assert_eq!(fa.info.choices, fb.info.choices);
+        assert_eq!(fa.info.bin, fb.info.bin);
     }
 }
 
@@ -581,7 +584,7 @@ fn a_tilted_frame_jaw_model_reproduces_its_shapes_and_its_frame_survives_save_lo
             .map(|v| fr.vertices[v].distance(mesh[v]))
             .fold(0.0, f64::max);
         assert!(err <= 1e-6 * diag, "shape {k}: {err:e}");
-        assert!(fr.residuals.iter().all(|&r| r <= 1e-9 * diag));
+        assert!(fr.info.residuals.iter().all(|&r| r <= 1e-9 * diag));
     }
     let path = std::env::temp_dir().join(format!("lgi-frame-{}.lgi", std::process::id()));
     crate::io::model_file::save(&model, &path).unwrap();
