@@ -4,7 +4,7 @@
 //! the next frame's choice beside this frame's sewing), independent (frames in parallel) or
 //! smoothed (all choices, then temporal smoothing of the shape weights, then sewing).
 
-use super::{Frame, FrameInfo, FrameState, Model};
+use super::{Frame, FrameInfo, FrameState, LocalShapeId, Model};
 use crate::choose::{choose, Choice, ChoiceParams, FrameErrors, Scoring, Scratch, NO_TET};
 use crate::error::{LgiError, Result};
 use crate::jaw::JawParams;
@@ -145,7 +145,7 @@ impl Model {
     ) -> Result<Frame> {
         let mut vertices = vec![DVec3::ZERO; self.dataset.num_vertices()];
         let info = self.solve_prepared_into(prep, previous, &mut vertices)?;
-        Ok(Frame::from_parts(vertices, info))
+        Ok(Frame { vertices, info })
     }
 
     /// [`solve_prepared`](Self::solve_prepared) writing the vertices into `out` (V).
@@ -258,23 +258,7 @@ impl Model {
         theta: Option<JawParams>,
         bin: usize,
     ) -> Result<Vec<DVec3>> {
-        let Some(j) = &self.jaw else {
-            return Ok(lookup.to_vec());
-        };
-        let mut out = lookup.to_vec();
-        if let Some(r) = self.lookups[bin].reference {
-            let posed = out.clone();
-            j.input
-                .rig
-                .unskin_weighted(&posed, &j.bundle_weights, r, &mut out)?;
-        }
-        if let Some(t) = theta {
-            let unskinned = out.clone();
-            j.input
-                .rig
-                .skin_weighted(&unskinned, &j.bundle_weights, t, &mut out)?;
-        }
-        Ok(out)
+        self.repose_bundles(lookup, self.lookups[bin].reference, theta)
     }
 
     /// Targets in bin `bin`'s space: unskinned with the frame's pose, then skinned to the
@@ -285,16 +269,27 @@ impl Model {
         theta: Option<JawParams>,
         bin: usize,
     ) -> Result<Vec<DVec3>> {
+        self.repose_bundles(targets, theta, self.lookups[bin].reference)
+    }
+
+    /// Bundle positions at jaw pose `from` moved to pose `to` (`None`: the rest pose, no
+    /// step), each with its bundle's jaw weight: unskinned by `from`, then skinned by `to`.
+    fn repose_bundles(
+        &self,
+        points: &[DVec3],
+        from: Option<JawParams>,
+        to: Option<JawParams>,
+    ) -> Result<Vec<DVec3>> {
         let Some(j) = &self.jaw else {
-            return Ok(targets.to_vec());
+            return Ok(points.to_vec());
         };
-        let mut out = targets.to_vec();
-        if let Some(t) = theta {
+        let mut out = points.to_vec();
+        if let Some(t) = from {
             j.input
                 .rig
-                .unskin_weighted(targets, &j.bundle_weights, t, &mut out)?;
+                .unskin_weighted(points, &j.bundle_weights, t, &mut out)?;
         }
-        if let Some(r) = self.lookups[bin].reference {
+        if let Some(r) = to {
             let unskinned = out.clone();
             j.input
                 .rig
@@ -319,12 +314,12 @@ impl Model {
                     return None;
                 }
                 let previous = previous.and_then(|p| p.get(i)).and_then(|c| c.as_ref());
-                let tet = self.choose_bundle(prep.bin, i, targets, &errors, previous, scratch);
+                let scoring = self.scoring(prep.bin, i, targets, &errors, previous);
+                let tet = self.choose_scored(prep.bin, i, &scoring, scratch);
                 let Some(fit) = fit else {
                     return Some(tet);
                 };
                 // The global fit against the tets, by the same score (ties keep the tet).
-                let scoring = self.scoring(prep.bin, i, targets, &errors, previous);
                 if scoring.positions_score(&fit.positions, i, true) < scoring.choice_score(&tet) {
                     Some(Choice {
                         shapes: [0; 4],
@@ -371,14 +366,25 @@ impl Model {
         previous: Option<&Choice>,
         scratch: &mut Scratch,
     ) -> Choice {
-        let lk = &self.lookups[bin];
         let scoring = self.scoring(bin, i, targets, errors, previous);
+        self.choose_scored(bin, i, &scoring, scratch)
+    }
+
+    /// Bundle `i`'s tet choice in bin `bin` under `scoring` (whose targets hold its target).
+    fn choose_scored(
+        &self,
+        bin: usize,
+        i: usize,
+        scoring: &Scoring<'_>,
+        scratch: &mut Scratch,
+    ) -> Choice {
+        let lk = &self.lookups[bin];
         choose(
             &lk.indices[i],
             &lk.clouds[i],
             &lk.groups[i],
-            targets[i],
-            &scoring,
+            scoring.targets[i],
+            scoring,
             &self.choice_params(),
             scratch,
         )
@@ -492,8 +498,8 @@ impl Model {
         let fit_weights = match &prep.fit {
             Some(fit) if lk.reference.is_some() => {
                 let mut global = vec![0.0; self.dataset.num_shapes() + 1];
-                for (j, &w) in fit.weights.iter().enumerate().skip(1) {
-                    global[lk.members[j - 1] as usize + 1] = w;
+                for (j, &w) in fit.weights.iter().enumerate() {
+                    global[lk.global_id(LocalShapeId(j as u32)).0 as usize] = w;
                 }
                 global
             }
@@ -537,7 +543,10 @@ impl Model {
         Ok(infos
             .into_iter()
             .zip(vertices.chunks(nv.max(1)))
-            .map(|(info, v)| Frame::from_parts(v.to_vec(), info))
+            .map(|(info, v)| Frame {
+                vertices: v.to_vec(),
+                info,
+            })
             .collect())
     }
 
