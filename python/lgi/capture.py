@@ -20,7 +20,9 @@ from numpy.typing import ArrayLike, NDArray
 from lgi._lgi import Dataset
 from lgi.dataset import without_shapes
 from lgi.errors import InputError
+from lgi.evaluate import marker_samples
 from lgi.jaw import fit_rigid, rotation_axis_angle
+from lgi.sample import dropout_mask
 
 F64 = NDArray[np.float64]
 I64 = NDArray[np.int64]
@@ -176,9 +178,6 @@ def make_capture(
     marker samples lost in runs of 2 to 8 frames, and a `holdout` fraction of the shapes (never
     those named in `keep`) removed from the dataset the methods get. Seeded: the same
     arguments give the same take."""
-    from lgi.evaluate import marker_samples  # the protocols' one marker sampler
-    from lgi.sample import _dropout_mask
-
     if not (np.isfinite(sigma) and sigma >= 0):
         raise InputError(f"sigma must be >= 0, got {sigma}")
     if not (0 <= dropout < 1 and 0 <= holdout < 1):
@@ -188,7 +187,7 @@ def make_capture(
     truth = capture_truth(dataset, w, jaw)
     frames = marker_samples(dataset, markers, truth)
     frames = frames + rng.normal(0.0, sigma, size=frames.shape)
-    frames[_dropout_mask(frames.shape[0], frames.shape[1], dropout, rng)] = np.nan
+    frames[dropout_mask(frames.shape[0], frames.shape[1], dropout, rng)] = np.nan
     names = list(dataset.names)
     candidates = [i for i, n in enumerate(names) if n not in keep]
     drop = sorted(

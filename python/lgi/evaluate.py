@@ -351,8 +351,9 @@ def capture(
     jaw_open: ArrayLike,
     region: ArrayLike | None = None,
 ) -> list[Row]:
-    """Scores each method's solve of a capture take (`lgi.capture.make_capture`): mean, p95 and
-    max per-vertex error over `region`, overall and on the `jaw_open` frames (F,) bool."""
+    """Scores each method's solve of a capture take (`lgi.capture.make_capture`): the `score`
+    row (mean, p95 and max per-vertex error over `region`, residual, jitter, speed) plus the
+    error on the `jaw_open` frames (F,) bool (`CAPTURE_COLUMNS`)."""
     fr = np.asarray(frames, dtype=np.float64)
     tr = np.asarray(truth, dtype=np.float64)
     opened = np.asarray(jaw_open, dtype=bool)
@@ -361,17 +362,9 @@ def capture(
     for name, m in methods.items():
         t0 = time.perf_counter()
         res = m.solve(fr, temporal=True, quiet=True)
-        seconds = time.perf_counter() - t0
-        err = np.linalg.norm(np.asarray(res.vertices)[:, idx] - tr[:, idx], axis=2)
-        row: Row = {
-            "method": name,
-            "frames": int(fr.shape[0]),
-            "mean": float(err.mean()),
-            "p95": float(np.percentile(err, 95)),
-            "max": float(err.max()),
-            "open_mean": float(err[opened].mean()) if opened.any() else float("nan"),
-            "open_p95": float(np.percentile(err[opened], 95)) if opened.any() else float("nan"),
-            "ms_per_frame": 1e3 * seconds / max(int(fr.shape[0]), 1),
-        }
+        row = score(name, res, tr, time.perf_counter() - t0, region)
+        err = np.linalg.norm(np.asarray(res.vertices)[opened][:, idx] - tr[opened][:, idx], axis=2)
+        row["open_mean"] = float(err.mean()) if opened.any() else float("nan")
+        row["open_p95"] = float(np.percentile(err, 95)) if opened.any() else float("nan")
         rows.append(row)
     return rows

@@ -102,13 +102,11 @@ def _bin_edges(jaw_bins: int | ArrayLike, shape_theta: NDArray[np.float64]) -> N
 
 
 def _noise(marker_noise: float) -> float:
+    """`marker_noise` as a float for the core, which checks its range."""
     try:
-        sigma = float(marker_noise)
+        return float(marker_noise)
     except (TypeError, ValueError):
         raise InputError(f"marker_noise must be a number or None, got {marker_noise!r}") from None
-    if not (np.isfinite(sigma) and sigma >= 0):
-        raise InputError(f"marker_noise must be a finite distance >= 0, got {marker_noise!r}")
-    return sigma
 
 
 def estimate_marker_noise(frames: ArrayLike) -> float:

@@ -39,6 +39,7 @@ I64 = NDArray[np.int64]
 __all__ = [
     "Sample",
     "describe",
+    "dropout_mask",
     "load_sample",
     "make_sample",
     "save_sample",
@@ -724,7 +725,7 @@ def _weight_curves(names: list[str], num_frames: int, rng: np.random.Generator) 
     return np.clip(w, 0.0, 1.0)
 
 
-def _dropout_mask(
+def dropout_mask(
     num_frames: int, num_markers: int, fraction: float, rng: np.random.Generator
 ) -> NDArray[np.bool_]:
     """(F, B) mask of lost markers, in runs of 2 to 8 frames; frame 0 is always complete."""
@@ -825,7 +826,7 @@ def make_sample(
     )
     clean = np.einsum("bc,fbcd->fbd", marker_bary, truth[:, corners])
     performance = clean + rng.normal(0.0, noise_mm / 10.0, clean.shape)
-    lost = _dropout_mask(int(num_frames), len(marker_names), dropout, rng)
+    lost = dropout_mask(int(num_frames), len(marker_names), dropout, rng)
     performance[lost] = np.nan
 
     uvs = np.stack(
