@@ -125,7 +125,9 @@ def test_exact_solve_with_the_fit_candidate_interpolates_every_marker(sample_mod
     s, model = sample_model
     res = model.solve(s.performance, quiet=True, fit=True)
     assert res.choices.fit is not None and res.choices.fit.any()
-    assert not model.solve(s.performance[:5], quiet=True).choices.fit.any()  # paper by default
+    paper = model.solve(s.performance[:5], quiet=True)  # the paper's method by default
+    assert not paper.choices.fit.any() and paper.fit_weights is None
+    assert res.fit_weights is not None and np.isfinite(res.fit_weights).all()
     assert res.bundle_residuals.max() <= 1e-6 * model.diagonal
     assert res.marker_corrections is not None and not res.marker_corrections.any()
 

@@ -63,7 +63,8 @@ class SolveResult:
     """(F, B) how far noise-aware solving (`marker_noise=`) moved each marker before the
     surface interpolated it (data units; 0 when exact)."""
     fit_weights: NDArray[np.float64] | None = None
-    """(F, S) each frame's global blendshape fit (NaN rows when no fit was made)."""
+    """(F, S) each frame's global blendshape fit; None when no fit was made (`fit` off, or a
+    dataset without shapes)."""
 
 
 def _bin_edges(jaw_bins: int | ArrayLike, shape_theta: NDArray[np.float64]) -> NDArray[np.float64]:

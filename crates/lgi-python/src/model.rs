@@ -221,7 +221,8 @@ impl Model {
         let mut took_fit = Vec::with_capacity(nf * b);
         let mut corrections = Vec::with_capacity(nf * b);
         let ns = self.inner.dataset().num_shapes();
-        let mut fit_weights = Vec::with_capacity(nf * ns);
+        // Every frame has a fit or none has (no fit asked for, or a dataset without shapes).
+        let mut fit_weights = Some(Vec::with_capacity(nf * ns));
         let bins: Vec<i64> = solved.iter().map(|fr| fr.bin as i64).collect();
         for fr in &solved {
             res.extend_from_slice(&fr.residuals);
@@ -229,9 +230,9 @@ impl Model {
                 0 => corrections.extend(std::iter::repeat_n(0.0, b)),
                 _ => corrections.extend_from_slice(&fr.corrections),
             }
-            match fr.fit_weights.get(1..) {
-                Some(w) if w.len() == ns => fit_weights.extend_from_slice(w),
-                _ => fit_weights.extend(std::iter::repeat_n(f64::NAN, ns)),
+            match (fr.fit_weights.get(1..), &mut fit_weights) {
+                (Some(w), Some(all)) if w.len() == ns => all.extend_from_slice(w),
+                _ => fit_weights = None,
             }
             pos.extend(fr.bundle_positions.iter().flat_map(|p| [p.x, p.y, p.z]));
             for c in &fr.choices {
@@ -270,9 +271,10 @@ impl Model {
             marker_corrections: flat_to_array(py, corrections, &[nf, b])?
                 .into_any()
                 .unbind(),
-            fit_weights: flat_to_array(py, fit_weights, &[nf, ns])?
-                .into_any()
-                .unbind(),
+            fit_weights: match fit_weights {
+                Some(w) => Some(flat_to_array(py, w, &[nf, ns])?.into_any().unbind()),
+                None => None,
+            },
         })
     }
 
@@ -454,9 +456,9 @@ pub struct SolveOutput {
     /// (F, B) float64: how far noise-aware solving moved each marker (0 when exact).
     #[pyo3(get)]
     marker_corrections: Py<PyAny>,
-    /// (F, S) float64: the frame's global fit weights per dataset shape (NaN without a fit).
+    /// (F, S) float64: each frame's global fit weights per dataset shape; None without a fit.
     #[pyo3(get)]
-    fit_weights: Py<PyAny>,
+    fit_weights: Option<Py<PyAny>>,
 }
 
 /// A caller's output array for `solve(out=...)`: float64, C-contiguous, writeable, of `shape`.
