@@ -26,7 +26,9 @@ pub struct BlendshapeSolver {
     shapes: usize,
     l2: f64,
     penalty: f64,
-    // Cholesky factor of AᵀA + l2 I over all rows: the first step of every complete frame.
+    // AᵀA + l2 I over all rows (every complete frame's Hessian before the box terms) and its
+    // Cholesky factor (the first step of every complete frame).
+    full_gram: Vec<f64>,
     full: Vec<f64>,
 }
 
@@ -90,10 +92,11 @@ impl BlendshapeSolver {
             shapes,
             l2,
             penalty,
+            full_gram: Vec::new(),
             full: Vec::new(),
         };
-        let all = vec![true; rows];
-        me.full = cholesky(shapes, me.gram(&all))?;
+        me.full_gram = me.gram(&vec![true; rows]);
+        me.full = cholesky(shapes, me.full_gram.clone())?;
         Ok(me)
     }
 
@@ -159,10 +162,12 @@ impl BlendshapeSolver {
         }
         let present: Vec<bool> = target.iter().map(|t| !t.is_nan()).collect();
         let complete = present.iter().all(|&p| p);
+        let partial;
         let gram = if complete {
-            None
+            &self.full_gram
         } else {
-            Some(self.gram(&present))
+            partial = self.gram(&present);
+            &partial
         };
         let mut atr = vec![0.0; s];
         for (r, &t) in target.iter().enumerate().filter(|(_, t)| !t.is_nan()) {
@@ -182,33 +187,13 @@ impl BlendshapeSolver {
             if none && complete && first {
                 return Ok(cholesky_solve(s, &self.full, &rhs));
             }
-            let mut h = match &gram {
-                Some(g) => g.clone(),
-                None => self.gram(&present),
-            };
+            let mut h = gram.clone();
             for (i, &(l, u)) in active.iter().enumerate() {
                 if l || u {
                     h[i * s + i] += self.penalty;
                 }
             }
             Ok(cholesky_solve(s, &cholesky(s, h)?, &rhs))
-        };
-        let grad = |w: &[f64]| -> Vec<f64> {
-            let mut g: Vec<f64> = w
-                .iter()
-                .map(|&x| {
-                    let out = x.min(0.0) + (x - 1.0).max(0.0);
-                    2.0 * (self.l2 * x + self.penalty * out)
-                })
-                .collect();
-            for (r, &t) in target.iter().enumerate().filter(|(_, t)| !t.is_nan()) {
-                let row = &self.a[r * s..(r + 1) * s];
-                let res: f64 = row.iter().zip(w).map(|(a, b)| a * b).sum::<f64>() - t;
-                for (gi, a) in g.iter_mut().zip(row) {
-                    *gi += 2.0 * res * a;
-                }
-            }
-            g
         };
         // Start inside the box so the first step is the plain (unconstrained) normal equations.
         let mut w = vec![0.5; s];
@@ -232,9 +217,27 @@ impl BlendshapeSolver {
             // quadratic in α, so its derivative is piecewise linear between the breakpoints
             // where a weight crosses 0 or 1; a damped step keeps the iteration from cycling.
             let d: Vec<f64> = cand.iter().zip(&w).map(|(c, x)| c - x).collect();
+            // The slope d·∇f(w + αd): the data term's part is linear in α, from A d and
+            // A w − t once per iteration; the ridge and box terms are per weight.
+            let (mut ad_r, mut ad_ad) = (0.0, 0.0);
+            for (r, &t) in target.iter().enumerate().filter(|(_, t)| !t.is_nan()) {
+                let row = &self.a[r * s..(r + 1) * s];
+                let ad: f64 = row.iter().zip(&d).map(|(a, b)| a * b).sum();
+                let res: f64 = row.iter().zip(&w).map(|(a, b)| a * b).sum::<f64>() - t;
+                ad_r += ad * res;
+                ad_ad += ad * ad;
+            }
             let slope = |alpha: f64| -> f64 {
-                let x: Vec<f64> = w.iter().zip(&d).map(|(a, b)| a + alpha * b).collect();
-                grad(&x).iter().zip(&d).map(|(g, di)| g * di).sum()
+                let box_terms: f64 = w
+                    .iter()
+                    .zip(&d)
+                    .map(|(&x, &di)| {
+                        let x = x + alpha * di;
+                        let out = x.min(0.0) + (x - 1.0).max(0.0);
+                        2.0 * (self.l2 * x + self.penalty * out) * di
+                    })
+                    .sum();
+                2.0 * (ad_r + alpha * ad_ad) + box_terms
             };
             let mut breaks: Vec<f64> = w
                 .iter()
