@@ -4,6 +4,7 @@
 
 use super::solve::{Prepared, RESIDUAL_TOLERANCE};
 use super::*;
+use crate::choose::{Choice, NO_TET};
 use crate::geodesic::FieldCache;
 use crate::jaw::{JawBins, JawParams, JawRig};
 use crate::mesh::Mesh;
@@ -700,5 +701,69 @@ fn local_and_dataset_shape_ids_round_trip_and_non_members_have_no_local_id() {
             assert_eq!(lk.local_id(ShapeId(k + 1)).is_some(), member, "shape {k}");
         }
         assert_eq!(lk.local_id(ShapeId(data.num_shapes() as u32 + 1)), None);
+    }
+}
+
+#[test]
+fn a_shared_fit_piece_blends_as_the_fit_copied_into_every_bundle_that_took_it() {
+    let data = patch(24);
+    let model = Model::build(&data, &patch_markers(3, 30), &BuildConfig::default()).unwrap();
+    let fit = vec![0.0, 0.3, 0.0, 0.25, 0.6, 0.0, 0.1];
+    let choices: Vec<Option<Choice>> = (0..model.num_bundles())
+        .map(|i| match i % 3 {
+            0 => None,
+            1 => Some(Choice {
+                shapes: [0; 4],
+                weights: [0.0; 4],
+                tet: NO_TET,
+                projected: false,
+                distance: 0.0,
+                fit: true,
+            }),
+            _ => Some(Choice {
+                shapes: [(i % 6) as u32 + 1, 0, 0, 0],
+                weights: [1.0, 0.0, 0.0, 0.0],
+                tet: NO_TET,
+                projected: false,
+                distance: 0.0,
+                fit: false,
+            }),
+        })
+        .collect();
+    let shared = Pieces::from_choices_with_fit(&choices, &fit);
+    assert_eq!(shared.fit_shapes, [1, 3, 4, 6]);
+    // The reference: every fit bundle holds its own copy of the fit's entries.
+    let mut copied = Pieces {
+        start: vec![0],
+        ..Pieces::default()
+    };
+    for b in 0..choices.len() {
+        let (s, w) = shared.bundle(b);
+        copied.shapes.extend_from_slice(s);
+        copied.weights.extend_from_slice(w);
+        copied.start.push(copied.shapes.len() as u32);
+    }
+    let blend = |pieces: &Pieces| {
+        let mut v = vec![DVec3::ZERO; data.num_vertices()];
+        crate::sew::blend(
+            &data.neutral().positions,
+            data.displacements(),
+            model.sew_weights(),
+            pieces,
+            &mut v,
+        );
+        v
+    };
+    let (a, b) = (blend(&shared), blend(&copied));
+    let moved = a
+        .iter()
+        .zip(&data.neutral().positions)
+        .any(|(p, q)| p.distance(*q) > 1e-3);
+    assert!(
+        moved,
+        "the pieces must move the patch for the test to mean anything"
+    );
+    for (p, q) in a.iter().zip(&b) {
+        assert!(p.distance(*q) <= 1e-14, "{p} vs {q}");
     }
 }

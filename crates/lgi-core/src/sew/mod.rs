@@ -21,22 +21,37 @@ pub use plan::{SewGeometry, SewPlan, SewPlans};
 const CHUNK: usize = 512;
 
 /// Each bundle's piece of geometry as a sparse shape-weight vector (shape id 0 = neutral):
-/// a choice's 4 weights, or more after temporal smoothing.
+/// a choice's 4 weights, or more after temporal smoothing, or the frame's global fit, which is
+/// stored once for every bundle that took it (the sewing then reads it once per vertex).
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct Pieces {
-    /// Bundle b's entries are `start[b]..start[b + 1]`.
+    /// Bundle b's entries are `start[b]..start[b + 1]` (none for a bundle that took the fit).
     pub start: Vec<u32>,
     /// Shape ids.
     pub shapes: Vec<u32>,
     /// Weights (convex per bundle).
     pub weights: Vec<f64>,
+    /// Per bundle: its piece is the frame's global fit (empty when no bundle's is).
+    pub fit: Vec<bool>,
+    /// The global fit's shape ids (its nonzero weights).
+    pub fit_shapes: Vec<u32>,
+    /// The global fit's weights.
+    pub fit_weights: Vec<f64>,
 }
 
 impl Pieces {
     /// One bundle's entries.
     pub fn bundle(&self, b: usize) -> (&[u32], &[f64]) {
+        if self.takes_fit(b) {
+            return (&self.fit_shapes, &self.fit_weights);
+        }
         let (s, e) = (self.start[b] as usize, self.start[b + 1] as usize);
         (&self.shapes[s..e], &self.weights[s..e])
+    }
+
+    /// True when bundle `b`'s piece is the frame's global fit.
+    pub fn takes_fit(&self, b: usize) -> bool {
+        self.fit.get(b).copied().unwrap_or(false)
     }
 
     /// The pieces of per-bundle choices (a missing bundle has no entries).
@@ -51,15 +66,17 @@ impl Pieces {
             start: vec![0],
             ..Pieces::default()
         };
-        for c in choices {
-            if c.is_some_and(|c| c.fit) {
-                for (k, &w) in fit.iter().enumerate() {
-                    if w != 0.0 {
-                        p.shapes.push(k as u32);
-                        p.weights.push(w);
-                    }
+        if choices.iter().any(|c| c.is_some_and(|c| c.fit)) {
+            p.fit = choices.iter().map(|c| c.is_some_and(|c| c.fit)).collect();
+            for (k, &w) in fit.iter().enumerate() {
+                if w != 0.0 {
+                    p.fit_shapes.push(k as u32);
+                    p.fit_weights.push(w);
                 }
-            } else if let Some(c) = c {
+            }
+        }
+        for c in choices {
+            if let Some(c) = c.filter(|c| !c.fit) {
                 for j in 0..4 {
                     if c.weights[j] != 0.0 {
                         p.shapes.push(c.shapes[j]);
@@ -94,13 +111,17 @@ pub fn blend(
 }
 
 /// What the blend of one frame reads (see [`blend`]), with each bundle's piece flattened to
-/// (offset of the shape's row in `displacements`, weight) terms, the neutral left out.
+/// (offset of the shape's row in `displacements`, weight) terms, the neutral left out; the
+/// global fit's terms once, for the bundles that took it.
 pub struct BlendInput<'a> {
     x0: &'a [DVec3],
     displacements: &'a [f32],
     weights: &'a SparseWeights,
     start: Vec<u32>,
     terms: Vec<(usize, f64)>,
+    /// Per bundle: its piece is `fit_terms` (empty when no bundle's is).
+    fit: Vec<bool>,
+    fit_terms: Vec<(usize, f64)>,
 }
 
 impl<'a> BlendInput<'a> {
@@ -113,48 +134,82 @@ impl<'a> BlendInput<'a> {
         pieces: &Pieces,
     ) -> Self {
         let nv = x0.len();
-        let mut start = Vec::with_capacity(pieces.start.len());
-        let mut terms = Vec::with_capacity(pieces.shapes.len());
-        start.push(0);
-        for b in 0..pieces.start.len().saturating_sub(1) {
-            let (shapes, alphas) = pieces.bundle(b);
+        let flatten = |shapes: &[u32], alphas: &[f64], terms: &mut Vec<(usize, f64)>| {
             for (&k, &a) in shapes.iter().zip(alphas) {
                 if k != 0 {
                     terms.push(((k as usize - 1) * nv * 3, a));
                 }
             }
+        };
+        let mut start = Vec::with_capacity(pieces.start.len());
+        let mut terms = Vec::with_capacity(pieces.shapes.len());
+        start.push(0);
+        for b in 0..pieces.start.len().saturating_sub(1) {
+            if !pieces.takes_fit(b) {
+                let (shapes, alphas) = pieces.bundle(b);
+                flatten(shapes, alphas, &mut terms);
+            }
             start.push(terms.len() as u32);
         }
+        let mut fit_terms = Vec::with_capacity(pieces.fit_shapes.len());
+        flatten(&pieces.fit_shapes, &pieces.fit_weights, &mut fit_terms);
         BlendInput {
             x0,
             displacements,
             weights,
             start,
             terms,
+            fit: pieces.fit.clone(),
+            fit_terms,
         }
     }
 
-    /// One vertex of [`blend`]: `x0 + Σ_i W_vi Σ_j α_ij s_k(v)`.
+    /// One vertex of [`blend`]: `x0 + Σ_i W_vi Σ_j α_ij s_k(v)`. The bundles that took the
+    /// global fit share its terms: their weights are summed and the fit is read once.
     #[inline]
     pub fn vertex(&self, v: usize) -> DVec3 {
         let (cols, vals) = self.weights.row(v);
         let mut d = [0.0f64; 3];
-        for (&b, &w) in cols.iter().zip(vals) {
+        let piece = |b: u32| {
             let (s, e) = (
                 self.start[b as usize] as usize,
                 self.start[b as usize + 1] as usize,
             );
-            for &(offset, a) in &self.terms[s..e] {
-                let at = offset + 3 * v;
-                if let Some(s) = self.displacements.get(at..at + 3) {
-                    let f = w * a;
-                    d[0] += f * s[0] as f64;
-                    d[1] += f * s[1] as f64;
-                    d[2] += f * s[2] as f64;
+            &self.terms[s..e]
+        };
+        if self.fit.is_empty() {
+            // No bundle took the fit (the paper's method): no per-bundle test in this loop.
+            for (&b, &w) in cols.iter().zip(vals) {
+                self.add_terms(piece(b), w, v, &mut d);
+            }
+        } else {
+            let mut fit_weight = 0.0;
+            for (&b, &w) in cols.iter().zip(vals) {
+                if self.fit.get(b as usize).copied().unwrap_or(false) {
+                    fit_weight += w;
+                } else {
+                    self.add_terms(piece(b), w, v, &mut d);
                 }
+            }
+            if fit_weight != 0.0 {
+                self.add_terms(&self.fit_terms, fit_weight, v, &mut d);
             }
         }
         self.x0[v] + DVec3::from_array(d)
+    }
+
+    /// Adds `w Σ_j α_j s_j(v)` over `terms` to `d`.
+    #[inline]
+    fn add_terms(&self, terms: &[(usize, f64)], w: f64, v: usize, d: &mut [f64; 3]) {
+        for &(offset, a) in terms {
+            let at = offset + 3 * v;
+            if let Some(s) = self.displacements.get(at..at + 3) {
+                let f = w * a;
+                d[0] += f * s[0] as f64;
+                d[1] += f * s[1] as f64;
+                d[2] += f * s[2] as f64;
+            }
+        }
     }
 }
 
