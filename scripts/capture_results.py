@@ -8,6 +8,7 @@ Usage: python scripts/capture_results.py [--frames 200] [--out docs/capture-tabl
 from __future__ import annotations
 
 import argparse
+import os
 import time
 from pathlib import Path
 
@@ -41,7 +42,7 @@ def main() -> None:
     ap.add_argument("--out", type=Path)
     ap.add_argument("--layouts", default="120,160:7,80:11")
     args = ap.parse_args()
-    folder = ict.find()
+    folder = ict.find(os.environ.get(ict.ENV))
     if folder is None:
         raise SystemExit(f"ICT-FaceKit data not found (set ${ict.ENV})")
     data = ict.load_dataset(folder)
@@ -61,7 +62,7 @@ def main() -> None:
         "best baseline jaw-open |",
         "|---|---|---|---|---|---|---|---|---|---|",
     ]
-    for rec in ict.livelinkface():
+    for rec in ict.livelinkface(os.environ.get(ict.ENV)):
         curves = read_livelinkface(rec)
         w = curves.for_dataset(data.names)
         w = w[:: max(1, w.shape[0] // args.frames)]
