@@ -127,6 +127,8 @@ def test_exact_solve_with_the_fit_candidate_interpolates_every_marker(sample_mod
     assert res.choices.fit is not None and res.choices.fit.any()
     paper = model.solve(s.performance[:5], quiet=True)  # the paper's method by default
     assert not paper.choices.fit.any() and paper.fit_weights is None
+    # The compiled model's own default is the same rule (bench.py and pipelines call it).
+    assert not model.core.solve(s.performance[:5]).choice_fit.any()
     assert res.fit_weights is not None and np.isfinite(res.fit_weights).all()
     assert res.bundle_residuals.max() <= 1e-6 * model.diagonal
     assert res.marker_corrections is not None and not res.marker_corrections.any()

@@ -242,11 +242,12 @@ class Model:
         jaw_theta: ArrayLike | None = None,
         smooth_window: int = 0,
         out: NDArray[np.float64] | None = None,
-        fit: bool = True,
+        fit: bool | None = None,
         marker_noise: float | None = None,
     ) -> SolveOutput:
         """Solves (F, B, 3) frames (vertices into `out` if given); ``fit`` offers the global
-        fit as a candidate, ``marker_noise`` (data units) solves noise-aware."""
+        fit as a candidate (None: exactly when ``marker_noise`` is given), ``marker_noise``
+        (data units) solves noise-aware."""
     def bundle_positions(self, meshes: ArrayLike) -> NDArray[np.float64]:
         """(F, V, 3) meshes -> (F, B, 3) bundle surface positions."""
     def bundle_stats(self) -> _BundleStats:

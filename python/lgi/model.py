@@ -307,7 +307,7 @@ class Model:
                 jaw_theta=theta,
                 smooth_window=smooth_window,
                 out=out,
-                fit=(marker_noise is not None) if fit is None else bool(fit),
+                fit=None if fit is None else bool(fit),
                 marker_noise=None if marker_noise is None else _noise(marker_noise),
             )
         return SolveResult(

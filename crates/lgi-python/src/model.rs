@@ -150,9 +150,10 @@ impl Model {
     /// frame with the GIL held. `temporal=False` solves frames independently (in parallel).
     /// `out`: a C-contiguous, writeable float64 (F, V, 3) array that receives the vertices
     /// (and is returned as `vertices`) instead of a new one. `fit` offers every bundle the
-    /// frame's global blendshape fit beside its tets; `marker_noise` (data units) solves
-    /// noise-aware (None: every marker interpolated as given).
-    #[pyo3(signature = (frames, progress=None, temporal=true, jaw_theta=None, smooth_window=0, out=None, fit=true, marker_noise=None))]
+    /// frame's global blendshape fit beside its tets (None: exactly when `marker_noise` is
+    /// given); `marker_noise` (data units) solves noise-aware (None: every marker
+    /// interpolated as given).
+    #[pyo3(signature = (frames, progress=None, temporal=true, jaw_theta=None, smooth_window=0, out=None, fit=None, marker_noise=None))]
     #[allow(clippy::too_many_arguments)]
     fn solve<'py>(
         &self,
@@ -163,15 +164,10 @@ impl Model {
         jaw_theta: Option<&Bound<'py, PyAny>>,
         smooth_window: usize,
         out: Option<&Bound<'py, PyAny>>,
-        fit: bool,
+        fit: Option<bool>,
         marker_noise: Option<f64>,
     ) -> PyResult<SolveOutput> {
-        let options = SolveOptions {
-            temporal,
-            smooth_window,
-            fit,
-            marker_noise,
-        };
+        let options = SolveOptions::new(temporal, smooth_window, fit, marker_noise);
         let b = self.inner.num_bundles();
         let frames = point_sets(frames, "frames", ("frame", "bundle"), Some(b), true)?;
         let thetas: Option<Vec<JawParams>> = match jaw_theta {

@@ -37,13 +37,9 @@ pub struct SolveOptions {
 }
 
 impl Default for SolveOptions {
+    /// The paper's method on a performance: temporal, tets only, every marker interpolated.
     fn default() -> Self {
-        SolveOptions {
-            temporal: true,
-            smooth_window: 0,
-            fit: true,
-            marker_noise: None,
-        }
+        SolveOptions::exact(true, 0)
     }
 }
 
@@ -55,6 +51,23 @@ impl SolveOptions {
             smooth_window,
             fit: false,
             marker_noise: None,
+        }
+    }
+
+    /// Options with the fit candidate on when asked (`fit`) or, left open (`None`), exactly
+    /// when a marker noise is given: noise-aware solving is meant with the fit, whose
+    /// residuals it measures markers against.
+    pub fn new(
+        temporal: bool,
+        smooth_window: usize,
+        fit: Option<bool>,
+        marker_noise: Option<f64>,
+    ) -> Self {
+        SolveOptions {
+            temporal,
+            smooth_window,
+            fit: fit.unwrap_or(marker_noise.is_some()),
+            marker_noise,
         }
     }
 

@@ -767,3 +767,12 @@ fn a_shared_fit_piece_blends_as_the_fit_copied_into_every_bundle_that_took_it() 
         assert!(p.distance(*q) <= 1e-14, "{p} vs {q}");
     }
 }
+
+#[test]
+fn the_fit_candidate_is_on_when_asked_or_when_a_marker_noise_is_given() {
+    assert_eq!(SolveOptions::default(), SolveOptions::exact(true, 0));
+    assert!(!SolveOptions::new(true, 0, None, None).fit);
+    assert!(SolveOptions::new(true, 0, None, Some(0.05)).fit);
+    assert!(!SolveOptions::new(true, 0, Some(false), Some(0.05)).fit);
+    assert!(SolveOptions::new(false, 0, Some(true), None).fit);
+}
