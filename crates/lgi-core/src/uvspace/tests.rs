@@ -103,6 +103,18 @@ fn rim() -> Vec<[(i64, i64); 2]> {
     r
 }
 
+/// The rim plus the four edges around the hole at cell (1, 1) of the 3×3 grid.
+fn rim_and_hole() -> Vec<[(i64, i64); 2]> {
+    let mut r = rim();
+    r.extend([
+        [(1, 1), (2, 1)],
+        [(1, 2), (2, 2)],
+        [(1, 1), (1, 2)],
+        [(2, 1), (2, 2)],
+    ]);
+    r
+}
+
 fn sorted(mut v: Vec<[(i64, i64); 2]>) -> Vec<[(i64, i64); 2]> {
     v.sort();
     v
@@ -112,13 +124,7 @@ fn sorted(mut v: Vec<[(i64, i64); 2]>) -> Vec<[(i64, i64); 2]> {
 fn boundary_barriers_are_the_rim_and_the_hole() {
     let m = grid_mesh(3, Some((1, 1)), None);
     let uv = vertex_charts(&m);
-    let mut expect = rim();
-    expect.extend([
-        [(1, 1), (2, 1)],
-        [(1, 2), (2, 2)],
-        [(1, 1), (1, 2)],
-        [(2, 1), (2, 2)],
-    ]);
+    let expect = rim_and_hole();
     assert_eq!(keys(&boundary_barriers(&m, &uv)), sorted(expect));
 }
 
@@ -147,13 +153,7 @@ fn vertex_uvs_take_the_lowest_triangle_of_the_space_on_seams() {
     // A seam is not a 3D boundary: only the rim.
     assert_eq!(keys(&boundary_barriers(&m, &uv)), sorted(rim()));
     // The big island's own boundary closes the hole the small island fills.
-    let mut expect = rim();
-    expect.extend([
-        [(1, 1), (2, 1)],
-        [(1, 2), (2, 2)],
-        [(1, 1), (1, 2)],
-        [(2, 1), (2, 2)],
-    ]);
+    let expect = rim_and_hole();
     assert_eq!(keys(&islands.island_barriers(&m, 0)), sorted(expect));
     // The small island's boundary lies in its own UVs (offset by 2 = 6/3 in u).
     assert_eq!(
