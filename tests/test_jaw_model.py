@@ -251,15 +251,16 @@ def test_jaw_pose_from_the_global_fit_recovers_the_sample_jaw_and_beats_no_jaw(
     sample, sample_dataset, sample_model
 ) -> None:  # type: ignore[no-untyped-def]
     auto = lgi.Model.build(sample_dataset, sample.markers_rest)
-    res = auto.solve(sample.performance, quiet=True)  # jaw="auto": the fit's pose
-    err_deg = np.degrees(np.abs(res.jaw_theta[:, 0] - sample.jaw_theta[:, 0]))
-    assert err_deg.mean() < 0.6 and err_deg.max() < 4.0
+    res = auto.solve(sample.performance, quiet=True)  # jaw="auto": the fit's pose, refined
+    # Measured: 0.047 degrees mean, 0.17 max (the skinned fit's start alone: 0.41 mean).
+    err_deg = np.degrees(np.abs(res.jaw_theta[:, :2] - sample.jaw_theta[:, :2]))
+    assert err_deg.mean() < 0.1 and err_deg.max() < 0.5
     plain = sample_model.solve(sample.performance, quiet=True)
     e_auto = np.linalg.norm(res.vertices - sample.truth, axis=2).mean()
     e_plain = np.linalg.norm(plain.vertices - sample.truth, axis=2).mean()
-    assert e_auto < 0.9 * e_plain
+    assert e_auto < 0.85 * e_plain  # measured 0.0262 cm against 0.0344
     assert res.bundle_residuals.max() <= 1e-6 * auto.diagonal
-    # A pose array equal to the fit's gives the same solve; None solves at the rest pose.
-    again = auto.solve(sample.performance[:3], jaw=res.jaw_theta[:3], quiet=True)
-    np.testing.assert_array_equal(again.vertices, res.vertices[:3])
+    # The refined poses given back as an array give the same solve; None: the rest pose.
+    again = auto.solve(sample.performance, jaw=res.jaw_theta, quiet=True)
+    np.testing.assert_array_equal(again.vertices, res.vertices)
     assert auto.solve(sample.performance[:3], jaw=None, quiet=True).jaw_theta is None

@@ -281,13 +281,14 @@ class Model:
         order and each prefers the previous frame's choices; `temporal=False` treats frames as
         independent (e.g. one frame per dataset shape) and solves them in parallel.
 
-        `jaw` (models built with a jaw rig): `"auto"` (default) and `"fit"` take each frame's
+        `jaw` (models built with a jaw rig): `"auto"` (default) and `"fit"` start each frame's
         jaw pose from its global blendshape fit (the shapes' poses weighted by their fitted
-        weights); `"track"` fits the markers the jaw carries rigidly (`lgi.jaw.track_jaw`;
-        biased where lips and chin move with other shapes); an (F, 3) array gives the poses;
-        None solves at the rest pose. Without a rig, `"auto"` is None. The poses used are in
-        `result.jaw_theta`; with jaw bins (`Model.build(jaw_bins=...)`) the bin each frame
-        used is in `result.jaw_bin`.
+        weights) and refine it to the pose whose jaw-unskinned markers the dataset explains
+        best (Gauss-Newton in the core); `"track"` fits the markers the jaw carries rigidly
+        (`lgi.jaw.track_jaw`; biased where lips and chin move with other shapes); an (F, 3)
+        array gives the poses; None solves at the rest pose. Without a rig, `"auto"` is None.
+        The poses used are in `result.jaw_theta`; with jaw bins (`Model.build(jaw_bins=...)`)
+        the bin each frame used is in `result.jaw_bin`.
 
         `smooth_window` > 1 averages each marker's shape weights over that many frames
         (centred) before sewing, in the jaw-unskinned space so jaw motion is kept; markers are
@@ -316,6 +317,8 @@ class Model:
         if arr.ndim == 2:
             arr = arr[None]
         theta = self._jaw_theta(arr, jaw)
+        # A pose from the fit is refined in the core, in the jaw's unskinned space.
+        refine = theta is not None and isinstance(jaw, str) and jaw in ("auto", "fit")
         total = int(arr.shape[0]) if arr.ndim == 3 else 0
         with _progress_bar(total, "lgi solve", quiet) as bar:
             res = self._core.solve(
@@ -327,13 +330,14 @@ class Model:
                 out=out,
                 fit=None if fit is None else bool(fit),
                 marker_noise=None if marker_noise is None else _noise(marker_noise),
+                refine_jaw=refine,
             )
         return SolveResult(
             vertices=res.vertices,
             bundle_residuals=res.bundle_residuals,
             bundle_positions=res.bundle_positions,
             missing=res.missing,
-            jaw_theta=theta,
+            jaw_theta=res.jaw_theta,
             jaw_bin=None if theta is None else res.jaw_bin,
             marker_corrections=res.marker_corrections,
             fit_weights=res.fit_weights,

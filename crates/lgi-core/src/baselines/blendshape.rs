@@ -135,6 +135,18 @@ impl BlendshapeSolver {
     /// Errors: wrong length or infinite targets, a singular system, or no convergence within
     /// 100 iterations ([`LgiError::Input`]).
     pub fn solve(&self, target: &[f64]) -> Result<BlendshapeSolution> {
+        Ok(self.solve_with_derivatives(target, &[])?.0)
+    }
+
+    /// [`solve`](Self::solve), and for each of `directions` (R values each, a change of the
+    /// target; rows missing from `target` are ignored) the change of the weights per unit of
+    /// it, on the solution's piece (its clamped set held): the fit's derivative with respect
+    /// to its target, for callers that optimise something of which the fit is a part.
+    pub fn solve_with_derivatives(
+        &self,
+        target: &[f64],
+        directions: &[Vec<f64>],
+    ) -> Result<(BlendshapeSolution, Vec<Vec<f64>>)> {
         let rows = self.rows;
         if target.len() != rows {
             return Err(LgiError::Input(format!(
@@ -145,12 +157,34 @@ impl BlendshapeSolver {
         if target.iter().any(|t| t.is_infinite()) {
             return Err(LgiError::Input("target has an infinite value".into()));
         }
+        if directions.iter().any(|d| d.len() != rows) {
+            return Err(LgiError::Input(format!(
+                "every direction must have {rows} values"
+            )));
+        }
+        // Aᵀδ of each direction over the present rows.
+        let s = self.shapes;
+        let along: Vec<Vec<f64>> = directions
+            .iter()
+            .map(|d| {
+                let mut out = vec![0.0; s];
+                for (r, (&t, &x)) in target.iter().zip(d).enumerate() {
+                    if !t.is_nan() && x != 0.0 {
+                        for (o, a) in out.iter_mut().zip(&self.a[r * s..(r + 1) * s]) {
+                            *o += a * x;
+                        }
+                    }
+                }
+                out
+            })
+            .collect();
         match &self.low_rank {
             Some(lr) => {
                 let (frame, atr) = lr.frame(target);
                 let frame = std::cell::RefCell::new(frame);
                 self.newton(
                     &atr,
+                    &along,
                     |clamped, rhs, _| {
                         frame
                             .borrow_mut()
@@ -160,7 +194,7 @@ impl BlendshapeSolver {
                     |w| frame.borrow().data_term(w, &atr) + self.box_terms(w),
                 )
             }
-            None => self.solve_dense(target),
+            None => self.solve_dense(target, &along),
         }
     }
 
@@ -175,7 +209,11 @@ impl BlendshapeSolver {
     }
 
     /// [`solve`](Self::solve) on the dense S × S normal equations.
-    fn solve_dense(&self, target: &[f64]) -> Result<BlendshapeSolution> {
+    fn solve_dense(
+        &self,
+        target: &[f64],
+        along: &[Vec<f64>],
+    ) -> Result<(BlendshapeSolution, Vec<Vec<f64>>)> {
         let s = self.shapes;
         let present: Vec<bool> = target.iter().map(|t| !t.is_nan()).collect();
         let complete = present.iter().all(|&p| p);
@@ -216,20 +254,24 @@ impl BlendshapeSolver {
             }
             (ad_aw, ad_ad)
         };
-        self.newton(&atr, piece, products, |w| self.objective(w, target))
+        self.newton(&atr, along, piece, products, |w| self.objective(w, target))
     }
 
     /// The active-set Newton iteration on the frame's normal equations: `piece(clamped, rhs,
     /// first)` minimises the quadratic piece where `clamped` weights are out of the box,
     /// `products(d, w)` gives `(dᵀ G w, dᵀ G d)` with G the data term's Hessian / 2, and
-    /// `objective(w)` the whole objective; `atr` is Aᵀt.
+    /// `objective(w)` the whole objective; `atr` is Aᵀt. The solution's piece also solves
+    /// for the right-hand sides `along` (the derivatives of [`solve_with_derivatives`]).
+    ///
+    /// [`solve_with_derivatives`]: Self::solve_with_derivatives
     fn newton(
         &self,
         atr: &[f64],
+        along: &[Vec<f64>],
         mut piece: impl FnMut(&[bool], &[f64], bool) -> Result<Vec<f64>>,
         products: impl Fn(&[f64], &[f64]) -> (f64, f64),
         objective: impl Fn(&[f64]) -> f64,
-    ) -> Result<BlendshapeSolution> {
+    ) -> Result<(BlendshapeSolution, Vec<Vec<f64>>)> {
         let s = self.shapes;
         let sides =
             |v: &[f64]| -> Vec<(bool, bool)> { v.iter().map(|&x| (x < 0.0, x > 1.0)).collect() };
@@ -254,11 +296,16 @@ impl BlendshapeSolver {
             // that same piece the (C¹ convex) gradient vanishes there: the global minimum.
             if sides(&cand) == sides(&w) {
                 let objective = objective(&cand);
-                return Ok(BlendshapeSolution {
+                let derivatives = along
+                    .iter()
+                    .map(|b| piece(&clamped, b, false))
+                    .collect::<Result<_>>()?;
+                let solution = BlendshapeSolution {
                     weights: cand,
                     iterations: it,
                     objective,
-                });
+                };
+                return Ok((solution, derivatives));
             }
             // Otherwise an exact line search: along w + αd the objective is a convex piecewise
             // quadratic in α, so its derivative is piecewise linear between the breakpoints
@@ -432,6 +479,31 @@ mod tests {
                     }
                 }
                 assert!((got.objective - want.objective).abs() < 1e-9 * (1.0 + want.objective));
+            }
+        }
+    }
+
+    #[test]
+    fn derivatives_equal_finite_differences_of_the_solution_on_both_paths() {
+        for (a, rows, shapes) in [augmented(7), {
+            let mut s = 11u64;
+            (((0..30 * 5).map(|_| rnd(&mut s)).collect()), 30, 5)
+        }] {
+            let sol = BlendshapeSolver::new(a, rows, shapes, 1e-2, 5.0).unwrap();
+            let mut s = 3u64;
+            let mut t: Vec<f64> = (0..rows).map(|_| 2.0 * rnd(&mut s)).collect();
+            t[4] = f64::NAN;
+            let dirs: Vec<Vec<f64>> = (0..2)
+                .map(|_| (0..rows).map(|_| rnd(&mut s)).collect())
+                .collect();
+            let (base, dw) = sol.solve_with_derivatives(&t, &dirs).unwrap();
+            for (d, dwd) in dirs.iter().zip(&dw) {
+                let h = 1e-7;
+                let moved: Vec<f64> = t.iter().zip(d).map(|(a, b)| a + h * b).collect();
+                let w = sol.solve(&moved).unwrap().weights;
+                for ((x1, x0), g) in w.iter().zip(&base.weights).zip(dwd) {
+                    assert!(((x1 - x0) / h - g).abs() < 1e-5, "{} vs {g}", (x1 - x0) / h);
+                }
             }
         }
     }
