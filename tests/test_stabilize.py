@@ -11,7 +11,7 @@ from hypothesis import strategies as st
 from scipy.spatial.transform import Rotation
 
 import lgi
-from lgi.stabilize import align, kabsch, stable_weights
+from lgi.stabilize import align, despike, kabsch, stable_weights
 
 CM_TO_MM = 10.0
 
@@ -132,3 +132,23 @@ def test_align_reports_bad_input_naming_the_argument_and_frame() -> None:
     original = frames.copy()
     align(np.nan_to_num(frames) + rest, rest)
     np.testing.assert_array_equal(np.isnan(frames), np.isnan(original))
+
+
+def test_despike_removes_one_frame_jumps_and_keeps_smooth_motion() -> None:
+    rng = np.random.default_rng(6)
+    f, b = 200, 30
+    time = np.linspace(0, 4 * np.pi, f)[:, None, None]
+    smooth = np.sin(time * rng.uniform(0.5, 1.5, (1, b, 3))) + rng.normal(0, 0.01, (f, b, 3))
+    spiked = smooth.copy()
+    where = rng.random((f, b)) < 0.01
+    spiked[where] += rng.choice([-1, 1], size=(int(where.sum()), 3)) * 0.5
+    spiked[3, 4] = np.nan
+    original = spiked.copy()
+    cleaned, flags = despike(spiked)
+    assert flags[where].all()
+    assert flags[~where].mean() < 0.01  # a few real samples may go: the solve fills them
+    assert np.isnan(cleaned[flags]).all()
+    np.testing.assert_array_equal(cleaned[~flags], spiked[~flags])
+    np.testing.assert_array_equal(spiked, original)
+    with pytest.raises(lgi.InputError, match="half_window"):
+        despike(spiked, half_window=0)

@@ -5,11 +5,14 @@ iteratively reweighted loop (Tukey's biweight on the residuals, scale from their
 markers that move with expressions and gross outliers stop pulling the fit. The per-frame
 rotation and translation (the head transform, `capture = R rest + t`) are kept for export.
 `stable_weights` derives per-marker weights from how rigidly each marker moves over a take,
-the paper's forehead / nose bridge / cheek weighting found from data.
+the paper's forehead / nose bridge / cheek weighting found from data. `despike` drops the
+one-frame jumps a mistracked 2D point leaves in stabilised bundles (with two cameras, a
+mistrack along the epipolar line keeps a small reprojection error but moves the point in depth).
 """
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
@@ -19,7 +22,7 @@ from lgi.errors import InputError
 
 F64 = NDArray[np.float64]
 
-__all__ = ["Alignment", "align", "kabsch", "stable_weights"]
+__all__ = ["Alignment", "align", "despike", "kabsch", "stable_weights"]
 
 _TUKEY = 4.685  # biweight tuning constant: 95 % efficiency on Gaussian residuals
 _MAD = 1.4826  # median absolute deviation to standard deviation (Gaussian)
@@ -181,3 +184,40 @@ def stable_weights(
         w = np.asarray(np.where(seen, 1.0 / (1.0 + (motion / s) ** 2), 0.0))
         w /= w.max()
     return w
+
+
+def despike(
+    frames: ArrayLike, *, half_window: int = 2, threshold: float = 5.0
+) -> tuple[F64, NDArray[np.bool_]]:
+    """Stabilised bundles (F, B, 3) with one-frame jumps removed: a sample farther from the
+    median of its marker's `half_window` neighbours on each side (itself excluded) than
+    `threshold` times that marker's robust scale (1.4826 x the median such distance over the
+    take) becomes NaN (missing, so the solve reconstructs it). Returns the cleaned copy and
+    the (F, B) mask of removed samples. Run it on stabilised frames, where the head's motion
+    no longer hides the markers' own smooth motion."""
+    r = np.asarray(frames, dtype=np.float64)
+    if r.ndim != 3 or r.shape[2] != 3:
+        raise InputError(f"frames: expected shape (F, B, 3), got {r.shape}")
+    if half_window < 1:
+        raise InputError(f"half_window must be >= 1, got {half_window}")
+    if not (np.isfinite(threshold) and threshold > 0):
+        raise InputError(f"threshold must be > 0, got {threshold}")
+    nf = r.shape[0]
+    neighbours = []
+    for off in range(-half_window, half_window + 1):
+        if off == 0:
+            continue
+        idx = np.arange(nf) + off
+        shifted = r[np.clip(idx, 0, nf - 1)].copy()
+        shifted[(idx < 0) | (idx >= nf)] = np.nan
+        neighbours.append(shifted)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN windows: no verdict
+        med = np.nanmedian(np.stack(neighbours), axis=0)
+        dist = np.linalg.norm(r - med, axis=2)
+        scale = _MAD * np.nanmedian(dist, axis=0)
+    with np.errstate(invalid="ignore"):
+        spikes = dist > threshold * scale[None]
+    out = r.copy()
+    out[spikes] = np.nan
+    return out, spikes
