@@ -24,6 +24,7 @@ from lgi import ict
 from lgi.camera import triangulate
 from lgi.capture import HingeJaw, make_capture
 from lgi.helmet import head_motion, helmet_cameras, make_helmet_take
+from lgi.rays import solve_with_rays, to_rest_space
 from lgi.stabilize import align, despike, stable_weights
 from lgi.takes import read_livelinkface
 
@@ -92,6 +93,11 @@ def main() -> None:
         res = model.solve(frames, quiet=True, **kw)  # type: ignore[arg-type]
         return MM * np.linalg.norm(res.vertices[:, skin] - take.truth[:, skin], axis=2)
 
+    def ray_face() -> np.ndarray:
+        rays = to_rest_space(tri.rays, stab)
+        res = solve_with_rays(model, chain, rays, quiet=True, marker_noise=sigma).result
+        return MM * np.linalg.norm(res.vertices[:, skin] - take.truth[:, skin], axis=2)
+
     # The true head transforms applied to the triangulated points: the chain without
     # stabilisation error (isolates triangulation).
     truly_stabilised = despike(
@@ -104,6 +110,7 @@ def main() -> None:
         "true stabilised bundles, marker_noise=0": face(true_bundles, marker_noise=0.0),
         "full chain, paper mode (exact)": face(chain),
         f"**full chain, {noise} (estimated from the take)**": face(chain, marker_noise=sigma),
+        f"full chain + single-camera rays (lgi.rays), {noise}": ray_face(),
         f"full chain without despike, {noise}": face(stab.frames, marker_noise=sigma),
         f"triangulated + true head transforms, {noise}": face(truly_stabilised, marker_noise=sigma),
         f"triangulated, no stabilisation, {noise}": face(tri.points, marker_noise=sigma),
