@@ -78,6 +78,15 @@ def _weights(weights: ArrayLike | None, n: int) -> F64:
     return w
 
 
+def _weighted_median(values: F64, weights: F64) -> F64:
+    """Per row, the weighted median of values (F, B) with weights (F, B) (zero = ignored)."""
+    order = np.argsort(np.where(weights > 0, values, np.inf), axis=1)
+    v = np.take_along_axis(values, order, axis=1)
+    cum = np.cumsum(np.take_along_axis(weights, order, axis=1), axis=1)
+    idx = (cum < 0.5 * cum[:, -1:]).sum(axis=1)
+    return v[np.arange(values.shape[0]), np.minimum(idx, values.shape[1] - 1)]
+
+
 def kabsch(source: F64, target: F64, weights: F64) -> tuple[F64, F64]:
     """Batched weighted Kabsch: rotations (F, 3, 3) and translations (F, 3) minimising
     `sum_b w_fb |R source_b + t - target_fb|^2` for source (B, 3), target (F, B, 3) and
@@ -108,9 +117,10 @@ def align(
     """Aligns each frame's markers (F, B, 3) (NaN = missing) to the rest layout (B, 3) by a
     weighted, outlier-robust rigid fit. `weights` (B,) say how much each marker is trusted to
     move with the skull (e.g. `stable_weights`); every marker's pull is further multiplied by
-    Tukey's biweight of its residual, with the scale `4.685 * 1.4826 * median residual`, until
-    the fit stops changing. `threshold` (data units) caps that inlier scale (a residual above
-    it is always an outlier). Raises InputError for a frame with fewer than 3 usable markers."""
+    Tukey's biweight of its residual, with the scale `4.685 * 1.4826 * median residual` (the
+    median weighted by `weights`, so the trusted markers set it), until the fit stops
+    changing. `threshold` (data units) caps that inlier scale (a residual above it is always
+    an outlier). Raises InputError for a frame with fewer than 3 usable markers."""
     r = _rest(rest)
     x = _frames(frames, r)
     prior = _weights(weights, r.shape[0])
@@ -132,8 +142,8 @@ def align(
     for _ in range(iterations):
         pred = np.einsum("fij,bj->fbi", rot, r) + t[:, None]
         e = np.linalg.norm(np.nan_to_num(x) - pred, axis=2)
-        e_masked = np.where(base > 0, e, np.nan)
-        scale = np.maximum(_MAD * np.nanmedian(e_masked, axis=1), floor)
+        # The inlier scale from the markers trusted most: the prior-weighted median.
+        scale = np.maximum(_MAD * _weighted_median(e, base), floor)
         c = _TUKEY * scale
         if threshold is not None:
             c = np.minimum(c, threshold)
