@@ -160,6 +160,31 @@ def test_fisheye_project_then_unproject_returns_the_same_ray(d, xy) -> None:  # 
     np.testing.assert_allclose(back, x[:, :2], atol=1e-9)
 
 
+@given(
+    d=st.tuples(
+        st.floats(-0.1, 0.1),
+        st.floats(-0.02, 0.02),
+        st.floats(-0.002, 0.002),
+        st.floats(-0.002, 0.002),
+        st.floats(-0.01, 0.01),
+    ),
+    xy=st.tuples(st.floats(-0.6, 0.6), st.floats(-0.6, 0.6)),
+)
+def test_pinhole_project_then_unproject_returns_the_same_ray(d, xy) -> None:  # type: ignore[no-untyped-def]
+    cam = PinholeCamera(np.array([[800.0, 0, 640], [0, 800, 360], [0, 0, 1]]), d)
+    x = np.array([[xy[0], xy[1], 1.0]])
+    np.testing.assert_allclose(cam.normalized(cam.project(x)), x[:, :2], atol=1e-9)
+
+
+def test_a_point_behind_both_cameras_is_reported_as_failed_not_invented() -> None:
+    cams = _stereo_rig()
+    # The upper camera's ray tilts up and the lower one's down: they diverge in front of the
+    # rig and only meet behind it.
+    uv = np.array([[[[640.0, 824.0], [640.0, 200.0]]]])
+    tri = triangulate(cams, uv)
+    assert tri.missing.all() and tri.failed.all() and "1 failed" in tri.summary()
+
+
 def test_bad_camera_arguments_raise_input_errors_naming_the_argument() -> None:
     k = np.array([[500.0, 0, 600], [0, 500, 500], [0, 0, 1]])
     with pytest.raises(lgi.InputError, match="D: the fisheye model takes 4"):

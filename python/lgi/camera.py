@@ -590,16 +590,25 @@ class Triangulation:
         """(F, B) markers with no point (NaN in `points`)."""
         return np.isnan(self.points[..., 0])
 
+    @property
+    def failed(self) -> NDArray[np.bool_]:
+        """(F, B) seen by two or more cameras, not rejected, yet without a point (parallel
+        rays, or a solution behind a camera)."""
+        return self.missing & (self.views >= 2) & ~self.rejected
+
     def summary(self) -> str:
-        """One line: how many samples were triangulated, single-view, unseen or rejected."""
+        """One line: how many samples were triangulated, single-view, unseen, rejected or
+        failed."""
         n = self.views.size
         ok = ~self.missing
         err = self.reprojection_error[ok]
         med = f"{np.median(err):.3g}" if err.size else "n/a"
+        failed = int(self.failed.sum())
         return (
             f"{int(ok.sum())}/{n} marker samples triangulated (median reprojection error "
             f"{med} px); {int((self.views == 1).sum())} seen by one camera (rays), "
             f"{int((self.views == 0).sum())} unseen, {int(self.rejected.sum())} rejected"
+            + (f", {failed} failed (parallel rays or behind a camera)" if failed else "")
         )
 
 
