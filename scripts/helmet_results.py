@@ -6,7 +6,8 @@ scored against its truth, and the face error of the full chain is put beside sol
 true stabilised bundles.
 
 Usage: python scripts/helmet_results.py [--frames 160] [--recording jmtechart_myslate_3]
-       [--out helmet-out]   (writes per-frame head transforms, true and recovered, as CSV)
+       [--out helmet-out]   (writes per-frame head transforms, true and recovered, and the
+       per-marker 3D errors as CSV)
 """
 
 from __future__ import annotations
@@ -281,9 +282,29 @@ def main() -> None:
             header="frame,true_rx,true_ry,true_rz,true_tx,true_ty,true_tz,"
             "est_rx,est_ry,est_rz,est_tx,est_ty,est_tz,rot_err_deg,trans_err_mm",
             comments="",
+            fmt="%.9g",
+        )
+        per = np.column_stack(
+            [
+                np.arange(e3d.shape[1]),
+                np.nanmean(e3d, axis=0),
+                np.nanpercentile(e3d, 95, axis=0),
+                per_marker,
+                (tri.views >= 2).mean(axis=0),
+                weights,
+            ]
+        )
+        np.savetxt(
+            args.out / "per_marker.csv",
+            per,
+            delimiter=",",
+            header="marker,err3d_mean_mm,err3d_p95_mm,err3d_mean_clean_mm,triangulated_fraction,"
+            "stable_weight",
+            comments="",
+            fmt="%.6g",
         )
         (args.out / "helmet_results.md").write_text(text + "\n")
-        print(f"wrote {args.out}/head_transforms.csv and helmet_results.md")
+        print(f"wrote {args.out}/head_transforms.csv, per_marker.csv and helmet_results.md")
 
 
 if __name__ == "__main__":
