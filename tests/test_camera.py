@@ -197,6 +197,10 @@ def test_bad_camera_arguments_raise_input_errors_naming_the_argument() -> None:
         PinholeCamera(k, (0, 0, 0, 0), t=(1, 2))
     with pytest.raises(lgi.InputError, match="image_size"):
         PinholeCamera(k, (0, 0, 0, 0), image_size=(0, 10))
+    with pytest.raises(lgi.InputError, match="image_size"):
+        PinholeCamera(k, (0, 0, 0, 0), image_size=("wide", 10))
+    with pytest.raises(lgi.InputError, match="D: not a numeric"):
+        PinholeCamera(k, ("a", 0, 0, 0))
     with pytest.raises(lgi.InputError, match="no skew"):
         PinholeCamera(np.array([[500.0, 1, 600], [0, 500, 500], [0, 0, 1]]), (0, 0, 0, 0))
     with pytest.raises(lgi.InputError, match=r"points: expected shape \(\.\.\., 3\)"):
@@ -264,6 +268,13 @@ def test_bad_calibration_files_name_the_file_and_what_is_wrong(tmp_path: Path) -
         load_cameras(j)
     with pytest.raises(lgi.InputError, match="cannot read"):
         load_cameras(tmp_path / "absent.yaml")
+    save_cameras(p, [_fisheye()])
+    p.write_text(p.read_text().replace("cam0_image_width: 1280", "cam0_image_width: wide"))
+    with pytest.raises(lgi.InputError, match=r"rig\.yaml: camera 0: image_size"):
+        load_cameras(p)
+    p.write_text(p.read_text().replace("rows: 3\n   cols: 3", "rows: 2\n   cols: 3", 1))
+    with pytest.raises(lgi.InputError, match=r"matrix cam0_K: 2x3 needs 6 values, got 9"):
+        load_cameras(p)
     with pytest.raises(lgi.InputError, match=r"\.yaml, \.yml or \.json"):
         save_cameras(tmp_path / "rig.txt", [_fisheye()])
 

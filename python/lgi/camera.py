@@ -109,7 +109,10 @@ class Camera:
             raise InputError(f"K: focal lengths must be > 0, got fx={k[0, 0]}, fy={k[1, 1]}")
         if k[1, 0] != 0 or k[2, 0] != 0 or k[2, 1] != 0 or k[2, 2] != 1:
             raise InputError("K: expected [[fx, s, cx], [0, fy, cy], [0, 0, 1]]")
-        d = np.asarray(D, dtype=np.float64).ravel()
+        try:
+            d = np.asarray(D, dtype=np.float64).ravel()
+        except (TypeError, ValueError) as e:
+            raise InputError(f"D: not a numeric array ({e})") from None
         if d.size not in self._num_coefficients:
             raise InputError(
                 f"D: the {self.model} model takes {' or '.join(map(str, self._num_coefficients))}"
@@ -124,7 +127,10 @@ class Camera:
         if np.abs(r @ r.T - np.eye(3)).max() > 1e-6 or np.linalg.det(r) < 0:
             raise InputError("R: not a rotation matrix (orthonormal, determinant +1)")
         tt = np.zeros(3) if t is None else _matrix(t, (3,), "t")
-        size = tuple(int(v) for v in image_size)
+        try:
+            size = tuple(int(v) for v in image_size)
+        except (TypeError, ValueError):
+            raise InputError(f"image_size: expected (width, height), got {image_size!r}") from None
         if (
             len(size) != 2
             or min(size) <= 0
