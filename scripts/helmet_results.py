@@ -1,7 +1,7 @@
 """The capture front end end to end, for docs/results.md: ICT-FaceKit driven by a real Live
 Link Face recording (jaw as a true rotation, as in the capture protocol), markers_120 filmed
 by the paper's helmet (two vertically stacked fisheye cameras) on a moving head, 2D tracks with
-0.5 px noise, occlusions and mistracks -> triangulate -> stabilise -> solve. Each stage is
+0.5 px noise, occlusions and mistracks -> triangulate -> stabilise -> (jaw) -> solve. Each stage is
 scored against its truth, and the face error of the full chain is put beside solving from the
 true stabilised bundles.
 
@@ -25,7 +25,6 @@ from lgi import ict
 from lgi.camera import triangulate
 from lgi.capture import HingeJaw, make_capture
 from lgi.helmet import head_motion, helmet_cameras, make_helmet_take
-from lgi.jaw import estimate_rig
 from lgi.rays import solve_with_rays, to_rest_space
 from lgi.stabilize import align, despike, stable_weights
 from lgi.takes import read_livelinkface
@@ -152,17 +151,15 @@ def main() -> None:
     t_stab = time.perf_counter() - t0
     unweighted = align(tri.points, markers)
 
-    model = lgi.Model.build(data, markers)
-    # The jaw stage: a rig estimated from the dataset's jaw shapes, the pose tracked per frame.
-    rig, shape_theta = estimate_rig(
-        data.neutral, data.shapes, data.names, rigid_vertices=ict.lower_teeth()
-    )
-    jawed = lgi.Model.build(data, markers, jaw=rig, shape_theta=shape_theta)
+    model = lgi.Model.build(data, markers, jaw=None)  # no jaw rig: the rows below the jaw's
+    # The jaw stage: the default build estimates a rig from the dataset's jaw shapes and the
+    # default solve takes each frame's jaw pose from its global fit (jaw="auto").
+    jawed = lgi.Model.build(data, markers)
     sigma = lgi.estimate_marker_noise(chain)
 
     def face(frames: np.ndarray, jaw: bool = False, **kw: object) -> np.ndarray:
         m = jawed if jaw else model
-        res = m.solve(frames, quiet=True, jaw="track" if jaw else None, **kw)  # type: ignore[arg-type]
+        res = m.solve(frames, quiet=True, **kw)  # type: ignore[arg-type]
         return MM * np.linalg.norm(res.vertices[:, skin] - take.truth[:, skin], axis=2)
 
     def ray_face() -> np.ndarray:
@@ -182,10 +179,10 @@ def main() -> None:
         "true stabilised bundles, marker_noise=0": face(true_bundles, marker_noise=0.0),
         "full chain, paper mode (exact)": face(chain),
         f"**full chain, {noise} (estimated from the take)**": face(chain, marker_noise=sigma),
-        "true stabilised bundles, jaw tracked (estimated rig), marker_noise=0": face(
+        "true stabilised bundles, default build (jaw rig, jaw='auto'), marker_noise=0": face(
             true_bundles, jaw=True, marker_noise=0.0
         ),
-        f"full chain, jaw tracked (estimated rig), {noise}": face(
+        f"full chain, default build (jaw rig, jaw='auto'), {noise}": face(
             chain, jaw=True, marker_noise=sigma
         ),
         f"full chain + single-camera rays (lgi.rays), {noise}": ray_face(),
