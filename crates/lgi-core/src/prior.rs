@@ -85,16 +85,18 @@ impl FitPrior {
 
     /// The fit of `targets` (B, NaN rows missing).
     pub fn fit(&self, targets: &[DVec3]) -> Result<FrameFit> {
-        Ok(self.fit_with_directions(targets, &[])?.0)
+        Ok(self.fit_with_directions(targets, &[], None)?.0)
     }
 
     /// [`fit`](Self::fit), and for each of `directions` (B points each, a change of the
     /// targets) the change of the fit's positions per unit of it, the fit's clamped weights
-    /// held (the derivative of the fit's positions with respect to its targets).
+    /// held (the derivative of the fit's positions with respect to its targets). `start`: a
+    /// nearby fit to start from (its `weights`).
     pub fn fit_with_directions(
         &self,
         targets: &[DVec3],
         directions: &[Vec<DVec3>],
+        start: Option<&FrameFit>,
     ) -> Result<(FrameFit, Vec<Vec<DVec3>>)> {
         let b = self.rest.len();
         let mut rhs = Vec::with_capacity(3 * b);
@@ -105,7 +107,8 @@ impl FitPrior {
             .iter()
             .map(|d| d.iter().flat_map(|p| p.to_array()).collect())
             .collect();
-        let (solution, dw) = self.solver.solve_with_derivatives(&rhs, &flat)?;
+        let from = start.and_then(|f| f.weights.get(1..));
+        let (solution, dw) = self.solver.solve_with_derivatives(&rhs, &flat, from)?;
         let moved = |w: &[f64], base: &[DVec3]| -> Vec<DVec3> {
             let mut out = base.to_vec();
             for (k, &x) in w.iter().enumerate() {

@@ -135,17 +135,20 @@ impl BlendshapeSolver {
     /// Errors: wrong length or infinite targets, a singular system, or no convergence within
     /// 100 iterations ([`LgiError::Input`]).
     pub fn solve(&self, target: &[f64]) -> Result<BlendshapeSolution> {
-        Ok(self.solve_with_derivatives(target, &[])?.0)
+        Ok(self.solve_with_derivatives(target, &[], None)?.0)
     }
 
     /// [`solve`](Self::solve), and for each of `directions` (R values each, a change of the
     /// target; rows missing from `target` are ignored) the change of the weights per unit of
     /// it, on the solution's piece (its clamped set held): the fit's derivative with respect
     /// to its target, for callers that optimise something of which the fit is a part.
+    /// `start` (S weights, e.g. a nearby target's solution) starts the iteration there
+    /// instead of inside the box: the same minimum in fewer steps.
     pub fn solve_with_derivatives(
         &self,
         target: &[f64],
         directions: &[Vec<f64>],
+        start: Option<&[f64]>,
     ) -> Result<(BlendshapeSolution, Vec<Vec<f64>>)> {
         let rows = self.rows;
         if target.len() != rows {
@@ -156,6 +159,12 @@ impl BlendshapeSolver {
         }
         if target.iter().any(|t| t.is_infinite()) {
             return Err(LgiError::Input("target has an infinite value".into()));
+        }
+        if start.is_some_and(|w| w.len() != self.shapes || w.iter().any(|x| !x.is_finite())) {
+            return Err(LgiError::Input(format!(
+                "a start must be {} finite weights",
+                self.shapes
+            )));
         }
         if directions.iter().any(|d| d.len() != rows) {
             return Err(LgiError::Input(format!(
@@ -185,6 +194,7 @@ impl BlendshapeSolver {
                 self.newton(
                     &atr,
                     &along,
+                    start,
                     |clamped, rhs, _| {
                         frame
                             .borrow_mut()
@@ -194,7 +204,7 @@ impl BlendshapeSolver {
                     |w| frame.borrow().data_term(w, &atr) + self.box_terms(w),
                 )
             }
-            None => self.solve_dense(target, &along),
+            None => self.solve_dense(target, &along, start),
         }
     }
 
@@ -213,6 +223,7 @@ impl BlendshapeSolver {
         &self,
         target: &[f64],
         along: &[Vec<f64>],
+        start: Option<&[f64]>,
     ) -> Result<(BlendshapeSolution, Vec<Vec<f64>>)> {
         let s = self.shapes;
         let present: Vec<bool> = target.iter().map(|t| !t.is_nan()).collect();
@@ -254,7 +265,9 @@ impl BlendshapeSolver {
             }
             (ad_aw, ad_ad)
         };
-        self.newton(&atr, along, piece, products, |w| self.objective(w, target))
+        self.newton(&atr, along, start, piece, products, |w| {
+            self.objective(w, target)
+        })
     }
 
     /// The active-set Newton iteration on the frame's normal equations: `piece(clamped, rhs,
@@ -268,6 +281,7 @@ impl BlendshapeSolver {
         &self,
         atr: &[f64],
         along: &[Vec<f64>],
+        start: Option<&[f64]>,
         mut piece: impl FnMut(&[bool], &[f64], bool) -> Result<Vec<f64>>,
         products: impl Fn(&[f64], &[f64]) -> (f64, f64),
         objective: impl Fn(&[f64]) -> f64,
@@ -286,8 +300,9 @@ impl BlendshapeSolver {
             }
             (w.iter().map(|&x| !(0.0..=1.0).contains(&x)).collect(), rhs)
         };
-        // Start inside the box so the first step is the plain (unconstrained) normal equations.
-        let mut w = vec![0.5; s];
+        // Start inside the box so the first step is the plain (unconstrained) normal equations
+        // (or where the caller says).
+        let mut w = start.map_or_else(|| vec![0.5; s], <[f64]>::to_vec);
         let mut f = objective(&w);
         for it in 1..=MAX_ITERATIONS {
             let (clamped, rhs) = clamped_and_rhs(&w);
@@ -496,7 +511,15 @@ mod tests {
             let dirs: Vec<Vec<f64>> = (0..2)
                 .map(|_| (0..rows).map(|_| rnd(&mut s)).collect())
                 .collect();
-            let (base, dw) = sol.solve_with_derivatives(&t, &dirs).unwrap();
+            let (base, dw) = sol.solve_with_derivatives(&t, &dirs, None).unwrap();
+            // Started at the solution, the iteration ends at once, on the same weights.
+            let (again, _) = sol
+                .solve_with_derivatives(&t, &[], Some(&base.weights))
+                .unwrap();
+            assert_eq!(again.iterations, 1);
+            for (a, b) in again.weights.iter().zip(&base.weights) {
+                assert!((a - b).abs() < 1e-12);
+            }
             for (d, dwd) in dirs.iter().zip(&dw) {
                 let h = 1e-7;
                 let moved: Vec<f64> = t.iter().zip(d).map(|(a, b)| a + h * b).collect();

@@ -320,6 +320,7 @@ impl Model {
         };
         let mut theta = start.to_array();
         let mut best = (f64::INFINITY, theta);
+        let mut last: Option<FrameFit> = None;
         for _ in 0..JAW_ITERATIONS {
             let u = at(theta)?;
             let mut dirs = Vec::with_capacity(dims.len());
@@ -342,7 +343,7 @@ impl Model {
                         .collect::<Vec<_>>(),
                 );
             }
-            let (fit, changes) = prior.fit_with_directions(&u, &dirs)?;
+            let (fit, changes) = prior.fit_with_directions(&u, &dirs, last.as_ref())?;
             let n = dims.len();
             let (mut m, mut g, mut e) = (vec![0.0; n * n], vec![[0.0; 3]; n], 0.0);
             for &i in &prep.present {
@@ -366,6 +367,7 @@ impl Model {
             for a in 0..n {
                 m[a * n + a] += 1e-9 * trace + f64::MIN_POSITIVE;
             }
+            last = Some(fit);
             let Ok(lu) = Lu::factor(n, m) else { break };
             let step = lu.solve3(&g);
             let mut largest = 0.0f64;
