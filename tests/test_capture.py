@@ -125,8 +125,11 @@ def test_exact_solve_with_the_fit_candidate_interpolates_every_marker(sample_mod
     s, model = sample_model
     res = model.solve(s.performance, quiet=True, fit=True)
     assert res.choices.fit is not None and res.choices.fit.any()
-    paper = model.solve(s.performance[:5], quiet=True)  # the paper's method by default
-    assert not paper.choices.fit.any() and paper.fit_weights is None
+    paper = model.solve(s.performance[:5], quiet=True)  # the paper's choice rule by default
+    assert not paper.choices.fit.any()
+    # The fit is made to refine the jaw pose (reported), never offered; without a pose, none.
+    assert paper.fit_weights is not None
+    assert model.solve(s.performance[:5], jaw=None, quiet=True).fit_weights is None
     # The compiled model's own default is the same rule (bench.py and pipelines call it).
     assert not model.core.solve(s.performance[:5]).choice_fit.any()
     assert res.fit_weights is not None and np.isfinite(res.fit_weights).all()
