@@ -25,8 +25,9 @@ const JAW_ITERATIONS: usize = 6;
 const JAW_STEP: [f64; 3] = [0.1, 0.05, 0.01];
 /// Its finite-difference step (the same units).
 const JAW_DIFFERENCE: f64 = 1e-6;
-/// A step below this (the same units) ends it.
-const JAW_TOLERANCE: f64 = 1e-7;
+/// A step below this (the same units: 1e-6 rad moves a point 5 cm from the hinge by 5e-6 cm)
+/// ends it.
+const JAW_TOLERANCE: f64 = 1e-6;
 
 /// How a sequence is solved.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -267,10 +268,15 @@ impl Model {
         let Some(prior) = &self.lookups[prep.bin].prior else {
             return Ok(());
         };
-        if refine_jaw {
-            self.refine_jaw(prep, prior)?;
-        }
-        let fit = prior.fit(&prep.lookup)?;
+        let refined = if refine_jaw {
+            self.refine_jaw(prep, prior)?
+        } else {
+            None
+        };
+        let fit = match refined {
+            Some(fit) => fit,
+            None => prior.fit(&prep.lookup)?,
+        };
         if marker_noise == Some(0.0) {
             // Noise-free markers stay where they are (no round trip through the jaw's space).
             prep.corrections = vec![0.0; prep.targets.len()];
@@ -297,11 +303,11 @@ impl Model {
     /// on its piece (so each step costs one fit). A linear fit of the skinned markers (the
     /// usual start) reads a partly open jaw as a mix of jawOpen and other shapes; in the
     /// unskinned space the jaw's rotation is gone and the rest is what the shapes span.
-    /// Steps are bounded, the best pose seen is kept, and a frame without a pose or rig is
-    /// left as it is.
-    fn refine_jaw(&self, prep: &mut Prepared, prior: &FitPrior) -> Result<()> {
+    /// Steps are bounded, the best pose evaluated is kept (and its fit returned, the one the
+    /// frame is solved with), and a frame without a pose or rig is left as it is.
+    fn refine_jaw(&self, prep: &mut Prepared, prior: &FitPrior) -> Result<Option<FrameFit>> {
         let (Some(jaw), Some(start)) = (&self.jaw, prep.theta) else {
-            return Ok(());
+            return Ok(None);
         };
         let scale = [1.0, 1.0, self.diagonal];
         let dims: Vec<usize> = (0..3)
@@ -313,13 +319,14 @@ impl Model {
             })
             .collect();
         if dims.is_empty() {
-            return Ok(());
+            return Ok(None);
         }
         let at = |t: [f64; 3]| {
             self.lookup_targets(&prep.targets, Some(JawParams::from_array(t)), prep.bin)
         };
         let mut theta = start.to_array();
-        let mut best = (f64::INFINITY, theta);
+        // The best pose evaluated, its residual and its fit (what the frame is solved with).
+        let mut best: Option<(f64, [f64; 3], FrameFit)> = None;
         let mut last: Option<FrameFit> = None;
         for _ in 0..JAW_ITERATIONS {
             let u = at(theta)?;
@@ -358,11 +365,10 @@ impl Model {
                     }
                 }
             }
-            if e < best.0 {
-                best = (e, theta);
-            } else {
+            if best.as_ref().is_some_and(|b| e >= b.0) {
                 break;
             }
+            best = Some((e, theta, fit.clone()));
             let trace: f64 = (0..n).map(|a| m[a * n + a]).sum();
             for a in 0..n {
                 m[a * n + a] += 1e-9 * trace + f64::MIN_POSITIVE;
@@ -378,17 +384,20 @@ impl Model {
                 largest = largest.max(x.abs() / scale[d]);
             }
             if largest < JAW_TOLERANCE {
-                // One more evaluation would not move the pose: take the step as final.
-                best = (best.0, theta);
+                // The pose has settled: the last one evaluated stands.
                 break;
             }
         }
-        let pose = JawParams::from_array(best.1);
-        if pose.validate().is_ok() {
-            prep.lookup = at(best.1)?;
-            prep.theta = Some(pose);
+        let Some((_, pose, fit)) = best else {
+            return Ok(None);
+        };
+        let pose = JawParams::from_array(pose);
+        if pose.validate().is_err() {
+            return Ok(None);
         }
-        Ok(())
+        prep.lookup = at(pose.to_array())?;
+        prep.theta = Some(pose);
+        Ok(Some(fit))
     }
 
     /// The inverse of [`lookup_targets`](Self::lookup_targets): points of bin `bin`'s space
