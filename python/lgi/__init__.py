@@ -4,7 +4,7 @@ Every marker ("bundle") looks up local geometry that really occurred in a datase
 shapes; the pieces are sewn so that the surface passes exactly through every marker.
 """
 
-from lgi import jaw
+from lgi import export, jaw, takes
 from lgi._lgi import Dataset, __version__
 from lgi.errors import (
     DatasetError,
@@ -30,5 +30,7 @@ __all__ = [
     "SolveResult",
     "__version__",
     "estimate_marker_noise",
+    "export",
     "jaw",
+    "takes",
 ]

@@ -158,6 +158,32 @@ impl Dataset {
         flat_to_array(py, flat, &[t.len(), 3])
     }
 
+    /// The neutral's source faces when its file had them (OBJ): `(counts, vertices, uvs)`,
+    /// int64 arrays of corners per face (P,), vertex index per corner (sum of counts,) and UV
+    /// index per corner (same length, or empty without UVs); fan-split they give `triangles`
+    /// and `uv_triangles`. None for datasets from arrays, glTF or `.npz`.
+    #[getter]
+    #[allow(clippy::type_complexity)]
+    fn polygons<'py>(
+        &self,
+        py: Python<'py>,
+    ) -> PyResult<
+        Option<(
+            Bound<'py, PyArrayDyn<i64>>,
+            Bound<'py, PyArrayDyn<i64>>,
+            Bound<'py, PyArrayDyn<i64>>,
+        )>,
+    > {
+        let Some(p) = self.inner.polygons() else {
+            return Ok(None);
+        };
+        let arr = |v: &[u32]| {
+            let flat: Vec<i64> = v.iter().map(|&i| i64::from(i)).collect();
+            flat_to_array(py, flat, &[v.len()])
+        };
+        Ok(Some((arr(&p.counts)?, arr(&p.vertices)?, arr(&p.uvs)?)))
+    }
+
     fn __repr__(&self) -> String {
         format!(
             "Dataset(num_vertices={}, num_shapes={}, num_triangles={})",

@@ -1,0 +1,143 @@
+"""The file pipeline end to end, as a TD drives it: files on disk (the sample's neutral with
+quads, shape OBJs, a named layout, a C3D take written by ezc3d in millimetres with shuffled
+labels and dropouts) -> `lgi build` and `lgi solve` as subprocesses -> the USD read back with
+pxr, against `Model.solve` on the same frames; then `lgi export` and `lgi info`."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from pipeline_files import write_actor, write_c3d
+
+import lgi
+
+pxr = pytest.importorskip("pxr")
+pytest.importorskip("ezc3d")
+
+FPS = 48.0
+
+
+def lgi_cli(*args: str | Path) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(
+        [sys.executable, "-m", "lgi.cli", *map(str, args)],
+        capture_output=True,
+        text=True,
+        env={**os.environ, "PYTHONWARNINGS": "error"},
+        timeout=600,
+    )
+
+
+@pytest.fixture(scope="module")
+def actor(tmp_path_factory, sample):  # type: ignore[no-untyped-def]
+    return write_actor(tmp_path_factory.mktemp("actor"), sample)
+
+
+@pytest.fixture(scope="module")
+def take_frames(sample) -> np.ndarray:  # type: ignore[no-untyped-def]
+    """The performance's first 40 frames in centimetres (the model's unit), NaN dropouts."""
+    return np.asarray(sample.performance[:40], dtype=np.float64)
+
+
+@pytest.fixture(scope="module")
+def built(tmp_path_factory, actor, sample, take_frames):  # type: ignore[no-untyped-def]
+    """`lgi build` run as a subprocess, and a C3D take in mm with labels in reverse order."""
+    out = tmp_path_factory.mktemp("built")
+    model_path = out / "actor.lgi"
+    r = lgi_cli(
+        "build", actor.neutral, actor.shapes, actor.markers, "-o", model_path, "--units", "cm", "-q"
+    )
+    assert r.returncode == 0, r.stderr
+    order = np.arange(len(actor.names))[::-1]
+    c3d = out / "take.c3d"
+    write_c3d(c3d, take_frames[:, order] * 10.0, [actor.names[i] for i in order], FPS, "mm")
+    return model_path, c3d
+
+
+def reference_frames(take_frames: np.ndarray) -> np.ndarray:
+    """What the C3D holds, in the model's centimetres: float32 millimetres (the file's
+    precision) divided by 10; NaN where dropped."""
+    return (take_frames * 10.0).astype(np.float32).astype(np.float64) / 10.0
+
+
+def test_lgi_build_keeps_the_marker_names_units_and_the_neutral_quads(built, actor):  # type: ignore[no-untyped-def]
+    model = lgi.Model.load(built[0])
+    assert model.marker_names == actor.names
+    assert model.units == "cm"
+    counts, _, _ = model.dataset.polygons
+    assert counts.size == actor.num_polygons
+    np.testing.assert_array_equal(counts, actor.counts)
+    assert (counts == 4).sum() > 1000  # the file really had quads
+
+
+def test_lgi_solve_writes_a_usd_cache_whose_samples_equal_model_solve(
+    built, actor, take_frames, tmp_path
+):  # type: ignore[no-untyped-def]
+    from pxr import Usd, UsdGeom
+
+    model_path, c3d = built
+    usd = tmp_path / "take.usd"
+    r = lgi_cli("solve", model_path, c3d, "-o", usd, "-q")
+    assert r.returncode == 0, r.stderr
+    model = lgi.Model.load(model_path)
+    ref = model.solve(reference_frames(take_frames), quiet=True)
+
+    stage = Usd.Stage.Open(str(usd))
+    assert stage.GetTimeCodesPerSecond() == FPS
+    assert UsdGeom.GetStageMetersPerUnit(stage) == pytest.approx(0.01)
+    mesh = UsdGeom.Mesh(stage.GetPrimAtPath("/Face/Mesh"))
+    counts = np.array(mesh.GetFaceVertexCountsAttr().Get())
+    assert counts.size == actor.num_polygons
+    np.testing.assert_array_equal(counts, actor.counts)
+    points = mesh.GetPointsAttr()
+    times = points.GetTimeSamples()
+    assert times == [float(t) for t in range(take_frames.shape[0])]
+    for f, t in enumerate(times):
+        got = np.array(points.Get(t), dtype=np.float64)
+        np.testing.assert_allclose(got, ref.vertices[f], rtol=0, atol=1e-6 * model.diagonal)
+    st = UsdGeom.PrimvarsAPI(mesh).GetPrimvar("st")
+    assert st.GetInterpolation() == UsdGeom.Tokens.faceVarying
+    assert len(st.GetIndices()) == counts.sum()
+
+
+def test_lgi_export_turns_the_solved_npz_into_usd_and_an_obj_sequence_with_the_same_faces(
+    built, actor, tmp_path
+):  # type: ignore[no-untyped-def]
+    from pxr import Usd, UsdGeom
+
+    model_path, c3d = built
+    npz = tmp_path / "take.npz"
+    r = lgi_cli("solve", model_path, c3d, "-o", npz, "--frames", "5:9", "-q")
+    assert r.returncode == 0, r.stderr
+    res = lgi.export.read_result_npz(npz)
+    assert res.vertices.shape[0] == 4 and res.start == 5 and res.fps == FPS
+    usd = tmp_path / "again.usda"
+    assert lgi_cli("export", npz, "-o", usd, "-q").returncode == 0
+    stage = Usd.Stage.Open(str(usd))
+    points = UsdGeom.Mesh(stage.GetPrimAtPath("/Face/Mesh")).GetPointsAttr()
+    assert points.GetTimeSamples() == [5.0, 6.0, 7.0, 8.0]
+    np.testing.assert_array_equal(np.array(points.Get(7.0)), res.vertices[2])
+    objs = tmp_path / "objs" / "shot.obj"
+    objs.parent.mkdir()
+    r = lgi_cli("export", npz, "-o", objs, "-q")
+    assert r.returncode == 0, r.stderr
+    written = sorted(objs.parent.glob("shot.*.obj"))
+    assert [p.name for p in written] == [f"shot.{f:04d}.obj" for f in range(5, 9)]
+    back = lgi.Dataset.from_obj(written[1])
+    np.testing.assert_array_equal(back.polygons[0], actor.counts)
+    np.testing.assert_allclose(back.neutral, res.vertices[1], rtol=0, atol=1e-6)
+
+
+def test_lgi_info_summarises_model_take_and_usd(built, actor, tmp_path):  # type: ignore[no-untyped-def]
+    model_path, c3d = built
+    r = lgi_cli("info", model_path)
+    assert r.returncode == 0, r.stderr
+    assert f"markers: {len(actor.names)} ({actor.names[0]}," in r.stdout
+    assert f"{actor.num_polygons} polygons" in r.stdout and "units: cm" in r.stdout
+    r = lgi_cli("info", c3d)
+    assert r.returncode == 0, r.stderr
+    assert "frames: 40" in r.stdout and "units: mm" in r.stdout and "fps 48" in r.stdout
