@@ -107,6 +107,4 @@ def write_c3d(
     res = np.zeros((1, frames.shape[1], frames.shape[0]))
     res[0][np.isnan(frames).any(axis=2).T] = -1.0
     c["data"]["meta_points"]["residuals"] = res
-    if first_frame:
-        c["header"]["points"]["first_frame"] = first_frame
     c.write(str(path))

@@ -12,12 +12,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from pipeline_files import write_actor, write_c3d
 
 import lgi
-
-pxr = pytest.importorskip("pxr")
-pytest.importorskip("ezc3d")
+from pipeline_files import write_actor, write_c3d
 
 FPS = 48.0
 

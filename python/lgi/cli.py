@@ -8,6 +8,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import re
 import sys
 from collections.abc import Sequence
 from pathlib import Path
@@ -151,15 +152,21 @@ def _cmd_build(args: argparse.Namespace) -> int:
         _say(args, f"estimated the jaw rig (pivot {np.round(rig.pivot, 3).tolist()})")
     t0 = time.perf_counter()
     _say(args, f"building the model for {len(layout.names)} markers ...")
-    model = lgi.Model.build(
-        data,
-        layout.positions,
-        config,
-        jaw=rig,
-        shape_theta=theta,
-        marker_names=layout.names,
-        units=args.units,
-    )
+    try:
+        model = lgi.Model.build(
+            data,
+            layout.positions,
+            config,
+            jaw=rig,
+            shape_theta=theta,
+            marker_names=layout.names,
+            units=args.units,
+        )
+    except lgi.MarkerError as e:
+        # The core counts markers; the user knows them by name.
+        found = re.match(r"marker (\d+)", str(e))
+        name = f" ({layout.names[int(found.group(1))]!r})" if found else ""
+        raise lgi.MarkerError(f"MARKERS {args.markers}: {e}{name}") from None
     model.save(out)
     _say(args, f"built in {time.perf_counter() - t0:.1f} s")
     print(f"wrote {out}")
@@ -286,8 +293,8 @@ def _write_output(
 def _cmd_solve(args: argparse.Namespace) -> int:
     from lgi import takes
 
-    kind = _output_kind(args.out)
     out = _output_file(args.out, "--out")
+    kind = _output_kind(args.out)
     model = lgi.Model.load(_existing_file(args.model, "MODEL"))
     take = takes.read(
         _existing_file(args.take, "TAKE"),
@@ -332,8 +339,8 @@ def _cmd_solve(args: argparse.Namespace) -> int:
 
 
 def _cmd_export(args: argparse.Namespace) -> int:
-    kind = _output_kind(args.out)
     out = _output_file(args.out, "--out")
+    kind = _output_kind(args.out)
     src = _existing_file(args.result, "RESULT")
     if src.resolve() == out.resolve():
         raise lgi.InputError(f"--out {args.out}: is the RESULT file itself")
