@@ -102,6 +102,20 @@ def _out_path(path: str | os.PathLike[str], what: str) -> Path:
     return p
 
 
+def _new_stage(usd: Any, sdf: Any, path: Path) -> Any:
+    """A new stage whose root layer will be saved to `path` (Save is ~2.5x faster than
+    exporting an in-memory layer). A layer of that path already open in this process (an
+    earlier cache, a stage a caller holds) is emptied and reused: USD keeps one per path."""
+    layer = sdf.Layer.Find(str(path))
+    if layer is not None:
+        layer.Clear()
+        return usd.Stage.Open(layer)
+    try:
+        return usd.Stage.CreateNew(str(path))
+    except Exception as e:  # pxr raises Tf.ErrorException (a RuntimeError) for I/O failures
+        raise InputError(f"USD output {path}: cannot be created: {e}") from None
+
+
 class UsdCache:
     """A USD point cache written chunk by chunk: `add(vertices)` appends frames (time codes
     `start`, `start + 1`, ...), `close()` writes the file (its format by suffix: `.usd`/`.usdc`
@@ -136,7 +150,7 @@ class UsdCache:
         self._topo = topo
         self._next = int(start)
         self._start = int(start)
-        stage = Usd.Stage.CreateInMemory()
+        stage = _new_stage(Usd, Sdf, self._path)
         UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.y)
         if units is not None:
             UsdGeom.SetStageMetersPerUnit(stage, METERS_PER_UNIT[normalize_unit(units, "units")])
@@ -195,7 +209,9 @@ class UsdCache:
             t = Usd.TimeCode(self._next)
             p = np.ascontiguousarray(v[i], dtype=np.float32)
             self._points.Set(Vt.Vec3fArray.FromNumpy(p), t)
-            lo, hi = p.min(axis=0), p.max(axis=0)
+            # Reduced over a (3, V) copy: numpy's axis-0 reduce of (V, 3) is ~15x slower.
+            pt = np.ascontiguousarray(p.T)
+            lo, hi = pt.min(axis=1), pt.max(axis=1)
             self._extent.Set(
                 Vt.Vec3fArray([Gf.Vec3f(*map(float, lo)), Gf.Vec3f(*map(float, hi))]), t
             )
@@ -211,7 +227,7 @@ class UsdCache:
             raise InputError(f"USD output {self._path}: no frames were added")
         self._stage.SetStartTimeCode(self._start)
         self._stage.SetEndTimeCode(self._next - 1)
-        if not self._stage.GetRootLayer().Export(str(self._path)):
+        if not self._stage.GetRootLayer().Save():
             raise InputError(f"USD output {self._path}: could not be written")
         return self._path
 

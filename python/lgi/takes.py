@@ -589,8 +589,9 @@ def read(
     if source is None and raw.units is not None:
         source = normalize_unit(raw.units, f"{raw.path}: units")
     target = normalize_unit(units, "units") if units else None
+    ignored: tuple[str, ...] = ()
     if layout is None:
-        frames, ignored, names = raw.points.copy(), (), list(raw.labels)
+        frames, names = raw.points.copy(), list(raw.labels)
     else:
         frames, ignored = match_layout(raw, layout, allow_missing)
         names = list(layout)
