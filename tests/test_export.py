@@ -163,3 +163,35 @@ def test_export_inputs_are_checked(quads, tmp_path: Path) -> None:  # type: igno
     f.write_text("x")
     with pytest.raises(InputError, match="is a file, expected a folder"):
         export.write_obj_sequence(f, quads, frames(1, 7))
+
+
+def test_source_polygons_survive_a_dataset_npz_and_leaving_shapes_out(
+    quads, tmp_path: Path
+) -> None:  # type: ignore[no-untyped-def]
+    from lgi.dataset import without_shapes
+
+    with_shape = lgi.Dataset.from_arrays(
+        quads.neutral,
+        quads.triangles,
+        np.ones((2, 7, 3)),
+        uvs=quads.uvs,
+        uv_triangles=quads.uv_triangles,
+    ).with_polygons(*quads.polygons)
+    p = tmp_path / "d.npz"
+    with_shape.to_npz(p)
+    back = lgi.Dataset.from_npz(p)
+    for a, b in zip(back.polygons, quads.polygons, strict=True):
+        np.testing.assert_array_equal(a, b)
+    kept = without_shapes(back, [0])
+    assert kept.num_shapes == 1
+    np.testing.assert_array_equal(kept.polygons[0], [4, 4, 3])
+
+
+def test_polygons_that_do_not_fan_split_into_the_triangles_are_refused(quads) -> None:  # type: ignore[no-untyped-def]
+    counts, vertices, uvs = quads.polygons
+    with pytest.raises(InputError, match="do not fan-split"):
+        quads.with_polygons(counts, np.roll(vertices, 1), uvs)
+    with pytest.raises(InputError, match="UV indices"):
+        quads.with_polygons(counts, vertices)
+    with pytest.raises(InputError, match="1-D integer array"):
+        quads.with_polygons(counts.reshape(1, -1), vertices, uvs)

@@ -69,6 +69,10 @@ class Dataset:
     @property
     def uvs(self) -> NDArray[np.float64]:
         """(U, 2) UV coordinates."""
+    def with_polygons(
+        self, counts: ArrayLike, vertices: ArrayLike, uvs: ArrayLike | None = None
+    ) -> Dataset:
+        """A new dataset with the neutral's source faces (fan-splitting into its triangles)."""
     @property
     def polygons(
         self,
