@@ -228,3 +228,25 @@ def test_unit_scale_matches_the_definitions(a: str, b: str, factor: float) -> No
 def test_unknown_units_are_refused_naming_them() -> None:
     with pytest.raises(InputError, match="unknown length unit 'furlong'"):
         takes.normalize_unit("furlong", "units")
+
+
+@given(st.permutations(list(range(6))), st.integers(0, 3))
+def test_match_layout_puts_every_label_in_its_layout_column_whatever_the_file_order(
+    order: list[int], absent: int
+) -> None:
+    """Brute force: column b of the result is the file column whose label is layout name b;
+    names the file lacks (the last `absent` of the order) are NaN with allow_missing."""
+    names = [f"n{i}" for i in range(6)]
+    present = order[: 6 - absent]
+    pts = RNG.normal(size=(3, len(present), 3))
+    raw = takes.RawTake([names[i] for i in present], pts, None, None, "mem")
+    out, ignored = takes.match_layout(raw, names, allow_missing=True)
+    assert ignored == ()
+    for b in range(6):
+        if b in present:
+            np.testing.assert_array_equal(out[:, b], pts[:, present.index(b)])
+        else:
+            assert np.isnan(out[:, b]).all()
+    if absent:
+        with pytest.raises(InputError, match="not in the take"):
+            takes.match_layout(raw, names)

@@ -201,7 +201,8 @@ def normalize_unit(unit: str, where: str) -> str:
     """`unit` as a key of `METERS_PER_UNIT` (`Millimeters` -> `mm`); `InputError` naming
     `where` when unknown."""
     u = unit.strip().lower()
-    u = _UNIT_ALIASES.get(u.rstrip("s") if u.rstrip("s") in _UNIT_ALIASES else u, u)
+    singular = u[:-1] if u.endswith("s") and u[:-1] in _UNIT_ALIASES else u  # millimeters
+    u = _UNIT_ALIASES.get(singular, u)
     if u not in METERS_PER_UNIT:
         raise InputError(
             f"{where}: unknown length unit {unit!r} (known: {', '.join(METERS_PER_UNIT)})"
