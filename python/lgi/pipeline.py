@@ -1,0 +1,471 @@
+"""The file pipeline behind `lgi build` / `solve` / `export` / `info`: files in (a neutral and
+its shapes, a named marker layout, a take), files out (a model file, a USD point cache, an OBJ
+sequence, a solved `.npz`), and one-paragraph summaries of each kind of file. The readers and
+writers themselves are `lgi.takes` and `lgi.export`; the CLI only parses arguments and calls
+`build_file`, `solve_file`, `export_file` and `describe`. Error messages name the CLI's
+arguments and options (`--frames`, `MARKERS`), which these functions' parameters mirror."""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+
+from lgi import export, takes
+from lgi._lgi import BuildConfig, Dataset
+from lgi.errors import InputError, MarkerError
+from lgi.model import Model, estimate_marker_noise
+
+__all__ = [
+    "CHUNK_FRAMES",
+    "build_file",
+    "describe",
+    "export_file",
+    "frame_range",
+    "marker_noise",
+    "output_kind",
+    "read_dataset",
+    "solve_file",
+]
+
+CHUNK_FRAMES = 100
+"""Frames written per chunk (one progress step)."""
+
+Say = Callable[[str], None]
+
+
+def _silent(_message: str) -> None:
+    pass
+
+
+def existing_file(path: str, what: str) -> Path:
+    """An input file that exists and is not a folder (`what` names the argument)."""
+    p = Path(path)
+    if not p.exists():
+        raise InputError(f"{what} {path}: no such file")
+    if p.is_dir():
+        raise InputError(f"{what} {path}: is a folder, expected a file")
+    return p
+
+
+def output_file(path: str, what: str) -> Path:
+    """An output file path: not a folder, in a folder that exists (an old file is replaced)."""
+    p = Path(path)
+    if p.is_dir():
+        raise InputError(f"{what} {path}: is a folder, expected a file path")
+    if not p.parent.is_dir():
+        raise InputError(f"{what} {path}: the folder {p.parent} does not exist")
+    return p
+
+
+def read_dataset(neutral: str, shapes: str) -> Dataset:
+    """NEUTRAL (.obj with SHAPES a folder of OBJs or a glob; .gltf/.glb/.npz holding its
+    shapes, SHAPES then '-' or the same file)."""
+    n = existing_file(neutral, "NEUTRAL")
+    suffix = n.suffix.lower()
+    if suffix in (".gltf", ".glb", ".npz"):
+        if shapes not in ("-", neutral) and Path(shapes) != n:
+            raise InputError(
+                f"SHAPES {shapes}: a {suffix} neutral holds its shapes "
+                f"({'morph targets' if suffix != '.npz' else 'the shapes array'}); pass '-'"
+            )
+        if suffix == ".npz":
+            return Dataset.from_npz(n)
+        return Dataset.from_gltf(n)
+    if suffix != ".obj":
+        raise InputError(f"NEUTRAL {neutral}: expected .obj, .gltf, .glb or .npz")
+    if shapes == "-":
+        return Dataset.from_obj(n)
+    s = Path(shapes)
+    if s.is_dir():
+        files = sorted(p for p in s.iterdir() if p.suffix.lower() == ".obj")
+        if not files:
+            raise InputError(f"SHAPES {shapes}: the folder holds no .obj files")
+        return Dataset.from_obj(n, files)
+    if s.suffix.lower() in (".gltf", ".glb"):
+        raise InputError(
+            f"SHAPES {shapes}: glTF morph targets come with their own neutral; "
+            f"pass the glTF as NEUTRAL and '-' as SHAPES"
+        )
+    if not any(c in shapes for c in "*?["):
+        if not s.exists():
+            raise InputError(f"SHAPES {shapes}: no such folder or file (or a glob pattern)")
+        return Dataset.from_obj(n, [s])
+    return Dataset.from_obj(n, shapes)
+
+
+def read_config(path: str | None) -> BuildConfig | None:
+    if path is None:
+        return None
+    p = existing_file(path, "--config")
+    try:
+        fields = json.loads(p.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as e:
+        raise InputError(f"--config {path}: not a JSON file: {e}") from None
+    if not isinstance(fields, dict):
+        raise InputError(f"--config {path}: expected a JSON object of BuildConfig fields")
+    known = BuildConfig().to_dict()
+    unknown = sorted(set(fields) - set(known))
+    if unknown:
+        raise InputError(
+            f"--config {path}: unknown fields {unknown} (BuildConfig has {', '.join(known)})"
+        )
+    try:
+        return BuildConfig(**fields)
+    except InputError as e:
+        raise InputError(f"--config {path}: {e}") from None
+
+
+def frame_range(spec: str | None, count: int) -> slice:
+    """`--frames a:b` (0-based take frames, b exclusive; either end may be left out)."""
+    if spec is None:
+        return slice(0, count)
+    parts = spec.split(":")
+    try:
+        if len(parts) != 2:
+            raise ValueError
+        a = int(parts[0]) if parts[0].strip() else 0
+        b = int(parts[1]) if parts[1].strip() else count
+    except ValueError:
+        raise InputError(f"--frames {spec!r}: expected START:END (e.g. 0:100)") from None
+    if not 0 <= a < b <= count:
+        raise InputError(
+            f"--frames {spec}: the take has frames 0:{count}; START must be < END within it"
+        )
+    return slice(a, b)
+
+
+def marker_noise(spec: str | None, frames: np.ndarray) -> float | None:
+    if spec is None or spec == "none":
+        return None
+    if spec == "auto":
+        return estimate_marker_noise(frames)
+    try:
+        sigma = float(spec)
+    except ValueError:
+        raise InputError(
+            f"--marker-noise {spec!r}: expected a number (data units), 'auto' or 'none'"
+        ) from None
+    if not np.isfinite(sigma) or sigma < 0:
+        raise InputError(f"--marker-noise {spec}: must be a finite number >= 0")
+    return sigma
+
+
+def output_kind(path: str) -> str:
+    suffix = Path(path).suffix.lower()
+    kinds = {".usd": "usd", ".usdc": "usd", ".usda": "usd", ".npz": "npz", ".obj": "obj"}
+    if suffix not in kinds:
+        raise InputError(
+            f"--out {path}: unknown output format {suffix or '(no suffix)'!r}; "
+            "use .usd/.usdc/.usda (point cache), .obj (OBJ sequence) or .npz"
+        )
+    return kinds[suffix]
+
+
+def frame_rate(given: float | None, take_fps: float | None, kind: str) -> float | None:
+    if given is not None:
+        if not np.isfinite(given) or given <= 0:
+            raise InputError(f"--fps {given}: must be a positive number")
+        return float(given)
+    if take_fps is None and kind == "usd":
+        raise InputError("the take has no frame rate; pass --fps for the USD time codes")
+    return take_fps
+
+
+def write_output(
+    kind: str,
+    out: Path,
+    topo: export.Topology,
+    vertices: np.ndarray,
+    *,
+    residuals: np.ndarray,
+    missing: np.ndarray,
+    names: list[str],
+    fps: float | None,
+    start: int,
+    units: str | None,
+    jaw_theta: np.ndarray | None,
+    quiet: bool = False,
+) -> Path:
+    from tqdm import tqdm
+
+    n = vertices.shape[0]
+    chunk = CHUNK_FRAMES
+    if kind == "usd":
+        assert fps is not None
+        cache = export.UsdCache(out, topo, fps=fps, units=units, start=start)
+        with tqdm(total=n, desc="lgi write USD", unit="frame", disable=quiet, leave=False) as bar:
+            for a in range(0, n, chunk):
+                b = min(n, a + chunk)
+                cache.add(
+                    vertices[a:b],
+                    jaw_theta=None if jaw_theta is None else jaw_theta[a:b],
+                    marker_residuals=residuals[a:b],
+                )
+                bar.update(b - a)
+        cache.close()
+    elif kind == "obj":
+        with tqdm(total=n, desc="lgi write OBJ", unit="frame", disable=quiet, leave=False) as bar:
+            for a in range(0, n, chunk):
+                b = min(n, a + chunk)
+                export.write_obj_sequence(
+                    out.parent, topo, vertices[a:b], name=out.stem, start=start + a
+                )
+                bar.update(b - a)
+    else:
+        export.write_result_npz(
+            out,
+            topo,
+            vertices,
+            residuals,
+            missing,
+            names,
+            fps=fps,
+            start=start,
+            units=units,
+            jaw_theta=jaw_theta,
+        )
+    return out.parent / f"{out.stem}.NNNN.obj" if kind == "obj" else out
+
+
+def describe(path: str | os.PathLike[str]) -> list[str]:
+    """`lgi info`: a few lines summarising a model (`.lgi`), a take, a solved `.npz` or a USD
+    file."""
+    path = existing_file(os.fspath(path), "FILE")
+    from lgi import takes
+
+    suffix = path.suffix.lower()
+    if suffix == ".lgi":
+        m = Model.load(path)
+        d = m.dataset
+        polys = d.polygons
+        faces = (
+            f"{polys[0].size} polygons ({np.asarray(d.triangles).shape[0]} triangles)"
+            if polys is not None
+            else f"{np.asarray(d.triangles).shape[0]} triangles"
+        )
+        names = m.marker_names
+        shown = ", ".join(names[:8]) + (", ..." if len(names) > 8 else "")
+        jaw_bins = m.jaw_bins
+        return [
+            f"model {path}",
+            f"  neutral: {d.num_vertices} vertices, {faces}, "
+            f"{'with' if np.asarray(d.uv_triangles).size else 'without'} UVs",
+            f"  shapes: {d.num_shapes}",
+            f"  markers: {m.num_bundles} ({shown})",
+            f"  units: {m.units or 'not given'}",
+            f"  jaw: {'none' if m.jaw_rig is None else 'rig'}"
+            + ("" if jaw_bins is None else f", {len(jaw_bins) - 1} bins"),
+            f"  face size (bounding-box diagonal): {m.diagonal:.6g}",
+        ]
+    if suffix == ".npz":
+        with np.load(path, allow_pickle=False) as z:
+            files = set(z.files)
+        if "vertices" in files:
+            r = export.read_result_npz(path)
+            return [
+                f"solved take {path}",
+                f"  frames: {r.vertices.shape[0]} from time code {r.start}, "
+                f"fps {r.fps if r.fps is not None else 'unknown'}",
+                f"  mesh: {r.vertices.shape[1]} vertices, {r.topology.num_faces} faces",
+                f"  markers: {len(r.marker_names)}, residual max {r.bundle_residuals.max():.3g}",
+                f"  units: {r.units or 'not given'}",
+            ]
+    if suffix in takes.TAKE_SUFFIXES:
+        raw = takes.read_raw(path)
+        miss = np.isnan(raw.points).any(axis=2)
+        shown = ", ".join(raw.labels[:8]) + (", ..." if len(raw.labels) > 8 else "")
+        return [
+            f"take {path}",
+            f"  frames: {raw.points.shape[0]} from frame {raw.first_frame}, "
+            f"fps {raw.fps if raw.fps is not None else 'unknown'}",
+            f"  markers: {len(raw.labels)} ({shown})",
+            f"  units: {raw.units or 'not given'}",
+            f"  missing samples: {100 * miss.mean():.1f}%",
+        ]
+    if suffix in (".usd", ".usdc", ".usda"):
+        from pxr import Usd, UsdGeom
+
+        stage = Usd.Stage.Open(str(path))
+        if stage is None:
+            raise InputError(f"{path}: not a readable USD file")
+        lines = [
+            f"USD {path}",
+            f"  time codes: {stage.GetStartTimeCode():g} to {stage.GetEndTimeCode():g} "
+            f"at {stage.GetTimeCodesPerSecond():g} per second",
+            f"  metersPerUnit: {UsdGeom.GetStageMetersPerUnit(stage):g}",
+        ]
+        for prim in stage.Traverse():
+            if prim.IsA(UsdGeom.Mesh):
+                mesh = UsdGeom.Mesh(prim)
+                counts = mesh.GetFaceVertexCountsAttr().Get()
+                samples = mesh.GetPointsAttr().GetNumTimeSamples()
+                lines.append(f"  mesh {prim.GetPath()}: {len(counts)} faces, {samples} samples")
+        return lines
+    raise InputError(
+        f"{path}: unknown file kind {suffix or '(no suffix)'!r}; lgi info reads .lgi models, "
+        f"takes ({', '.join(takes.TAKE_SUFFIXES)}), solved .npz and USD files"
+    )
+
+
+def build_file(
+    neutral: str | os.PathLike[str],
+    shapes: str,
+    markers: str | os.PathLike[str],
+    out: str | os.PathLike[str],
+    *,
+    config: str | os.PathLike[str] | None = None,
+    jaw: str = "none",
+    units: str | None = None,
+    say: Say = _silent,
+) -> Path:
+    """`lgi build`: a model file `out` from `neutral` and `shapes` (`read_dataset`), the
+    layout CSV `markers` (`lgi.takes.read_layout`) and a JSON `config`; `jaw="auto"`
+    estimates a jaw rig from the `jawOpen` shape. The model keeps the layout's names and
+    `units`. Returns `out`."""
+    from lgi import jaw as jaw_tools
+
+    if jaw not in ("auto", "none"):
+        raise InputError(f"--jaw {jaw!r}: expected 'auto' or 'none'")
+    dest = output_file(os.fspath(out), "--out")
+    cfg = read_config(None if config is None else os.fspath(config))
+    layout = takes.read_layout(existing_file(os.fspath(markers), "MARKERS"))
+    t0 = time.perf_counter()
+    data = read_dataset(os.fspath(neutral), shapes)
+    say(
+        f"read the neutral ({data.num_vertices} vertices) and {data.num_shapes} shapes "
+        f"({time.perf_counter() - t0:.1f} s)"
+    )
+    rig = theta = None
+    if jaw == "auto":
+        if "jawOpen" not in data.names:
+            raise InputError(
+                "--jaw auto: the dataset has no 'jawOpen' shape to estimate the jaw from "
+                "(name it so, or pass --jaw none)"
+            )
+        rig, theta = jaw_tools.estimate_rig(
+            data.neutral, data.shapes, data.names, triangles=data.triangles
+        )
+        say(f"estimated the jaw rig (pivot {np.round(rig.pivot, 3).tolist()})")
+    t0 = time.perf_counter()
+    say(f"building the model for {len(layout.names)} markers ...")
+    try:
+        model = Model.build(
+            data,
+            layout.positions,
+            cfg,
+            jaw=rig,
+            shape_theta=theta,
+            marker_names=layout.names,
+            units=units,
+        )
+    except MarkerError as e:
+        # The core counts markers; the user knows them by name.
+        found = re.match(r"marker (\d+)", str(e))
+        name = f" ({layout.names[int(found.group(1))]!r})" if found else ""
+        raise MarkerError(f"MARKERS {os.fspath(markers)}: {e}{name}") from None
+    model.save(dest)
+    say(f"built in {time.perf_counter() - t0:.1f} s")
+    return dest
+
+
+def solve_file(
+    model: str | os.PathLike[str],
+    take: str | os.PathLike[str],
+    out: str | os.PathLike[str],
+    *,
+    noise: str | None = None,
+    frames: str | None = None,
+    fps: float | None = None,
+    allow_missing: bool = False,
+    take_units: str | None = None,
+    jaw: str = "track",
+    quiet: bool = False,
+    say: Say = _silent,
+) -> tuple[Path, int]:
+    """`lgi solve`: the take file solved with the model file, written by `out`'s suffix
+    (`output_kind`). `noise` is `--marker-noise` (a number, 'auto' or 'none'), `frames` is
+    `--frames A:B`. The frame range is solved in one `Model.solve` (frames prefer their
+    predecessor's choices across the whole range), then written chunk by chunk. Returns the
+    path written (the `NAME.NNNN.obj` pattern for OBJ sequences) and the frame count."""
+    if jaw not in ("track", "rest"):
+        raise InputError(f"--jaw {jaw!r}: expected 'track' or 'rest'")
+    dest = output_file(os.fspath(out), "--out")
+    kind = output_kind(os.fspath(out))
+    m = Model.load(existing_file(os.fspath(model), "MODEL"))
+    t = takes.read(
+        existing_file(os.fspath(take), "TAKE"),
+        m.marker_names,
+        units=m.units,
+        take_units=take_units,
+        allow_missing=allow_missing,
+    )
+    if t.ignored:
+        say(f"left out {len(t.ignored)} labels unknown to the model: {', '.join(t.ignored)}")
+    rng = frame_range(frames, t.num_frames)
+    x = t.frames[rng]
+    rate = frame_rate(fps, t.fps, kind)
+    sigma = marker_noise(noise, x)
+    jaw_mode = None if m.jaw_rig is None or jaw == "rest" else "track"
+    missing = np.isnan(x).any(axis=2)
+    say(
+        f"{x.shape[0]} frames of {x.shape[1]} markers "
+        f"({100 * missing.mean():.1f}% samples missing)"
+        + ("" if sigma is None else f", marker noise {sigma:.4g}")
+    )
+    res = m.solve(x, jaw=jaw_mode, marker_noise=sigma, quiet=quiet)
+    written = write_output(
+        kind,
+        dest,
+        export.topology(m.dataset),
+        res.vertices,
+        residuals=res.bundle_residuals,
+        missing=res.missing,
+        names=m.marker_names,
+        fps=rate,
+        start=t.first_frame + rng.start,
+        units=m.units,
+        jaw_theta=res.jaw_theta,
+        quiet=quiet,
+    )
+    return written, int(x.shape[0])
+
+
+def export_file(
+    result: str | os.PathLike[str],
+    out: str | os.PathLike[str],
+    *,
+    frames: str | None = None,
+    fps: float | None = None,
+    quiet: bool = False,
+) -> tuple[Path, int]:
+    """`lgi export`: a solved `.npz` (`lgi solve -o x.npz`) written again by `out`'s suffix,
+    optionally a frame range (`--frames A:B`) at another rate. Returns the path written and
+    the frame count."""
+    dest = output_file(os.fspath(out), "--out")
+    kind = output_kind(os.fspath(out))
+    src = existing_file(os.fspath(result), "RESULT")
+    if src.resolve() == dest.resolve():
+        raise InputError(f"--out {os.fspath(out)}: is the RESULT file itself")
+    r = export.read_result_npz(src)
+    rng = frame_range(frames, r.vertices.shape[0])
+    written = write_output(
+        kind,
+        dest,
+        r.topology,
+        r.vertices[rng],
+        residuals=r.bundle_residuals[rng],
+        missing=r.missing[rng],
+        names=r.marker_names,
+        fps=frame_rate(fps, r.fps, kind),
+        start=r.start + rng.start,
+        units=r.units,
+        jaw_theta=None if r.jaw_theta is None else r.jaw_theta[rng],
+        quiet=quiet,
+    )
+    return written, int(r.vertices[rng].shape[0])
