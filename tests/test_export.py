@@ -195,3 +195,18 @@ def test_polygons_that_do_not_fan_split_into_the_triangles_are_refused(quads) ->
         quads.with_polygons(counts, vertices)
     with pytest.raises(InputError, match="1-D integer array"):
         quads.with_polygons(counts.reshape(1, -1), vertices, uvs)
+
+
+def test_write_usd_takes_a_model_and_a_solve_result_as_the_design_says(
+    tmp_path: Path, sample, sample_dataset
+) -> None:  # type: ignore[no-untyped-def]
+    model = lgi.Model.build(sample_dataset, sample.markers_rest, units="cm")
+    res = model.solve(sample.performance[:3], quiet=True)
+    p = export.write_usd(tmp_path / "m.usda", model, res, fps=30.0)
+    stage = Usd.Stage.Open(str(p))
+    assert UsdGeom.GetStageMetersPerUnit(stage) == pytest.approx(0.01)
+    prim = stage.GetPrimAtPath("/Face/Mesh")
+    pts = UsdGeom.Mesh(prim).GetPointsAttr()
+    np.testing.assert_array_equal(np.array(pts.Get(2)), res.vertices[2].astype(np.float32))
+    got = np.array(prim.GetAttribute("lgi:markerResidual").Get(1))
+    np.testing.assert_allclose(got, res.bundle_residuals[1].astype(np.float32))

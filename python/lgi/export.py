@@ -10,10 +10,9 @@ dataset without them (arrays, glTF, `.npz`) exports its triangles.
 from __future__ import annotations
 
 import os
-from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -21,6 +20,9 @@ from numpy.typing import NDArray
 from lgi._lgi import Dataset
 from lgi.errors import InputError
 from lgi.takes import METERS_PER_UNIT, normalize_unit
+
+if TYPE_CHECKING:
+    from lgi.model import Model
 
 I64 = NDArray[np.int64]
 F64 = NDArray[np.float64]
@@ -241,22 +243,33 @@ class UsdCache:
 
 def write_usd(
     path: str | os.PathLike[str],
-    topo: Topology | Dataset,
-    vertices: Any | Iterable[Any],
+    source: Topology | Dataset | Model,
+    frames: Any,
     *,
     fps: float,
     units: str | None = None,
     start: int = 0,
     jaw_theta: Any | None = None,
 ) -> Path:
-    """Writes a USD point cache (`UsdCache`) of `vertices` (F, V, 3), or of an iterable of
-    chunks (each (F_i, V, 3)); `topo` is a `Topology` or a dataset (`topology`)."""
-    t = topo if isinstance(topo, Topology) else topology(topo)
+    """Writes a USD point cache (`UsdCache`). `source` gives the faces: a `Topology`, a
+    dataset (`topology`), or a model (its dataset's; `units` then default to the model's).
+    `frames`: vertices (F, V, 3), a `SolveResult` (its vertices, jaw poses and marker
+    residuals), or an iterable of (F_i, V, 3) chunks."""
+    from lgi.model import Model, SolveResult
+
+    if isinstance(source, Model):
+        units = source.units if units is None else units
+        source = source.dataset
+    t = source if isinstance(source, Topology) else topology(source)
     cache = UsdCache(path, t, fps=fps, units=units, start=start)
-    if isinstance(vertices, np.ndarray):
-        cache.add(vertices, jaw_theta=jaw_theta)
+    if isinstance(frames, SolveResult):
+        cache.add(
+            frames.vertices, jaw_theta=frames.jaw_theta, marker_residuals=frames.bundle_residuals
+        )
+    elif isinstance(frames, np.ndarray):
+        cache.add(frames, jaw_theta=jaw_theta)
     else:
-        for chunk in vertices:
+        for chunk in frames:
             cache.add(chunk)
     return cache.close()
 
