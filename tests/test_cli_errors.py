@@ -248,6 +248,9 @@ def test_export_and_info_mistakes(files, capsys, tmp_path: Path) -> None:  # typ
     odd = tmp_path / "x.fbx"
     odd.write_text("x")
     assert_user_error(capsys, "unknown file kind '.fbx'", "info", odd)
+    garbage = tmp_path / "garbage.npz"
+    garbage.write_text("not a zip")
+    assert_user_error(capsys, "not a readable .npz archive", "info", garbage)
 
 
 # --- lgi demo, lgi evaluate (the cases that ended in tracebacks) --------------------------

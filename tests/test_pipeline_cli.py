@@ -175,3 +175,12 @@ def test_ict_through_the_cli_keeps_its_quads_in_the_usd_and_matches_model_solve(
     for f in range(6):
         got = np.array(points.Get(f), dtype=np.float64)
         np.testing.assert_allclose(got, ref.vertices[f], rtol=0, atol=1e-6 * model.diagonal)
+
+
+def test_lgi_info_describes_a_dataset_npz(sample_dataset, tmp_path):  # type: ignore[no-untyped-def]
+    p = tmp_path / "d.npz"
+    sample_dataset.to_npz(p)
+    r = lgi_cli("info", p)
+    assert r.returncode == 0, r.stderr
+    assert f"neutral: {sample_dataset.num_vertices} vertices" in r.stdout
+    assert f"shapes: {sample_dataset.num_shapes}" in r.stdout

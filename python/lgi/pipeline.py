@@ -264,8 +264,21 @@ def describe(path: str | os.PathLike[str]) -> list[str]:
             f"  face size (bounding-box diagonal): {m.diagonal:.6g}",
         ]
     if suffix == ".npz":
-        with np.load(path, allow_pickle=False) as z:
-            files = set(z.files)
+        try:
+            with np.load(path, allow_pickle=False) as z:
+                files = set(z.files)
+        except Exception as e:  # not a zip, a pickled array, ...: numpy raises various classes
+            raise InputError(f"{path}: not a readable .npz archive: {e}") from None
+        if "neutral" in files and "triangles" in files:
+            d = Dataset.from_npz(path)
+            polys = d.polygons
+            faces = "no source polygons" if polys is None else f"{polys[0].size} polygons"
+            return [
+                f"dataset {path}",
+                f"  neutral: {d.num_vertices} vertices, "
+                f"{np.asarray(d.triangles).shape[0]} triangles, {faces}",
+                f"  shapes: {d.num_shapes}",
+            ]
         if "vertices" in files:
             r = export.read_result_npz(path)
             return [
