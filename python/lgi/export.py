@@ -229,7 +229,11 @@ class UsdCache:
             raise InputError(f"USD output {self._path}: no frames were added")
         self._stage.SetStartTimeCode(self._start)
         self._stage.SetEndTimeCode(self._next - 1)
-        if not self._stage.GetRootLayer().Save():
+        try:
+            saved = self._stage.GetRootLayer().Save()
+        except Exception as e:  # pxr's Tf.ErrorException: a full disk, a vanished folder
+            raise InputError(f"USD output {self._path}: could not be written: {e}") from None
+        if not saved:
             raise InputError(f"USD output {self._path}: could not be written")
         return self._path
 
