@@ -184,3 +184,64 @@ def test_lgi_info_describes_a_dataset_npz(sample_dataset, tmp_path):  # type: ig
     assert r.returncode == 0, r.stderr
     assert f"neutral: {sample_dataset.num_vertices} vertices" in r.stdout
     assert f"shapes: {sample_dataset.num_shapes}" in r.stdout
+
+
+def usd_points(path: Path) -> np.ndarray:
+    from pxr import Usd, UsdGeom
+
+    stage = Usd.Stage.Open(str(path))
+    points = UsdGeom.Mesh(stage.GetPrimAtPath("/Face/Mesh")).GetPointsAttr()
+    return np.array([np.array(points.Get(t), dtype=np.float64) for t in points.GetTimeSamples()])
+
+
+def test_csv_and_trc_takes_solve_like_model_solve_with_noise_auto(
+    built, actor, take_frames, tmp_path
+):  # type: ignore[no-untyped-def]
+    """A CSV (no unit: the model's cm, exact float64 text) and a TRC in mm (written by the
+    format description in test_takes) through `lgi solve --marker-noise auto`."""
+    from test_takes import write_trc
+
+    model_path, _ = built
+    model = lgi.Model.load(model_path)
+    x = take_frames[:12]
+    csv = tmp_path / "take.csv"
+    head = ",".join(f"{n}_{a}" for n in actor.names for a in "xyz")
+    rows = [f"time,{head}"] + [
+        f"{k / FPS!r}," + ",".join("" if np.isnan(v) else repr(float(v)) for v in x[k].ravel())
+        for k in range(len(x))
+    ]
+    csv.write_text("\n".join(rows) + "\n")
+    sigma = lgi.estimate_marker_noise(x)
+    ref = model.solve(x, marker_noise=sigma, quiet=True)
+    out = tmp_path / "csv.usd"
+    r = lgi_cli("solve", model_path, csv, "-o", out, "--marker-noise", "auto", "-q")
+    assert r.returncode == 0, r.stderr
+    np.testing.assert_allclose(usd_points(out), ref.vertices, rtol=0, atol=1e-6 * model.diagonal)
+
+    trc = tmp_path / "take.trc"
+    write_trc(trc, x * 10.0, actor.names, FPS, "mm")
+    out = tmp_path / "trc.usd"
+    r = lgi_cli("solve", model_path, trc, "-o", out, "--marker-noise", str(sigma), "-q")
+    assert r.returncode == 0, r.stderr
+    ref = model.solve(x * 10.0 * 0.1, marker_noise=sigma, quiet=True)
+    np.testing.assert_allclose(usd_points(out), ref.vertices, rtol=0, atol=1e-6 * model.diagonal)
+
+
+def test_build_jaw_auto_gives_a_jaw_model_and_solve_tracks_the_jaw(
+    actor, built, take_frames, tmp_path
+):  # type: ignore[no-untyped-def]
+    model_path = tmp_path / "jaw.lgi"
+    r = lgi_cli(
+        "build", actor.neutral, actor.shapes, actor.markers, "-o", model_path, "--units", "cm",
+        "--jaw", "auto", "-q",
+    )  # fmt: skip
+    assert r.returncode == 0, r.stderr
+    model = lgi.Model.load(model_path)
+    assert model.jaw_rig is not None
+    out = tmp_path / "jaw.npz"
+    r = lgi_cli("solve", model_path, built[1], "-o", out, "--frames", "0:8", "-q")
+    assert r.returncode == 0, r.stderr
+    res = lgi.export.read_result_npz(out)
+    ref = model.solve(reference_frames(take_frames)[:8], jaw="track", quiet=True)
+    np.testing.assert_allclose(res.vertices, ref.vertices, rtol=0, atol=1e-6 * model.diagonal)
+    np.testing.assert_allclose(res.jaw_theta, ref.jaw_theta, rtol=0, atol=1e-9)  # radians
