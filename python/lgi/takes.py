@@ -428,8 +428,11 @@ def read_csv(path: str | os.PathLike[str], fps: float | None = None) -> RawTake:
     if not rows:
         raise InputError(f"{p}: empty file")
     header = [h.strip() for h in rows[0]]
-    lead = [h.lower() for h in header[:2]]
-    skip = sum(1 for h in lead if h in ("frame", "time"))
+    # Leading `frame` / `time` columns (either, both, any order), then the coordinates.
+    skip = 0
+    while skip < min(2, len(header)) and header[skip].lower() in ("frame", "time"):
+        skip += 1
+    lead = [h.lower() for h in header[:skip]]
     time_col = lead.index("time") if "time" in lead else None
     columns = header[skip:]
     if not columns or len(columns) % 3:
@@ -440,18 +443,17 @@ def read_csv(path: str | os.PathLike[str], fps: float | None = None) -> RawTake:
     labels: list[str] = []
     for k in range(0, len(columns), 3):
         parts = [_split_axis(c) for c in columns[k : k + 3]]
+        split = [q for q in parts if q is not None]
         if (
-            any(q is None for q in parts)
-            or [q[1] for q in parts if q] != list(_AXES)
-            or len({q[0] for q in parts if q}) != 1
+            len(split) != 3
+            or [q[1] for q in split] != list(_AXES)
+            or len({q[0] for q in split}) != 1
         ):
             raise InputError(
                 f"{p}, line 1: columns {skip + k + 1}-{skip + k + 3} "
                 f"({', '.join(columns[k : k + 3])}) are not NAME_x, NAME_y, NAME_z"
             )
-        first = parts[0]
-        assert first is not None
-        labels.append(first[0])
+        labels.append(split[0][0])
     data = np.empty((len(rows) - 1, len(columns)))
     times: list[float] = []
     for i, row in enumerate(rows[1:]):
