@@ -127,6 +127,12 @@ def test_build_mistakes(files, capsys, tmp_path: Path) -> None:  # type: ignore[
     assert_user_error(capsys, "unknown length unit 'parsec'", "build", *base, "--units", "parsec")
     assert_user_error(capsys, "invalid choice", "build", *base, "--jaw", "maybe")
     assert_user_error(capsys, "required: -o/--out", "build", *base[:3])
+    before = a.markers.read_bytes()
+    assert_user_error(capsys, "is an input of the command", "build", *base[:3], "-o", a.markers)
+    assert a.markers.read_bytes() == before
+    assert_user_error(
+        capsys, "inside the SHAPES folder", "build", *base[:3], "-o", a.shapes / "m.obj"
+    )
     far = tmp_path / "far.csv"
     far.write_text(
         "name,x,y,z\n" + "\n".join(f"{n},{1e3 + i},0,0" for i, n in enumerate(a.names)) + "\n"
@@ -173,6 +179,7 @@ def test_solve_mistakes(files, capsys, tmp_path: Path) -> None:  # type: ignore[
         capsys, "unknown output format '.fbx'", "solve", m, c3d, "-o", tmp_path / "o.fbx"
     )
     assert_user_error(capsys, "is a folder", "solve", m, c3d, "-o", tmp_path)
+    assert_user_error(capsys, "is an input of the command", "solve", m, c3d, "-o", m)
     for spec, msg in [
         ("9:2", "START must be < END"),
         ("0:99", "the take has frames 0:5"),
@@ -243,7 +250,7 @@ def test_export_and_info_mistakes(files, capsys, tmp_path: Path) -> None:  # typ
     )
     good = tmp_path / "good.npz"
     assert run(capsys, "solve", files["model"], files["c3d"], "-o", good, "-q")[0] == 0
-    assert_user_error(capsys, "is the RESULT file itself", "export", good, "-o", good)
+    assert_user_error(capsys, "is an input of the command", "export", good, "-o", good)
     assert_user_error(capsys, "FILE none.lgi: no such file", "info", "none.lgi")
     odd = tmp_path / "x.fbx"
     odd.write_text("x")

@@ -63,6 +63,14 @@ def output_file(path: str, what: str) -> Path:
     return p
 
 
+def not_an_input(out: Path, *inputs: str | os.PathLike[str]) -> None:
+    """Refuses an output path that is one of the command's inputs (nothing given is modified)."""
+    for i in inputs:
+        q = Path(i)
+        if q.exists() and q.resolve() == out.resolve():
+            raise InputError(f"--out {out}: is an input of the command ({i}); choose another path")
+
+
 def read_dataset(neutral: str, shapes: str) -> Dataset:
     """NEUTRAL (.obj with SHAPES a folder of OBJs or a glob; .gltf/.glb/.npz holding its
     shapes, SHAPES then '-' or the same file)."""
@@ -346,6 +354,7 @@ def build_file(
     if jaw not in ("auto", "none"):
         raise InputError(f"--jaw {jaw!r}: expected 'auto' or 'none'")
     dest = output_file(os.fspath(out), "--out")
+    not_an_input(dest, neutral, shapes, markers, *([config] if config is not None else []))
     cfg = read_config(None if config is None else os.fspath(config))
     layout = takes.read_layout(existing_file(os.fspath(markers), "MARKERS"))
     t0 = time.perf_counter()
@@ -409,6 +418,7 @@ def solve_file(
     if jaw not in ("track", "rest"):
         raise InputError(f"--jaw {jaw!r}: expected 'track' or 'rest'")
     dest = output_file(os.fspath(out), "--out")
+    not_an_input(dest, model, take)
     kind = output_kind(os.fspath(out))
     m = Model.load(existing_file(os.fspath(model), "MODEL"))
     t = takes.read(
@@ -463,8 +473,7 @@ def export_file(
     dest = output_file(os.fspath(out), "--out")
     kind = output_kind(os.fspath(out))
     src = existing_file(os.fspath(result), "RESULT")
-    if src.resolve() == dest.resolve():
-        raise InputError(f"--out {os.fspath(out)}: is the RESULT file itself")
+    not_an_input(dest, src)
     r = export.read_result_npz(src)
     rng = frame_range(frames, r.vertices.shape[0])
     written = write_output(
