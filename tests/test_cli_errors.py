@@ -130,9 +130,9 @@ def test_build_mistakes(files, capsys, tmp_path: Path) -> None:  # type: ignore[
     before = a.markers.read_bytes()
     assert_user_error(capsys, "is an input of the command", "build", *base[:3], "-o", a.markers)
     assert a.markers.read_bytes() == before
-    assert_user_error(
-        capsys, "inside the SHAPES folder", "build", *base[:3], "-o", a.shapes / "m.obj"
-    )
+    shape = sorted(a.shapes.glob("*.obj"))[0]
+    want = "is an input of the command"
+    assert_user_error(capsys, want, "build", a.neutral, shape, a.markers, "-o", shape)
     far = tmp_path / "far.csv"
     far.write_text(
         "name,x,y,z\n" + "\n".join(f"{n},{1e3 + i},0,0" for i, n in enumerate(a.names)) + "\n"
