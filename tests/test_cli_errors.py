@@ -143,25 +143,22 @@ def test_build_mistakes(files, capsys, tmp_path: Path) -> None:  # type: ignore[
     assert not out.exists()
 
 
-def test_build_jaw_auto_without_a_jaw_open_shape_says_so(files, capsys, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
+def test_build_jaw_auto_without_a_jaw_open_shape_builds_without_a_rig_and_says_so(
+    files, capsys, tmp_path: Path
+) -> None:  # type: ignore[no-untyped-def]
     a = files["actor"]
     shapes = tmp_path / "shapes"
     shapes.mkdir()
     for p in sorted(a.shapes.glob("*.obj")):
         if p.stem != "jawOpen":
             (shapes / p.name).write_bytes(p.read_bytes())
-    assert_user_error(
-        capsys,
-        "no 'jawOpen' shape",
-        "build",
-        a.neutral,
-        shapes,
-        a.markers,
-        "-o",
-        tmp_path / "m.lgi",
-        "--jaw",
-        "auto",
-    )
+    out = tmp_path / "m.lgi"
+    code, err = run(capsys, "build", a.neutral, shapes, a.markers, "-o", out, "--jaw", "auto")
+    assert code == 0, err
+    assert "without a jaw rig" in err
+    import lgi
+
+    assert lgi.Model.load(out).jaw_rig is None
 
 
 # --- lgi solve ----------------------------------------------------------------------------

@@ -227,7 +227,7 @@ def test_csv_and_trc_takes_solve_like_model_solve_with_noise_auto(
     np.testing.assert_allclose(usd_points(out), ref.vertices, rtol=0, atol=1e-6 * model.diagonal)
 
 
-def test_build_jaw_auto_gives_a_jaw_model_and_solve_tracks_the_jaw(
+def test_build_jaw_auto_gives_a_jaw_model_and_solve_jaw_track_tracks_it(
     actor, built, take_frames, tmp_path
 ):  # type: ignore[no-untyped-def]
     model_path = tmp_path / "jaw.lgi"
@@ -239,7 +239,7 @@ def test_build_jaw_auto_gives_a_jaw_model_and_solve_tracks_the_jaw(
     model = lgi.Model.load(model_path)
     assert model.jaw_rig is not None
     out = tmp_path / "jaw.npz"
-    r = lgi_cli("solve", model_path, built[1], "-o", out, "--frames", "0:8", "-q")
+    r = lgi_cli("solve", model_path, built[1], "-o", out, "--frames", "0:8", "--jaw", "track", "-q")
     assert r.returncode == 0, r.stderr
     res = lgi.export.read_result_npz(out)
     ref = model.solve(reference_frames(take_frames)[:8], jaw="track", quiet=True)

@@ -9,6 +9,8 @@ from numpy.typing import ArrayLike, NDArray
 from typing_extensions import NotRequired, Self, disjoint_base
 
 __all__ = [
+    "FIT_L2",
+    "FIT_PENALTY",
     "BlendshapeSolver",
     "BuildConfig",
     "Dataset",
@@ -20,6 +22,8 @@ __all__ = [
 ]
 
 __version__: str
+FIT_L2: float
+FIT_PENALTY: float
 
 _Path = str | os.PathLike[str]
 

@@ -28,7 +28,9 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
     ict_dir = args.ict_dir
     if args.data == "ict" and ict_dir is None:
         ict_dir = ict.find(os.environ.get(ict.ENV))
-    rows = evaluate.run_protocol(args.data, args.protocol, args.out, ict_dir)
+    rows = evaluate.run_protocol(
+        args.data, args.protocol, args.out, ict_dir, sigma=args.sigma, holdout=args.holdout
+    )
     print(evaluate.to_markdown(rows), end="")
     print(f"wrote {args.out}/results.md and {args.out}/results.csv")
     return 0
@@ -113,8 +115,9 @@ def _add_pipeline_commands(sub: Any) -> None:
     b.add_argument(
         "--jaw",
         choices=["auto", "none"],
-        default="none",
-        help="auto: estimate a jaw rig from the 'jawOpen' (and jawLeft/Right/Forward) shapes",
+        default="auto",
+        help="auto (default): a jaw rig estimated from the jaw shapes when the dataset has "
+        "'jawOpen'; none: no rig",
     )
     b.add_argument(
         "--units",
@@ -158,9 +161,10 @@ def _add_pipeline_commands(sub: Any) -> None:
     )
     s.add_argument(
         "--jaw",
-        choices=["track", "rest"],
-        default="track",
-        help="jaw models: track the jaw from the markers (default) or solve at rest",
+        choices=list(pipeline.JAW_POSES),
+        default="auto",
+        help="models with a jaw rig: each frame's jaw pose from its blendshape fit (auto, "
+        "fit), from the jaw's markers (track), or the rest pose (rest); see Model.solve",
     )
     s.add_argument("-q", "--quiet", action="store_true", help="no progress bars")
     s.set_defaults(func=_cmd_solve)
@@ -212,6 +216,23 @@ def _seed(value: str) -> int:
     return seed
 
 
+def _non_negative(text: str) -> float:
+    try:
+        x = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+    if not (x >= 0 and x < float("inf")):
+        raise argparse.ArgumentTypeError(f"expected a finite number >= 0, got {text!r}")
+    return x
+
+
+def _fraction(text: str) -> float:
+    x = _non_negative(text)
+    if x >= 1:
+        raise argparse.ArgumentTypeError(f"expected a fraction in [0, 1), got {text!r}")
+    return x
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = _Parser(
         prog="lgi",
@@ -235,8 +256,22 @@ def build_parser() -> argparse.ArgumentParser:
     ev.add_argument("--data", choices=["sample", "ict"], default="sample")
     ev.add_argument(
         "--protocol",
-        choices=["performance", "verification", "loo", "noise", "dropout"],
+        choices=["performance", "verification", "loo", "noise", "dropout", "capture"],
         default="performance",
+        help="capture (--data ict): the shared Live Link Face recordings drive ICT with a "
+        "hinged jaw, markers with noise, dropouts and held-out shapes (docs/results.md)",
+    )
+    ev.add_argument(
+        "--sigma",
+        type=_non_negative,
+        default=0.05,
+        help="capture protocol: marker noise per coordinate, data units (default 0.05 cm)",
+    )
+    ev.add_argument(
+        "--holdout",
+        type=_fraction,
+        default=0.0,
+        help="capture protocol: fraction of the shapes the methods do not get (default 0)",
     )
     ev.add_argument(
         "--out", type=_out_folder, default="lgi-evaluate-output", help="output folder (created)"

@@ -23,6 +23,7 @@ from lgi.model import Model, estimate_marker_noise
 
 __all__ = [
     "CHUNK_FRAMES",
+    "JAW_POSES",
     "build_file",
     "describe",
     "export_file",
@@ -35,6 +36,9 @@ __all__ = [
 
 CHUNK_FRAMES = 100
 """Frames written per chunk (one progress step)."""
+
+JAW_POSES = ("auto", "fit", "track", "rest")
+"""`lgi solve --jaw`: `Model.solve`'s jaw modes for models with a rig ("rest" = None)."""
 
 Say = Callable[[str], None]
 
@@ -341,16 +345,15 @@ def build_file(
     out: str | os.PathLike[str],
     *,
     config: str | os.PathLike[str] | None = None,
-    jaw: str = "none",
+    jaw: str = "auto",
     units: str | None = None,
     say: Say = _silent,
 ) -> Path:
     """`lgi build`: a model file `out` from `neutral` and `shapes` (`read_dataset`), the
-    layout CSV `markers` (`lgi.takes.read_layout`) and a JSON `config`; `jaw="auto"`
-    estimates a jaw rig from the `jawOpen` shape. The model keeps the layout's names and
+    layout CSV `markers` (`lgi.takes.read_layout`) and a JSON `config`; `jaw` is
+    `Model.build`'s: "auto" (a rig from the jaw shapes when the dataset has `jawOpen`) or
+    "none". The model keeps the layout's names and
     `units`. Returns `out`."""
-    from lgi import jaw as jaw_tools
-
     if jaw not in ("auto", "none"):
         raise InputError(f"--jaw {jaw!r}: expected 'auto' or 'none'")
     dest = output_file(os.fspath(out), "--out")
@@ -363,17 +366,6 @@ def build_file(
         f"read the neutral ({data.num_vertices} vertices) and {data.num_shapes} shapes "
         f"({time.perf_counter() - t0:.1f} s)"
     )
-    rig = theta = None
-    if jaw == "auto":
-        if "jawOpen" not in data.names:
-            raise InputError(
-                "--jaw auto: the dataset has no 'jawOpen' shape to estimate the jaw from "
-                "(name it so, or pass --jaw none)"
-            )
-        rig, theta = jaw_tools.estimate_rig(
-            data.neutral, data.shapes, data.names, triangles=data.triangles
-        )
-        say(f"estimated the jaw rig (pivot {np.round(rig.pivot, 3).tolist()})")
     t0 = time.perf_counter()
     say(f"building the model for {len(layout.names)} markers ...")
     try:
@@ -381,8 +373,7 @@ def build_file(
             data,
             layout.positions,
             cfg,
-            jaw=rig,
-            shape_theta=theta,
+            jaw="auto" if jaw == "auto" else None,
             marker_names=layout.names,
             units=units,
         )
@@ -392,7 +383,11 @@ def build_file(
         name = f" ({layout.names[int(found.group(1))]!r})" if found else ""
         raise MarkerError(f"MARKERS {os.fspath(markers)}: {e}{name}") from None
     model.save(dest)
-    say(f"built in {time.perf_counter() - t0:.1f} s")
+    rig = model.jaw_rig
+    say(
+        f"built in {time.perf_counter() - t0:.1f} s, "
+        + ("without a jaw rig" if rig is None else f"jaw pivot {np.round(rig.pivot, 3).tolist()}")
+    )
     return dest
 
 
@@ -406,7 +401,7 @@ def solve_file(
     fps: float | None = None,
     allow_missing: bool = False,
     take_units: str | None = None,
-    jaw: str = "track",
+    jaw: str = "auto",
     quiet: bool = False,
     say: Say = _silent,
 ) -> tuple[Path, int]:
@@ -415,8 +410,8 @@ def solve_file(
     `--frames A:B`. The frame range is solved in one `Model.solve` (frames prefer their
     predecessor's choices across the whole range), then written chunk by chunk. Returns the
     path written (the `NAME.NNNN.obj` pattern for OBJ sequences) and the frame count."""
-    if jaw not in ("track", "rest"):
-        raise InputError(f"--jaw {jaw!r}: expected 'track' or 'rest'")
+    if jaw not in JAW_POSES:
+        raise InputError(f"--jaw {jaw!r}: expected one of {', '.join(JAW_POSES)}")
     dest = output_file(os.fspath(out), "--out")
     not_an_input(dest, model, take)
     kind = output_kind(os.fspath(out))
@@ -434,7 +429,7 @@ def solve_file(
     x = t.frames[rng]
     rate = frame_rate(fps, t.fps, kind)
     sigma = marker_noise(noise, x)
-    jaw_mode = None if m.jaw_rig is None or jaw == "rest" else "track"
+    jaw_mode = None if m.jaw_rig is None or jaw == "rest" else jaw
     missing = np.isnan(x).any(axis=2)
     say(
         f"{x.shape[0]} frames of {x.shape[1]} markers "

@@ -246,7 +246,10 @@ impl Model {
             return Ok(());
         };
         let fit = prior.fit(&prep.lookup)?;
-        if let Some(sigma) = marker_noise {
+        if marker_noise == Some(0.0) {
+            // Noise-free markers stay where they are (no round trip through the jaw's space).
+            prep.corrections = vec![0.0; prep.targets.len()];
+        } else if let Some(sigma) = marker_noise {
             let denoised = prior.denoise(&prep.lookup, &fit, sigma)?;
             let targets = self.frame_targets(&denoised, prep.theta, prep.bin)?;
             prep.corrections = prep
