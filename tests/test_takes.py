@@ -250,3 +250,11 @@ def test_match_layout_puts_every_label_in_its_layout_column_whatever_the_file_or
     if absent:
         with pytest.raises(InputError, match="not in the take"):
             takes.match_layout(raw, names)
+
+
+def test_converting_to_a_whole_multiple_unit_divides_exactly_as_a_user_would() -> None:
+    x = RNG.normal(size=1000) * 100.0
+    np.testing.assert_array_equal(takes.convert_units(x, "mm", "cm"), x / 10.0)
+    np.testing.assert_array_equal(takes.convert_units(x, "mm", "m"), x / 1000.0)
+    np.testing.assert_array_equal(takes.convert_units(x, "cm", "mm"), x * 10.0)
+    np.testing.assert_allclose(takes.convert_units(x, "in", "cm"), x * 2.54, rtol=1e-15)

@@ -31,6 +31,7 @@ __all__ = [
     "RawTake",
     "Take",
     "arkit_to_dataset",
+    "convert_units",
     "match_layout",
     "normalize_unit",
     "read",
@@ -216,6 +217,16 @@ def unit_scale(source: str, target: str) -> float:
         METERS_PER_UNIT[normalize_unit(source, "unit")]
         / METERS_PER_UNIT[normalize_unit(target, "unit")]
     )
+
+
+def convert_units(x: F64, source: str, target: str) -> F64:
+    """`x` in `source` units converted to `target` units. To a unit a whole number of times
+    larger (mm -> cm), coordinates are divided by that number, so the result is the correctly
+    rounded quotient a user computes (x / 10), not x * 0.1 (which differs in the last bit)."""
+    up = 1.0 / unit_scale(source, target)
+    if up > 1 and up == round(up):
+        return x / round(up)
+    return x * unit_scale(source, target)
 
 
 @dataclass(frozen=True)
@@ -599,7 +610,7 @@ def read(
         frames, ignored = match_layout(raw, layout, allow_missing)
         names = list(layout)
     if source is not None and target is not None:
-        frames *= unit_scale(source, target)
+        frames = convert_units(frames, source, target)
     elif source is not None and target is None and layout is not None:
         raise InputError(
             f"{raw.path}: the take is in {source!r} but the model has no unit to convert to; "
