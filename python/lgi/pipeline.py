@@ -112,6 +112,7 @@ def read_dataset(neutral: str, shapes: str) -> Dataset:
 
 
 def read_config(path: str | None) -> BuildConfig | None:
+    """`--config`: a JSON object of `BuildConfig` fields (None: the defaults)."""
     if path is None:
         return None
     p = existing_file(path, "--config")
@@ -153,6 +154,8 @@ def frame_range(spec: str | None, count: int) -> slice:
 
 
 def marker_noise(spec: str | None, frames: np.ndarray) -> float | None:
+    """`--marker-noise`: a sigma >= 0 (model units), 'auto' (estimated from `frames`) or
+    'none'/None (exact interpolation)."""
     if spec is None or spec == "none":
         return None
     if spec == "auto":
@@ -169,6 +172,7 @@ def marker_noise(spec: str | None, frames: np.ndarray) -> float | None:
 
 
 def output_kind(path: str) -> str:
+    """`--out`'s format by suffix: 'usd', 'obj' (a sequence) or 'npz'."""
     suffix = Path(path).suffix.lower()
     kinds = {".usd": "usd", ".usdc": "usd", ".usda": "usd", ".npz": "npz", ".obj": "obj"}
     if suffix not in kinds:
@@ -180,6 +184,7 @@ def output_kind(path: str) -> str:
 
 
 def frame_rate(given: float | None, take_fps: float | None, kind: str) -> float | None:
+    """`--fps`, else the take's rate; a USD output needs one."""
     if given is not None:
         if not np.isfinite(given) or given <= 0:
             raise InputError(f"--fps {given}: must be a positive number")
@@ -204,12 +209,15 @@ def write_output(
     jaw_theta: np.ndarray | None,
     quiet: bool = False,
 ) -> Path:
+    """Writes solved frames as `kind` (`output_kind`) to `out`, `CHUNK_FRAMES` at a time with
+    a progress bar; returns the path written (`NAME.NNNN.obj` for a sequence)."""
     from tqdm import tqdm
 
     n = vertices.shape[0]
     chunk = CHUNK_FRAMES
     if kind == "usd":
-        assert fps is not None
+        if fps is None:
+            raise InputError("a USD point cache needs a frame rate (--fps)")
         cache = export.UsdCache(out, topo, fps=fps, units=units, start=start)
         with tqdm(total=n, desc="lgi write USD", unit="frame", disable=quiet, leave=False) as bar:
             for a in range(0, n, chunk):
