@@ -284,3 +284,11 @@ def test_evaluate_ict_with_a_missing_or_garbled_marker_layout(
     assert_user_error(
         capsys, want, "evaluate", "--data", "ict", "--ict-dir", ict, "--out", tmp_path / "o"
     )
+
+
+def test_solve_chunk_must_be_a_positive_whole_number(files, capsys, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
+    out = tmp_path / "o.usd"
+    for bad in ["0", "-2", "x"]:
+        assert_user_error(
+            capsys, "--chunk", "solve", files["model"], files["c3d"], "-o", out, "--chunk", bad
+        )

@@ -75,6 +75,7 @@ def _cmd_solve(args: argparse.Namespace) -> int:
         allow_missing=args.allow_missing,
         take_units=args.take_units,
         jaw=args.jaw,
+        chunk=args.chunk,
         quiet=args.quiet,
         say=_say(args),
     )
@@ -166,6 +167,14 @@ def _add_pipeline_commands(sub: Any) -> None:
         help="models with a jaw rig: each frame's jaw pose from its blendshape fit (auto, "
         "fit), from the jaw's markers (track), or the rest pose (rest); see Model.solve",
     )
+    s.add_argument(
+        "--chunk",
+        type=_positive_int,
+        default=None,
+        metavar="N",
+        help="solve and write N frames at a time (bounded memory; each chunk starts without "
+        "a previous frame); default: the whole range in one solve",
+    )
     s.add_argument("-q", "--quiet", action="store_true", help="no progress bars")
     s.set_defaults(func=_cmd_solve)
 
@@ -214,6 +223,16 @@ def _seed(value: str) -> int:
     if not 0 <= seed < 2**32:
         raise argparse.ArgumentTypeError(f"{seed}: a seed is an integer in 0..2^32-1")
     return seed
+
+
+def _positive_int(text: str) -> int:
+    try:
+        n = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a whole number, got {text!r}") from None
+    if n < 1:
+        raise argparse.ArgumentTypeError(f"expected a whole number >= 1, got {n}")
+    return n
 
 
 def _non_negative(text: str) -> float:

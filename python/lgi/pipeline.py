@@ -194,6 +194,68 @@ def frame_rate(given: float | None, take_fps: float | None, kind: str) -> float 
     return take_fps
 
 
+class _Sink:
+    """Where solved frames go, chunk after chunk: a USD cache (`export.UsdCache`), OBJ files,
+    or float32 copies gathered for one solved-take `.npz` (written at `close`)."""
+
+    def __init__(
+        self,
+        kind: str,
+        out: Path,
+        topo: export.Topology,
+        *,
+        names: list[str],
+        fps: float | None,
+        start: int,
+        units: str | None,
+    ) -> None:
+        self.kind, self.out, self.topo, self.names = kind, out, topo, names
+        self.fps, self.start, self.units = fps, start, units
+        self.next = start
+        self.usd: export.UsdCache | None = None
+        if kind == "usd":
+            if fps is None:
+                raise InputError("a USD point cache needs a frame rate (--fps)")
+            self.usd = export.UsdCache(out, topo, fps=fps, units=units, start=start)
+        self.parts: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None]] = []
+
+    def add(
+        self,
+        vertices: np.ndarray,
+        residuals: np.ndarray,
+        missing: np.ndarray,
+        jaw_theta: np.ndarray | None,
+    ) -> None:
+        if self.usd is not None:
+            self.usd.add(vertices, jaw_theta=jaw_theta, marker_residuals=residuals)
+        elif self.kind == "obj":
+            export.write_obj_sequence(
+                self.out.parent, self.topo, vertices, name=self.out.stem, start=self.next
+            )
+        else:
+            self.parts.append((vertices.astype(np.float32), residuals, missing, jaw_theta))
+        self.next += int(vertices.shape[0])
+
+    def close(self) -> Path:
+        if self.usd is not None:
+            return self.usd.close()
+        if self.kind == "obj":
+            return self.out.parent / f"{self.out.stem}.NNNN.obj"
+        jaws = [p[3] for p in self.parts if p[3] is not None]
+        return export.write_result_npz(
+            self.out,
+            self.topo,
+            np.concatenate([p[0] for p in self.parts]),
+            np.concatenate([p[1] for p in self.parts]),
+            np.concatenate([p[2] for p in self.parts]),
+            self.names,
+            fps=self.fps,
+            start=self.start,
+            units=self.units,
+            jaw_theta=np.concatenate(jaws) if len(jaws) == len(self.parts) else None,
+        )
+
+
 def write_output(
     kind: str,
     out: Path,
@@ -213,44 +275,19 @@ def write_output(
     a progress bar; returns the path written (`NAME.NNNN.obj` for a sequence)."""
     from tqdm import tqdm
 
+    sink = _Sink(kind, out, topo, names=names, fps=fps, start=start, units=units)
     n = vertices.shape[0]
-    chunk = CHUNK_FRAMES
-    if kind == "usd":
-        if fps is None:
-            raise InputError("a USD point cache needs a frame rate (--fps)")
-        cache = export.UsdCache(out, topo, fps=fps, units=units, start=start)
-        with tqdm(total=n, desc="lgi write USD", unit="frame", disable=quiet, leave=False) as bar:
-            for a in range(0, n, chunk):
-                b = min(n, a + chunk)
-                cache.add(
-                    vertices[a:b],
-                    jaw_theta=None if jaw_theta is None else jaw_theta[a:b],
-                    marker_residuals=residuals[a:b],
-                )
-                bar.update(b - a)
-        cache.close()
-    elif kind == "obj":
-        with tqdm(total=n, desc="lgi write OBJ", unit="frame", disable=quiet, leave=False) as bar:
-            for a in range(0, n, chunk):
-                b = min(n, a + chunk)
-                export.write_obj_sequence(
-                    out.parent, topo, vertices[a:b], name=out.stem, start=start + a
-                )
-                bar.update(b - a)
-    else:
-        export.write_result_npz(
-            out,
-            topo,
-            vertices,
-            residuals,
-            missing,
-            names,
-            fps=fps,
-            start=start,
-            units=units,
-            jaw_theta=jaw_theta,
-        )
-    return out.parent / f"{out.stem}.NNNN.obj" if kind == "obj" else out
+    with tqdm(total=n, desc=f"lgi write {kind}", unit="frame", disable=quiet, leave=False) as bar:
+        for a in range(0, n, CHUNK_FRAMES):
+            b = min(n, a + CHUNK_FRAMES)
+            sink.add(
+                vertices[a:b],
+                residuals[a:b],
+                missing[a:b],
+                None if jaw_theta is None else jaw_theta[a:b],
+            )
+            bar.update(b - a)
+    return sink.close()
 
 
 def describe(path: str | os.PathLike[str]) -> list[str]:
@@ -410,14 +447,20 @@ def solve_file(
     allow_missing: bool = False,
     take_units: str | None = None,
     jaw: str = "auto",
+    chunk: int | None = None,
     quiet: bool = False,
     say: Say = _silent,
 ) -> tuple[Path, int]:
     """`lgi solve`: the take file solved with the model file, written by `out`'s suffix
-    (`output_kind`). `noise` is `--marker-noise` (a number, 'auto' or 'none'), `frames` is
-    `--frames A:B`. The frame range is solved in one `Model.solve` (frames prefer their
-    predecessor's choices across the whole range), then written chunk by chunk. Returns the
-    path written (the `NAME.NNNN.obj` pattern for OBJ sequences) and the frame count."""
+    (`output_kind`). `noise` is `--marker-noise` (a number, 'auto' or 'none'; 'auto' looks at
+    the whole range), `frames` is `--frames A:B`. By default the range is solved in one
+    `Model.solve` (frames prefer their predecessor's choices across the whole range), then
+    written chunk by chunk; `chunk` (`--chunk N`) solves and writes N frames at a time into
+    one reused buffer, so the solve's memory stays that of N frames (each chunk starts
+    without a previous frame to prefer). Returns the path written (the `NAME.NNNN.obj`
+    pattern for OBJ sequences) and the frame count."""
+    if chunk is not None and (isinstance(chunk, bool) or int(chunk) < 1):
+        raise InputError(f"--chunk {chunk}: must be a whole number of frames >= 1")
     if jaw not in JAW_POSES:
         raise InputError(f"--jaw {jaw!r}: expected one of {', '.join(JAW_POSES)}")
     dest = output_file(os.fspath(out), "--out")
@@ -444,22 +487,37 @@ def solve_file(
         f"({100 * missing.mean():.1f}% samples missing)"
         + ("" if sigma is None else f", marker noise {sigma:.4g}")
     )
-    res = m.solve(x, jaw=jaw_mode, marker_noise=sigma, quiet=quiet)
-    written = write_output(
-        kind,
-        dest,
-        export.topology(m.dataset),
-        res.vertices,
-        residuals=res.bundle_residuals,
-        missing=res.missing,
-        names=m.marker_names,
-        fps=rate,
-        start=t.first_frame + rng.start,
-        units=m.units,
-        jaw_theta=res.jaw_theta,
-        quiet=quiet,
-    )
-    return written, int(x.shape[0])
+    topo = export.topology(m.dataset)
+    start = t.first_frame + rng.start
+    if chunk is None:
+        res = m.solve(x, jaw=jaw_mode, marker_noise=sigma, quiet=quiet)
+        written = write_output(
+            kind,
+            dest,
+            topo,
+            res.vertices,
+            residuals=res.bundle_residuals,
+            missing=res.missing,
+            names=m.marker_names,
+            fps=rate,
+            start=start,
+            units=m.units,
+            jaw_theta=res.jaw_theta,
+            quiet=quiet,
+        )
+        return written, int(x.shape[0])
+    from tqdm import tqdm
+
+    n, size = int(x.shape[0]), int(chunk)
+    sink = _Sink(kind, dest, topo, names=m.marker_names, fps=rate, start=start, units=m.units)
+    buf = np.empty((min(size, n), m.num_vertices, 3))
+    with tqdm(total=n, desc="lgi solve", unit="frame", disable=quiet, leave=False) as bar:
+        for a in range(0, n, size):
+            b = min(n, a + size)
+            res = m.solve(x[a:b], jaw=jaw_mode, marker_noise=sigma, quiet=True, out=buf[: b - a])
+            sink.add(res.vertices, res.bundle_residuals, res.missing, res.jaw_theta)
+            bar.update(b - a)
+    return sink.close(), n
 
 
 def export_file(
