@@ -292,3 +292,24 @@ def test_solve_chunk_must_be_a_positive_whole_number(files, capsys, tmp_path: Pa
         assert_user_error(
             capsys, "--chunk", "solve", files["model"], files["c3d"], "-o", out, "--chunk", bad
         )
+
+
+def test_info_take_with_model_lists_what_does_not_match(
+    files, capsys, tmp_path: Path, sample
+) -> None:  # type: ignore[no-untyped-def]
+    code, out = run_out(capsys, "info", files["c3d"], "--model", files["model"])
+    assert code == 0 and f"matches the model's {len(files['actor'].names)} markers" in out
+    names = list(files["actor"].names)
+    lost, names[2] = names[2], "extra"
+    c3d = tmp_path / "odd.c3d"
+    write_c3d(c3d, np.asarray(sample.performance[:2]), names, 30.0, "cm")
+    code, out = run_out(capsys, "info", c3d, "--model", files["model"])
+    assert code == 0
+    assert f"model markers not in the take (1): {lost}" in out
+    assert "take labels not in the model (1): extra" in out
+    assert_user_error(capsys, "--model none.lgi: no such file", "info", c3d, "--model", "none.lgi")
+
+
+def run_out(capsys: pytest.CaptureFixture[str], *argv: str | Path) -> tuple[int, str]:
+    code = cli.main([str(a) for a in argv])
+    return code, capsys.readouterr().out

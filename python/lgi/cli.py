@@ -92,7 +92,7 @@ def _cmd_export(args: argparse.Namespace) -> int:
 
 
 def _cmd_info(args: argparse.Namespace) -> int:
-    for line in pipeline.describe(args.file):
+    for line in pipeline.describe(args.file, model=args.model):
         print(line)
     return 0
 
@@ -191,6 +191,9 @@ def _add_pipeline_commands(sub: Any) -> None:
 
     i = sub.add_parser("info", help="summarise a model, a take, a solved .npz or a USD file")
     i.add_argument("file", metavar="FILE")
+    i.add_argument(
+        "--model", default=None, help="with a take: how its labels match this model's markers"
+    )
     i.set_defaults(func=_cmd_info)
 
 

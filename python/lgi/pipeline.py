@@ -290,9 +290,11 @@ def write_output(
     return sink.close()
 
 
-def describe(path: str | os.PathLike[str]) -> list[str]:
+def describe(
+    path: str | os.PathLike[str], model: str | os.PathLike[str] | None = None
+) -> list[str]:
     """`lgi info`: a few lines summarising a model (`.lgi`), a take, a solved `.npz` or a USD
-    file."""
+    file; for a take with `model` (`--model`), how its labels match the model's markers."""
     path = existing_file(os.fspath(path), "FILE")
     from lgi import takes
 
@@ -357,6 +359,11 @@ def describe(path: str | os.PathLike[str]) -> list[str]:
             f"  markers: {len(raw.labels)} ({shown})",
             f"  units: {raw.units or 'not given'}",
             f"  missing samples: {100 * miss.mean():.1f}%",
+            *(
+                []
+                if model is None
+                else _matching(raw, Model.load(existing_file(os.fspath(model), "--model")))
+            ),
         ]
     if suffix in (".usd", ".usdc", ".usda"):
         from pxr import Usd, UsdGeom
@@ -381,6 +388,19 @@ def describe(path: str | os.PathLike[str]) -> list[str]:
         f"{path}: unknown file kind {suffix or '(no suffix)'!r}; lgi info reads .lgi models, "
         f"takes ({', '.join(takes.TAKE_SUFFIXES)}), solved .npz and USD files"
     )
+
+
+def _matching(raw: takes.RawTake, model: Model) -> list[str]:
+    """How a take's labels meet a model's marker names (`lgi info TAKE --model MODEL`)."""
+    _, absent, unknown = takes.label_columns(raw, model.marker_names)
+    if not absent and not unknown:
+        return [f"  matches the model's {model.num_bundles} markers by name"]
+    out = []
+    if absent:
+        out.append(f"  model markers not in the take ({len(absent)}): {', '.join(absent)}")
+    if unknown:
+        out.append(f"  take labels not in the model ({len(unknown)}): {', '.join(unknown)}")
+    return out
 
 
 def build_file(

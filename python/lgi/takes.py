@@ -32,8 +32,10 @@ __all__ = [
     "Take",
     "arkit_to_dataset",
     "convert_units",
+    "label_columns",
     "match_layout",
     "normalize_unit",
+    "plain_label",
     "read",
     "read_c3d",
     "read_csv",
@@ -540,18 +542,17 @@ def read_raw(path: str | os.PathLike[str]) -> RawTake:
     return _READERS[suffix](p)
 
 
-def _plain(label: str) -> str:
+def plain_label(label: str) -> str:
     """A label without a `Subject:` prefix (Vicon and others prefix labels with it)."""
     return label.rsplit(":", 1)[-1].strip()
 
 
-def match_layout(
-    raw: RawTake, names: Sequence[str], allow_missing: bool = False
-) -> tuple[F64, tuple[str, ...]]:
-    """The take's columns in the order of `names` (F, B, 3), and the labels left out. A
-    label matches a name exactly, or after dropping a `Subject:` prefix. A name the take
-    lacks or a label the layout lacks is an `InputError` listing them; with `allow_missing`
-    the first become NaN columns and the second are left out."""
+def label_columns(
+    raw: RawTake, names: Sequence[str]
+) -> tuple[list[int], list[str], tuple[str, ...]]:
+    """For each of `names`, the take column whose label is that name (exactly, or after
+    dropping a `Subject:` prefix), -1 when none; the names without a column; the labels no
+    name took. A label that appears twice is an `InputError`."""
     where: dict[str, int] = {}
     for j, lab in enumerate(raw.labels):
         if lab in where:
@@ -559,13 +560,24 @@ def match_layout(
         where[lab] = j
     wanted = set(names)
     for lab, j in list(where.items()):
-        plain = _plain(lab)
+        plain = plain_label(lab)
         if lab not in wanted and plain in wanted and plain not in where:
             where[plain] = j
     cols = [where.get(n, -1) for n in names]
     absent = [n for n, c in zip(names, cols, strict=True) if c < 0]
     used = {c for c in cols if c >= 0}
     unknown = tuple(lab for j, lab in enumerate(raw.labels) if j not in used)
+    return cols, absent, unknown
+
+
+def match_layout(
+    raw: RawTake, names: Sequence[str], allow_missing: bool = False
+) -> tuple[F64, tuple[str, ...]]:
+    """The take's columns in the order of `names` (F, B, 3), and the labels left out
+    (`label_columns`). A name the take lacks or a label the layout lacks is an `InputError`
+    listing them; with `allow_missing` the first become NaN columns and the second are left
+    out."""
+    cols, absent, unknown = label_columns(raw, names)
     if (absent or unknown) and not allow_missing:
         parts = []
         if absent:
