@@ -1,7 +1,9 @@
 #!/usr/bin/env python3
 """End-to-end benchmark of lgi through its Python API: build, per-frame solve at 1 and 2 rayon
 threads (one subprocess each: rayon reads RAYON_NUM_THREADS once), peak RSS, model save size and
-load time, and a dense-numpy reference of the sewing step. Prints a markdown table.
+load time, a dense-numpy reference of the sewing step, and the cost of writing results (a
+1,000-frame USD point cache and OBJ frames with the neutral's polygons). Prints a markdown
+table.
 
 Workload: ICT-300 (ICT-FaceKit neutral + 57 shapes augmented to 300, markers_120) when the data
 is found ($LGI_SHARED_DATA, else ../shared/data beside the checkout); else the shipped sample.
@@ -230,7 +232,36 @@ def worker(args: argparse.Namespace) -> dict[str, Any]:
     out["vertices"] = v
     out["sew_bytes_per_frame"] = float(v * 24 + np.mean(touched) * 12 + v * 24)
     out["memcpy_gbps"] = memcpy_bandwidth() / 1e9
+    out.update(writing(data, np.asarray(res.vertices)))
     out.update(baselines(data, markers, frames, 20 if args.quick else 50))
+    return out
+
+
+USD_FRAMES = 1000
+
+
+def writing(data: Any, vertices: np.ndarray) -> dict[str, Any]:
+    """Time to write a `USD_FRAMES`-frame USD point cache chunk by chunk as `lgi solve` does
+    (100 frames a chunk, file included); and OBJ frames of the same mesh."""
+    from lgi import export
+
+    topo = export.topology(data)
+    out: dict[str, Any] = {"usd_frames": USD_FRAMES, "faces": topo.num_faces}
+    with tempfile.TemporaryDirectory() as d:
+        t = time.perf_counter()
+        cache = export.UsdCache(Path(d) / "take.usd", topo, fps=60.0, units="cm")
+        for a in range(0, USD_FRAMES, 100):
+            f = np.arange(a, min(USD_FRAMES, a + 100))
+            # Distinct frames (the solved ones, cycled and offset): USD's crate files store
+            # an array once however often it repeats, which would flatter the cycle.
+            cache.add(vertices[f % len(vertices)] + 1e-3 * f[:, None, None])
+        path = cache.close()
+        out["usd_s"] = time.perf_counter() - t
+        out["usd_mib"] = path.stat().st_size / (1 << 20)
+        n_obj = 10
+        t = time.perf_counter()
+        export.write_obj_sequence(Path(d) / "obj", topo, vertices[:n_obj])
+        out["obj_ms"] = (time.perf_counter() - t) / n_obj * 1e3
     return out
 
 
@@ -367,6 +398,21 @@ def table(r1: dict[str, Any], r2: dict[str, Any]) -> str:
             f"{r1['sew_bytes_per_frame'] / 1e6:.2f} MB/frame ({r1['sew_nnz']} weights); "
             f"at the numpy memcpy bandwidth {r1['memcpy_gbps']:.1f} GB/s: "
             f"{r1['sew_bytes_per_frame'] / (r1['memcpy_gbps'] * 1e9) * 1e3:.3f} ms",
+        ),
+    ]
+    usd_ms = r1["usd_s"] / r1["usd_frames"] * 1e3
+    rows += [
+        (
+            f"USD point cache of {r1['usd_frames']} frames ({r1['faces']} faces), written "
+            "chunk by chunk",
+            f"{r1['usd_s']:.2f} s = {usd_ms:.2f} ms/frame = "
+            f"{usd_ms / r1['solve_ms_mean']:.2f} x lgi's 1-thread solve "
+            f"({usd_ms / r2['solve_ms_mean']:.2f} x 2-thread); {r1['usd_mib']:.0f} MiB",
+        ),
+        (
+            "OBJ frame with the neutral's polygons",
+            f"{r1['obj_ms']:.1f} ms/frame = {r1['obj_ms'] / r1['solve_ms_mean']:.1f} x "
+            "lgi's 1-thread solve",
         ),
     ]
     for key, label in [

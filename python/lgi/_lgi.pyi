@@ -73,6 +73,15 @@ class Dataset:
     @property
     def uvs(self) -> NDArray[np.float64]:
         """(U, 2) UV coordinates."""
+    def with_polygons(
+        self, counts: ArrayLike, vertices: ArrayLike, uvs: ArrayLike | None = None
+    ) -> Dataset:
+        """A new dataset with the neutral's source faces (fan-splitting into its triangles)."""
+    @property
+    def polygons(
+        self,
+    ) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.int64]] | None:
+        """The neutral's source faces (OBJ): ``(counts, vertices, uvs)``; None otherwise."""
     @property
     def uv_triangles(self) -> NDArray[np.int64]:
         """(T, 3) UV indices (empty when the mesh has no UVs)."""
@@ -217,10 +226,13 @@ class Model:
         jaw_bins: ArrayLike | None = None,
         bin_overlap: float = 0.0,
         jaw_frame: ArrayLike | None = None,
+        marker_names: Sequence[str] | None = None,
+        units: str | None = None,
     ) -> Model:
         """Builds a model (``config`` None: the defaults); ``jaw_bins`` are bin
         edges over the jaw opening (radians); ``jaw_frame`` (3, 3) is the jaw rig's rotation
-        (columns: open, lateral, forward axes; None: identity)."""
+        (columns: open, lateral, forward axes; None: identity); ``marker_names`` (B unique
+        names; None: ``m000``…) and ``units`` (e.g. ``cm``; None: unknown) are kept."""
     @staticmethod
     def load(path: _Path) -> Model:
         """Loads a model written by ``save``."""
@@ -236,6 +248,12 @@ class Model:
     def dataset(self) -> Dataset: ...
     @property
     def markers_rest(self) -> NDArray[np.float64]: ...
+    @property
+    def marker_names(self) -> list[str]:
+        """Each marker's name (B); ``m000``, ``m001``, … when built without names."""
+    @property
+    def units(self) -> str | None:
+        """The coordinates' length unit given at build; None when not given."""
     @property
     def jaw_rig(self) -> JawRig | None: ...
     @property

@@ -1,5 +1,7 @@
 """The `lgi` command line: argument (and environment) handling only. `lgi demo` runs the whole
-pipeline on the built-in sample (`lgi.demo`); `lgi evaluate` a protocol (`lgi.evaluate`)."""
+pipeline on the built-in sample (`lgi.demo`); `lgi evaluate` a protocol (`lgi.evaluate`); the
+file pipeline `lgi build` / `solve` / `export` / `info` is `lgi.pipeline`'s. Every user
+mistake ends as `lgi: error: ...` and exit status 2."""
 
 from __future__ import annotations
 
@@ -8,10 +10,12 @@ import os
 import sys
 from collections.abc import Sequence
 from pathlib import Path
+from typing import Any, NoReturn
 
 import numpy as np
 
 import lgi
+from lgi import pipeline
 
 
 def _cmd_demo(args: argparse.Namespace) -> int:
@@ -34,6 +38,208 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
     return 0
 
 
+# --- The file pipeline: build, solve, export, info ----------------------------------------
+
+
+def _say(args: argparse.Namespace) -> pipeline.Say:
+    """Step lines on stderr, silenced by -q."""
+
+    def say(message: str) -> None:
+        if not args.quiet:
+            print(f"lgi {args.command}: {message}", file=sys.stderr)
+
+    return say
+
+
+def _cmd_build(args: argparse.Namespace) -> int:
+    out = pipeline.build_file(
+        args.neutral,
+        args.shapes,
+        args.markers,
+        args.out,
+        config=args.config,
+        jaw=args.jaw,
+        units=args.units,
+        say=_say(args),
+    )
+    print(f"wrote {out}")
+    return 0
+
+
+def _cmd_solve(args: argparse.Namespace) -> int:
+    out, n = pipeline.solve_file(
+        args.model,
+        args.take,
+        args.out,
+        noise=args.marker_noise,
+        frames=args.frames,
+        fps=args.fps,
+        allow_missing=args.allow_missing,
+        take_units=args.take_units,
+        jaw=args.jaw,
+        chunk=args.chunk,
+        quiet=args.quiet,
+        say=_say(args),
+    )
+    print(f"wrote {out} ({n} frames)")
+    return 0
+
+
+def _cmd_export(args: argparse.Namespace) -> int:
+    out, n = pipeline.export_file(
+        args.result, args.out, frames=args.frames, fps=args.fps, quiet=args.quiet
+    )
+    print(f"wrote {out} ({n} frames)")
+    return 0
+
+
+def _cmd_info(args: argparse.Namespace) -> int:
+    for line in pipeline.describe(args.file, model=args.model):
+        print(line)
+    return 0
+
+
+def _add_pipeline_commands(sub: Any) -> None:
+    b = sub.add_parser(
+        "build",
+        help="build a model file from a neutral, its shapes and a named marker layout",
+        description="Build a model (.lgi) from NEUTRAL, SHAPES and a MARKERS layout.",
+    )
+    b.add_argument("neutral", metavar="NEUTRAL", help="neutral mesh: .obj, .gltf/.glb or .npz")
+    b.add_argument(
+        "shapes",
+        metavar="SHAPES",
+        help="shape OBJs: a folder, a glob pattern ('shapes/*.obj') or one file; '-' when "
+        "NEUTRAL holds the shapes (glTF morph targets, .npz) or for none",
+    )
+    b.add_argument("markers", metavar="MARKERS", help="marker layout CSV: name,x,y,z")
+    b.add_argument("-o", "--out", required=True, help="model file to write (.lgi)")
+    b.add_argument("--config", default=None, help="JSON object of BuildConfig fields")
+    b.add_argument(
+        "--jaw",
+        choices=["auto", "none"],
+        default="auto",
+        help="auto (default): a jaw rig estimated from the jaw shapes when the dataset has "
+        "'jawOpen'; none: no rig",
+    )
+    b.add_argument(
+        "--units",
+        default=None,
+        help="length unit of the neutral and markers (mm, cm, m, in, ft): takes are "
+        "converted to it and USD's metersPerUnit is set from it",
+    )
+    b.add_argument("-q", "--quiet", action="store_true", help="no progress output")
+    b.set_defaults(func=_cmd_build)
+
+    s = sub.add_parser(
+        "solve",
+        help="solve a marker take into meshes: USD point cache, OBJ sequence or .npz",
+        description="Solve TAKE (.c3d, .trc, .csv, .npz) with MODEL; --out's suffix picks "
+        "the format.",
+    )
+    s.add_argument("model", metavar="MODEL", help="model file (.lgi) from lgi build")
+    s.add_argument("take", metavar="TAKE", help="marker take: .c3d, .trc, labelled .csv, .npz")
+    s.add_argument(
+        "-o",
+        "--out",
+        required=True,
+        help="output: .usd/.usdc/.usda point cache, NAME.obj (writes NAME.0000.obj, ...) or .npz",
+    )
+    s.add_argument(
+        "--marker-noise",
+        default=None,
+        metavar="SIGMA|auto|none",
+        help="markers' noise sigma in model units (auto: estimated from the take); default "
+        "none: every marker interpolated exactly",
+    )
+    s.add_argument("--frames", default=None, metavar="A:B", help="take frames A..B-1 (0-based)")
+    s.add_argument("--fps", type=float, default=None, help="frame rate (default: the take's)")
+    s.add_argument(
+        "--allow-missing",
+        action="store_true",
+        help="solve with layout markers absent from the take as missing, ignoring unknown labels",
+    )
+    s.add_argument(
+        "--take-units", default=None, help="the take's length unit, overriding the file's"
+    )
+    s.add_argument(
+        "--jaw",
+        choices=list(pipeline.JAW_POSES),
+        default="auto",
+        help="models with a jaw rig: each frame's jaw pose from its blendshape fit (auto, "
+        "fit), from the jaw's markers (track), or the rest pose (rest); see Model.solve",
+    )
+    s.add_argument(
+        "--chunk",
+        type=_positive_int,
+        default=None,
+        metavar="N",
+        help="solve and write N frames at a time (bounded memory; each chunk starts without "
+        "a previous frame); default: the whole range in one solve",
+    )
+    s.add_argument("-q", "--quiet", action="store_true", help="no progress bars")
+    s.set_defaults(func=_cmd_solve)
+
+    e = sub.add_parser(
+        "export",
+        help="convert a solved .npz to a USD point cache, an OBJ sequence or another .npz",
+    )
+    e.add_argument("result", metavar="RESULT", help="solved take (.npz from lgi solve)")
+    e.add_argument("-o", "--out", required=True, help="output: .usd/.usdc/.usda, NAME.obj, .npz")
+    e.add_argument("--frames", default=None, metavar="A:B", help="frames A..B-1 (0-based)")
+    e.add_argument("--fps", type=float, default=None, help="frame rate (default: the result's)")
+    e.add_argument("-q", "--quiet", action="store_true", help="no progress bars")
+    e.set_defaults(func=_cmd_export)
+
+    i = sub.add_parser("info", help="summarise a model, a take, a solved .npz or a USD file")
+    i.add_argument("file", metavar="FILE")
+    i.add_argument(
+        "--model", default=None, help="with a take: how its labels match this model's markers"
+    )
+    i.set_defaults(func=_cmd_info)
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse with the one error format of the CLI: usage, then `lgi: error: ...`, exit 2."""
+
+    def error(self, message: str) -> NoReturn:
+        self.print_usage(sys.stderr)
+        self.exit(2, f"lgi: error: {message}\n")
+
+
+def _out_folder(value: str) -> str:
+    """`--out` of demo/evaluate: a folder to create or reuse, not a file nor under one."""
+    p = Path(value)
+    if p.exists() and not p.is_dir():
+        raise argparse.ArgumentTypeError(f"{value} is a file; --out is a folder (created)")
+    for parent in p.absolute().parents:
+        if parent.exists():
+            if not parent.is_dir():
+                raise argparse.ArgumentTypeError(f"{value}: {parent} is a file, not a folder")
+            break
+    return value
+
+
+def _seed(value: str) -> int:
+    try:
+        seed = int(value)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{value!r} is not an integer") from None
+    if not 0 <= seed < 2**32:
+        raise argparse.ArgumentTypeError(f"{seed}: a seed is an integer in 0..2^32-1")
+    return seed
+
+
+def _positive_int(text: str) -> int:
+    try:
+        n = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a whole number, got {text!r}") from None
+    if n < 1:
+        raise argparse.ArgumentTypeError(f"expected a whole number >= 1, got {n}")
+    return n
+
+
 def _non_negative(text: str) -> float:
     try:
         x = float(text)
@@ -52,15 +258,13 @@ def _fraction(text: str) -> float:
 
 
 def _read_rest(path: Path) -> np.ndarray:
-    """Marker rest positions (B, 3): `.npy`, or CSV with a header row and name,x,y,z columns."""
+    """Marker rest positions (B, 3): `.npy`, or a layout CSV (`lgi.takes.read_layout`)."""
+    if path.suffix.lower() != ".npy":
+        return lgi.takes.read_layout(path).positions
     try:
-        if path.suffix.lower() == ".npy":
-            rest = np.load(path)
-        else:
-            rest = np.loadtxt(path, delimiter=",", skiprows=1, usecols=(1, 2, 3), ndmin=2)
+        rest = np.asarray(np.load(path), dtype=np.float64)
     except (OSError, ValueError) as e:
         raise lgi.InputError(f"{path}: cannot read marker rest positions ({e})") from None
-    rest = np.asarray(rest, dtype=np.float64)
     if rest.ndim != 2 or rest.shape[1] != 3:
         raise lgi.InputError(f"{path}: expected (B, 3) marker positions, got {rest.shape}")
     return rest
@@ -86,7 +290,7 @@ def _cmd_helmet_demo(args: argparse.Namespace) -> int:
     return 0
 
 
-def _add_front_end_commands(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+def _add_front_end_commands(sub: argparse._SubParsersAction[_Parser]) -> None:
     """`lgi triangulate` (2D tracks to stabilised bundles) and `lgi helmet-demo`."""
     tr = sub.add_parser(
         "triangulate",
@@ -110,7 +314,7 @@ def _add_front_end_commands(sub: argparse._SubParsersAction[argparse.ArgumentPar
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(
+    p = _Parser(
         prog="lgi",
         description="Local Geometric Indexing: sparse facial markers to dense face meshes.",
     )
@@ -121,8 +325,10 @@ def build_parser() -> argparse.ArgumentParser:
         "demo",
         help="build the built-in sample, solve its performance, write meshes and a report",
     )
-    demo.add_argument("--out", default="lgi-demo-output", help="output folder (created)")
-    demo.add_argument("--seed", type=int, default=0, help="seed of the generated sample")
+    demo.add_argument(
+        "--out", type=_out_folder, default="lgi-demo-output", help="output folder (created)"
+    )
+    demo.add_argument("--seed", type=_seed, default=0, help="seed of the generated sample")
     demo.add_argument("-q", "--quiet", action="store_true", help="no progress bars")
     demo.set_defaults(func=_cmd_demo)
 
@@ -147,7 +353,9 @@ def build_parser() -> argparse.ArgumentParser:
         default=0.0,
         help="capture protocol: fraction of the shapes the methods do not get (default 0)",
     )
-    ev.add_argument("--out", default="lgi-evaluate-output", help="output folder (created)")
+    ev.add_argument(
+        "--out", type=_out_folder, default="lgi-evaluate-output", help="output folder (created)"
+    )
     ev.add_argument(
         "--ict-dir",
         default=None,
@@ -155,6 +363,7 @@ def build_parser() -> argparse.ArgumentParser:
         "else under shared/data beside the working directory)",
     )
     ev.set_defaults(func=_cmd_evaluate)
+    _add_pipeline_commands(sub)
     _add_front_end_commands(sub)
     return p
 
@@ -168,6 +377,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         return int(args.func(args))
     except lgi.LgiError as e:
+        print(f"lgi: error: {e}", file=sys.stderr)
+        return 2
+    except OSError as e:  # a file the user named cannot be read or written
         print(f"lgi: error: {e}", file=sys.stderr)
         return 2
 

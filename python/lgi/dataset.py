@@ -17,10 +17,22 @@ if TYPE_CHECKING:
     from lgi.sample import Sample
 
 
-NPZ_KEYS = ("neutral", "triangles", "shapes", "names", "uvs", "uv_triangles")
+NPZ_KEYS = (
+    "neutral",
+    "triangles",
+    "shapes",
+    "names",
+    "uvs",
+    "uv_triangles",
+    "polygon_counts",
+    "polygon_vertices",
+    "polygon_uvs",
+)
 """Arrays of the `.npz` layout: `neutral` (V, 3) float and `triangles` (T, 3) int, then the
 optional `shapes` (S, V, 3) float displacements, `names` (S,) str, `uvs` (U, 2) float and
-`uv_triangles` (T, 3) int (empty `uvs` and `uv_triangles` mean no UVs)."""
+`uv_triangles` (T, 3) int (empty `uvs` and `uv_triangles` mean no UVs), and the neutral's
+source faces `polygon_counts` (P,), `polygon_vertices` and `polygon_uvs` (one per corner;
+empty without UVs), which must fan-split into `triangles` (`Dataset.with_polygons`)."""
 
 
 def read_npz(path: str | os.PathLike[str]) -> Dataset:
@@ -51,7 +63,7 @@ def read_npz(path: str | os.PathLike[str]) -> Dataset:
     if (uvs is None or uvs.size == 0) and (uv_triangles is None or uv_triangles.size == 0):
         uvs = uv_triangles = None
     try:
-        return Dataset.from_arrays(
+        ds = Dataset.from_arrays(
             arrays["neutral"],
             arrays["triangles"],
             arrays.get("shapes"),
@@ -59,6 +71,14 @@ def read_npz(path: str | os.PathLike[str]) -> Dataset:
             uvs=uvs,
             uv_triangles=uv_triangles,
         )
+        if "polygon_counts" in arrays:
+            pu = arrays.get("polygon_uvs")
+            ds = ds.with_polygons(
+                arrays["polygon_counts"],
+                arrays.get("polygon_vertices", np.zeros(0, np.int64)),
+                None if pu is None or pu.size == 0 else pu,
+            )
+        return ds
     except InputError as e:
         # Bad content is a fault of the file, not of an argument: re-raise naming the file.
         raise DatasetError(f"{name}: {e}") from e
@@ -68,6 +88,10 @@ def write_npz(dataset: Dataset, path: str | os.PathLike[str]) -> None:
     """Writes `dataset` as a compressed `.npz` archive of the `NPZ_KEYS` layout (numpy appends
     `.npz` to `path` when it has no such suffix)."""
     name = os.fspath(path)
+    polygons: dict[str, Any] = {}
+    if dataset.polygons is not None:
+        counts, vertices, uvs = dataset.polygons
+        polygons = {"polygon_counts": counts, "polygon_vertices": vertices, "polygon_uvs": uvs}
     try:
         np.savez_compressed(
             name,
@@ -77,6 +101,7 @@ def write_npz(dataset: Dataset, path: str | os.PathLike[str]) -> None:
             names=np.array(dataset.names).astype("str"),
             uvs=dataset.uvs,
             uv_triangles=dataset.uv_triangles,
+            **polygons,
         )
     except OSError as e:
         raise DatasetFileError(f"cannot read {name}: {e}") from e
@@ -95,11 +120,12 @@ def sample_dataset(sample: Sample) -> Dataset:
 
 
 def without_shapes(dataset: Dataset, drop: Iterable[int]) -> Dataset:
-    """A copy of `dataset` without the shapes at indices `drop` (same neutral, topology, UVs)."""
+    """A copy of `dataset` without the shapes at indices `drop` (same neutral, topology, UVs,
+    source polygons)."""
     gone = set(drop)
     keep = [i for i in range(dataset.num_shapes) if i not in gone]
     has_uv = np.asarray(dataset.uv_triangles).size > 0
-    return Dataset.from_arrays(
+    out = Dataset.from_arrays(
         dataset.neutral,
         dataset.triangles,
         np.asarray(dataset.shapes)[keep],
@@ -107,3 +133,7 @@ def without_shapes(dataset: Dataset, drop: Iterable[int]) -> Dataset:
         uvs=dataset.uvs if has_uv else None,
         uv_triangles=dataset.uv_triangles if has_uv else None,
     )
+    if dataset.polygons is not None:
+        counts, vertices, uvs = dataset.polygons
+        out = out.with_polygons(counts, vertices, uvs if has_uv else None)
+    return out

@@ -17,6 +17,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from lgi._lgi import Dataset
+from lgi.takes import Layout, read_layout
 
 __all__ = [
     "ENV",
@@ -27,6 +28,7 @@ __all__ = [
     "is_ict",
     "livelinkface",
     "load_dataset",
+    "load_layout",
     "load_markers",
     "lower_teeth",
     "skin",
@@ -93,6 +95,11 @@ def load_dataset(folder: str | os.PathLike[str]) -> Dataset:
 
 
 def load_markers(folder: str | os.PathLike[str]) -> NDArray[np.float64]:
-    """The 120 markers' rest positions (120, 3)."""
-    path = Path(folder) / "markers_120.csv"
-    return np.loadtxt(path, delimiter=",", skiprows=1, usecols=(1, 2, 3)).reshape(-1, 3)
+    """The 120 markers' rest positions (120, 3); `InputError` naming the file and line when
+    `markers_120.csv` is missing or garbled (`lgi.takes.read_layout`)."""
+    return load_layout(folder).positions
+
+
+def load_layout(folder: str | os.PathLike[str]) -> Layout:
+    """The 120-marker layout with its names (`m000`...)."""
+    return read_layout(Path(folder) / "markers_120.csv")

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import os
 import warnings
+from collections.abc import Sequence
 from dataclasses import dataclass
 from functools import cached_property
 from typing import Any
@@ -134,6 +135,22 @@ def estimate_marker_noise(frames: ArrayLike) -> float:
     return float(1.4826 * np.median(np.abs(d2)) / np.sqrt(6.0))
 
 
+def _labels(marker_names: Sequence[str] | None, units: str | None) -> dict[str, Any]:
+    """`marker_names` and `units` checked for the core: names a sequence of str (the core
+    checks count, uniqueness and form), the unit one lgi knows (normalised: `Millimeters` ->
+    `mm`)."""
+    from lgi.takes import normalize_unit
+
+    out: dict[str, Any] = {}
+    if marker_names is not None:
+        if isinstance(marker_names, str) or not all(isinstance(n, str) for n in marker_names):
+            raise InputError("marker_names must be a sequence of str, one per marker")
+        out["marker_names"] = list(marker_names)
+    if units is not None:
+        out["units"] = normalize_unit(units, "units")
+    return out
+
+
 def _progress_bar(total: int, desc: str, quiet: bool) -> Any:
     from tqdm import tqdm
 
@@ -157,6 +174,8 @@ class Model:
         shape_theta: ArrayLike | None = None,
         jaw_bins: int | ArrayLike | None = None,
         bin_overlap: float = 0.0,
+        marker_names: Sequence[str] | None = None,
+        units: str | None = None,
     ) -> Model:
         """Builds the model for `dataset` and marker rest positions `markers_rest` (B, 3).
 
@@ -176,7 +195,13 @@ class Model:
         `jaw="auto"` (default): a dataset with a `jawOpen` shape gets the rig
         `lgi.jaw.estimate_rig` finds in its jaw shapes (a warning and no rig when it finds
         none), so `solve` turns the jaw as a rotation rather than blending it linearly
-        (docs/results.md measures what it gives); `jaw=None` builds without a rig."""
+        (docs/results.md measures what it gives); `jaw=None` builds without a rig.
+
+        `marker_names` (B unique names, e.g. from `lgi.takes.read_layout`) and `units` (the
+        coordinates' length unit, a key of `lgi.takes.METERS_PER_UNIT`) are kept with the
+        model (and its file): takes are matched to it by label and converted to its units.
+        Default: names `m000`, `m001`, ... and no unit."""
+        labels = _labels(marker_names, units)
         if isinstance(jaw, str):
             if jaw != "auto":
                 raise InputError(f"jaw must be 'auto', a JawRig or None, got {jaw!r}")
@@ -190,7 +215,7 @@ class Model:
                 raise InputError("shape_theta was given without a jaw rig")
             if jaw_bins is not None:
                 raise InputError("jaw_bins needs a jaw rig (jaw=...) and shape_theta")
-            return cls(_lgi.Model.build(dataset, markers_rest, config))
+            return cls(_lgi.Model.build(dataset, markers_rest, config, **labels))
         if shape_theta is None:
             raise InputError("a jaw rig needs shape_theta: the jaw pose of every dataset shape")
         theta = np.asarray(shape_theta, dtype=np.float64)
@@ -209,6 +234,7 @@ class Model:
             jaw_bins=edges,
             bin_overlap=overlap,
             jaw_frame=jaw.frame,
+            **labels,
         )
         return cls(core)
 
@@ -241,6 +267,17 @@ class Model:
     @property
     def markers_rest(self) -> NDArray[np.float64]:
         return self._core.markers_rest
+
+    @property
+    def marker_names(self) -> list[str]:
+        """Each marker's name (B): the layout's, or `m000`, `m001`, ... when built without
+        names (and for files of format version 3 and older)."""
+        return self._core.marker_names
+
+    @property
+    def units(self) -> str | None:
+        """The coordinates' length unit given at build (`cm`, `mm`, ...); None if not given."""
+        return self._core.units
 
     @property
     def config(self) -> BuildConfig:

@@ -1,8 +1,10 @@
 """Takes in: recordings from the capture stage, read into arrays in the model's terms.
 
-Today: Live Link Face CSV recordings (ARKit blendshape-weight curves, as Apple's Live Link Face
-app writes them), with the mapping of ARKit names onto a dataset's shape names. Marker takes
-(C3D, TRC, labelled CSV) belong here as well.
+Marker takes (`read`): C3D (through `ezc3d`), TRC, labelled CSV and `.npz`, with their labels
+matched to the model's marker names and their units converted to the model's; marker layouts
+(`read_layout`: CSV `name,x,y,z`). Live Link Face CSV recordings (ARKit blendshape-weight
+curves, as Apple's Live Link Face app writes them), with the mapping of ARKit names onto a
+dataset's shape names (`read_livelinkface`, `arkit_to_dataset`).
 """
 
 from __future__ import annotations
@@ -19,7 +21,31 @@ from lgi.errors import InputError
 
 F64 = NDArray[np.float64]
 
-__all__ = ["ARKIT_BOTH_SIDES", "Curves", "arkit_to_dataset", "read_livelinkface"]
+__all__ = [
+    "ARKIT_BOTH_SIDES",
+    "METERS_PER_UNIT",
+    "NPZ_TAKE_KEYS",
+    "TAKE_SUFFIXES",
+    "Curves",
+    "Layout",
+    "RawTake",
+    "Take",
+    "arkit_to_dataset",
+    "convert_units",
+    "label_columns",
+    "match_layout",
+    "normalize_unit",
+    "plain_label",
+    "read",
+    "read_c3d",
+    "read_csv",
+    "read_layout",
+    "read_livelinkface",
+    "read_npz",
+    "read_raw",
+    "read_trc",
+    "unit_scale",
+]
 
 ARKIT_BOTH_SIDES = ("BrowInnerUp", "CheekPuff")
 """ARKit curves with no side that drive both a `_L` and an `_R` shape in a two-sided rig."""
@@ -147,3 +173,468 @@ def read_livelinkface(path: str | os.PathLike[str]) -> Curves:
         line = int(np.argmax(np.diff(t) <= 0)) + 3
         raise InputError(f"{p}, line {line}: timecodes do not increase")
     return Curves(times=t - t[0], names=names, weights=values, path=p)
+
+
+# --- Marker takes -------------------------------------------------------------------------
+
+METERS_PER_UNIT = {"mm": 1e-3, "cm": 1e-2, "dm": 1e-1, "m": 1.0, "in": 0.0254, "ft": 0.3048}
+"""Length units understood (takes' declared units, `lgi build --units`), in meters: the one
+table of unit conversions and of USD's `metersPerUnit`."""
+
+_UNIT_ALIASES = {
+    "millimeter": "mm",
+    "millimetre": "mm",
+    "centimeter": "cm",
+    "centimetre": "cm",
+    "decimeter": "dm",
+    "decimetre": "dm",
+    "meter": "m",
+    "metre": "m",
+    "inch": "in",
+    "inches": "in",
+    "foot": "ft",
+    "feet": "ft",
+}
+
+TAKE_SUFFIXES = (".c3d", ".trc", ".csv", ".npz")
+"""File suffixes `read` understands (case-insensitive)."""
+
+
+def normalize_unit(unit: str, where: str) -> str:
+    """`unit` as a key of `METERS_PER_UNIT` (`Millimeters` -> `mm`); `InputError` naming
+    `where` when unknown."""
+    u = unit.strip().lower()
+    singular = u[:-1] if u.endswith("s") and u[:-1] in _UNIT_ALIASES else u  # millimeters
+    u = _UNIT_ALIASES.get(singular, u)
+    if u not in METERS_PER_UNIT:
+        raise InputError(
+            f"{where}: unknown length unit {unit!r} (known: {', '.join(METERS_PER_UNIT)})"
+        )
+    return u
+
+
+def unit_scale(source: str, target: str) -> float:
+    """The factor taking coordinates in `source` units to `target` units."""
+    return (
+        METERS_PER_UNIT[normalize_unit(source, "unit")]
+        / METERS_PER_UNIT[normalize_unit(target, "unit")]
+    )
+
+
+def convert_units(x: F64, source: str, target: str) -> F64:
+    """`x` in `source` units converted to `target` units. To a unit a whole number of times
+    larger (mm -> cm), coordinates are divided by that number, so the result is the correctly
+    rounded quotient a user computes (x / 10), not x * 0.1 (which differs in the last bit)."""
+    up = 1.0 / unit_scale(source, target)
+    if up > 1 and up == round(up):
+        return x / round(up)
+    return x * unit_scale(source, target)
+
+
+@dataclass(frozen=True)
+class Layout:
+    """A named marker layout (`read_layout`)."""
+
+    names: list[str]
+    """B marker names, in file order."""
+    positions: F64
+    """(B, 3) rest positions."""
+    path: str
+
+
+def read_layout(path: str | os.PathLike[str]) -> Layout:
+    """Reads a marker layout CSV: a header `name,x,y,z`, then one marker per line. Raises
+    `InputError` naming the file and line: missing file, bad header, wrong column count, a
+    coordinate that is not a finite number, an empty or repeated name."""
+    p = os.fspath(path)
+    try:
+        with open(p, newline="", encoding="utf-8") as fh:
+            rows = list(csv.reader(fh))
+    except (OSError, UnicodeDecodeError) as e:
+        raise InputError(f"{p}: cannot read the marker layout: {e}") from None
+    header = [c.strip().lower() for c in rows[0]] if rows else []
+    if header != ["name", "x", "y", "z"]:
+        raise InputError(
+            f"{p}, line 1: a marker layout's header is 'name,x,y,z' "
+            f"(got {','.join(rows[0]) if rows else 'an empty file'!r})"
+        )
+    names: list[str] = []
+    positions: list[list[float]] = []
+    seen: dict[str, int] = {}
+    for i, row in enumerate(rows[1:]):
+        line = i + 2
+        if not row or all(not c.strip() for c in row):
+            continue
+        if len(row) != 4:
+            raise InputError(f"{p}, line {line}: {len(row)} columns, expected 4 (name,x,y,z)")
+        name = row[0].strip()
+        if not name:
+            raise InputError(f"{p}, line {line}: empty marker name")
+        if name in seen:
+            raise InputError(f"{p}, line {line}: marker {name!r} repeats line {seen[name]}")
+        seen[name] = line
+        try:
+            xyz = [float(c) for c in row[1:]]
+        except ValueError:
+            raise InputError(
+                f"{p}, line {line}: marker {name!r}: a coordinate is not a number"
+            ) from None
+        if not all(np.isfinite(xyz)):
+            raise InputError(f"{p}, line {line}: marker {name!r}: a coordinate is not finite")
+        names.append(name)
+        positions.append(xyz)
+    if not names:
+        raise InputError(f"{p}: the marker layout has no markers")
+    return Layout(names=names, positions=np.array(positions, dtype=np.float64), path=p)
+
+
+@dataclass(frozen=True)
+class RawTake:
+    """A marker take as its file holds it: labels in file order, NaN where a sample is
+    missing, the file's own units (None when the format has none)."""
+
+    labels: list[str]
+    points: F64
+    """(F, N, 3) coordinates, file units; NaN rows are missing samples."""
+    fps: float | None
+    units: str | None
+    path: str
+    first_frame: int = 0
+    """The file's number of the first frame (C3D header, TRC `Frame#`)."""
+
+
+@dataclass(frozen=True)
+class Take:
+    """A marker take matched to a layout (`read`): ready for `Model.solve`."""
+
+    frames: F64
+    """(F, B, 3) in the layout's order and the target units; NaN rows are missing markers."""
+    names: list[str]
+    """The B layout names the columns follow."""
+    fps: float | None
+    units: str | None
+    """Units of `frames` (the target's; the file's when no target was given)."""
+    source_units: str | None
+    """Units the file declared (None when it has none)."""
+    path: str
+    first_frame: int = 0
+    ignored: tuple[str, ...] = ()
+    """Labels of the file unknown to the layout, left out (only with `allow_missing`)."""
+
+    @property
+    def num_frames(self) -> int:
+        return int(self.frames.shape[0])
+
+
+def read_c3d(path: str | os.PathLike[str]) -> RawTake:
+    """Reads a C3D file with `ezc3d`: labels from `POINT:LABELS` (then `LABELS2`, ... past
+    255), units from `POINT:UNITS`, rate from `POINT:RATE`; a sample with a negative residual
+    or all-zero coordinates is missing (NaN)."""
+    p = os.fspath(path)
+    try:
+        import ezc3d
+    except ImportError:  # pragma: no cover - ezc3d is a dependency
+        raise InputError(f"{p}: reading C3D needs the ezc3d package (pip install ezc3d)") from None
+    if not os.path.isfile(p):
+        raise InputError(f"{p}: no such take file")
+    try:
+        c = ezc3d.c3d(p)
+    except Exception as e:  # ezc3d raises RuntimeError/IOError/ValueError for bad files
+        raise InputError(f"{p}: not a readable C3D file: {e}") from None
+    point = c["parameters"]["POINT"]
+    labels: list[str] = []
+    for key in ["LABELS", *(f"LABELS{k}" for k in range(2, 100))]:
+        if key not in point:
+            break
+        labels += [str(x).strip() for x in point[key]["value"]]
+    pts = np.asarray(c["data"]["points"], dtype=np.float64)
+    if pts.ndim != 3 or pts.shape[0] < 3:
+        raise InputError(f"{p}: C3D points have shape {pts.shape}, expected (4, N, F)")
+    n = pts.shape[1]
+    if len(labels) < n:
+        raise InputError(f"{p}: {n} points but only {len(labels)} labels in POINT:LABELS")
+    xyz = np.ascontiguousarray(pts[:3].transpose(2, 1, 0))
+    residuals = c["data"]["meta_points"].get("residuals")
+    if residuals is not None and np.size(residuals) == n * xyz.shape[0]:
+        res = np.asarray(residuals, dtype=np.float64).reshape(n, -1).T
+        xyz[res < 0] = np.nan
+    xyz[np.all(xyz == 0.0, axis=2)] = np.nan
+    units_v = point["UNITS"]["value"] if "UNITS" in point else []
+    units = str(units_v[0]).strip() if len(units_v) and str(units_v[0]).strip() else None
+    rate_v = point["RATE"]["value"] if "RATE" in point else []
+    fps = float(rate_v[0]) if len(rate_v) and float(rate_v[0]) > 0 else None
+    first = int(c["header"]["points"].get("first_frame", 0))
+    return RawTake(labels[:n], xyz, fps, units, p, first)
+
+
+def read_trc(path: str | os.PathLike[str]) -> RawTake:
+    """Reads a TRC file (Motion Analysis / OpenSim, tab-separated): line 2 names the fields
+    of line 3 (`DataRate`, `Units`, ...), line 4 is `Frame#`, `Time` and one name per marker
+    (each over 3 columns), line 5 the `X1 Y1 Z1 ...` headers, then one row per frame; empty
+    cells are missing samples."""
+    p = os.fspath(path)
+    try:
+        with open(p, encoding="utf-8") as fh:
+            lines = fh.read().splitlines()
+    except (OSError, UnicodeDecodeError) as e:
+        raise InputError(f"{p}: cannot read a TRC file: {e}") from None
+    if len(lines) < 5 or not lines[0].startswith("PathFileType"):
+        raise InputError(f"{p}: not a TRC file (line 1 must start with 'PathFileType')")
+    keys = [k.strip() for k in lines[1].split("\t")]
+    vals = [v.strip() for v in lines[2].split("\t")]
+    meta = dict(zip(keys, vals, strict=False))
+    head = lines[3].split("\t")
+    if len(head) < 3 or head[0].strip() != "Frame#":
+        raise InputError(f"{p}, line 4: expected 'Frame#', 'Time' and the marker names")
+    labels = [h.strip() for h in head[2:] if h.strip()]
+    n = len(labels)
+    rows: list[list[float]] = []
+    frame_numbers: list[int] = []
+    for i, raw in enumerate(lines[5:]):
+        line = i + 6
+        if not raw.strip():
+            continue
+        cells = raw.split("\t")
+        if len(cells) < 2 + 3 * n:
+            cells += [""] * (2 + 3 * n - len(cells))
+        try:
+            frame_numbers.append(int(float(cells[0])))
+            rows.append([float(c) if c.strip() else np.nan for c in cells[2 : 2 + 3 * n]])
+        except ValueError:
+            raise InputError(f"{p}, line {line}: a value is not a number") from None
+    if not rows:
+        raise InputError(f"{p}: the take has no frames")
+    xyz = np.array(rows, dtype=np.float64).reshape(len(rows), n, 3)
+    if np.isinf(xyz).any():
+        raise InputError(f"{p}: infinite coordinate")
+    try:
+        fps = float(meta["DataRate"]) if meta.get("DataRate") else None
+    except ValueError:
+        raise InputError(f"{p}, line 3: DataRate {meta['DataRate']!r} is not a number") from None
+    units = meta.get("Units") or None
+    return RawTake(labels, xyz, fps, units, p, frame_numbers[0])
+
+
+_AXES = ("x", "y", "z")
+
+
+def _split_axis(column: str) -> tuple[str, str] | None:
+    """`NAME_x` / `NAME.x` / `NAME:x` / `NAME x` (any case) -> (`NAME`, `x`)."""
+    c = column.strip()
+    if len(c) >= 3 and c[-1].lower() in _AXES and c[-2] in "_.: ":
+        return c[:-2], c[-1].lower()
+    return None
+
+
+def read_csv(path: str | os.PathLike[str], fps: float | None = None) -> RawTake:
+    """Reads a labelled marker CSV: one row per frame, three columns per marker named
+    `NAME_x,NAME_y,NAME_z` (`.`, `:` or a space may replace `_`; any case), optionally led by
+    a `frame` and/or `time` column (seconds: gives the rate when `fps` is None). Empty or
+    `nan` cells are missing samples. CSV has no units: the coordinates are taken to be in the
+    target's units unless `read(take_units=...)` says otherwise."""
+    p = os.fspath(path)
+    try:
+        with open(p, newline="", encoding="utf-8") as fh:
+            rows = list(csv.reader(fh))
+    except (OSError, UnicodeDecodeError) as e:
+        raise InputError(f"{p}: cannot read a marker CSV: {e}") from None
+    if not rows:
+        raise InputError(f"{p}: empty file")
+    header = [h.strip() for h in rows[0]]
+    # Leading `frame` / `time` columns (either, both, any order), then the coordinates.
+    skip = 0
+    while skip < min(2, len(header)) and header[skip].lower() in ("frame", "time"):
+        skip += 1
+    lead = [h.lower() for h in header[:skip]]
+    time_col = lead.index("time") if "time" in lead else None
+    columns = header[skip:]
+    if not columns or len(columns) % 3:
+        raise InputError(
+            f"{p}, line 1: expected a frame/time column and three columns per marker "
+            f"(NAME_x, NAME_y, NAME_z); got {len(columns)} coordinate columns"
+        )
+    labels: list[str] = []
+    for k in range(0, len(columns), 3):
+        parts = [_split_axis(c) for c in columns[k : k + 3]]
+        split = [q for q in parts if q is not None]
+        if (
+            len(split) != 3
+            or [q[1] for q in split] != list(_AXES)
+            or len({q[0] for q in split}) != 1
+        ):
+            raise InputError(
+                f"{p}, line 1: columns {skip + k + 1}-{skip + k + 3} "
+                f"({', '.join(columns[k : k + 3])}) are not NAME_x, NAME_y, NAME_z"
+            )
+        labels.append(split[0][0])
+    data = np.empty((len(rows) - 1, len(columns)))
+    times: list[float] = []
+    for i, row in enumerate(rows[1:]):
+        line = i + 2
+        if len(row) != len(header):
+            raise InputError(f"{p}, line {line}: {len(row)} columns, the header has {len(header)}")
+        try:
+            data[i] = [float(c) if c.strip() else np.nan for c in row[skip:]]
+            if time_col is not None:
+                times.append(float(row[time_col]))
+        except ValueError:
+            raise InputError(f"{p}, line {line}: a value is not a number") from None
+    if data.shape[0] == 0:
+        raise InputError(f"{p}: the take has no frames")
+    if np.isinf(data).any():
+        line = int(np.argmax(np.isinf(data).any(axis=1))) + 2
+        raise InputError(f"{p}, line {line}: infinite coordinate")
+    if fps is None and len(times) >= 2 and np.all(np.diff(times) > 0):
+        fps = float(1.0 / np.median(np.diff(times)))
+    return RawTake(labels, data.reshape(len(data), -1, 3), fps, None, p)
+
+
+NPZ_TAKE_KEYS = ("markers", "names", "fps", "units")
+"""Arrays of a take `.npz`: `markers` (F, N, 3) float (NaN = missing), `names` (N,) str, and
+optionally `fps` (scalar) and `units` (str)."""
+
+
+def read_npz(path: str | os.PathLike[str]) -> RawTake:
+    """Reads a take `.npz` of the `NPZ_TAKE_KEYS` layout (`allow_pickle=False`)."""
+    p = os.fspath(path)
+    try:
+        with np.load(p, allow_pickle=False) as z:
+            if not isinstance(z, np.lib.npyio.NpzFile):  # pragma: no cover - .npy given
+                raise InputError(f"{p}: not an .npz archive")
+            missing = [k for k in NPZ_TAKE_KEYS[:2] if k not in z.files]
+            if missing:
+                raise InputError(
+                    f"{p}: a take .npz needs arrays {list(NPZ_TAKE_KEYS[:2])}; missing "
+                    f"{missing} (the archive has {z.files})"
+                )
+            markers = np.asarray(z["markers"])
+            names = [str(x) for x in np.asarray(z["names"]).ravel()]
+            fps = float(z["fps"]) if "fps" in z.files else None
+            units = str(z["units"]) if "units" in z.files else None
+    except InputError:
+        raise
+    except Exception as e:  # garbled archive: numpy raises various classes
+        raise InputError(f"{p}: not a readable take .npz: {e}") from None
+    if markers.ndim != 3 or markers.shape[2] != 3 or markers.dtype.kind not in "iuf":
+        raise InputError(f"{p}: 'markers' must be (F, N, 3) numbers, got {markers.shape}")
+    if markers.shape[1] != len(names):
+        raise InputError(f"{p}: {markers.shape[1]} marker columns but {len(names)} names")
+    m = markers.astype(np.float64)
+    if np.isinf(m).any():
+        raise InputError(f"{p}: infinite coordinate")
+    return RawTake(names, m, fps, units or None, p)
+
+
+_READERS = {".c3d": read_c3d, ".trc": read_trc, ".csv": read_csv, ".npz": read_npz}
+
+
+def read_raw(path: str | os.PathLike[str]) -> RawTake:
+    """Reads a take by its suffix (`TAKE_SUFFIXES`), without matching it to a layout."""
+    p = os.fspath(path)
+    suffix = os.path.splitext(p)[1].lower()
+    if suffix not in _READERS:
+        raise InputError(
+            f"{p}: unknown take format {suffix or '(no suffix)'!r}; "
+            f"known: {', '.join(TAKE_SUFFIXES)}"
+        )
+    if not os.path.isfile(p):
+        raise InputError(f"{p}: no such take file")
+    return _READERS[suffix](p)
+
+
+def plain_label(label: str) -> str:
+    """A label without a `Subject:` prefix (Vicon and others prefix labels with it)."""
+    return label.rsplit(":", 1)[-1].strip()
+
+
+def label_columns(
+    raw: RawTake, names: Sequence[str]
+) -> tuple[list[int], list[str], tuple[str, ...]]:
+    """For each of `names`, the take column whose label is that name (exactly, or after
+    dropping a `Subject:` prefix), -1 when none; the names without a column; the labels no
+    name took. A label that appears twice is an `InputError`."""
+    where: dict[str, int] = {}
+    for j, lab in enumerate(raw.labels):
+        if lab in where:
+            raise InputError(f"{raw.path}: label {lab!r} appears twice (columns {where[lab]}, {j})")
+        where[lab] = j
+    wanted = set(names)
+    for lab, j in list(where.items()):
+        plain = plain_label(lab)
+        if lab not in wanted and plain in wanted and plain not in where:
+            where[plain] = j
+    cols = [where.get(n, -1) for n in names]
+    absent = [n for n, c in zip(names, cols, strict=True) if c < 0]
+    used = {c for c in cols if c >= 0}
+    unknown = tuple(lab for j, lab in enumerate(raw.labels) if j not in used)
+    return cols, absent, unknown
+
+
+def match_layout(
+    raw: RawTake, names: Sequence[str], allow_missing: bool = False
+) -> tuple[F64, tuple[str, ...]]:
+    """The take's columns in the order of `names` (F, B, 3), and the labels left out
+    (`label_columns`). A name the take lacks or a label the layout lacks is an `InputError`
+    listing them; with `allow_missing` the first become NaN columns and the second are left
+    out."""
+    cols, absent, unknown = label_columns(raw, names)
+    if (absent or unknown) and not allow_missing:
+        parts = []
+        if absent:
+            parts.append(f"{len(absent)} layout markers are not in the take: {', '.join(absent)}")
+        if unknown:
+            parts.append(f"{len(unknown)} take labels are not in the layout: {', '.join(unknown)}")
+        raise InputError(
+            f"{raw.path}: labels do not match the model's markers: {'; '.join(parts)} "
+            "(allow_missing / --allow-missing solves with the absent markers missing and the "
+            "unknown labels left out)"
+        )
+    out = np.full((raw.points.shape[0], len(names), 3), np.nan)
+    for b, c in enumerate(cols):
+        if c >= 0:
+            out[:, b] = raw.points[:, c]
+    return out, unknown
+
+
+def read(
+    path: str | os.PathLike[str],
+    layout: Sequence[str] | None = None,
+    *,
+    units: str | None = None,
+    take_units: str | None = None,
+    allow_missing: bool = False,
+) -> Take:
+    """Reads a marker take (C3D, TRC, labelled CSV or `.npz`, by suffix) as (F, B, 3) frames
+    for a model: columns matched to `layout` (the model's `marker_names`; None keeps the
+    file's labels and order) by name (`match_layout`), coordinates converted from the file's
+    units (or `take_units`, which overrides them) to `units` (the model's). A file without
+    units (CSV, most `.npz`) is taken to be in `units` already. A file with units read for a
+    target without units is an `InputError` (say the model's units: `lgi build --units`)."""
+    raw = read_raw(path)
+    source = normalize_unit(take_units, "take_units") if take_units else None
+    if source is None and raw.units is not None:
+        source = normalize_unit(raw.units, f"{raw.path}: units")
+    target = normalize_unit(units, "units") if units else None
+    ignored: tuple[str, ...] = ()
+    if layout is None:
+        frames, names = raw.points.copy(), list(raw.labels)
+    else:
+        frames, ignored = match_layout(raw, layout, allow_missing)
+        names = list(layout)
+    if source is not None and target is not None:
+        frames = convert_units(frames, source, target)
+    elif source is not None and target is None and layout is not None:
+        raise InputError(
+            f"{raw.path}: the take is in {source!r} but the model has no unit to convert to; "
+            "build the model with units (lgi build --units, Model.build(units=...))"
+        )
+    return Take(
+        frames=frames,
+        names=names,
+        fps=raw.fps,
+        units=target or source,
+        source_units=source,
+        path=raw.path,
+        first_frame=raw.first_frame,
+        ignored=ignored,
+    )

@@ -81,7 +81,11 @@ pub fn augment(dataset: &Dataset, min_shapes: usize) -> Result<Dataset> {
         }
     }
     let names = rec.into_iter().map(|(n, _)| n).collect();
-    Dataset::new(dataset.neutral().clone(), disp, names)
+    let out = Dataset::new(dataset.neutral().clone(), disp, names)?;
+    match dataset.polygons() {
+        Some(p) => out.with_polygons(p.clone()),
+        None => Ok(out),
+    }
 }
 
 #[cfg(test)]

@@ -3,6 +3,7 @@
 
 use crate::error::{LgiError, Result};
 use crate::mesh::Mesh;
+use crate::polygons::Polygons;
 use glam::DVec3;
 
 /// Neutral mesh plus shapes as displacements. Construct with [`Dataset::new`] or
@@ -14,6 +15,8 @@ pub struct Dataset {
     /// S * V * 3 displacements, shape-major.
     displacements: Vec<f32>,
     names: Vec<String>,
+    /// The neutral's source polygons when its file had them (OBJ); exports use them.
+    polygons: Option<Polygons>,
 }
 
 impl Dataset {
@@ -49,7 +52,21 @@ impl Dataset {
             neutral,
             displacements,
             names,
+            polygons: None,
         })
+    }
+
+    /// The same dataset with the neutral's source polygons attached (checked to fan-split
+    /// into its triangles, [`Polygons::check_against`]).
+    pub fn with_polygons(mut self, polygons: Polygons) -> Result<Self> {
+        polygons.check_against(&self.neutral, "neutral")?;
+        self.polygons = Some(polygons);
+        Ok(self)
+    }
+
+    /// The neutral's source polygons (quads, n-gons), when known.
+    pub fn polygons(&self) -> Option<&Polygons> {
+        self.polygons.as_ref()
     }
 
     /// A dataset from full shape meshes (positions with the neutral's topology); each

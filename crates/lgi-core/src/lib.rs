@@ -27,6 +27,7 @@ mod jaw;
 mod linalg;
 mod mesh;
 mod model;
+mod polygons;
 mod prefetch;
 mod prior;
 mod sew;
@@ -43,17 +44,18 @@ pub use dataset::Dataset;
 pub use error::{LgiError, Result};
 pub use mesh::{Mesh, SurfacePoint};
 pub use model::{
-    BinParts, BinPartsRef, BuildConfig, BundleStats, Frame, FrameInfo, FrameState, JawInput,
-    JawSetup, LocalShapeId, Lookup, Model, ModelParts, ModelPartsRef, PartsError, ShapeId,
-    SolveOptions,
+    default_marker_names, BinParts, BinPartsRef, BuildConfig, BundleStats, Frame, FrameInfo,
+    FrameState, JawInput, JawSetup, LocalShapeId, Lookup, Model, ModelParts, ModelPartsRef,
+    PartsError, ShapeId, SolveOptions, MAX_UNIT_LEN,
 };
+pub use polygons::Polygons;
 pub use prior::{FitPrior, FrameFit, FIT_L2, FIT_PENALTY, RESIDUAL_LENGTH};
 
 // Files: meshes, datasets and the `.lgi` model file.
 pub use io::glob::expand as expand_glob;
 pub use io::gltf::read_gltf;
 pub use io::model_file::{load as load_model, save as save_model};
-pub use io::obj::{parse_obj, read_obj, read_obj_positions, write_obj};
+pub use io::obj::{parse_obj, read_obj, read_obj_polygons, read_obj_positions, write_obj};
 
 // The jaw (Eq. 2) and the baselines.
 pub use baselines::{BlendshapeSolution, BlendshapeSolver, RbfInterpolator};

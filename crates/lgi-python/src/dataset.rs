@@ -158,6 +158,62 @@ impl Dataset {
         flat_to_array(py, flat, &[t.len(), 3])
     }
 
+    /// A new dataset with the neutral's source faces: `counts` (P,) corners per face (each
+    /// >= 3), `vertices` (sum of counts,) vertex index per corner, `uvs` the UV index per
+    /// corner (required exactly when the dataset has UVs). They must fan-split (corner 0
+    /// with each later edge) into exactly `triangles` and `uv_triangles`; exports then write
+    /// these faces. An `lgi.InputError` names what does not match.
+    #[pyo3(signature = (counts, vertices, uvs = None))]
+    fn with_polygons(
+        &self,
+        counts: &Bound<'_, PyAny>,
+        vertices: &Bound<'_, PyAny>,
+        uvs: Option<&Bound<'_, PyAny>>,
+    ) -> PyResult<Dataset> {
+        let polygons = lgi_core::Polygons {
+            counts: index_vector(counts, "counts")?,
+            vertices: index_vector(vertices, "vertices")?,
+            uvs: match uvs {
+                None => Vec::new(),
+                Some(u) => index_vector(u, "uvs")?,
+            },
+        };
+        let d = (*self.inner)
+            .clone()
+            .with_polygons(polygons)
+            .map_err(|e| match e {
+                LgiError::Dataset(m) => PyLgiError(LgiError::Input(m)),
+                other => PyLgiError(other),
+            })?;
+        Ok(Dataset { inner: Arc::new(d) })
+    }
+
+    /// The neutral's source faces when its file had them (OBJ): `(counts, vertices, uvs)`,
+    /// int64 arrays of corners per face (P,), vertex index per corner (sum of counts,) and UV
+    /// index per corner (same length, or empty without UVs); fan-split they give `triangles`
+    /// and `uv_triangles`. None for datasets from arrays, glTF or `.npz`.
+    #[getter]
+    #[allow(clippy::type_complexity)]
+    fn polygons<'py>(
+        &self,
+        py: Python<'py>,
+    ) -> PyResult<
+        Option<(
+            Bound<'py, PyArrayDyn<i64>>,
+            Bound<'py, PyArrayDyn<i64>>,
+            Bound<'py, PyArrayDyn<i64>>,
+        )>,
+    > {
+        let Some(p) = self.inner.polygons() else {
+            return Ok(None);
+        };
+        let arr = |v: &[u32]| {
+            let flat: Vec<i64> = v.iter().map(|&i| i64::from(i)).collect();
+            flat_to_array(py, flat, &[v.len()])
+        };
+        Ok(Some((arr(&p.counts)?, arr(&p.vertices)?, arr(&p.uvs)?)))
+    }
+
     fn __repr__(&self) -> String {
         format!(
             "Dataset(num_vertices={}, num_shapes={}, num_triangles={})",
@@ -316,6 +372,17 @@ fn build(
             other => PyLgiError(other),
         })?;
     Ok(Dataset { inner: Arc::new(d) })
+}
+
+/// A 1-D integer array as u32 indices (`lgi.InputError` naming `name` otherwise).
+fn index_vector(obj: &Bound<'_, PyAny>, name: &str) -> PyResult<Vec<u32>> {
+    let np = obj.py().import("numpy")?;
+    let arr = np.call_method1("asarray", (obj,))?;
+    let ndim: usize = arr.getattr("ndim")?.extract()?;
+    if ndim != 1 {
+        return Err(input_error(format!("{name}: expected a 1-D integer array")));
+    }
+    index_array(&arr.call_method1("reshape", ((-1i64, 1i64),))?, name, 1)
 }
 
 /// `(T, 3)` index rows, each index below `count` (`what` names the indexed element).

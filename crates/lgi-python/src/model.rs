@@ -24,9 +24,10 @@ impl Model {
     /// Builds a model (GIL released) with `config` (None: the defaults); `jaw_frame`
     /// (3, 3) is the jaw rig's rotation (columns: open, lateral, forward axes; None: identity);
     /// `jaw_bins` (edges over the jaw opening, radians) and `bin_overlap` bin the clouds of a
-    /// jaw model.
+    /// jaw model. `marker_names` (B unique names; None: `m000`, `m001`, …) and `units` (the
+    /// coordinates' length unit, e.g. `cm`; None: unknown) are kept with the model.
     #[staticmethod]
-    #[pyo3(signature = (dataset, markers_rest, config=None, jaw_pivot=None, jaw_weights=None, shape_theta=None, jaw_bins=None, bin_overlap=0.0, jaw_frame=None))]
+    #[pyo3(signature = (dataset, markers_rest, config=None, jaw_pivot=None, jaw_weights=None, shape_theta=None, jaw_bins=None, bin_overlap=0.0, jaw_frame=None, marker_names=None, units=None))]
     #[allow(clippy::too_many_arguments)]
     fn build(
         py: Python<'_>,
@@ -39,8 +40,11 @@ impl Model {
         jaw_bins: Option<&Bound<'_, PyAny>>,
         bin_overlap: f64,
         jaw_frame: Option<&Bound<'_, PyAny>>,
+        marker_names: Option<Vec<String>>,
+        units: Option<String>,
     ) -> PyResult<Model> {
         let markers = points(markers_rest, "markers_rest", None, false)?;
+        let names = marker_names.unwrap_or_else(|| lgi_core::default_marker_names(markers.len()));
         let cfg = config.map(|c| c.inner.clone()).unwrap_or_default();
         let data = dataset.inner.clone();
         if jaw_bins.is_some() && jaw_pivot.is_none() {
@@ -93,8 +97,12 @@ impl Model {
                 ))
             }
         };
+        let units = units.unwrap_or_default();
         let model = py
-            .detach(move || CoreModel::build_shared(data, &markers, &cfg, jaw))
+            .detach(move || {
+                CoreModel::build_shared(data, &markers, &cfg, jaw)
+                    .and_then(|m| m.with_labels(names, units))
+            })
             .map_err(PyLgiError)?;
         Ok(Model {
             inner: Arc::new(model),
@@ -418,6 +426,19 @@ impl Model {
         BuildConfig {
             inner: self.inner.config().clone(),
         }
+    }
+
+    /// Each marker's name (B); `m000`, `m001`, … when built without names.
+    #[getter]
+    fn marker_names(&self) -> Vec<String> {
+        self.inner.marker_names().to_vec()
+    }
+
+    /// The coordinates' length unit given at build (`cm`, `mm`, …); None when not given.
+    #[getter]
+    fn units(&self) -> Option<String> {
+        let u = self.inner.units();
+        (!u.is_empty()).then(|| u.to_string())
     }
 
     /// Marker rest positions (B, 3).

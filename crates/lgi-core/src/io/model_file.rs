@@ -2,6 +2,9 @@
 //! rebuild (dataset, markers, config, per-bundle clouds and tets). Everything cheap (grid
 //! indices, correspondences, sewing weights) is recomputed on load. A checksum over the payload
 //! turns truncation and corruption into a clear error instead of a wrong model.
+//!
+//! Versions: 2 (no jaw bins), 3 (jaw bins), 4 (this build: + marker names, unit, the neutral's
+//! source polygons). Older files still load: default names `m000…`, no unit, no polygons.
 
 use crate::cloud::BundleCloud;
 use crate::dataset::Dataset;
@@ -11,6 +14,7 @@ use crate::mesh::Mesh;
 use crate::model::{
     BinParts, BinPartsRef, BuildConfig, JawInput, Model, ModelParts, ModelPartsRef, PartsError,
 };
+use crate::polygons::Polygons;
 use crate::tets::Tet;
 use glam::{DMat3, DVec2, DVec3};
 use std::path::Path;
@@ -18,9 +22,11 @@ use std::sync::Arc;
 
 const MAGIC: &[u8; 8] = b"LGIMODEL";
 /// Format version written by this build; readers accept exactly the versions they know.
-pub const FORMAT_VERSION: u32 = 3;
-/// The previous version (no jaw bins), still read (as an unbinned model).
+pub const FORMAT_VERSION: u32 = 4;
+/// The oldest version read (no jaw bins: an unbinned model).
 const PREVIOUS_VERSION: u32 = 2;
+/// The first version with jaw bins (and the word-wise checksum).
+const BINS_VERSION: u32 = 3;
 const HEADER: usize = 8 + 4 + 8 + 8;
 
 /// FNV-1a 64 over bytes: the checksum of version 2 files (one multiply per byte, ~0.1 s for
@@ -194,11 +200,16 @@ fn to_tris(r: &Reader<'_>, v: Vec<u32>) -> Result<Vec<[u32; 3]>> {
 
 /// Writes `model` to `path` (overwrites).
 pub fn save(model: &Model, path: &Path) -> Result<()> {
-    write(&model.parts(), path)
+    write(&model.parts(), model.marker_names(), model.units(), path)
 }
 
-/// Writes a model's parts to `path`.
-fn write(parts: &ModelPartsRef<'_>, path: &Path) -> Result<()> {
+/// Writes a model's parts and labels to `path`.
+fn write(
+    parts: &ModelPartsRef<'_>,
+    marker_names: &[String],
+    units: &str,
+    path: &Path,
+) -> Result<()> {
     let mut w = Writer::default();
     let c = parts.config;
     for x in [
@@ -288,6 +299,22 @@ fn write(parts: &ModelPartsRef<'_>, path: &Path) -> Result<()> {
             }
         }
     }
+    // Version 4: the labels section (marker names, unit), then the neutral's source polygons
+    // (0 = none; 1 = counts, vertex indices, UV indices).
+    w.u64(marker_names.len() as u64);
+    for n in marker_names {
+        w.str(n);
+    }
+    w.str(units);
+    match parts.dataset.polygons() {
+        None => w.u64(0),
+        Some(p) => {
+            w.u64(1);
+            w.u32s(p.counts.iter().copied());
+            w.u32s(p.vertices.iter().copied());
+            w.u32s(p.uvs.iter().copied());
+        }
+    }
     let payload = w.0;
     let mut out = Vec::with_capacity(HEADER + payload.len());
     out.extend_from_slice(MAGIC);
@@ -309,9 +336,9 @@ pub fn load(path: &Path) -> Result<Model> {
         return Err(bad("not an lgi model file (bad magic)"));
     }
     let version = u32::from_le_bytes([bytes[8], bytes[9], bytes[10], bytes[11]]);
-    if version != FORMAT_VERSION && version != PREVIOUS_VERSION {
+    if !(PREVIOUS_VERSION..=FORMAT_VERSION).contains(&version) {
         return Err(bad(&format!(
-            "format version {version}; this lgi reads versions {PREVIOUS_VERSION} and \
+            "format version {version}; this lgi reads versions {PREVIOUS_VERSION} to \
              {FORMAT_VERSION}: rebuild the model"
         )));
     }
@@ -392,7 +419,7 @@ pub fn load(path: &Path) -> Result<Model> {
         .map(|_| r.str())
         .collect::<Result<Vec<_>>>()?;
     let displacements = r.f32s()?;
-    let dataset = Dataset::new(mesh, displacements, names).map_err(|e| bad(&e.to_string()))?;
+    let mut dataset = Dataset::new(mesh, displacements, names).map_err(|e| bad(&e.to_string()))?;
     let markers = {
         let v = r.f64s()?;
         to_vec3s(&r, v)?
@@ -433,7 +460,7 @@ pub fn load(path: &Path) -> Result<Model> {
         _ => return Err(r.err("unknown jaw section")),
     };
     let bins = match version {
-        PREVIOUS_VERSION => None,
+        v if v < BINS_VERSION => None,
         _ => match r.u64()? {
             0 => None,
             1 => {
@@ -448,6 +475,28 @@ pub fn load(path: &Path) -> Result<Model> {
             }
             _ => return Err(r.err("unknown jaw bins section")),
         },
+    };
+    let labels = if version >= 4 {
+        let n = r.len(8)?;
+        let names = (0..n).map(|_| r.str()).collect::<Result<Vec<_>>>()?;
+        let units = r.str()?;
+        dataset = match r.u64()? {
+            0 => dataset,
+            1 => {
+                let polygons = Polygons {
+                    counts: r.u32s()?,
+                    vertices: r.u32s()?,
+                    uvs: r.u32s()?,
+                };
+                dataset
+                    .with_polygons(polygons)
+                    .map_err(|e| bad(&e.to_string()))?
+            }
+            _ => return Err(r.err("unknown polygons section")),
+        };
+        Some((names, units))
+    } else {
+        None
     };
     if r.at != payload.len() {
         return Err(bad("trailing bytes after the last section"));
@@ -467,10 +516,16 @@ pub fn load(path: &Path) -> Result<Model> {
         markers_rest: markers,
         bins: built,
     };
-    Model::from_parts(parts).map_err(|e| match e {
+    let model = Model::from_parts(parts).map_err(|e| match e {
         PartsError::Inconsistent(m) => bad(&m),
         PartsError::Build(e) => e,
-    })
+    })?;
+    match labels {
+        None => Ok(model),
+        Some((names, units)) => model
+            .with_labels(names, units)
+            .map_err(|e| bad(&e.to_string())),
+    }
 }
 
 /// One bin's clouds and tets, bundle after bundle.
@@ -557,6 +612,107 @@ mod tests {
             z.push(0);
             assert_ne!(checksum(&z), h, "padded {n}");
         }
+    }
+
+    /// A wavy n×n grid of quads (UVs = xy) with smooth shapes, its quads kept as polygons.
+    fn quad_patch(n: usize) -> Dataset {
+        let mut positions = Vec::new();
+        let mut uvs = Vec::new();
+        for y in 0..n {
+            for x in 0..n {
+                let (u, v) = (x as f64 / (n - 1) as f64, y as f64 / (n - 1) as f64);
+                positions.push(DVec3::new(u, v, 0.1 * (3.0 * u).sin() * (2.0 * v).cos()));
+                uvs.push(DVec2::new(u, v));
+            }
+        }
+        let (mut triangles, mut polygons) = (Vec::new(), Polygons::default());
+        for y in 0..n - 1 {
+            for x in 0..n - 1 {
+                let a = (y * n + x) as u32;
+                let q = [a, a + 1, a + n as u32 + 1, a + n as u32];
+                triangles.push([q[0], q[1], q[2]]);
+                triangles.push([q[0], q[2], q[3]]);
+                polygons.push(&q, Some(&q));
+            }
+        }
+        let mesh = Mesh {
+            positions: positions.clone(),
+            uv_triangles: triangles.clone(),
+            triangles,
+            uvs,
+        };
+        let shapes = (0..5)
+            .map(|k| {
+                let f = k as f64 + 1.0;
+                let pos = positions
+                    .iter()
+                    .map(|p| *p + DVec3::new(0.0, 0.0, 0.05 * (f * p.x + 0.3 * f * p.y).sin()))
+                    .collect();
+                (format!("s{k}"), pos)
+            })
+            .collect();
+        Dataset::from_shape_positions(mesh, shapes)
+            .unwrap()
+            .with_polygons(polygons)
+            .unwrap()
+    }
+
+    fn labelled_model() -> Model {
+        let data = quad_patch(9);
+        let markers: Vec<DVec3> = [(0.2, 0.2), (0.8, 0.2), (0.5, 0.5), (0.2, 0.8), (0.8, 0.8)]
+            .iter()
+            .map(|&(u, v)| DVec3::new(u, v, 0.1 * (3.0f64 * u).sin() * (2.0f64 * v).cos()))
+            .collect();
+        let names = ["chin", "lip_L", "nose", "brow_R", "brow_L"];
+        Model::build(&data, &markers, &BuildConfig::default())
+            .unwrap()
+            .with_labels(names.iter().map(|s| s.to_string()).collect(), "cm".into())
+            .unwrap()
+    }
+
+    #[test]
+    fn marker_names_unit_and_source_polygons_survive_save_and_load() {
+        let model = labelled_model();
+        let dir = std::env::temp_dir().join(format!("lgi-labels-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("m.lgi");
+        save(&model, &path).unwrap();
+        let back = load(&path).unwrap();
+        assert_eq!(back.marker_names(), model.marker_names());
+        assert_eq!(back.units(), "cm");
+        assert_eq!(back.dataset().polygons(), model.dataset().polygons());
+        assert_eq!(back.dataset().polygons().unwrap().num_faces(), 64);
+        std::fs::remove_dir_all(&dir).ok();
+    }
+
+    #[test]
+    fn a_version_3_file_loads_with_default_names_no_unit_and_no_polygons() {
+        let model = labelled_model();
+        let dir = std::env::temp_dir().join(format!("lgi-v3-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("m.lgi");
+        save(&model, &path).unwrap();
+        let bytes = std::fs::read(&path).unwrap();
+        // A version 3 file is a version 4 payload without its last section (the labels).
+        let p = model.dataset().polygons().unwrap();
+        let names: usize = model.marker_names().iter().map(|n| 8 + n.len()).sum();
+        let labels = 8 + names + 8 + 2 + 8 + 3 * 8 + 4 * (p.counts.len() + 2 * p.vertices.len());
+        let payload = &bytes[HEADER..bytes.len() - labels];
+        let mut v3 = Vec::new();
+        v3.extend_from_slice(MAGIC);
+        v3.extend_from_slice(&BINS_VERSION.to_le_bytes());
+        v3.extend_from_slice(&(payload.len() as u64).to_le_bytes());
+        v3.extend_from_slice(&checksum(payload).to_le_bytes());
+        v3.extend_from_slice(payload);
+        std::fs::write(&path, v3).unwrap();
+        let back = load(&path).unwrap();
+        assert_eq!(
+            back.marker_names(),
+            ["m000", "m001", "m002", "m003", "m004"]
+        );
+        assert_eq!(back.units(), "");
+        assert!(back.dataset().polygons().is_none());
+        std::fs::remove_dir_all(&dir).ok();
     }
 
     #[test]

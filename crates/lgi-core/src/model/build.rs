@@ -3,7 +3,7 @@
 //! loading (tet indices, alias groups, sewing weights, the bundles' jaw weights).
 
 use super::lookup::{lookup_sources, Lookup, LookupParts};
-use super::{BuildConfig, JawInput, JawSetup, Model};
+use super::{labels, BuildConfig, JawInput, JawSetup, Model};
 use crate::cloud::{build_cloud, BundleCloud};
 use crate::correspond::correspond;
 use crate::dataset::Dataset;
@@ -123,6 +123,7 @@ impl Model {
             lookups,
             neighbours,
             sewing,
+            labels: labels::Labels::unnamed(markers_rest.len()),
         })
     }
 }

@@ -26,6 +26,7 @@ use std::sync::Arc;
 mod build;
 mod config;
 mod frame;
+mod labels;
 pub mod lookup;
 mod parts;
 mod solve;
@@ -34,6 +35,7 @@ mod tests;
 
 pub use config::BuildConfig;
 pub use frame::{Frame, FrameInfo, FrameState};
+pub use labels::{default_marker_names, MAX_UNIT_LEN};
 pub use lookup::{LocalShapeId, Lookup, ShapeId};
 pub use parts::{BinParts, BinPartsRef, ModelParts, ModelPartsRef, PartsError};
 pub use solve::SolveOptions;
@@ -87,6 +89,8 @@ pub struct Model {
     neighbours: Vec<Vec<u32>>,
     /// The sewing weights: the full plan and the plans of missing-bundle sets.
     sewing: SewPlans,
+    /// Each marker's label (B) and the length unit of the coordinates (`labels.rs`).
+    labels: labels::Labels,
 }
 
 impl Model {

@@ -644,10 +644,13 @@ fn a_version_2_file_still_loads_as_an_unbinned_model() {
     let model = jaw_model(&data, &markers, rig, &thetas, None).unwrap();
     let path = std::env::temp_dir().join(format!("lgi-v2-{}.lgi", std::process::id()));
     crate::io::model_file::save(&model, &path).unwrap();
-    // Version 2 is version 3 without the trailing bins section (a u64 0 when unbinned).
+    // Version 2 is version 4 without its labels section (names, unit, a u64 0 for no
+    // polygons) and the bins section before it (a u64 0 when unbinned).
     let bytes = std::fs::read(&path).unwrap();
-    let payload = &bytes[28..bytes.len() - 8];
-    assert_eq!(&bytes[bytes.len() - 8..], &[0u8; 8]);
+    let names: usize = model.marker_names().iter().map(|n| 8 + n.len()).sum();
+    let end = bytes.len() - (8 + names + 8 + model.units().len() + 8);
+    let payload = &bytes[28..end - 8];
+    assert_eq!(&bytes[end - 8..end], &[0u8; 8]);
     let mut v2 = bytes[..8].to_vec();
     v2.extend_from_slice(&2u32.to_le_bytes());
     v2.extend_from_slice(&(payload.len() as u64).to_le_bytes());

@@ -1,0 +1,574 @@
+"""The file pipeline behind `lgi build` / `solve` / `export` / `info`: files in (a neutral and
+its shapes, a named marker layout, a take), files out (a model file, a USD point cache, an OBJ
+sequence, a solved `.npz`), and one-paragraph summaries of each kind of file. The readers and
+writers themselves are `lgi.takes` and `lgi.export`; the CLI only parses arguments and calls
+`build_file`, `solve_file`, `export_file` and `describe`. Error messages name the CLI's
+arguments and options (`--frames`, `MARKERS`), which these functions' parameters mirror."""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+
+from lgi import export, takes
+from lgi._lgi import BuildConfig, Dataset
+from lgi.errors import InputError, MarkerError
+from lgi.model import Model, estimate_marker_noise
+
+__all__ = [
+    "CHUNK_FRAMES",
+    "JAW_POSES",
+    "build_file",
+    "describe",
+    "export_file",
+    "frame_range",
+    "marker_noise",
+    "output_kind",
+    "read_dataset",
+    "solve_file",
+]
+
+CHUNK_FRAMES = 100
+"""Frames written per chunk (one progress step)."""
+
+JAW_POSES = ("auto", "fit", "track", "rest")
+"""`lgi solve --jaw`: `Model.solve`'s jaw modes for models with a rig ("rest" = None)."""
+
+Say = Callable[[str], None]
+
+
+def _silent(_message: str) -> None:
+    pass
+
+
+def existing_file(path: str, what: str) -> Path:
+    """An input file that exists and is not a folder (`what` names the argument)."""
+    p = Path(path)
+    if not p.exists():
+        raise InputError(f"{what} {path}: no such file")
+    if p.is_dir():
+        raise InputError(f"{what} {path}: is a folder, expected a file")
+    return p
+
+
+def output_file(path: str, what: str) -> Path:
+    """An output file path: not a folder, in a folder that exists (an old file is replaced)."""
+    p = Path(path)
+    if p.is_dir():
+        raise InputError(f"{what} {path}: is a folder, expected a file path")
+    if not p.parent.is_dir():
+        raise InputError(f"{what} {path}: the folder {p.parent} does not exist")
+    return p
+
+
+def not_an_input(out: Path, *inputs: str | os.PathLike[str]) -> None:
+    """Refuses an output path that is one of the command's inputs (nothing given is modified)."""
+    for i in inputs:
+        q = Path(i)
+        if q.exists() and q.resolve() == out.resolve():
+            raise InputError(f"--out {out}: is an input of the command ({i}); choose another path")
+
+
+def read_dataset(neutral: str, shapes: str) -> Dataset:
+    """NEUTRAL (.obj with SHAPES a folder of OBJs or a glob; .gltf/.glb/.npz holding its
+    shapes, SHAPES then '-' or the same file)."""
+    n = existing_file(neutral, "NEUTRAL")
+    suffix = n.suffix.lower()
+    if suffix in (".gltf", ".glb", ".npz"):
+        if shapes not in ("-", neutral) and Path(shapes) != n:
+            raise InputError(
+                f"SHAPES {shapes}: a {suffix} neutral holds its shapes "
+                f"({'morph targets' if suffix != '.npz' else 'the shapes array'}); pass '-'"
+            )
+        if suffix == ".npz":
+            return Dataset.from_npz(n)
+        return Dataset.from_gltf(n)
+    if suffix != ".obj":
+        raise InputError(f"NEUTRAL {neutral}: expected .obj, .gltf, .glb or .npz")
+    if shapes == "-":
+        return Dataset.from_obj(n)
+    s = Path(shapes)
+    if s.is_dir():
+        files = sorted(p for p in s.iterdir() if p.suffix.lower() == ".obj")
+        if not files:
+            raise InputError(f"SHAPES {shapes}: the folder holds no .obj files")
+        return Dataset.from_obj(n, files)
+    if s.suffix.lower() in (".gltf", ".glb"):
+        raise InputError(
+            f"SHAPES {shapes}: glTF morph targets come with their own neutral; "
+            f"pass the glTF as NEUTRAL and '-' as SHAPES"
+        )
+    if not any(c in shapes for c in "*?["):
+        if not s.exists():
+            raise InputError(f"SHAPES {shapes}: no such folder or file (or a glob pattern)")
+        return Dataset.from_obj(n, [s])
+    return Dataset.from_obj(n, shapes)
+
+
+def read_config(path: str | None) -> BuildConfig | None:
+    """`--config`: a JSON object of `BuildConfig` fields (None: the defaults)."""
+    if path is None:
+        return None
+    p = existing_file(path, "--config")
+    try:
+        fields = json.loads(p.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as e:
+        raise InputError(f"--config {path}: not a JSON file: {e}") from None
+    if not isinstance(fields, dict):
+        raise InputError(f"--config {path}: expected a JSON object of BuildConfig fields")
+    known = BuildConfig().to_dict()
+    unknown = sorted(set(fields) - set(known))
+    if unknown:
+        raise InputError(
+            f"--config {path}: unknown fields {unknown} (BuildConfig has {', '.join(known)})"
+        )
+    try:
+        return BuildConfig(**fields)
+    except InputError as e:
+        raise InputError(f"--config {path}: {e}") from None
+
+
+def frame_range(spec: str | None, count: int) -> slice:
+    """`--frames a:b` (0-based take frames, b exclusive; either end may be left out)."""
+    if spec is None:
+        return slice(0, count)
+    parts = spec.split(":")
+    try:
+        if len(parts) != 2:
+            raise ValueError
+        a = int(parts[0]) if parts[0].strip() else 0
+        b = int(parts[1]) if parts[1].strip() else count
+    except ValueError:
+        raise InputError(f"--frames {spec!r}: expected START:END (e.g. 0:100)") from None
+    if not 0 <= a < b <= count:
+        raise InputError(
+            f"--frames {spec}: the take has frames 0:{count}; START must be < END within it"
+        )
+    return slice(a, b)
+
+
+def marker_noise(spec: str | None, frames: np.ndarray) -> float | None:
+    """`--marker-noise`: a sigma >= 0 (model units), 'auto' (estimated from `frames`) or
+    'none'/None (exact interpolation)."""
+    if spec is None or spec == "none":
+        return None
+    if spec == "auto":
+        return estimate_marker_noise(frames)
+    try:
+        sigma = float(spec)
+    except ValueError:
+        raise InputError(
+            f"--marker-noise {spec!r}: expected a number (data units), 'auto' or 'none'"
+        ) from None
+    if not np.isfinite(sigma) or sigma < 0:
+        raise InputError(f"--marker-noise {spec}: must be a finite number >= 0")
+    return sigma
+
+
+def output_kind(path: str) -> str:
+    """`--out`'s format by suffix: 'usd', 'obj' (a sequence) or 'npz'."""
+    suffix = Path(path).suffix.lower()
+    kinds = {".usd": "usd", ".usdc": "usd", ".usda": "usd", ".npz": "npz", ".obj": "obj"}
+    if suffix not in kinds:
+        raise InputError(
+            f"--out {path}: unknown output format {suffix or '(no suffix)'!r}; "
+            "use .usd/.usdc/.usda (point cache), .obj (OBJ sequence) or .npz"
+        )
+    return kinds[suffix]
+
+
+def frame_rate(given: float | None, take_fps: float | None, kind: str) -> float | None:
+    """`--fps`, else the take's rate; a USD output needs one."""
+    if given is not None:
+        if not np.isfinite(given) or given <= 0:
+            raise InputError(f"--fps {given}: must be a positive number")
+        return float(given)
+    if take_fps is None and kind == "usd":
+        raise InputError("the take has no frame rate; pass --fps for the USD time codes")
+    return take_fps
+
+
+class _Sink:
+    """Where solved frames go, chunk after chunk: a USD cache (`export.UsdCache`), OBJ files,
+    or float32 copies gathered for one solved-take `.npz` (written at `close`)."""
+
+    def __init__(
+        self,
+        kind: str,
+        out: Path,
+        topo: export.Topology,
+        *,
+        names: list[str],
+        fps: float | None,
+        start: int,
+        units: str | None,
+    ) -> None:
+        self.kind, self.out, self.topo, self.names = kind, out, topo, names
+        self.fps, self.start, self.units = fps, start, units
+        self.next = start
+        self.usd: export.UsdCache | None = None
+        if kind == "usd":
+            if fps is None:
+                raise InputError("a USD point cache needs a frame rate (--fps)")
+            self.usd = export.UsdCache(out, topo, fps=fps, units=units, start=start)
+        self.parts: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None]] = []
+
+    def add(
+        self,
+        vertices: np.ndarray,
+        residuals: np.ndarray,
+        missing: np.ndarray,
+        jaw_theta: np.ndarray | None,
+    ) -> None:
+        if self.usd is not None:
+            self.usd.add(vertices, jaw_theta=jaw_theta, marker_residuals=residuals)
+        elif self.kind == "obj":
+            export.write_obj_sequence(
+                self.out.parent, self.topo, vertices, name=self.out.stem, start=self.next
+            )
+        else:
+            self.parts.append((vertices.astype(np.float32), residuals, missing, jaw_theta))
+        self.next += int(vertices.shape[0])
+
+    def close(self) -> Path:
+        if self.usd is not None:
+            return self.usd.close()
+        if self.kind == "obj":
+            return self.out.parent / f"{self.out.stem}.NNNN.obj"
+        jaws = [p[3] for p in self.parts if p[3] is not None]
+        return export.write_result_npz(
+            self.out,
+            self.topo,
+            np.concatenate([p[0] for p in self.parts]),
+            np.concatenate([p[1] for p in self.parts]),
+            np.concatenate([p[2] for p in self.parts]),
+            self.names,
+            fps=self.fps,
+            start=self.start,
+            units=self.units,
+            jaw_theta=np.concatenate(jaws) if len(jaws) == len(self.parts) else None,
+        )
+
+
+def write_output(
+    kind: str,
+    out: Path,
+    topo: export.Topology,
+    vertices: np.ndarray,
+    *,
+    residuals: np.ndarray,
+    missing: np.ndarray,
+    names: list[str],
+    fps: float | None,
+    start: int,
+    units: str | None,
+    jaw_theta: np.ndarray | None,
+    quiet: bool = False,
+) -> Path:
+    """Writes solved frames as `kind` (`output_kind`) to `out`, `CHUNK_FRAMES` at a time with
+    a progress bar; returns the path written (`NAME.NNNN.obj` for a sequence)."""
+    from tqdm import tqdm
+
+    sink = _Sink(kind, out, topo, names=names, fps=fps, start=start, units=units)
+    n = vertices.shape[0]
+    with tqdm(total=n, desc=f"lgi write {kind}", unit="frame", disable=quiet, leave=False) as bar:
+        for a in range(0, n, CHUNK_FRAMES):
+            b = min(n, a + CHUNK_FRAMES)
+            sink.add(
+                vertices[a:b],
+                residuals[a:b],
+                missing[a:b],
+                None if jaw_theta is None else jaw_theta[a:b],
+            )
+            bar.update(b - a)
+    return sink.close()
+
+
+def describe(
+    path: str | os.PathLike[str], model: str | os.PathLike[str] | None = None
+) -> list[str]:
+    """`lgi info`: a few lines summarising a model (`.lgi`), a take, a solved `.npz` or a USD
+    file; for a take with `model` (`--model`), how its labels match the model's markers."""
+    path = existing_file(os.fspath(path), "FILE")
+    from lgi import takes
+
+    suffix = path.suffix.lower()
+    if suffix == ".lgi":
+        m = Model.load(path)
+        d = m.dataset
+        polys = d.polygons
+        faces = (
+            f"{polys[0].size} polygons ({np.asarray(d.triangles).shape[0]} triangles)"
+            if polys is not None
+            else f"{np.asarray(d.triangles).shape[0]} triangles"
+        )
+        names = m.marker_names
+        shown = ", ".join(names[:8]) + (", ..." if len(names) > 8 else "")
+        jaw_bins = m.jaw_bins
+        return [
+            f"model {path}",
+            f"  neutral: {d.num_vertices} vertices, {faces}, "
+            f"{'with' if np.asarray(d.uv_triangles).size else 'without'} UVs",
+            f"  shapes: {d.num_shapes}",
+            f"  markers: {m.num_bundles} ({shown})",
+            f"  units: {m.units or 'not given'}",
+            f"  jaw: {'none' if m.jaw_rig is None else 'rig'}"
+            + ("" if jaw_bins is None else f", {len(jaw_bins) - 1} bins"),
+            f"  face size (bounding-box diagonal): {m.diagonal:.6g}",
+        ]
+    if suffix == ".npz":
+        try:
+            with np.load(path, allow_pickle=False) as z:
+                files = set(z.files)
+        except Exception as e:  # not a zip, a pickled array, ...: numpy raises various classes
+            raise InputError(f"{path}: not a readable .npz archive: {e}") from None
+        if "neutral" in files and "triangles" in files:
+            d = Dataset.from_npz(path)
+            polys = d.polygons
+            faces = "no source polygons" if polys is None else f"{polys[0].size} polygons"
+            return [
+                f"dataset {path}",
+                f"  neutral: {d.num_vertices} vertices, "
+                f"{np.asarray(d.triangles).shape[0]} triangles, {faces}",
+                f"  shapes: {d.num_shapes}",
+            ]
+        if "vertices" in files:
+            r = export.read_result_npz(path)
+            return [
+                f"solved take {path}",
+                f"  frames: {r.vertices.shape[0]} from time code {r.start}, "
+                f"fps {r.fps if r.fps is not None else 'unknown'}",
+                f"  mesh: {r.vertices.shape[1]} vertices, {r.topology.num_faces} faces",
+                f"  markers: {len(r.marker_names)}, residual max {r.bundle_residuals.max():.3g}",
+                f"  units: {r.units or 'not given'}",
+            ]
+    if suffix in takes.TAKE_SUFFIXES:
+        raw = takes.read_raw(path)
+        miss = np.isnan(raw.points).any(axis=2)
+        shown = ", ".join(raw.labels[:8]) + (", ..." if len(raw.labels) > 8 else "")
+        return [
+            f"take {path}",
+            f"  frames: {raw.points.shape[0]} from frame {raw.first_frame}, "
+            f"fps {raw.fps if raw.fps is not None else 'unknown'}",
+            f"  markers: {len(raw.labels)} ({shown})",
+            f"  units: {raw.units or 'not given'}",
+            f"  missing samples: {100 * miss.mean():.1f}%",
+            *(
+                []
+                if model is None
+                else _matching(raw, Model.load(existing_file(os.fspath(model), "--model")))
+            ),
+        ]
+    if suffix in (".usd", ".usdc", ".usda"):
+        from pxr import Usd, UsdGeom
+
+        stage = Usd.Stage.Open(str(path))
+        if stage is None:
+            raise InputError(f"{path}: not a readable USD file")
+        lines = [
+            f"USD {path}",
+            f"  time codes: {stage.GetStartTimeCode():g} to {stage.GetEndTimeCode():g} "
+            f"at {stage.GetTimeCodesPerSecond():g} per second",
+            f"  metersPerUnit: {UsdGeom.GetStageMetersPerUnit(stage):g}",
+        ]
+        for prim in stage.Traverse():
+            if prim.IsA(UsdGeom.Mesh):
+                mesh = UsdGeom.Mesh(prim)
+                counts = mesh.GetFaceVertexCountsAttr().Get()
+                samples = mesh.GetPointsAttr().GetNumTimeSamples()
+                lines.append(f"  mesh {prim.GetPath()}: {len(counts)} faces, {samples} samples")
+        return lines
+    raise InputError(
+        f"{path}: unknown file kind {suffix or '(no suffix)'!r}; lgi info reads .lgi models, "
+        f"takes ({', '.join(takes.TAKE_SUFFIXES)}), solved .npz and USD files"
+    )
+
+
+def _matching(raw: takes.RawTake, model: Model) -> list[str]:
+    """How a take's labels meet a model's marker names (`lgi info TAKE --model MODEL`)."""
+    _, absent, unknown = takes.label_columns(raw, model.marker_names)
+    if not absent and not unknown:
+        return [f"  matches the model's {model.num_bundles} markers by name"]
+    out = []
+    if absent:
+        out.append(f"  model markers not in the take ({len(absent)}): {', '.join(absent)}")
+    if unknown:
+        out.append(f"  take labels not in the model ({len(unknown)}): {', '.join(unknown)}")
+    return out
+
+
+def build_file(
+    neutral: str | os.PathLike[str],
+    shapes: str,
+    markers: str | os.PathLike[str],
+    out: str | os.PathLike[str],
+    *,
+    config: str | os.PathLike[str] | None = None,
+    jaw: str = "auto",
+    units: str | None = None,
+    say: Say = _silent,
+) -> Path:
+    """`lgi build`: a model file `out` from `neutral` and `shapes` (`read_dataset`), the
+    layout CSV `markers` (`lgi.takes.read_layout`) and a JSON `config`; `jaw` is
+    `Model.build`'s: "auto" (a rig from the jaw shapes when the dataset has `jawOpen`) or
+    "none". The model keeps the layout's names and
+    `units`. Returns `out`."""
+    if jaw not in ("auto", "none"):
+        raise InputError(f"--jaw {jaw!r}: expected 'auto' or 'none'")
+    dest = output_file(os.fspath(out), "--out")
+    not_an_input(dest, neutral, shapes, markers, *([config] if config is not None else []))
+    cfg = read_config(None if config is None else os.fspath(config))
+    layout = takes.read_layout(existing_file(os.fspath(markers), "MARKERS"))
+    t0 = time.perf_counter()
+    data = read_dataset(os.fspath(neutral), shapes)
+    say(
+        f"read the neutral ({data.num_vertices} vertices) and {data.num_shapes} shapes "
+        f"({time.perf_counter() - t0:.1f} s)"
+    )
+    t0 = time.perf_counter()
+    say(f"building the model for {len(layout.names)} markers ...")
+    try:
+        model = Model.build(
+            data,
+            layout.positions,
+            cfg,
+            jaw="auto" if jaw == "auto" else None,
+            marker_names=layout.names,
+            units=units,
+        )
+    except MarkerError as e:
+        # The core counts markers; the user knows them by name.
+        found = re.match(r"marker (\d+)", str(e))
+        name = f" ({layout.names[int(found.group(1))]!r})" if found else ""
+        raise MarkerError(f"MARKERS {os.fspath(markers)}: {e}{name}") from None
+    model.save(dest)
+    rig = model.jaw_rig
+    say(
+        f"built in {time.perf_counter() - t0:.1f} s, "
+        + ("without a jaw rig" if rig is None else f"jaw pivot {np.round(rig.pivot, 3).tolist()}")
+    )
+    return dest
+
+
+def solve_file(
+    model: str | os.PathLike[str],
+    take: str | os.PathLike[str],
+    out: str | os.PathLike[str],
+    *,
+    noise: str | None = None,
+    frames: str | None = None,
+    fps: float | None = None,
+    allow_missing: bool = False,
+    take_units: str | None = None,
+    jaw: str = "auto",
+    chunk: int | None = None,
+    quiet: bool = False,
+    say: Say = _silent,
+) -> tuple[Path, int]:
+    """`lgi solve`: the take file solved with the model file, written by `out`'s suffix
+    (`output_kind`). `noise` is `--marker-noise` (a number, 'auto' or 'none'; 'auto' looks at
+    the whole range), `frames` is `--frames A:B`. By default the range is solved in one
+    `Model.solve` (frames prefer their predecessor's choices across the whole range), then
+    written chunk by chunk; `chunk` (`--chunk N`) solves and writes N frames at a time into
+    one reused buffer, so the solve's memory stays that of N frames (each chunk starts
+    without a previous frame to prefer). Returns the path written (the `NAME.NNNN.obj`
+    pattern for OBJ sequences) and the frame count."""
+    if chunk is not None and (isinstance(chunk, bool) or int(chunk) < 1):
+        raise InputError(f"--chunk {chunk}: must be a whole number of frames >= 1")
+    if jaw not in JAW_POSES:
+        raise InputError(f"--jaw {jaw!r}: expected one of {', '.join(JAW_POSES)}")
+    dest = output_file(os.fspath(out), "--out")
+    not_an_input(dest, model, take)
+    kind = output_kind(os.fspath(out))
+    m = Model.load(existing_file(os.fspath(model), "MODEL"))
+    t = takes.read(
+        existing_file(os.fspath(take), "TAKE"),
+        m.marker_names,
+        units=m.units,
+        take_units=take_units,
+        allow_missing=allow_missing,
+    )
+    if t.ignored:
+        say(f"left out {len(t.ignored)} labels unknown to the model: {', '.join(t.ignored)}")
+    rng = frame_range(frames, t.num_frames)
+    x = t.frames[rng]
+    rate = frame_rate(fps, t.fps, kind)
+    sigma = marker_noise(noise, x)
+    jaw_mode = None if m.jaw_rig is None or jaw == "rest" else jaw
+    missing = np.isnan(x).any(axis=2)
+    say(
+        f"{x.shape[0]} frames of {x.shape[1]} markers "
+        f"({100 * missing.mean():.1f}% samples missing)"
+        + ("" if sigma is None else f", marker noise {sigma:.4g}")
+    )
+    topo = export.topology(m.dataset)
+    start = t.first_frame + rng.start
+    if chunk is None:
+        res = m.solve(x, jaw=jaw_mode, marker_noise=sigma, quiet=quiet)
+        written = write_output(
+            kind,
+            dest,
+            topo,
+            res.vertices,
+            residuals=res.bundle_residuals,
+            missing=res.missing,
+            names=m.marker_names,
+            fps=rate,
+            start=start,
+            units=m.units,
+            jaw_theta=res.jaw_theta,
+            quiet=quiet,
+        )
+        return written, int(x.shape[0])
+    from tqdm import tqdm
+
+    n, size = int(x.shape[0]), int(chunk)
+    sink = _Sink(kind, dest, topo, names=m.marker_names, fps=rate, start=start, units=m.units)
+    buf = np.empty((min(size, n), m.num_vertices, 3))
+    with tqdm(total=n, desc="lgi solve", unit="frame", disable=quiet, leave=False) as bar:
+        for a in range(0, n, size):
+            b = min(n, a + size)
+            res = m.solve(x[a:b], jaw=jaw_mode, marker_noise=sigma, quiet=True, out=buf[: b - a])
+            sink.add(res.vertices, res.bundle_residuals, res.missing, res.jaw_theta)
+            bar.update(b - a)
+    return sink.close(), n
+
+
+def export_file(
+    result: str | os.PathLike[str],
+    out: str | os.PathLike[str],
+    *,
+    frames: str | None = None,
+    fps: float | None = None,
+    quiet: bool = False,
+) -> tuple[Path, int]:
+    """`lgi export`: a solved `.npz` (`lgi solve -o x.npz`) written again by `out`'s suffix,
+    optionally a frame range (`--frames A:B`) at another rate. Returns the path written and
+    the frame count."""
+    dest = output_file(os.fspath(out), "--out")
+    kind = output_kind(os.fspath(out))
+    src = existing_file(os.fspath(result), "RESULT")
+    not_an_input(dest, src)
+    r = export.read_result_npz(src)
+    rng = frame_range(frames, r.vertices.shape[0])
+    written = write_output(
+        kind,
+        dest,
+        r.topology,
+        r.vertices[rng],
+        residuals=r.bundle_residuals[rng],
+        missing=r.missing[rng],
+        names=r.marker_names,
+        fps=frame_rate(fps, r.fps, kind),
+        start=r.start + rng.start,
+        units=r.units,
+        jaw_theta=None if r.jaw_theta is None else r.jaw_theta[rng],
+        quiet=quiet,
+    )
+    return written, int(r.vertices[rng].shape[0])
