@@ -27,6 +27,9 @@ def main() -> None:
     ap.add_argument("--frames", type=int, default=200)
     ap.add_argument("--out", type=Path)
     ap.add_argument("--layouts", default="120,160:7,80:11")
+    ap.add_argument(
+        "--seeds", default="3", help="noise and dropout seeds, comma separated (a row each)"
+    )
     args = ap.parse_args()
     folder = ict.find(os.environ.get(ict.ENV))
     if folder is None:
@@ -43,41 +46,47 @@ def main() -> None:
                 data, n, seed, np.arange(ict.NARROW_FACE)
             )
     lines = [
-        "| recording | layout | sigma (cm) | held out | displacement interp. | blendshape fit | "
-        "lgi (paper: exact, tets, no jaw) | **lgi (recommended)** | lgi jaw-open frames | "
+        "| recording | layout | seed | sigma (cm) | held out | displacement interp. | "
+        "blendshape fit | lgi (paper: exact, tets, no jaw) | **lgi (recommended)** | "
+        "lgi jaw-open frames | "
         "best baseline jaw-open |",
-        "|---|---|---|---|---|---|---|---|---|---|",
+        "|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for rec in ict.livelinkface(os.environ.get(ict.ENV)):
         curves = read_livelinkface(rec)
         w = curves.for_dataset(data.names)
         w = w[:: max(1, w.shape[0] // args.frames)]
         for lname, markers in layouts.items():
-            for sigma in SIGMAS:
-                for hold in HOLDOUTS:
-                    t0 = time.perf_counter()
-                    take = make_capture(
-                        data, w, markers, sigma=sigma, dropout=0.02, holdout=hold, seed=3, jaw=jaw
+            cells = [
+                (seed, sigma, hold)
+                for seed in (int(x) for x in args.seeds.split(","))
+                for sigma in SIGMAS
+                for hold in HOLDOUTS
+            ]
+            for seed, sigma, hold in cells:
+                t0 = time.perf_counter()
+                take = make_capture(
+                    data, w, markers, sigma=sigma, dropout=0.02, holdout=hold, seed=seed, jaw=jaw
+                )
+                methods = evaluate.capture_methods(take.dataset, markers, sigma)
+                keys = dict(zip(methods, ("disp", "bsfit", "paper", "lgi"), strict=True))
+                rows = {
+                    keys[r["method"]]: r
+                    for r in evaluate.capture(
+                        methods, take.frames, take.truth, take.jaw_open, ict.skin()
                     )
-                    methods = evaluate.capture_methods(take.dataset, markers, sigma)
-                    keys = dict(zip(methods, ("disp", "bsfit", "paper", "lgi"), strict=True))
-                    rows = {
-                        keys[r["method"]]: r
-                        for r in evaluate.capture(
-                            methods, take.frames, take.truth, take.jaw_open, ict.skin()
-                        )
-                    }
-                    best = min(rows["disp"]["mean"], rows["bsfit"]["mean"])
-                    best_open = min(rows["disp"]["open_mean"], rows["bsfit"]["open_mean"])
-                    mark = "" if rows["lgi"]["mean"] <= best else " ✗"
-                    lines.append(
-                        f"| {rec.stem} ({take.frames.shape[0]} fr) | {lname} | {sigma} | "
-                        f"{int(hold * 100)} % | {rows['disp']['mean']:.4f} | "
-                        f"{rows['bsfit']['mean']:.4f} | {rows['paper']['mean']:.4f} | "
-                        f"**{rows['lgi']['mean']:.4f}**{mark} | {rows['lgi']['open_mean']:.4f} | "
-                        f"{best_open:.4f} |"
-                    )
-                    print(lines[-1], f"({time.perf_counter() - t0:.0f} s)", flush=True)
+                }
+                best = min(rows["disp"]["mean"], rows["bsfit"]["mean"])
+                best_open = min(rows["disp"]["open_mean"], rows["bsfit"]["open_mean"])
+                mark = "" if rows["lgi"]["mean"] <= best else " ✗"
+                lines.append(
+                    f"| {rec.stem} ({take.frames.shape[0]} fr) | {lname} | {seed} | {sigma} | "
+                    f"{int(hold * 100)} % | {rows['disp']['mean']:.4f} | "
+                    f"{rows['bsfit']['mean']:.4f} | {rows['paper']['mean']:.4f} | "
+                    f"**{rows['lgi']['mean']:.4f}**{mark} | {rows['lgi']['open_mean']:.4f} | "
+                    f"{best_open:.4f} |"
+                )
+                print(lines[-1], f"({time.perf_counter() - t0:.0f} s)", flush=True)
     text = "\n".join(lines) + "\n"
     if args.out:
         args.out.write_text(text)
