@@ -15,6 +15,7 @@
 
 mod augment;
 mod baselines;
+mod basis;
 mod choose;
 mod cloud;
 mod correspond;

@@ -78,6 +78,12 @@ impl FitPrior {
         }))
     }
 
+    /// The rank of the fit's low-rank form when its solver uses it
+    /// ([`BlendshapeSolver::low_rank`]).
+    pub fn low_rank(&self) -> Option<usize> {
+        self.solver.low_rank()
+    }
+
     /// Number of bundles B.
     pub fn num_bundles(&self) -> usize {
         self.rest.len()

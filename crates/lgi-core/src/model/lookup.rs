@@ -22,6 +22,7 @@
 //! [`Lookup::global_id`] and [`Lookup::local_id`] (and `localize`, which maps whole choices
 //! with the latter) are the only crossings between the first two.
 
+use crate::basis::ShapeBasis;
 use crate::choose::{alias_groups, AliasGroups, Choice};
 use crate::cloud::BundleCloud;
 use crate::dataset::Dataset;
@@ -35,6 +36,7 @@ use glam::DVec3;
 use rayon::prelude::*;
 use std::borrow::Cow;
 use std::sync::Arc;
+use std::sync::OnceLock;
 
 use super::JawInput;
 
@@ -74,9 +76,24 @@ pub struct Lookup {
     /// The global fit of this bin's shapes at the bundles (`None` without shapes): derived
     /// from `shape_positions`, not saved.
     pub(super) prior: Option<FitPrior>,
+    /// The basis the fit is sewn over (derived on first use, see [`Lookup::fit_basis`]).
+    pub(super) basis: OnceLock<Option<ShapeBasis>>,
 }
 
 impl Lookup {
+    /// The basis of the bin's shapes that the global fit is sewn over ([`ShapeBasis`]):
+    /// looked for on first use, and only when the fit's matrix has low rank (an augmented
+    /// dataset, whose in-betweens and sums are combinations of its shapes); `None` otherwise.
+    pub(super) fn fit_basis(&self) -> Option<&ShapeBasis> {
+        self.basis
+            .get_or_init(|| {
+                let low = self.prior.as_ref().is_some_and(|p| p.low_rank().is_some());
+                low.then(|| ShapeBasis::find(self.data.displacements(), self.data.num_shapes()))
+                    .flatten()
+            })
+            .as_ref()
+    }
+
     /// The bin's reference pose (`None` when the model is unbinned).
     pub fn reference(&self) -> Option<JawParams> {
         self.reference
@@ -206,6 +223,7 @@ impl Lookup {
         let prior = FitPrior::new(&part.shape_positions, b)?;
         Ok(Lookup {
             prior,
+            basis: OnceLock::new(),
             reference: src.reference,
             members: src.members,
             local_of,

@@ -110,6 +110,10 @@ pub(super) struct Prepared {
     pub(super) bin: usize,
     pub(super) fit: Option<FrameFit>,
     pub(super) offer_fit: bool,
+    /// The fit's weights re-expressed over the bin's shape basis for sewing (the same
+    /// displacement; [`Lookup::fit_basis`](super::lookup::Lookup::fit_basis)); empty: the
+    /// fit's own weights.
+    pub(super) blend: Vec<f64>,
     pub(super) corrections: Vec<f64>,
     /// The targets as given when noise-aware solving moved them (residuals are measured
     /// against what the user gave).
@@ -120,6 +124,7 @@ impl Prepared {
     /// The fit's weights per local shape id, empty without a fit on offer.
     fn fit_weights(&self) -> &[f64] {
         match &self.fit {
+            Some(_) if self.offer_fit && !self.blend.is_empty() => &self.blend,
             Some(f) if self.offer_fit => &f.weights,
             _ => &[],
         }
@@ -250,6 +255,7 @@ impl Model {
             bin,
             fit: None,
             offer_fit: false,
+            blend: Vec::new(),
             corrections: Vec::new(),
             given: None,
         })
@@ -291,6 +297,13 @@ impl Model {
                 .collect();
             prep.lookup = denoised;
             prep.given = Some(std::mem::replace(&mut prep.targets, targets));
+        }
+        if offer {
+            if let Some(basis) = self.lookups[prep.bin].fit_basis() {
+                let mut blend = vec![0.0];
+                blend.extend(basis.map(&fit.weights[1..]));
+                prep.blend = blend;
+            }
         }
         prep.fit = Some(fit);
         prep.offer_fit = offer;
@@ -764,6 +777,12 @@ impl Model {
         if options.fit || options.marker_noise.is_some() || refine {
             // Frames' fits are independent of each other: in parallel.
             let offer = options.fit && smooth_window <= 1;
+            if offer {
+                // Found once per bin, before the parallel loop rather than inside it.
+                self.lookups.iter().for_each(|lk| {
+                    lk.fit_basis();
+                });
+            }
             prepared.par_iter_mut().enumerate().try_for_each(|(f, p)| {
                 self.add_fit(p, offer, options.marker_noise, refine)
                     .map_err(|e| frame_context(e, f))
