@@ -9,6 +9,7 @@ from lgi._lgi import Dataset, __version__
 from lgi.errors import (
     DatasetError,
     DatasetFileError,
+    FileWriteError,
     InputError,
     LgiError,
     MarkerError,
@@ -22,6 +23,7 @@ __all__ = [
     "Dataset",
     "DatasetError",
     "DatasetFileError",
+    "FileWriteError",
     "InputError",
     "LgiError",
     "MarkerError",

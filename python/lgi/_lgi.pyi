@@ -12,14 +12,25 @@ __all__ = [
     "BlendshapeSolver",
     "BuildConfig",
     "Dataset",
+    "MAGNITUDE_LIMIT",
     "JawRig",
     "Model",
     "RbfInterpolator",
     "SolveOutput",
     "__version__",
+    "check_count",
+    "check_marker_frames",
 ]
 
 __version__: str
+MAGNITUDE_LIMIT: float
+
+def check_count(value: object, name: str) -> int:
+    """`value` as a count (an int >= 0); else `lgi.InputError` naming `name`."""
+
+def check_marker_frames(frames: ArrayLike, markers_rest: ArrayLike, diagonal: float) -> None:
+    """Raise `lgi.InputError` (naming frame and marker) for frames (F, B, 3) that break the
+    magnitude policy of every method."""
 
 _Path = str | os.PathLike[str]
 

@@ -13,6 +13,10 @@ class DatasetFileError(DatasetError, FileNotFoundError):
     """A dataset file is missing or unreadable."""
 
 
+class FileWriteError(LgiError, OSError):
+    """A file could not be written (missing directory, permissions, disk full)."""
+
+
 class InputError(LgiError, ValueError):
     """An argument has the wrong shape, dtype or value (message names the argument)."""
 
@@ -28,6 +32,7 @@ class ModelFormatError(LgiError):
 __all__ = [
     "DatasetError",
     "DatasetFileError",
+    "FileWriteError",
     "InputError",
     "LgiError",
     "MarkerError",

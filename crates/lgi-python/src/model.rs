@@ -4,7 +4,7 @@
 use crate::config::BuildConfig;
 use crate::convert::{flat_to_array, float_array, point_sets, points, points_to_array};
 use crate::dataset::Dataset;
-use crate::error::{input_error, internal_error, PyLgiError};
+use crate::error::{input_error, PyLgiError};
 use crate::jaw::{frame_from_array, JawRig};
 use glam::{DMat3, DVec3};
 use lgi_core::{JawBins, JawInput, JawParams, JawRig as CoreRig, Model as CoreModel, SolveOptions};
@@ -194,18 +194,41 @@ impl Model {
                     "out: the array is not writeable (read-only, or borrowed elsewhere): {e}"
                 ))
             })?;
-            let flat = rw.as_slice_mut().map_err(internal_error)?;
-            let out: &mut [DVec3] = bytemuck::try_cast_slice_mut(flat).map_err(internal_error)?;
-            py.detach(move || {
-                model.solve_sequence_with(&frames, thetas.as_deref(), &options, out, |f| {
-                    if let Some(cb) = &progress {
-                        Python::attach(|py| {
-                            let _ = cb.call1(py, (f,));
+            let flat = rw
+                .as_slice_mut()
+                .map_err(|e| input_error(format!("out: the array must be C-contiguous: {e}")))?;
+            let out: &mut [DVec3] = bytemuck::try_cast_slice_mut(flat).map_err(|e| {
+                input_error(format!(
+                    "out: the array's memory must be aligned to 8 bytes (a fresh np.empty is): {e}"
+                ))
+            })?;
+            let mut stopped: Option<PyErr> = None;
+            let solved = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+                py.detach(|| {
+                    model.solve_sequence_with(&frames, thetas.as_deref(), &options, out, |f| {
+                        // Ctrl-C and a failing callback stop the solve after this frame.
+                        let called = Python::attach(|py| {
+                            py.check_signals()?;
+                            match &progress {
+                                Some(cb) => cb.call1(py, (f,)).map(drop),
+                                None => Ok(()),
+                            }
                         });
-                    }
+                        if let Err(e) = called {
+                            stopped = Some(e);
+                            // The core's progress hook cannot fail: unwind out of the solve
+                            // with a private payload (resume_unwind runs no panic hook, so
+                            // nothing is printed) and raise the Python error below.
+                            std::panic::resume_unwind(Box::new(SolveStopped));
+                        }
+                    })
                 })
-            })
-            .map_err(PyLgiError)?
+            }));
+            match (solved, stopped) {
+                (_, Some(e)) => return Err(e),
+                (Ok(r), None) => r.map_err(PyLgiError)?,
+                (Err(panic), None) => std::panic::resume_unwind(panic),
+            }
         };
         let mut res = Vec::with_capacity(nf * b);
         let mut pos = Vec::with_capacity(nf * b * 3);
@@ -458,6 +481,9 @@ pub struct SolveOutput {
 }
 
 /// A caller's output array for `solve(out=...)`: float64, C-contiguous, writeable, of `shape`.
+/// The payload that unwinds a solve stopped by Ctrl-C or a failing progress callback.
+struct SolveStopped;
+
 fn output_array<'py>(
     o: &Bound<'py, PyAny>,
     shape: [usize; 3],

@@ -197,6 +197,12 @@ pub fn save(model: &Model, path: &Path) -> Result<()> {
     write(&model.parts(), path)
 }
 
+/// Writes model parts to `path` as [`save`] would: for tools and tests that craft files (a
+/// crafted file gets a valid checksum, so only [`load`]'s sanity check stands in its way).
+pub fn save_parts(parts: &ModelPartsRef<'_>, path: &Path) -> Result<()> {
+    write(parts, path)
+}
+
 /// Writes a model's parts to `path`.
 fn write(parts: &ModelPartsRef<'_>, path: &Path) -> Result<()> {
     let mut w = Writer::default();
@@ -295,11 +301,24 @@ fn write(parts: &ModelPartsRef<'_>, path: &Path) -> Result<()> {
     out.extend_from_slice(&(payload.len() as u64).to_le_bytes());
     out.extend_from_slice(&checksum(&payload).to_le_bytes());
     out.extend_from_slice(&payload);
-    std::fs::write(path, out).map_err(|e| LgiError::io(path, &e))
+    std::fs::write(path, out).map_err(|e| LgiError::write(path, &e))
 }
 
-/// Reads a model written by [`save`]; every inconsistency is `LgiError::ModelFormat`.
+/// Reads a model written by [`save`]; every inconsistency is `LgiError::ModelFormat`, and a
+/// model that loads passes [`Model::sanity_check`].
 pub fn load(path: &Path) -> Result<Model> {
+    // The sanity check runs before assembly; the guard is for what it does not foresee.
+    std::panic::catch_unwind(|| load_unguarded(path)).unwrap_or_else(|panic| {
+        let why = super::panic_message(panic.as_ref());
+        Err(LgiError::ModelFormat {
+            path: path.to_path_buf(),
+            message: format!("not a valid model (loading it failed: {why})"),
+        })
+    })
+}
+
+/// [`load`] without the panic guard.
+fn load_unguarded(path: &Path) -> Result<Model> {
     let bytes = std::fs::read(path).map_err(|e| LgiError::io(path, &e))?;
     let bad = |m: &str| LgiError::ModelFormat {
         path: path.to_path_buf(),
@@ -467,9 +486,16 @@ pub fn load(path: &Path) -> Result<Model> {
         markers_rest: markers,
         bins: built,
     };
+    // A file can carry a valid checksum and still be wrong (edited, then re-summed, or
+    // written by something else): its parts must pass every invariant of a built model before
+    // assembly, and whatever assembly still refuses is a format error too, not a user's.
+    parts
+        .as_parts_ref()
+        .sanity_check()
+        .map_err(|m| bad(&format!("not a valid model: {m}")))?;
     Model::from_parts(parts).map_err(|e| match e {
         PartsError::Inconsistent(m) => bad(&m),
-        PartsError::Build(e) => e,
+        PartsError::Build(e) => bad(&format!("not a valid model: {e}")),
     })
 }
 

@@ -8,6 +8,7 @@ use super::{Frame, FrameInfo, FrameState, LocalShapeId, Model};
 use crate::choose::{choose, Choice, ChoiceParams, FrameErrors, Scoring, Scratch, NO_TET};
 use crate::error::{LgiError, Result};
 use crate::jaw::JawParams;
+use crate::magnitude::Extent;
 use crate::prior::FrameFit;
 use crate::sew::{BundleTargets, Pieces};
 use crate::smooth::smooth_choices_in_bins;
@@ -187,6 +188,11 @@ impl Model {
                 "frame has {} bundles, the model has {b}",
                 targets.len()
             )));
+        }
+        let extent = Extent::new(&self.markers_rest, self.diagonal);
+        extent.check_frame(targets)?;
+        if let Some(t) = &jaw {
+            extent.check_jaw(t)?;
         }
         let mut present = Vec::with_capacity(b);
         let mut targets_clean = targets.to_vec();
