@@ -9,10 +9,10 @@ from numpy.typing import ArrayLike, NDArray
 from typing_extensions import NotRequired, Self, disjoint_base
 
 __all__ = [
+    "MAGNITUDE_LIMIT",
     "BlendshapeSolver",
     "BuildConfig",
     "Dataset",
-    "MAGNITUDE_LIMIT",
     "JawRig",
     "Model",
     "RbfInterpolator",

@@ -105,6 +105,17 @@ impl Extent {
         Ok(())
     }
 
+    /// Checks a marker noise (a distance, `None`: exact) against [`limit`](Self::limit).
+    pub fn check_marker_noise(&self, sigma: Option<f64>) -> Result<()> {
+        match sigma {
+            Some(s) if !within(s.abs(), self.limit()) => Err(LgiError::Input(format!(
+                "marker_noise {s:e} is beyond {MAGNITUDE_LIMIT} x the neutral's size ({:e})",
+                self.limit()
+            ))),
+            _ => Ok(()),
+        }
+    }
+
     /// Checks a jaw pose's translation against [`limit`](Self::limit) (its angles are
     /// bounded by [`JawParams::validate`]).
     pub fn check_jaw(&self, theta: &JawParams) -> Result<()> {

@@ -598,6 +598,7 @@ impl Model {
         on_frame: impl FnMut(usize),
     ) -> Result<Vec<FrameInfo>> {
         options.validate()?;
+        Extent::new(&self.markers_rest, self.diagonal).check_marker_noise(options.marker_noise)?;
         let (temporal, smooth_window) = (options.temporal, options.smooth_window);
         let nv = self.dataset.num_vertices();
         if vertices.len() != frames.len() * nv {
