@@ -334,13 +334,11 @@ def test_fuzzed_arguments_are_accepted_or_named_input_errors(
         if valid and 0 <= min_shapes < 2**64:
             if min_shapes <= 60:  # larger counts are legal too (all pairs), only slower
                 d.augmented(min_shapes)
-                _count("augmented", "accepted")
         else:
             with pytest.raises(lgi.InputError, match="min_shapes"):
                 d.augmented(min_shapes)
-            _count("augmented", "refused")
     except lgi.LgiError:
-        _count("augmented", "refused")
+        pass  # refused for the dataset (e.g. too few shapes to combine): named by the core
 
 
 CONFIG_VALUE = st.one_of(

@@ -2,7 +2,8 @@
 //! malformed, gives `Ok` with a valid result or the reader's own error, never a panic (not
 //! even one caught by a reader's guard), and a crafted model file with a valid checksum is a
 //! `ModelFormat` error or a model that passes `Model::sanity_check` and solves to finite
-//! vertices. `PROPTEST_CASES` sets the budget (scripts/fuzz.sh runs a long one); the
+//! vertices. `PROPTEST_CASES` sets the budget (scripts/fuzz.sh runs a long one, with
+//! `LGI_FUZZ_TALLY` naming a file that receives one `target outcome` line per input); the
 //! regression tests name the cases found by the reliability review (issue 14).
 
 use lgi_core::{
@@ -13,6 +14,21 @@ use proptest::prelude::*;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::OnceLock;
+
+/// Appends `target outcome` to the file `$LGI_FUZZ_TALLY` names (the campaign's counts).
+fn tally(target: &str, outcome: &str) {
+    use std::io::Write;
+    if let Some(path) = std::env::var_os("LGI_FUZZ_TALLY") {
+        let mut f = std::fs::OpenOptions::new()
+            .create(true)
+            .append(true)
+            .open(path)
+            .unwrap();
+        // One write per line: appends of parallel tests do not interleave.
+        f.write_all(format!("{target} {outcome}\n").as_bytes())
+            .unwrap();
+    }
+}
 
 fn scratch(name: &str) -> PathBuf {
     let dir = std::env::temp_dir().join(format!("lgi-fuzz-{}-{name}", std::process::id()));
@@ -160,35 +176,45 @@ fn gltf_case() -> impl Strategy<Value = GltfCase> {
             0usize..120,
             0u32..8,
         ),
+        prop::collection::vec(0usize..13, 0..4),
     )
         .prop_map(
-            |((pa, ua, ia, ta), (ic, it, pc, pt), (count, stride, offset, vl, mode))| GltfCase {
-                position_accessor: pa,
-                uv_accessor: ua,
-                index_accessor: ia,
-                target_accessor: ta,
-                index_component: ic,
-                index_type: it,
-                position_component: pc,
-                position_type: pt,
-                count,
-                stride,
-                offset,
-                view_length: vl,
-                mode,
+            |((pa, ua, ia, ta), (ic, it, pc, pt), (count, stride, offset, vl, mode), fields)| {
+                // A few fields fuzzed at a time, the others valid: most cases get past the
+                // first check and reach the later ones.
+                let mut case = GltfCase::valid();
+                for f in fields {
+                    match f {
+                        0 => case.position_accessor = pa,
+                        1 => case.uv_accessor = ua,
+                        2 => case.index_accessor = ia,
+                        3 => case.target_accessor = ta,
+                        4 => case.index_component = ic,
+                        5 => case.index_type = it,
+                        6 => case.position_component = pc,
+                        7 => case.position_type = pt,
+                        8 => case.count = count,
+                        9 => case.stride = stride,
+                        10 => case.offset = offset,
+                        11 => case.view_length = vl,
+                        _ => case.mode = mode,
+                    }
+                }
+                case
             },
         )
 }
 
 /// Reads a glTF and checks the reader's promise: `Ok` is a valid dataset, `Err` names the
 /// file, and no panic happened (not even one the reader's guard caught).
-fn check_gltf(dir: &Path, text: &str) -> Result<(), TestCaseError> {
+fn check_gltf(target: &str, dir: &Path, text: &str) -> Result<(), TestCaseError> {
     let p = fresh(dir, "gltf");
     std::fs::write(&p, text).unwrap();
     let name = p.file_name().unwrap().to_string_lossy().to_string();
     match read_gltf(&p) {
         Ok(d) => {
             prop_assert!(d.neutral().positions.iter().all(|x| x.is_finite()));
+            tally(target, "accepted");
         }
         Err(e) => {
             let msg = e.to_string();
@@ -197,8 +223,10 @@ fn check_gltf(dir: &Path, text: &str) -> Result<(), TestCaseError> {
                 !msg.contains("the glTF parser failed"),
                 "a panic reached the guard (an accessor check is missing): {msg}"
             );
+            tally(target, "refused");
         }
     }
+    let _ = std::fs::remove_file(&p);
     Ok(())
 }
 
@@ -268,7 +296,7 @@ proptest! {
     fn gltf_with_fuzzed_accessors_never_panics(case in gltf_case()) {
         static DIR: OnceLock<PathBuf> = OnceLock::new();
         let dir = DIR.get_or_init(|| scratch("gltf-fuzz"));
-        check_gltf(dir, &case.json())?;
+        check_gltf("gltf-accessors", dir, &case.json())?;
     }
 
     #[test]
@@ -283,7 +311,7 @@ proptest! {
             // Digits and structural characters: edits that keep the JSON mostly parseable.
             bytes[i] = b"0123456789,:{}[]\"-e."[b as usize % 20];
         }
-        check_gltf(dir, &String::from_utf8_lossy(&bytes))?;
+        check_gltf("gltf-bytes", dir, &String::from_utf8_lossy(&bytes))?;
     }
 }
 
@@ -312,6 +340,9 @@ fn obj_line() -> impl Strategy<Value = String> {
         prop::collection::vec(num, 0..4).prop_map(|v| format!("vt {}", v.join(" "))),
         prop::collection::vec(idx, 0..6).prop_map(|v| format!("f {}", v.join(" "))),
         Just("# comment".to_string()),
+        Just("f 1/1 2/2 3/3".to_string()),
+        Just("f 3/3 2/2 1/1".to_string()),
+        Just("v 0.5 0.5 0.25".to_string()),
         Just("o thing".to_string()),
         Just(String::new()),
     ]
@@ -322,13 +353,20 @@ proptest! {
     fn obj_of_random_lines_never_panics_and_ok_is_a_valid_mesh(
         lines in prop::collection::vec(obj_line(), 0..24)
     ) {
-        let text = format!("v 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nvt 1 0\nvt 0 1\n{}\n", lines.join("\n"));
+        let text = format!(
+            "v 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nvt 1 0\nvt 0 1\nf 1/1 2/2 3/3\n{}\n",
+            lines.join("\n")
+        );
         match parse_obj(&text, Path::new("fuzz.obj")) {
             Ok(mesh) => {
                 prop_assert!(mesh.validate("fuzz.obj").is_ok());
                 prop_assert!(mesh.positions.iter().all(|p| p.is_finite()));
+                tally("obj-lines", "accepted");
             }
-            Err(e) => prop_assert!(e.to_string().contains("fuzz.obj"), "{e}"),
+            Err(e) => {
+                prop_assert!(e.to_string().contains("fuzz.obj"), "{e}");
+                tally("obj-lines", "refused");
+            }
         }
     }
 }
@@ -437,7 +475,7 @@ fn checksum(bytes: &[u8]) -> u64 {
 
 /// Loads `bytes` and checks the loader's promise: a `ModelFormat` error, or a model that
 /// passes its sanity check and solves its rest markers to finite vertices.
-fn check_model_bytes(dir: &Path, bytes: &[u8]) -> Result<(), TestCaseError> {
+fn check_model_bytes(target: &str, dir: &Path, bytes: &[u8]) -> Result<(), TestCaseError> {
     let p = fresh(dir, "lgi");
     std::fs::write(&p, bytes).unwrap();
     match load_model(&p) {
@@ -448,6 +486,7 @@ fn check_model_bytes(dir: &Path, bytes: &[u8]) -> Result<(), TestCaseError> {
                 Ok(f) => prop_assert!(f.vertices.iter().all(|v| v.is_finite())),
                 Err(e) => prop_assert!(matches!(e, LgiError::Input(_)), "{e:?}"),
             }
+            tally(target, "loaded");
         }
         Err(e) => {
             prop_assert!(matches!(e, LgiError::ModelFormat { .. }), "{e:?}");
@@ -455,6 +494,7 @@ fn check_model_bytes(dir: &Path, bytes: &[u8]) -> Result<(), TestCaseError> {
                 !e.to_string().contains("loading it failed"),
                 "a panic reached the loader's guard: {e}"
             );
+            tally(target, "refused");
         }
     }
     let _ = std::fs::remove_file(&p);
@@ -598,7 +638,7 @@ proptest! {
             bytes[HEADER + i..HEADER + i + 8].copy_from_slice(&w);
         }
         resum(&mut bytes);
-        check_model_bytes(dir, &bytes)?;
+        check_model_bytes("model-words", dir, &bytes)?;
     }
 
     #[test]
@@ -615,7 +655,7 @@ proptest! {
         bytes[12..20].copy_from_slice(&len.to_le_bytes());
         resum(&mut bytes);
         if bytes != *base {
-            check_model_bytes(dir, &bytes)?;
+            check_model_bytes("model-cut", dir, &bytes)?;
         }
     }
 }
