@@ -294,3 +294,13 @@ def test_saving_to_a_full_device_says_cannot_write(small) -> None:  # type: igno
         pytest.skip("no /dev/full on this system")
     with pytest.raises(lgi.FileWriteError, match="cannot write /dev/full"):
         small[2].save("/dev/full")
+
+
+def test_obj_vertex_beyond_the_coordinate_bound_is_a_dataset_error_naming_the_file(
+    tmp_path: Path,
+) -> None:
+    # Found by the fuzz campaign: the dataset's magnitude check did not name the OBJ file.
+    p = tmp_path / "far.obj"
+    p.write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1e31\nf 1 2 3\nf 1 2 4\n")
+    with pytest.raises(lgi.DatasetError, match=r"far\.obj.*vertex 3"):
+        lgi.Dataset.from_obj(p)

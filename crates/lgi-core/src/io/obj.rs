@@ -71,7 +71,11 @@ impl Dataset {
                 })?;
             named.push((name, r?));
         }
-        Dataset::from_shape_positions(mesh, named)
+        // The dataset's own checks (magnitudes, names) name shape and vertex; add the file.
+        Dataset::from_shape_positions(mesh, named).map_err(|e| match e {
+            LgiError::Dataset(m) => LgiError::Dataset(format!("{}: {m}", neutral.display())),
+            other => other,
+        })
     }
 }
 
