@@ -199,17 +199,20 @@ pub fn count(obj: &Bound<'_, PyAny>, name: &str) -> PyResult<usize> {
         .and_then(|k| k.extract::<String>())
         .is_ok_and(|k| k == "i" || k == "u")
         && obj.getattr("ndim").and_then(|n| n.extract::<usize>()).ok() == Some(0);
+    let shown = || obj.repr().map_or_else(|_| "?".into(), |r| r.to_string());
     if !(is_int || is_numpy_int) {
         return Err(input_error(format!(
             "{name}: expected an integer >= 0, got {}",
-            obj.repr().map_or_else(|_| "?".into(), |r| r.to_string())
+            shown()
         )));
     }
-    let value: i128 = obj.call_method0("__int__")?.extract().unwrap_or(i128::MAX);
-    usize::try_from(value).map_err(|_| {
+    // Beyond i128 the extraction fails: out of range like any other too-large value.
+    let value: Option<i128> = obj.call_method0("__int__")?.extract().ok();
+    value.and_then(|v| usize::try_from(v).ok()).ok_or_else(|| {
         input_error(format!(
-            "{name}: expected an integer from 0 to {}, got {value}",
-            usize::MAX
+            "{name}: expected an integer from 0 to {}, got {}",
+            usize::MAX,
+            shown()
         ))
     })
 }
