@@ -46,7 +46,7 @@ def main() -> None:
     out: dict[str, dict[str, str]] = {}
 
     name, data, markers = bench.load_workload()
-    model = lgi.Model.build(data, markers)
+    model = lgi.Model.build(data, markers, jaw=None)
     frames = bench.make_frames(model, data, args.frames)
     out["workload"] = {"name": name}
     out["temporal"] = digests(model.solve(frames, quiet=True, fit=False))
@@ -56,7 +56,7 @@ def main() -> None:
 
     s = make_sample(0)
     sdata = sample_dataset(s)
-    smodel = lgi.Model.build(sdata, s.markers_rest)
+    smodel = lgi.Model.build(sdata, s.markers_rest, jaw=None)
     out["sample"] = digests(smodel.solve(s.performance, quiet=True, fit=False))
     text = json.dumps(out, indent=1)
     print(text)

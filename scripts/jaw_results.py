@@ -81,7 +81,7 @@ def binned_results(s, data, rig, theta, unbinned, jawed) -> None:  # type: ignor
 def main() -> None:
     s = make_sample(0)
     data = sample_dataset(s)
-    plain = lgi.Model.build(data, s.markers_rest)
+    plain = lgi.Model.build(data, s.markers_rest, jaw=None)
     rig, theta = estimate_rig(s.neutral, s.shapes, s.names, triangles=s.triangles)
     jawed = lgi.Model.build(data, s.markers_rest, jaw=rig, shape_theta=theta)
     r0 = plain.solve(s.performance, quiet=True)

@@ -65,7 +65,7 @@ def main() -> None:
 
     def row(axis: str, size: object, data: lgi.Dataset, markers: np.ndarray, frames=None) -> None:  # type: ignore[no-untyped-def]
         t = time.perf_counter()
-        m = lgi.Model.build(data, markers)
+        m = lgi.Model.build(data, markers, jaw=None)
         tb = time.perf_counter() - t
         fr = make_frames(m, data, args.frames) if frames is None else frames
         ms = per_frame_ms(m, fr)

@@ -52,7 +52,7 @@ def main() -> None:
     t_load = time.perf_counter() - t0
     markers = ict_data.load_markers(args.data)
     t0 = time.perf_counter()
-    model = lgi.Model.build(data, markers)
+    model = lgi.Model.build(data, markers, jaw=None)
     t_build = time.perf_counter() - t0
     stats = model.core.bundle_stats()
     out: list[str] = []
@@ -119,7 +119,7 @@ def main() -> None:
         t0 = time.perf_counter()
         for k, name in enumerate(data.names):
             sub = without_shapes(data, [k])
-            m = lgi.Model.build(sub, markers)
+            m = lgi.Model.build(sub, markers, jaw=None)
             r = m.solve(frames[k : k + 1], temporal=False, quiet=True)
             err = np.linalg.norm(r.vertices[0, :SKIN] - meshes[k, :SKIN], axis=1)
             disp = np.linalg.norm(data.shapes[k, :SKIN], axis=1).mean()

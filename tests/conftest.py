@@ -45,9 +45,10 @@ def ict_markers(ict_path: Path) -> np.ndarray:
 
 @pytest.fixture(scope="session")
 def ict_model(ict_dataset, ict_markers):  # type: ignore[no-untyped-def]
+    """The paper's model of ICT: no jaw rig (`jaw=None`), so its solves are the paper's."""
     import lgi
 
-    return lgi.Model.build(ict_dataset, ict_markers)
+    return lgi.Model.build(ict_dataset, ict_markers, jaw=None)
 
 
 @pytest.fixture(scope="session")
@@ -66,6 +67,7 @@ def sample_dataset(sample):  # type: ignore[no-untyped-def]
 
 @pytest.fixture(scope="session")
 def sample_model(sample, sample_dataset):  # type: ignore[no-untyped-def]
+    """The paper's model of the sample: no jaw rig (`jaw=None`)."""
     import lgi
 
-    return lgi.Model.build(sample_dataset, sample.markers_rest)
+    return lgi.Model.build(sample_dataset, sample.markers_rest, jaw=None)

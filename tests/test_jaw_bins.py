@@ -151,7 +151,7 @@ def test_bad_jaw_bins_raise_input_error(
 
 def test_jaw_bins_need_a_jaw_and_distinct_openings(sample, sample_dataset, rig) -> None:  # type: ignore[no-untyped-def]
     with pytest.raises(lgi.InputError, match="needs a jaw rig"):
-        lgi.Model.build(sample_dataset, sample.markers_rest, jaw_bins=2)
+        lgi.Model.build(sample_dataset, sample.markers_rest, jaw=None, jaw_bins=2)
     with pytest.raises(lgi.InputError, match="same jaw opening"):
         lgi.Model.build(
             sample_dataset,

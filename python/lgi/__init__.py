@@ -4,7 +4,7 @@ Every marker ("bundle") looks up local geometry that really occurred in a datase
 shapes; the pieces are sewn so that the surface passes exactly through every marker.
 """
 
-from lgi import jaw
+from lgi import camera, jaw, stabilize
 from lgi._lgi import Dataset, __version__
 from lgi.errors import (
     DatasetError,
@@ -31,6 +31,8 @@ __all__ = [
     "ModelFormatError",
     "SolveResult",
     "__version__",
+    "camera",
     "estimate_marker_noise",
     "jaw",
+    "stabilize",
 ]

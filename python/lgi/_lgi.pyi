@@ -9,6 +9,8 @@ from numpy.typing import ArrayLike, NDArray
 from typing_extensions import NotRequired, Self, disjoint_base
 
 __all__ = [
+    "FIT_L2",
+    "FIT_PENALTY",
     "MAGNITUDE_LIMIT",
     "BlendshapeSolver",
     "BuildConfig",
@@ -23,6 +25,8 @@ __all__ = [
 ]
 
 __version__: str
+FIT_L2: float
+FIT_PENALTY: float
 MAGNITUDE_LIMIT: float
 
 def check_count(value: object, name: str) -> int:
@@ -184,6 +188,8 @@ class SolveOutput:
     def marker_corrections(self) -> NDArray[np.float64]: ...
     @property
     def fit_weights(self) -> NDArray[np.float64] | None: ...
+    @property
+    def jaw_theta(self) -> NDArray[np.float64] | None: ...
 
 # The dicts the inspection methods return, key by key (they exist only in this stub).
 class _BundleStats(TypedDict):
@@ -255,10 +261,11 @@ class Model:
         out: NDArray[np.float64] | None = None,
         fit: bool | None = None,
         marker_noise: float | None = None,
+        refine_jaw: bool = False,
     ) -> SolveOutput:
         """Solves (F, B, 3) frames (vertices into `out` if given); ``fit`` offers the global
         fit as a candidate (None: exactly when ``marker_noise`` is given), ``marker_noise``
-        (data units) solves noise-aware."""
+        (data units) solves noise-aware, ``refine_jaw`` refines ``jaw_theta`` per frame."""
     def bundle_positions(self, meshes: ArrayLike) -> NDArray[np.float64]:
         """(F, V, 3) meshes -> (F, B, 3) bundle surface positions."""
     def bundle_stats(self) -> _BundleStats:

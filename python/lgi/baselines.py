@@ -146,8 +146,8 @@ class BlendshapeFit:
         self,
         dataset: Dataset,
         markers_rest: ArrayLike,
-        penalty: float = 10.0,
-        l2: float = 1e-4,
+        penalty: float = _lgi.FIT_PENALTY,
+        l2: float = _lgi.FIT_L2,
         surface_tolerance: float = 0.02,
     ) -> None:
         self._s = _Surface(dataset, markers_rest, surface_tolerance)
@@ -215,7 +215,7 @@ class LgiRbf:
         sigma: float | None = None,
     ) -> None:
         cfg = config or BuildConfig()
-        self.model = Model.build(dataset, markers_rest, cfg)
+        self.model = Model.build(dataset, markers_rest, cfg, jaw=None)
         self._s = _Surface(dataset, markers_rest, cfg.surface_tolerance)
         self._shapes = np.asarray(dataset.shapes, dtype=np.float64)
         self._shapes_v = np.ascontiguousarray(self._shapes.transpose(1, 0, 2))  # (V, S, 3)

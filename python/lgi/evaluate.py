@@ -8,6 +8,7 @@ import csv
 import os
 import time
 from collections.abc import Callable, Mapping, Sequence
+from pathlib import Path
 from typing import Any, Protocol
 
 import numpy as np
@@ -16,7 +17,7 @@ from numpy.typing import ArrayLike, NDArray
 from lgi import _lgi
 from lgi._lgi import Dataset
 from lgi.dataset import sample_dataset, without_shapes
-from lgi.model import SolveResult
+from lgi.model import Model, SolveResult
 
 F64 = NDArray[np.float64]
 Row = dict[str, Any]
@@ -259,13 +260,80 @@ def default_methods(dataset: Dataset, markers: ArrayLike) -> dict[str, Solver]:
     }
 
 
+class Recommended:
+    """LGI's recommended path as a compared method: `model.solve(frames, marker_noise=sigma)`
+    on a model built with defaults (`sigma` None: the paper's exact mode)."""
+
+    def __init__(self, model: Model, marker_noise: float | None) -> None:
+        self.model, self.marker_noise = model, marker_noise
+
+    def solve(self, frames: ArrayLike, *, temporal: bool = True, quiet: bool = True) -> SolveResult:
+        return self.model.solve(
+            frames, temporal=temporal, quiet=quiet, marker_noise=self.marker_noise
+        )
+
+
+def capture_methods(dataset: Dataset, markers: ArrayLike, sigma: float) -> dict[str, Solver]:
+    """The methods of the capture protocol: the two baselines, LGI in the paper's exact mode
+    (no jaw rig, no fit: tets only) and LGI's recommended path (defaults, `marker_noise`)."""
+    from lgi.baselines import BlendshapeFit, DisplacementInterpolation
+
+    return {
+        DisplacementInterpolation.label: DisplacementInterpolation(dataset, markers),
+        BlendshapeFit.label: BlendshapeFit(dataset, markers),
+        "LGI (paper)": Recommended(Model.build(dataset, markers, jaw=None), None),
+        "LGI": Recommended(Model.build(dataset, markers), sigma),
+    }
+
+
+def capture_protocol(
+    dataset: Dataset,
+    markers: ArrayLike,
+    recordings: Sequence[str | os.PathLike[str]],
+    *,
+    sigma: float,
+    holdout: float,
+    jaw_rigid: ArrayLike,
+    region: ArrayLike | None = None,
+    frames: int = 200,
+    dropout: float = 0.02,
+    seed: int = 3,
+) -> list[Row]:
+    """The capture protocol: each Live Link Face recording (`lgi.takes.read_livelinkface`,
+    subsampled to about `frames` frames) drives `dataset`, its jaw-open shape turning about the
+    hinge fitted to the `jaw_rigid` vertices (`lgi.capture.HingeJaw`); markers carry noise
+    `sigma` and `dropout`; a `holdout` fraction of the shapes is kept from the methods
+    (`lgi.capture.make_capture`). Rows per recording and method ("recording: method")."""
+    from lgi.capture import HingeJaw, make_capture
+    from lgi.takes import read_livelinkface
+
+    hinge = HingeJaw.fit(dataset, jaw_rigid)
+    rows: list[Row] = []
+    for rec in recordings:
+        w = read_livelinkface(rec).for_dataset(dataset.names)
+        w = w[:: max(1, w.shape[0] // max(1, frames))]
+        take = make_capture(
+            dataset, w, markers, sigma=sigma, dropout=dropout, holdout=holdout, seed=seed, jaw=hinge
+        )
+        methods = capture_methods(take.dataset, markers, sigma)
+        for row in capture(methods, take.frames, take.truth, take.jaw_open, region):
+            row["method"] = f"{Path(rec).stem}: {row['method']}"
+            rows.append(row)
+    return rows
+
+
 def run_protocol(
-    data: str, protocol: str, out: str | os.PathLike[str], ict_dir: str | os.PathLike[str] | None
+    data: str,
+    protocol: str,
+    out: str | os.PathLike[str],
+    ict_dir: str | os.PathLike[str] | None,
+    *,
+    sigma: float = 0.05,
+    holdout: float = 0.0,
 ) -> list[Row]:
     """Runs `protocol` on `data` ("sample", or "ict" read from the folder `ict_dir`) and writes
-    results.md and results.csv into `out`."""
-    from pathlib import Path
-
+    results.md and results.csv into `out`. `sigma` and `holdout` are the capture protocol's
+    (ICT with the Live Link Face recordings beside it)."""
     from lgi import ict
     from lgi.errors import InputError
     from lgi.sample import make_sample
@@ -290,7 +358,25 @@ def run_protocol(
         region = ict.skin()
     else:
         raise InputError(f"unknown data '{data}' (sample or ict)")
-    if protocol == "loo":
+    if protocol == "capture":
+        if data != "ict" or ict_dir is None:
+            raise InputError("the capture protocol needs --data ict")
+        recordings = ict.livelinkface(Path(ict_dir).parent)
+        if not recordings:
+            raise InputError(
+                f"the capture protocol needs Live Link Face recordings in "
+                f"{Path(ict_dir).parent / 'livelinkface'}"
+            )
+        rows = capture_protocol(
+            ds,
+            markers,
+            recordings,
+            sigma=sigma,
+            holdout=holdout,
+            jaw_rigid=ict.lower_teeth(),
+            region=region,
+        )
+    elif protocol == "loo":
         rows = leave_one_out(ds, markers, default_methods, region=region)
     else:
         methods = default_methods(ds, markers)

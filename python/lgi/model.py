@@ -7,7 +7,9 @@ defined there once)."""
 from __future__ import annotations
 
 import os
+import warnings
 from dataclasses import dataclass
+from functools import cached_property
 from typing import Any
 
 import numpy as np
@@ -16,7 +18,7 @@ from numpy.typing import ArrayLike, NDArray
 from lgi import _lgi
 from lgi._lgi import BuildConfig, Dataset
 from lgi.errors import InputError
-from lgi.jaw import JawRig, track_jaw
+from lgi.jaw import JawRig, estimate_rig, track_jaw
 
 
 @dataclass(frozen=True)
@@ -151,7 +153,7 @@ class Model:
         markers_rest: ArrayLike,
         config: BuildConfig | None = None,
         *,
-        jaw: JawRig | None = None,
+        jaw: JawRig | str | None = "auto",
         shape_theta: ArrayLike | None = None,
         jaw_bins: int | ArrayLike | None = None,
         bin_overlap: float = 0.0,
@@ -169,7 +171,20 @@ class Model:
         opening lies in its range widened by `bin_overlap` (radians) on both sides, re-posed
         to the bin's middle opening; each frame uses the bin of its jaw opening (keeping the
         previous frame's bin while the opening stays in its widened range). None (default):
-        one set of clouds with every shape."""
+        one set of clouds with every shape.
+
+        `jaw="auto"` (default): a dataset with a `jawOpen` shape gets the rig
+        `lgi.jaw.estimate_rig` finds in its jaw shapes (a warning and no rig when it finds
+        none), so `solve` turns the jaw as a rotation rather than blending it linearly
+        (docs/results.md measures what it gives); `jaw=None` builds without a rig."""
+        if isinstance(jaw, str):
+            if jaw != "auto":
+                raise InputError(f"jaw must be 'auto', a JawRig or None, got {jaw!r}")
+            if shape_theta is not None:
+                raise InputError("shape_theta goes with a JawRig, not jaw='auto'")
+            jaw, shape_theta = _auto_rig(dataset)
+            if jaw is None and jaw_bins is not None:
+                raise InputError("jaw_bins: the dataset has no jawOpen shape to bin by")
         if jaw is None:
             if shape_theta is not None:
                 raise InputError("shape_theta was given without a jaw rig")
@@ -254,7 +269,7 @@ class Model:
         frames: ArrayLike,
         *,
         temporal: bool = True,
-        jaw: str | ArrayLike | None = None,
+        jaw: str | ArrayLike | None = "auto",
         smooth_window: int = 0,
         quiet: bool = False,
         out: NDArray[np.float64] | None = None,
@@ -266,10 +281,14 @@ class Model:
         order and each prefers the previous frame's choices; `temporal=False` treats frames as
         independent (e.g. one frame per dataset shape) and solves them in parallel.
 
-        `jaw` (models built with a jaw rig): `"track"` estimates each frame's jaw pose from the
-        markers the jaw carries (`lgi.jaw.track_jaw`), an (F, 3) array gives the poses, None
-        solves at the rest pose. The poses used are in `result.jaw_theta`; with jaw bins
-        (`Model.build(jaw_bins=...)`) the bin each frame used is in `result.jaw_bin`.
+        `jaw` (models built with a jaw rig): `"auto"` (default) and `"fit"` start each frame's
+        jaw pose from its global blendshape fit (the shapes' poses weighted by their fitted
+        weights) and refine it to the pose whose jaw-unskinned markers the dataset explains
+        best (Gauss-Newton in the core); `"track"` fits the markers the jaw carries rigidly
+        (`lgi.jaw.track_jaw`; biased where lips and chin move with other shapes); an (F, 3)
+        array gives the poses; None solves at the rest pose. Without a rig, `"auto"` is None.
+        The poses used are in `result.jaw_theta`; with jaw bins (`Model.build(jaw_bins=...)`)
+        the bin each frame used is in `result.jaw_bin`.
 
         `smooth_window` > 1 averages each marker's shape weights over that many frames
         (centred) before sewing, in the jaw-unskinned space so jaw motion is kept; markers are
@@ -297,6 +316,8 @@ class Model:
         if arr.ndim == 2:
             arr = arr[None]
         theta = self._jaw_theta(arr, jaw)
+        # A pose from the fit is refined in the core, in the jaw's unskinned space.
+        refine = theta is not None and isinstance(jaw, str) and jaw in ("auto", "fit")
         total = int(arr.shape[0]) if arr.ndim == 3 else 0
         with _progress_bar(total, "lgi solve", quiet) as bar:
             res = self._core.solve(
@@ -308,13 +329,14 @@ class Model:
                 out=out,
                 fit=None if fit is None else bool(fit),
                 marker_noise=None if marker_noise is None else _noise(marker_noise),
+                refine_jaw=refine,
             )
         return SolveResult(
             vertices=res.vertices,
             bundle_residuals=res.bundle_residuals,
             bundle_positions=res.bundle_positions,
             missing=res.missing,
-            jaw_theta=theta,
+            jaw_theta=res.jaw_theta,
             jaw_bin=None if theta is None else res.jaw_bin,
             marker_corrections=res.marker_corrections,
             fit_weights=res.fit_weights,
@@ -330,20 +352,55 @@ class Model:
     def _jaw_theta(
         self, frames: NDArray[Any], jaw: str | ArrayLike | None
     ) -> NDArray[np.float64] | None:
+        if isinstance(jaw, str) and jaw == "auto":
+            jaw = None if self._core.jaw() is None else "fit"
         if jaw is None:
             return None
         j, rig = self._core.jaw(), self.jaw_rig
         if j is None or rig is None:
             raise InputError("jaw: this model was built without a jaw rig")
         if isinstance(jaw, str):
+            if jaw == "fit":
+                return self._fit_theta(frames, j["shape_theta"])
             if jaw != "track":
-                raise InputError(f"jaw must be 'track', an (F, 3) array or None, got {jaw!r}")
+                raise InputError(
+                    f"jaw must be 'auto', 'fit', 'track', an (F, 3) array or None, got {jaw!r}"
+                )
             rest = self.bundle_positions(self.dataset.neutral)
             return track_jaw(rig, rest, j["bundle_weights"], frames)
         theta = np.asarray(jaw, dtype=np.float64)
         if theta.shape != (frames.shape[0], 3):
             raise InputError(f"jaw: expected shape ({frames.shape[0]}, 3), got {theta.shape}")
         return theta
+
+    @cached_property
+    def _rest_fit(self) -> tuple[_lgi.BlendshapeSolver, NDArray[np.float64]]:
+        """The global blendshape fit of the dataset as given (jaw not unskinned) at the
+        bundles, with the constants of the core's fit (`lgi._lgi.FIT_L2`, `FIT_PENALTY`), and
+        the bundles' rest positions."""
+        data = self.dataset
+        rest = self.bundle_positions(data.neutral)
+        shapes = self.bundle_positions(data.neutral[None] + data.shapes) - rest[None]
+        a = shapes.reshape(shapes.shape[0], -1).T.copy()
+        scale = float(np.mean(np.sum(a**2, axis=0))) or 1.0
+        return _lgi.BlendshapeSolver(a, _lgi.FIT_L2 * scale, _lgi.FIT_PENALTY * scale), rest
+
+    def _fit_theta(
+        self, frames: NDArray[Any], shape_theta: NDArray[np.float64]
+    ) -> NDArray[np.float64]:
+        """Each frame's jaw pose from its global blendshape fit: the shapes' poses weighted by
+        their fitted weights (in [0, 1]). The fit explains the markers with every shape at
+        once, so the jaw markers' non-rigid motion (lips, chin) does not bend the pose, as it
+        does a rigid fit of the jaw markers alone (`jaw="track"`)."""
+        solver, rest = self._rest_fit
+        fr = np.asarray(frames, dtype=np.float64)
+        if fr.ndim != 3 or fr.shape[1:] != rest.shape:
+            raise InputError(f"frames: expected shape (F, {rest.shape[0]}, 3), got {fr.shape}")
+        # Infinite rows are left out here; the core's solve rejects them, naming frame and
+        # bundle.
+        fr = np.where(np.isinf(fr).any(axis=2, keepdims=True), np.nan, fr)
+        w, _ = solver.solve((fr - rest[None]).reshape(fr.shape[0], -1))
+        return np.asarray(np.clip(w, 0.0, 1.0) @ shape_theta, dtype=np.float64)
 
     def bundle_positions(self, meshes: ArrayLike) -> NDArray[np.float64]:
         """Marker surface positions (F, B, 3) on meshes (F, V, 3) or (V, 3) -> (B, 3)."""
@@ -354,3 +411,16 @@ class Model:
 
     def __repr__(self) -> str:
         return f"Model(num_bundles={self.num_bundles}, num_vertices={self.num_vertices})"
+
+
+def _auto_rig(dataset: Dataset) -> tuple[JawRig | None, NDArray[np.float64] | None]:
+    """The rig `Model.build(jaw="auto")` uses: `estimate_rig` on the dataset's jaw shapes, or
+    none when it has no `jawOpen` shape (or no rigid jaw is found in it: then a warning)."""
+    if "jawOpen" not in dataset.names:
+        return None, None
+    try:
+        rig, theta = estimate_rig(dataset.neutral, dataset.shapes, dataset.names)
+    except InputError as e:
+        warnings.warn(f"jaw='auto': no jaw rig ({e}); building without one", stacklevel=3)
+        return None, None
+    return rig, np.asarray(theta, dtype=np.float64)

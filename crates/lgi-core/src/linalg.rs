@@ -1,6 +1,7 @@
 //! Dense LU factorisation with partial pivoting for the small B×B systems of the residual pass
-//! (B = number of bundles, ~100–300). glam has no general solver and nalgebra would be a heavy
-//! dependency for one routine.
+//! (B = number of bundles, ~100–300), and the Cholesky factorisation of the blendshape fit's
+//! normal equations. glam has no general solver and nalgebra would be a heavy dependency for
+//! two routines.
 
 use crate::error::{LgiError, Result};
 
@@ -83,6 +84,41 @@ impl Lu {
         }
         x
     }
+}
+
+/// Lower Cholesky factor of the row-major `n × n` symmetric matrix `g`; a pivot that is not
+/// positive is an [`LgiError::Input`] (shapes linearly dependent at the markers).
+pub fn cholesky(n: usize, mut g: Vec<f64>) -> Result<Vec<f64>> {
+    for j in 0..n {
+        let d = g[j * n + j] - (0..j).map(|k| g[j * n + k] * g[j * n + k]).sum::<f64>();
+        if d.is_nan() || d <= 0.0 {
+            return Err(LgiError::Input(format!(
+                "blendshape normal matrix is not positive definite at shape {j} \
+                 (shapes linearly dependent at the markers? use l2 > 0)"
+            )));
+        }
+        let d = d.sqrt();
+        g[j * n + j] = d;
+        for i in (j + 1)..n {
+            let s = g[i * n + j] - (0..j).map(|k| g[i * n + k] * g[j * n + k]).sum::<f64>();
+            g[i * n + j] = s / d;
+        }
+    }
+    Ok(g)
+}
+
+/// Solves `L Lᵀ x = b` with `l` from [`cholesky`].
+pub fn cholesky_solve(n: usize, l: &[f64], b: &[f64]) -> Vec<f64> {
+    let mut y = b.to_vec();
+    for i in 0..n {
+        let s: f64 = (0..i).map(|k| l[i * n + k] * y[k]).sum();
+        y[i] = (y[i] - s) / l[i * n + i];
+    }
+    for i in (0..n).rev() {
+        let s: f64 = ((i + 1)..n).map(|k| l[k * n + i] * y[k]).sum();
+        y[i] = (y[i] - s) / l[i * n + i];
+    }
+    y
 }
 
 #[cfg(test)]

@@ -15,6 +15,10 @@ use pyo3::prelude::*;
 #[pymodule]
 fn _lgi(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
+    // The global fit's ridge and box penalty (relative to the mean squared column norm), for
+    // the Python side's fits of the same kind (jaw poses, the blendshape baseline's defaults).
+    m.add("FIT_L2", lgi_core::FIT_L2)?;
+    m.add("FIT_PENALTY", lgi_core::FIT_PENALTY)?;
     m.add_class::<dataset::Dataset>()?;
     m.add_class::<config::BuildConfig>()?;
     m.add_class::<jaw::JawRig>()?;

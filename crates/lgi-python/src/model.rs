@@ -152,8 +152,9 @@ impl Model {
     /// (and is returned as `vertices`) instead of a new one. `fit` offers every bundle the
     /// frame's global blendshape fit beside its tets (None: exactly when `marker_noise` is
     /// given); `marker_noise` (data units) solves noise-aware (None: every marker
-    /// interpolated as given).
-    #[pyo3(signature = (frames, progress=None, temporal=true, jaw_theta=None, smooth_window=0, out=None, fit=None, marker_noise=None))]
+    /// interpolated as given); `refine_jaw` refines each frame's `jaw_theta` to the pose the
+    /// dataset's fit explains best (the poses used are `jaw_theta` of the output).
+    #[pyo3(signature = (frames, progress=None, temporal=true, jaw_theta=None, smooth_window=0, out=None, fit=None, marker_noise=None, refine_jaw=false))]
     #[allow(clippy::too_many_arguments)]
     fn solve<'py>(
         &self,
@@ -166,8 +167,10 @@ impl Model {
         out: Option<&Bound<'py, PyAny>>,
         fit: Option<bool>,
         marker_noise: Option<f64>,
+        refine_jaw: bool,
     ) -> PyResult<SolveOutput> {
-        let options = SolveOptions::new(temporal, smooth_window, fit, marker_noise);
+        let mut options = SolveOptions::new(temporal, smooth_window, fit, marker_noise);
+        options.refine_jaw = refine_jaw;
         let b = self.inner.num_bundles();
         let frames = point_sets(frames, "frames", ("frame", "bundle"), Some(b), true)?;
         let thetas: Option<Vec<JawParams>> = match jaw_theta {
@@ -243,6 +246,11 @@ impl Model {
         // Every frame has a fit or none has (no fit asked for, or a dataset without shapes).
         let mut fit_weights = Some(Vec::with_capacity(nf * ns));
         let bins: Vec<i64> = solved.iter().map(|fr| fr.bin as i64).collect();
+        let poses: Option<Vec<f64>> = solved
+            .iter()
+            .map(|fr| fr.theta.map(|t| t.to_array()))
+            .collect::<Option<Vec<_>>>()
+            .map(|t| t.into_iter().flatten().collect());
         for fr in &solved {
             res.extend_from_slice(&fr.residuals);
             match fr.corrections.len() {
@@ -292,6 +300,10 @@ impl Model {
                 .unbind(),
             fit_weights: match fit_weights {
                 Some(w) => Some(flat_to_array(py, w, &[nf, ns])?.into_any().unbind()),
+                None => None,
+            },
+            jaw_theta: match poses.filter(|_| nf > 0) {
+                Some(t) => Some(flat_to_array(py, t, &[nf, 3])?.into_any().unbind()),
                 None => None,
             },
         })
@@ -478,12 +490,15 @@ pub struct SolveOutput {
     /// (F, S) float64: each frame's global fit weights per dataset shape; None without a fit.
     #[pyo3(get)]
     fit_weights: Option<Py<PyAny>>,
+    /// (F, 3) float64: the jaw pose each frame was solved at; None without poses.
+    #[pyo3(get)]
+    jaw_theta: Option<Py<PyAny>>,
 }
 
-/// A caller's output array for `solve(out=...)`: float64, C-contiguous, writeable, of `shape`.
 /// The payload that unwinds a solve stopped by Ctrl-C or a failing progress callback.
 struct SolveStopped;
 
+/// A caller's output array for `solve(out=...)`: float64, C-contiguous, writeable, of `shape`.
 fn output_array<'py>(
     o: &Bound<'py, PyAny>,
     shape: [usize; 3],

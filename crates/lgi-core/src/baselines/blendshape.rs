@@ -4,7 +4,11 @@
 //! iteration solves it exactly in a few steps.
 
 use crate::error::{LgiError, Result};
+use crate::linalg::{cholesky, cholesky_solve};
 use rayon::prelude::*;
+
+mod low_rank;
+use low_rank::LowRank;
 
 /// Result of one frame's fit.
 #[derive(Debug, Clone, PartialEq)]
@@ -30,42 +34,11 @@ pub struct BlendshapeSolver {
     // Cholesky factor (the first step of every complete frame).
     full_gram: Vec<f64>,
     full: Vec<f64>,
+    /// The same equations in the span of A's rows, when its rank is low (`low_rank`).
+    low_rank: Option<LowRank>,
 }
 
 const MAX_ITERATIONS: usize = 100;
-
-/// Lower Cholesky factor of the row-major `n × n` symmetric matrix `g`.
-fn cholesky(n: usize, mut g: Vec<f64>) -> Result<Vec<f64>> {
-    for j in 0..n {
-        let d = g[j * n + j] - (0..j).map(|k| g[j * n + k] * g[j * n + k]).sum::<f64>();
-        if d.is_nan() || d <= 0.0 {
-            return Err(LgiError::Input(format!(
-                "blendshape normal matrix is not positive definite at shape {j} \
-                 (shapes linearly dependent at the markers? use l2 > 0)"
-            )));
-        }
-        let d = d.sqrt();
-        g[j * n + j] = d;
-        for i in (j + 1)..n {
-            let s = g[i * n + j] - (0..j).map(|k| g[i * n + k] * g[j * n + k]).sum::<f64>();
-            g[i * n + j] = s / d;
-        }
-    }
-    Ok(g)
-}
-
-fn cholesky_solve(n: usize, l: &[f64], b: &[f64]) -> Vec<f64> {
-    let mut y = b.to_vec();
-    for i in 0..n {
-        let s: f64 = (0..i).map(|k| l[i * n + k] * y[k]).sum();
-        y[i] = (y[i] - s) / l[i * n + i];
-    }
-    for i in (0..n).rev() {
-        let s: f64 = ((i + 1)..n).map(|k| l[k * n + i] * y[k]).sum();
-        y[i] = (y[i] - s) / l[i * n + i];
-    }
-    y
-}
 
 impl BlendshapeSolver {
     /// `a` is row-major `rows × shapes`; `l2` and `penalty` are absolute, non-negative.
@@ -94,9 +67,15 @@ impl BlendshapeSolver {
             penalty,
             full_gram: Vec::new(),
             full: Vec::new(),
+            low_rank: None,
         };
         me.full_gram = me.gram(&vec![true; rows]);
         me.full = cholesky(shapes, me.full_gram.clone())?;
+        let mut plain = me.full_gram.clone();
+        for i in 0..shapes {
+            plain[i * shapes + i] -= l2;
+        }
+        me.low_rank = LowRank::new(&me.a, rows, shapes, &plain, l2)?;
         Ok(me)
     }
 
@@ -108,6 +87,12 @@ impl BlendshapeSolver {
     /// Number of rows R.
     pub fn num_rows(&self) -> usize {
         self.rows
+    }
+
+    /// The rank of the normal equations' low-rank form, when the solver uses it (a matrix of
+    /// rank at most half its shapes, e.g. an augmented dataset's).
+    pub fn low_rank(&self) -> Option<usize> {
+        self.low_rank.as_ref().map(LowRank::rank)
     }
 
     fn gram(&self, present: &[bool]) -> Vec<f64> {
@@ -150,7 +135,19 @@ impl BlendshapeSolver {
     /// Errors: wrong length or infinite targets, a singular system, or no convergence within
     /// 100 iterations ([`LgiError::Input`]).
     pub fn solve(&self, target: &[f64]) -> Result<BlendshapeSolution> {
-        let (s, rows) = (self.shapes, self.rows);
+        Ok(self.solve_with_derivatives(target, &[])?.0)
+    }
+
+    /// [`solve`](Self::solve), and for each of `directions` (R values each, a change of the
+    /// target; rows missing from `target` are ignored) the change of the weights per unit of
+    /// it, on the solution's piece (its clamped set held): the fit's derivative with respect
+    /// to its target, for callers that optimise something of which the fit is a part.
+    pub fn solve_with_derivatives(
+        &self,
+        target: &[f64],
+        directions: &[Vec<f64>],
+    ) -> Result<(BlendshapeSolution, Vec<Vec<f64>>)> {
+        let rows = self.rows;
         if target.len() != rows {
             return Err(LgiError::Input(format!(
                 "expected {rows} target values, got {}",
@@ -160,6 +157,64 @@ impl BlendshapeSolver {
         if target.iter().any(|t| t.is_infinite()) {
             return Err(LgiError::Input("target has an infinite value".into()));
         }
+        if directions.iter().any(|d| d.len() != rows) {
+            return Err(LgiError::Input(format!(
+                "every direction must have {rows} values"
+            )));
+        }
+        // Aᵀδ of each direction over the present rows.
+        let s = self.shapes;
+        let along: Vec<Vec<f64>> = directions
+            .iter()
+            .map(|d| {
+                let mut out = vec![0.0; s];
+                for (r, (&t, &x)) in target.iter().zip(d).enumerate() {
+                    if !t.is_nan() && x != 0.0 {
+                        for (o, a) in out.iter_mut().zip(&self.a[r * s..(r + 1) * s]) {
+                            *o += a * x;
+                        }
+                    }
+                }
+                out
+            })
+            .collect();
+        match &self.low_rank {
+            Some(lr) => {
+                let (frame, atr) = lr.frame(target);
+                let frame = std::cell::RefCell::new(frame);
+                self.newton(
+                    &atr,
+                    &along,
+                    |clamped, rhs, _| {
+                        frame
+                            .borrow_mut()
+                            .piece(clamped, rhs, self.l2, self.penalty)
+                    },
+                    |d, w| frame.borrow().products(d, w),
+                    |w| frame.borrow().data_term(w, &atr) + self.box_terms(w),
+                )
+            }
+            None => self.solve_dense(target, &along),
+        }
+    }
+
+    /// The ridge and box terms of the objective at `w`.
+    fn box_terms(&self, w: &[f64]) -> f64 {
+        w.iter()
+            .map(|&x| {
+                let out = x.min(0.0) + (x - 1.0).max(0.0);
+                self.l2 * x * x + self.penalty * out * out
+            })
+            .sum()
+    }
+
+    /// [`solve`](Self::solve) on the dense S × S normal equations.
+    fn solve_dense(
+        &self,
+        target: &[f64],
+        along: &[Vec<f64>],
+    ) -> Result<(BlendshapeSolution, Vec<Vec<f64>>)> {
+        let s = self.shapes;
         let present: Vec<bool> = target.iter().map(|t| !t.is_nan()).collect();
         let complete = present.iter().all(|&p| p);
         let partial;
@@ -175,58 +230,91 @@ impl BlendshapeSolver {
                 *o += a * t;
             }
         }
-        let step = |w: &[f64], first: bool| -> Result<Vec<f64>> {
-            let active: Vec<(bool, bool)> = w.iter().map(|&x| (x < 0.0, x > 1.0)).collect();
-            let none = active.iter().all(|&(l, u)| !l && !u);
-            let mut rhs = atr.clone();
-            for (r, &(_, u)) in rhs.iter_mut().zip(&active) {
-                if u {
-                    *r += self.penalty;
-                }
-            }
-            if none && complete && first {
-                return Ok(cholesky_solve(s, &self.full, &rhs));
+        let piece = |clamped: &[bool], rhs: &[f64], first: bool| -> Result<Vec<f64>> {
+            if first && complete && clamped.iter().all(|&c| !c) {
+                return Ok(cholesky_solve(s, &self.full, rhs));
             }
             let mut h = gram.clone();
-            for (i, &(l, u)) in active.iter().enumerate() {
-                if l || u {
+            for (i, &c) in clamped.iter().enumerate() {
+                if c {
                     h[i * s + i] += self.penalty;
                 }
             }
-            Ok(cholesky_solve(s, &cholesky(s, h)?, &rhs))
+            Ok(cholesky_solve(s, &cholesky(s, h)?, rhs))
+        };
+        // The data term's slope parts, (A d)·(A w − t) + d·Aᵀt and (A d)·(A d), from A's rows.
+        let products = |d: &[f64], w: &[f64]| -> (f64, f64) {
+            let (mut ad_aw, mut ad_ad) = (0.0, 0.0);
+            for (r, _) in target.iter().enumerate().filter(|(_, t)| !t.is_nan()) {
+                let row = &self.a[r * s..(r + 1) * s];
+                let ad: f64 = row.iter().zip(d).map(|(a, b)| a * b).sum();
+                let aw: f64 = row.iter().zip(w).map(|(a, b)| a * b).sum::<f64>();
+                ad_aw += ad * aw;
+                ad_ad += ad * ad;
+            }
+            (ad_aw, ad_ad)
+        };
+        self.newton(&atr, along, piece, products, |w| self.objective(w, target))
+    }
+
+    /// The active-set Newton iteration on the frame's normal equations: `piece(clamped, rhs,
+    /// first)` minimises the quadratic piece where `clamped` weights are out of the box,
+    /// `products(d, w)` gives `(dᵀ G w, dᵀ G d)` with G the data term's Hessian / 2, and
+    /// `objective(w)` the whole objective; `atr` is Aᵀt. The solution's piece also solves
+    /// for the right-hand sides `along` (the derivatives of [`solve_with_derivatives`]).
+    ///
+    /// [`solve_with_derivatives`]: Self::solve_with_derivatives
+    fn newton(
+        &self,
+        atr: &[f64],
+        along: &[Vec<f64>],
+        mut piece: impl FnMut(&[bool], &[f64], bool) -> Result<Vec<f64>>,
+        products: impl Fn(&[f64], &[f64]) -> (f64, f64),
+        objective: impl Fn(&[f64]) -> f64,
+    ) -> Result<(BlendshapeSolution, Vec<Vec<f64>>)> {
+        let s = self.shapes;
+        let sides =
+            |v: &[f64]| -> Vec<(bool, bool)> { v.iter().map(|&x| (x < 0.0, x > 1.0)).collect() };
+        // The piece of w's active set: the clamped weights (out of the box), and the
+        // penalty's pull toward 1 on the right-hand side of those above it.
+        let clamped_and_rhs = |w: &[f64]| -> (Vec<bool>, Vec<f64>) {
+            let mut rhs = atr.to_vec();
+            for (r, &x) in rhs.iter_mut().zip(w) {
+                if x > 1.0 {
+                    *r += self.penalty;
+                }
+            }
+            (w.iter().map(|&x| !(0.0..=1.0).contains(&x)).collect(), rhs)
         };
         // Start inside the box so the first step is the plain (unconstrained) normal equations.
         let mut w = vec![0.5; s];
-        let mut f = self.objective(&w, target);
+        let mut f = objective(&w);
         for it in 1..=MAX_ITERATIONS {
-            let sides = |v: &[f64]| -> Vec<(bool, bool)> {
-                v.iter().map(|&x| (x < 0.0, x > 1.0)).collect()
-            };
-            let cand = step(&w, it == 1)?;
+            let (clamped, rhs) = clamped_and_rhs(&w);
+            let cand = piece(&clamped, &rhs, it == 1)?;
             // The candidate minimises the quadratic piece of w's active set; if it lies in
             // that same piece the (C¹ convex) gradient vanishes there: the global minimum.
             if sides(&cand) == sides(&w) {
-                let objective = self.objective(&cand, target);
-                return Ok(BlendshapeSolution {
+                let objective = objective(&cand);
+                let derivatives = along
+                    .iter()
+                    .map(|b| piece(&clamped, b, false))
+                    .collect::<Result<_>>()?;
+                let solution = BlendshapeSolution {
                     weights: cand,
                     iterations: it,
                     objective,
-                });
+                };
+                return Ok((solution, derivatives));
             }
             // Otherwise an exact line search: along w + αd the objective is a convex piecewise
             // quadratic in α, so its derivative is piecewise linear between the breakpoints
             // where a weight crosses 0 or 1; a damped step keeps the iteration from cycling.
             let d: Vec<f64> = cand.iter().zip(&w).map(|(c, x)| c - x).collect();
-            // The slope d·∇f(w + αd): the data term's part is linear in α, from A d and
-            // A w − t once per iteration; the ridge and box terms are per weight.
-            let (mut ad_r, mut ad_ad) = (0.0, 0.0);
-            for (r, &t) in target.iter().enumerate().filter(|(_, t)| !t.is_nan()) {
-                let row = &self.a[r * s..(r + 1) * s];
-                let ad: f64 = row.iter().zip(&d).map(|(a, b)| a * b).sum();
-                let res: f64 = row.iter().zip(&w).map(|(a, b)| a * b).sum::<f64>() - t;
-                ad_r += ad * res;
-                ad_ad += ad * ad;
-            }
+            // The slope d·∇f(w + αd): the data term's part is linear in α, from (A d)·(A w − t)
+            // and (A d)·(A d) once per iteration; the ridge and box terms are per weight.
+            let (d_gw, ad_ad) = products(&d, &w);
+            let ad_r = d_gw - d.iter().zip(atr).map(|(a, b)| a * b).sum::<f64>();
             let slope = |alpha: f64| -> f64 {
                 let box_terms: f64 = w
                     .iter()
@@ -263,7 +351,7 @@ impl BlendshapeSolver {
                 (lo, slo) = (hi, shi);
             }
             w = w.iter().zip(&d).map(|(x, dx)| x + alpha * dx).collect();
-            let fw = self.objective(&w, target);
+            let fw = objective(&w);
             if fw >= f && alpha == 0.0 {
                 return Err(LgiError::Input(
                     "blendshape fit stalled (no descent)".into(),
@@ -335,6 +423,88 @@ mod tests {
                 );
             }
             assert!(got.objective <= sol.objective(&want, &t) + 1e-12);
+        }
+    }
+
+    /// 12 shapes that are combinations of 3 (an augmented dataset's in-betweens and sums)
+    /// over 30 rows: rank 3, so the solver takes the low-rank path.
+    fn augmented(seed: u64) -> (Vec<f64>, usize, usize) {
+        let (rows, base, shapes) = (30, 3, 12);
+        let mut s = seed;
+        let b: Vec<f64> = (0..rows * base).map(|_| rnd(&mut s)).collect();
+        let mix: Vec<f64> = (0..shapes * base)
+            .map(|i| {
+                if i % base == (i / base) % base {
+                    1.0
+                } else {
+                    0.6 * rnd(&mut s)
+                }
+            })
+            .collect();
+        let a = (0..rows * shapes)
+            .map(|i| {
+                let (r, k) = (i / shapes, i % shapes);
+                (0..base).map(|j| b[r * base + j] * mix[k * base + j]).sum()
+            })
+            .collect();
+        (a, rows, shapes)
+    }
+
+    #[test]
+    fn the_low_rank_path_equals_the_dense_path_and_gradient_descent() {
+        for seed in 0..4u64 {
+            let (a, rows, shapes) = augmented(seed);
+            let sol = BlendshapeSolver::new(a, rows, shapes, 1e-2, 5.0).unwrap();
+            assert_eq!(sol.low_rank(), Some(3), "seed {seed}");
+            let mut dense = sol.clone();
+            dense.low_rank = None;
+            let mut s = seed + 100;
+            let mut t: Vec<f64> = (0..rows).map(|_| 2.0 * rnd(&mut s)).collect();
+            for missing in [vec![], vec![4, 5, 6], vec![0, 1, 2, 27, 28, 29]] {
+                for &m in &missing {
+                    t[m] = f64::NAN;
+                }
+                let got = sol.solve(&t).unwrap();
+                let want = dense.solve(&t).unwrap();
+                let slow = gradient_descent(
+                    &sol,
+                    &t.iter()
+                        .map(|x| if x.is_nan() { 0.0 } else { *x })
+                        .collect::<Vec<_>>(),
+                );
+                for ((g, w), d) in got.weights.iter().zip(&want.weights).zip(&slow) {
+                    assert!((g - w).abs() < 1e-9, "seed {seed} {missing:?}: {g} vs {w}");
+                    if missing.is_empty() {
+                        assert!((g - d).abs() < 1e-6, "seed {seed}: {g} vs descent {d}");
+                    }
+                }
+                assert!((got.objective - want.objective).abs() < 1e-9 * (1.0 + want.objective));
+            }
+        }
+    }
+
+    #[test]
+    fn derivatives_equal_finite_differences_of_the_solution_on_both_paths() {
+        for (a, rows, shapes) in [augmented(7), {
+            let mut s = 11u64;
+            (((0..30 * 5).map(|_| rnd(&mut s)).collect()), 30, 5)
+        }] {
+            let sol = BlendshapeSolver::new(a, rows, shapes, 1e-2, 5.0).unwrap();
+            let mut s = 3u64;
+            let mut t: Vec<f64> = (0..rows).map(|_| 2.0 * rnd(&mut s)).collect();
+            t[4] = f64::NAN;
+            let dirs: Vec<Vec<f64>> = (0..2)
+                .map(|_| (0..rows).map(|_| rnd(&mut s)).collect())
+                .collect();
+            let (base, dw) = sol.solve_with_derivatives(&t, &dirs).unwrap();
+            for (d, dwd) in dirs.iter().zip(&dw) {
+                let h = 1e-7;
+                let moved: Vec<f64> = t.iter().zip(d).map(|(a, b)| a + h * b).collect();
+                let w = sol.solve(&moved).unwrap().weights;
+                for ((x1, x0), g) in w.iter().zip(&base.weights).zip(dwd) {
+                    assert!(((x1 - x0) / h - g).abs() < 1e-5, "{} vs {g}", (x1 - x0) / h);
+                }
+            }
         }
     }
 

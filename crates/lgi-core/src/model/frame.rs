@@ -3,6 +3,7 @@
 //! [`FrameState`] a temporal solve carries from frame to frame.
 
 use crate::choose::Choice;
+use crate::jaw::JawParams;
 use glam::DVec3;
 
 /// One solved frame: its vertices and the rest of what the solve says about it.
@@ -34,6 +35,9 @@ pub struct FrameInfo {
     /// The frame's global fit, a weight per dataset shape id (index 0, the neutral, is 0;
     /// empty when no fit was made).
     pub fit_weights: Vec<f64>,
+    /// The jaw pose the frame was solved at (`None` without one): the given pose, or the
+    /// refined one ([`SolveOptions::refine_jaw`](super::SolveOptions::refine_jaw)).
+    pub theta: Option<JawParams>,
 }
 
 /// What the next frame needs from the previous one.

@@ -8,8 +8,9 @@ use super::{Frame, FrameInfo, FrameState, LocalShapeId, Model};
 use crate::choose::{choose, Choice, ChoiceParams, FrameErrors, Scoring, Scratch, NO_TET};
 use crate::error::{LgiError, Result};
 use crate::jaw::JawParams;
+use crate::linalg::Lu;
 use crate::magnitude::Extent;
-use crate::prior::FrameFit;
+use crate::prior::{FitPrior, FrameFit};
 use crate::sew::{BundleTargets, Pieces};
 use crate::smooth::smooth_choices_in_bins;
 use glam::DVec3;
@@ -18,6 +19,15 @@ use rayon::prelude::*;
 /// Round-off left at a bundle after the residual pass that triggers a refinement round
 /// (relative to the diagonal; the promise to users is 1e-6).
 pub(super) const RESIDUAL_TOLERANCE: f64 = 1e-12;
+
+/// Gauss–Newton iterations of [`Model::refine_jaw`] at most.
+const JAW_ITERATIONS: usize = 6;
+/// Its largest step per iteration: open and lateral in radians, forward in diagonals.
+const JAW_STEP: [f64; 3] = [0.1, 0.05, 0.01];
+/// Its finite-difference step (the same units).
+const JAW_DIFFERENCE: f64 = 1e-6;
+/// A step below this (the same units) ends it.
+const JAW_TOLERANCE: f64 = 1e-7;
 
 /// How a sequence is solved.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -35,6 +45,10 @@ pub struct SolveOptions {
     /// targets of [`FitPrior::denoise`](crate::prior::FitPrior::denoise) before the
     /// solve, which then interpolates those. `None`: every marker is interpolated as given.
     pub marker_noise: Option<f64>,
+    /// With a jaw rig and a pose per frame: refine each frame's pose to the one whose
+    /// unskinned markers the dataset's fit explains best ([`Model::refine_jaw`]), starting
+    /// from the given pose.
+    pub refine_jaw: bool,
 }
 
 impl Default for SolveOptions {
@@ -52,6 +66,7 @@ impl SolveOptions {
             smooth_window,
             fit: false,
             marker_noise: None,
+            refine_jaw: false,
         }
     }
 
@@ -69,6 +84,7 @@ impl SolveOptions {
             smooth_window,
             fit: fit.unwrap_or(marker_noise.is_some()),
             marker_noise,
+            refine_jaw: false,
         }
     }
 
@@ -247,12 +263,24 @@ impl Model {
     /// Adds the frame's global fit to a prepared frame (offered as a candidate with
     /// `offer`) and, with `marker_noise`, moves its targets to the noise-aware ones, in the
     /// bin's space and back to the frame's.
-    fn add_fit(&self, prep: &mut Prepared, offer: bool, marker_noise: Option<f64>) -> Result<()> {
+    fn add_fit(
+        &self,
+        prep: &mut Prepared,
+        offer: bool,
+        marker_noise: Option<f64>,
+        refine_jaw: bool,
+    ) -> Result<()> {
         let Some(prior) = &self.lookups[prep.bin].prior else {
             return Ok(());
         };
+        if refine_jaw {
+            self.refine_jaw(prep, prior)?;
+        }
         let fit = prior.fit(&prep.lookup)?;
-        if let Some(sigma) = marker_noise {
+        if marker_noise == Some(0.0) {
+            // Noise-free markers stay where they are (no round trip through the jaw's space).
+            prep.corrections = vec![0.0; prep.targets.len()];
+        } else if let Some(sigma) = marker_noise {
             let denoised = prior.denoise(&prep.lookup, &fit, sigma)?;
             let targets = self.frame_targets(&denoised, prep.theta, prep.bin)?;
             prep.corrections = prep
@@ -266,6 +294,104 @@ impl Model {
         }
         prep.fit = Some(fit);
         prep.offer_fit = offer;
+        Ok(())
+    }
+
+    /// Moves a prepared frame's jaw pose to the one whose unskinned markers `u(θ)` the
+    /// dataset's fit explains best: Gauss–Newton on `‖u(θ) − fit(u(θ))‖²` over the pose
+    /// components some dataset shape has, from the frame's pose, the fit's derivative taken
+    /// on its piece (so each step costs one fit). A linear fit of the skinned markers (the
+    /// usual start) reads a partly open jaw as a mix of jawOpen and other shapes; in the
+    /// unskinned space the jaw's rotation is gone and the rest is what the shapes span.
+    /// Steps are bounded, the best pose seen is kept, and a frame without a pose or rig is
+    /// left as it is.
+    fn refine_jaw(&self, prep: &mut Prepared, prior: &FitPrior) -> Result<()> {
+        let (Some(jaw), Some(start)) = (&self.jaw, prep.theta) else {
+            return Ok(());
+        };
+        let scale = [1.0, 1.0, self.diagonal];
+        let dims: Vec<usize> = (0..3)
+            .filter(|&d| {
+                jaw.input
+                    .shape_thetas
+                    .iter()
+                    .any(|t| t.to_array()[d] != 0.0)
+            })
+            .collect();
+        if dims.is_empty() {
+            return Ok(());
+        }
+        let at = |t: [f64; 3]| {
+            self.lookup_targets(&prep.targets, Some(JawParams::from_array(t)), prep.bin)
+        };
+        let mut theta = start.to_array();
+        let mut best = (f64::INFINITY, theta);
+        for _ in 0..JAW_ITERATIONS {
+            let u = at(theta)?;
+            let mut dirs = Vec::with_capacity(dims.len());
+            for &d in &dims {
+                let h = JAW_DIFFERENCE * scale[d];
+                let mut t = theta;
+                t[d] += h;
+                let moved = at(t)?;
+                dirs.push(
+                    moved
+                        .iter()
+                        .zip(&u)
+                        .map(|(a, b)| {
+                            if b.is_nan() {
+                                DVec3::ZERO
+                            } else {
+                                (*a - *b) / h
+                            }
+                        })
+                        .collect::<Vec<_>>(),
+                );
+            }
+            let (fit, changes) = prior.fit_with_directions(&u, &dirs)?;
+            let n = dims.len();
+            let (mut m, mut g, mut e) = (vec![0.0; n * n], vec![[0.0; 3]; n], 0.0);
+            for &i in &prep.present {
+                let i = i as usize;
+                let r = u[i] - fit.positions[i];
+                e += r.length_squared();
+                let pj: Vec<DVec3> = (0..n).map(|a| dirs[a][i] - changes[a][i]).collect();
+                for a in 0..n {
+                    g[a][0] -= pj[a].dot(r);
+                    for b in 0..n {
+                        m[a * n + b] += pj[a].dot(pj[b]);
+                    }
+                }
+            }
+            if e < best.0 {
+                best = (e, theta);
+            } else {
+                break;
+            }
+            let trace: f64 = (0..n).map(|a| m[a * n + a]).sum();
+            for a in 0..n {
+                m[a * n + a] += 1e-9 * trace + f64::MIN_POSITIVE;
+            }
+            let Ok(lu) = Lu::factor(n, m) else { break };
+            let step = lu.solve3(&g);
+            let mut largest = 0.0f64;
+            for (a, &d) in dims.iter().enumerate() {
+                let limit = JAW_STEP[d] * scale[d];
+                let x = step[a][0].clamp(-limit, limit);
+                theta[d] += x;
+                largest = largest.max(x.abs() / scale[d]);
+            }
+            if largest < JAW_TOLERANCE {
+                // One more evaluation would not move the pose: take the step as final.
+                best = (best.0, theta);
+                break;
+            }
+        }
+        let pose = JawParams::from_array(best.1);
+        if pose.validate().is_ok() {
+            prep.lookup = at(best.1)?;
+            prep.theta = Some(pose);
+        }
         Ok(())
     }
 
@@ -532,6 +658,7 @@ impl Model {
             bin: prep.bin,
             corrections: prep.corrections.clone(),
             fit_weights,
+            theta: prep.theta,
         })
     }
 
@@ -629,11 +756,12 @@ impl Model {
                 .map_err(|e| frame_context(e, f))?;
             prepared.push(prep);
         }
-        if options.fit || options.marker_noise.is_some() {
+        let refine = options.refine_jaw && self.jaw.is_some() && jaw.is_some();
+        if options.fit || options.marker_noise.is_some() || refine {
             // Frames' fits are independent of each other: in parallel.
             let offer = options.fit && smooth_window <= 1;
             prepared.par_iter_mut().enumerate().try_for_each(|(f, p)| {
-                self.add_fit(p, offer, options.marker_noise)
+                self.add_fit(p, offer, options.marker_noise, refine)
                     .map_err(|e| frame_context(e, f))
             })?;
         }

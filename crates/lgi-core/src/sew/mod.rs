@@ -103,9 +103,9 @@ pub fn blend(
     out.par_chunks_mut(CHUNK)
         .enumerate()
         .for_each(|(c, chunk)| {
-            let base = c * CHUNK;
+            let block = input.block(c * CHUNK, chunk.len());
             for (o, x) in chunk.iter_mut().enumerate() {
-                *x = input.vertex(base + o);
+                *x = block.vertex(o);
             }
         });
 }
@@ -168,6 +168,59 @@ impl<'a> BlendInput<'a> {
     /// global fit share its terms: their weights are summed and the fit is read once.
     #[inline]
     pub fn vertex(&self, v: usize) -> DVec3 {
+        self.vertex_with(v, || {
+            let mut f = [0.0f64; 3];
+            for &(offset, a) in &self.fit_terms {
+                if let Some(s) = self.displacements.get(offset + 3 * v..offset + 3 * v + 3) {
+                    for c in 0..3 {
+                        f[c] += a * s[c] as f64;
+                    }
+                }
+            }
+            f
+        })
+    }
+
+    /// [`vertex`](Self::vertex) for the vertices `base..base + len` at once: the fit's
+    /// displacement (dozens of shapes with every bundle on it) is summed shape by shape over
+    /// the whole block, streaming each shape's rows, rather than vertex by vertex; the same
+    /// operations in the same order, so the same bits.
+    pub fn block(&self, base: usize, len: usize) -> Block<'_, 'a> {
+        let mut fit = Vec::new();
+        let any =
+            !self.fit_terms.is_empty() && (base..base + len).any(|v| self.fit_weight(v) != 0.0);
+        if any {
+            fit = vec![0.0f64; 3 * len];
+            for &(offset, a) in &self.fit_terms {
+                let at = offset + 3 * base;
+                if let Some(rows) = self.displacements.get(at..at + 3 * len) {
+                    for (f, s) in fit.iter_mut().zip(rows) {
+                        *f += a * *s as f64;
+                    }
+                }
+            }
+        }
+        Block {
+            input: self,
+            base,
+            fit,
+        }
+    }
+
+    /// The summed weight of the bundles that took the fit at vertex `v`.
+    fn fit_weight(&self, v: usize) -> f64 {
+        let (cols, vals) = self.weights.row(v);
+        cols.iter()
+            .zip(vals)
+            .filter(|(&b, _)| self.fit.get(b as usize).copied().unwrap_or(false))
+            .map(|(_, &w)| w)
+            .sum()
+    }
+
+    /// `x0(v)` plus the pieces at `v`, the fit's displacement at `v` (Σ_k a_k s_k(v)) from
+    /// `fit` when some bundle there took it.
+    #[inline]
+    fn vertex_with(&self, v: usize, fit: impl FnOnce() -> [f64; 3]) -> DVec3 {
         let (cols, vals) = self.weights.row(v);
         let mut d = [0.0f64; 3];
         let piece = |b: u32| {
@@ -192,7 +245,10 @@ impl<'a> BlendInput<'a> {
                 }
             }
             if fit_weight != 0.0 {
-                self.add_terms(&self.fit_terms, fit_weight, v, &mut d);
+                let f = fit();
+                for c in 0..3 {
+                    d[c] += fit_weight * f[c];
+                }
             }
         }
         self.x0[v] + DVec3::from_array(d)
@@ -210,6 +266,26 @@ impl<'a> BlendInput<'a> {
                 d[2] += f * s[2] as f64;
             }
         }
+    }
+}
+
+/// A block of consecutive vertices of a [`BlendInput`], with the fit's displacement summed
+/// once for all of them ([`BlendInput::block`]).
+pub struct Block<'b, 'a> {
+    input: &'b BlendInput<'a>,
+    base: usize,
+    /// 3 per vertex of the block; empty when no vertex of the block takes the fit.
+    fit: Vec<f64>,
+}
+
+impl Block<'_, '_> {
+    /// Vertex `base + o`, bit for bit [`BlendInput::vertex`].
+    #[inline]
+    pub fn vertex(&self, o: usize) -> DVec3 {
+        self.input.vertex_with(self.base + o, || {
+            let f = &self.fit[3 * o..3 * o + 3];
+            [f[0], f[1], f[2]]
+        })
     }
 }
 
@@ -338,9 +414,10 @@ impl ResidualPass {
             .enumerate()
             .map(|(ci, chunk)| {
                 let mut bad = None;
+                let block = input.block(ci * CHUNK, chunk.len());
                 for (o, x) in chunk.iter_mut().enumerate() {
                     let v = ci * CHUNK + o;
-                    *x = corrected(v, map(v, input.vertex(v)), &rounds);
+                    *x = corrected(v, map(v, block.vertex(o)), &rounds);
                     if bad.is_none() && !x.is_finite() {
                         bad = Some(v);
                     }

@@ -1,0 +1,321 @@
+//! The blendshape fit's normal equations in the span of the matrix's rows. A dataset whose
+//! shapes are combinations of fewer ones (in-betweens and pair sums of an augmented dataset:
+//! ICT-300's 300 shapes span 55 directions at 120 markers) has `AᵀA` of low rank r, so every
+//! Newton step's `(AᵀA + D) w = b`, D diagonal (the ridge plus the box penalty), is solved by
+//! the Woodbury identity in r dimensions instead of S: O(S r + r³) per step, not O(S³).
+//!
+//! With `Aᵀ = W X` (W: S × r, X: r × R with orthonormal rows), a frame whose rows `m` are
+//! missing has `A_pᵀ A_p = W K Wᵀ`, `K = I − X_m X_mᵀ`, and `(D + W K Wᵀ) w = b` is
+//! `w = D⁻¹ (b − W y)` with `(I + K Wᵀ D⁻¹ W) y = K Wᵀ D⁻¹ b`.
+
+use crate::error::Result;
+use crate::linalg::{cholesky, cholesky_solve, Lu};
+
+/// A rank below this fraction of the shape count takes the low-rank path (the dense path is
+/// cheaper near full rank).
+const MAX_RANK_FRACTION: f64 = 0.5;
+
+/// Directions of `AᵀA` whose energy is below this fraction of the ridge (summed over the shapes)
+/// are dropped: against the ridge they change the normal equations by at most that fraction.
+const DROP_FRACTION: f64 = 1e-6;
+
+/// The factors of one matrix.
+#[derive(Debug, Clone)]
+pub(super) struct LowRank {
+    shapes: usize,
+    rank: usize,
+    /// W, `S × r` row-major.
+    w: Vec<f64>,
+    /// Xᵀ, `R × r` row-major: row ρ of it is what row ρ of A contributes.
+    xt: Vec<f64>,
+    /// WᵀW, `r × r`.
+    wtw: Vec<f64>,
+}
+
+impl LowRank {
+    /// The factors of `A` (R × S row-major, Gram `gram` = AᵀA without the ridge) when its
+    /// numerical rank is low enough to pay, else `None`.
+    pub(super) fn new(
+        a: &[f64],
+        rows: usize,
+        shapes: usize,
+        gram: &[f64],
+        l2: f64,
+    ) -> Result<Option<LowRank>> {
+        let s = shapes;
+        if l2 <= 0.0 || s < 4 {
+            return Ok(None);
+        }
+        // Pivoted Cholesky of AᵀA, stopped where what is left is negligible.
+        let tolerance = DROP_FRACTION * l2 / s as f64;
+        let max_rank = (MAX_RANK_FRACTION * s as f64) as usize;
+        let mut diag: Vec<f64> = (0..s).map(|i| gram[i * s + i]).collect();
+        let mut cols: Vec<Vec<f64>> = Vec::new();
+        loop {
+            let (p, dp) = diag
+                .iter()
+                .copied()
+                .enumerate()
+                .fold((0, f64::NEG_INFINITY), |b, x| if x.1 > b.1 { x } else { b });
+            if dp.is_nan() || dp <= tolerance {
+                break;
+            }
+            if cols.len() == max_rank {
+                return Ok(None);
+            }
+            let root = dp.sqrt();
+            let col: Vec<f64> = (0..s)
+                .map(|i| {
+                    let done: f64 = cols.iter().map(|c| c[i] * c[p]).sum();
+                    (gram[i * s + p] - done) / root
+                })
+                .collect();
+            for (d, c) in diag.iter_mut().zip(&col) {
+                *d -= c * c;
+            }
+            diag[p] = 0.0;
+            cols.push(col);
+        }
+        let r = cols.len();
+        if r == 0 {
+            return Ok(None);
+        }
+        let mut w = vec![0.0; s * r];
+        for (j, c) in cols.iter().enumerate() {
+            for i in 0..s {
+                w[i * r + j] = c[i];
+            }
+        }
+        // X = (WᵀW)⁻¹ Wᵀ Aᵀ, then its rows made orthonormal: X X ᵀ = L Lᵀ, X ← L⁻¹X, W ← W L.
+        let wtw = gram_of(&w, s, r);
+        let wtw_l = cholesky(r, wtw)?;
+        let mut xt = vec![0.0; rows * r];
+        for rho in 0..rows {
+            let row = &a[rho * s..(rho + 1) * s];
+            let aw: Vec<f64> = (0..r)
+                .map(|j| (0..s).map(|i| row[i] * w[i * r + j]).sum())
+                .collect();
+            xt[rho * r..(rho + 1) * r].copy_from_slice(&cholesky_solve(r, &wtw_l, &aw));
+        }
+        let xxt = gram_of(&xt, rows, r);
+        let l = cholesky(r, xxt)?;
+        // Xᵀ ← Xᵀ L⁻ᵀ (each row solved against L), W ← W L.
+        for rho in 0..rows {
+            let row = &mut xt[rho * r..(rho + 1) * r];
+            for i in 0..r {
+                let s: f64 = (0..i).map(|k| l[i * r + k] * row[k]).sum();
+                row[i] = (row[i] - s) / l[i * r + i];
+            }
+        }
+        let mut wl = vec![0.0; s * r];
+        for i in 0..s {
+            for j in 0..r {
+                wl[i * r + j] = (j..r).map(|k| w[i * r + k] * l[k * r + j]).sum();
+            }
+        }
+        let wtw = gram_of(&wl, s, r);
+        Ok(Some(LowRank {
+            shapes: s,
+            rank: r,
+            w: wl,
+            xt,
+            wtw,
+        }))
+    }
+
+    /// The rank r.
+    pub(super) fn rank(&self) -> usize {
+        self.rank
+    }
+
+    /// One frame's system for `target` (R values, NaN rows missing): its `Aᵀt` too.
+    pub(super) fn frame(&self, target: &[f64]) -> (Frame<'_>, Vec<f64>) {
+        let r = self.rank;
+        let mut c = vec![0.0; r];
+        let mut missing = Vec::new();
+        let mut tt = 0.0;
+        for (rho, &t) in target.iter().enumerate() {
+            let x = &self.xt[rho * r..(rho + 1) * r];
+            if t.is_nan() {
+                missing.push(rho);
+            } else {
+                tt += t * t;
+                for (ci, xi) in c.iter_mut().zip(x) {
+                    *ci += xi * t;
+                }
+            }
+        }
+        // K = I − X_m X_mᵀ, or None for I.
+        let k = (!missing.is_empty()).then(|| {
+            let mut k = vec![0.0; r * r];
+            for i in 0..r {
+                k[i * r + i] = 1.0;
+            }
+            for &rho in &missing {
+                let x = &self.xt[rho * r..(rho + 1) * r];
+                for i in 0..r {
+                    for j in 0..r {
+                        k[i * r + j] -= x[i] * x[j];
+                    }
+                }
+            }
+            k
+        });
+        let atr = self.w_times(&c);
+        let frame = Frame {
+            f: self,
+            k,
+            tt,
+            clamped: vec![false; self.shapes],
+            sum_clamped: vec![0.0; r * r],
+        };
+        (frame, atr)
+    }
+
+    /// W y (S).
+    fn w_times(&self, y: &[f64]) -> Vec<f64> {
+        self.w
+            .chunks(self.rank)
+            .map(|row| row.iter().zip(y).map(|(a, b)| a * b).sum())
+            .collect()
+    }
+
+    /// Wᵀ v (r).
+    fn wt_times(&self, v: &[f64]) -> Vec<f64> {
+        let mut out = vec![0.0; self.rank];
+        for (row, &x) in self.w.chunks(self.rank).zip(v) {
+            if x != 0.0 {
+                for (o, a) in out.iter_mut().zip(row) {
+                    *o += a * x;
+                }
+            }
+        }
+        out
+    }
+}
+
+/// `MᵀM` of a row-major `n × r` matrix.
+fn gram_of(m: &[f64], n: usize, r: usize) -> Vec<f64> {
+    let mut g = vec![0.0; r * r];
+    for row in m.chunks(r).take(n) {
+        for i in 0..r {
+            for j in 0..=i {
+                g[i * r + j] += row[i] * row[j];
+            }
+        }
+    }
+    for i in 0..r {
+        for j in 0..i {
+            g[j * r + i] = g[i * r + j];
+        }
+    }
+    g
+}
+
+/// One frame's normal equations `W K Wᵀ` with the weights clamped by the box so far (their
+/// `Σ w_i w_iᵀ` kept up to date as the active set changes, O(r²) per change).
+pub(super) struct Frame<'f> {
+    f: &'f LowRank,
+    k: Option<Vec<f64>>,
+    /// ‖t_p‖².
+    tt: f64,
+    clamped: Vec<bool>,
+    sum_clamped: Vec<f64>,
+}
+
+impl Frame<'_> {
+    /// K v.
+    fn k_times(&self, v: &[f64]) -> Vec<f64> {
+        let r = self.f.rank;
+        match &self.k {
+            None => v.to_vec(),
+            Some(k) => k
+                .chunks(r)
+                .map(|row| row.iter().zip(v).map(|(a, b)| a * b).sum())
+                .collect(),
+        }
+    }
+
+    /// The minimiser of the quadratic piece where `clamped[i]` (ridge `l2`, plus `penalty`
+    /// where clamped) for the right-hand side `rhs`.
+    pub(super) fn piece(
+        &mut self,
+        clamped: &[bool],
+        rhs: &[f64],
+        l2: f64,
+        penalty: f64,
+    ) -> Result<Vec<f64>> {
+        let (r, lr) = (self.f.rank, self.f);
+        for (i, &c) in clamped.iter().enumerate() {
+            if c != self.clamped[i] {
+                let sign = if c { 1.0 } else { -1.0 };
+                let wi = &lr.w[i * r..(i + 1) * r];
+                for a in 0..r {
+                    for b in 0..r {
+                        self.sum_clamped[a * r + b] += sign * wi[a] * wi[b];
+                    }
+                }
+                self.clamped[i] = c;
+            }
+        }
+        let (free, held) = (1.0 / l2, 1.0 / (l2 + penalty));
+        let dinv = |i: usize| if self.clamped[i] { held } else { free };
+        // M = Wᵀ D⁻¹ W.
+        let m: Vec<f64> = lr
+            .wtw
+            .iter()
+            .zip(&self.sum_clamped)
+            .map(|(a, c)| a * free - c * (free - held))
+            .collect();
+        let scaled: Vec<f64> = rhs.iter().enumerate().map(|(i, b)| b * dinv(i)).collect();
+        let g = lr.wt_times(&scaled);
+        let y = match &self.k {
+            None => {
+                let mut n = m;
+                for i in 0..r {
+                    n[i * r + i] += 1.0;
+                }
+                cholesky_solve(r, &cholesky(r, n)?, &g)
+            }
+            Some(k) => {
+                let mut n = vec![0.0; r * r];
+                for i in 0..r {
+                    for (l, &kil) in k[i * r..(i + 1) * r].iter().enumerate() {
+                        if kil != 0.0 {
+                            for j in 0..r {
+                                n[i * r + j] += kil * m[l * r + j];
+                            }
+                        }
+                    }
+                    n[i * r + i] += 1.0;
+                }
+                let kg = self.k_times(&g);
+                let cols: Vec<[f64; 3]> = kg.iter().map(|&x| [x, 0.0, 0.0]).collect();
+                Lu::factor(r, n)?
+                    .solve3(&cols)
+                    .iter()
+                    .map(|c| c[0])
+                    .collect()
+            }
+        };
+        let wy = lr.w_times(&y);
+        Ok((0..lr.shapes).map(|i| dinv(i) * (rhs[i] - wy[i])).collect())
+    }
+
+    /// `(dᵀ G w, dᵀ G d)` with G the frame's `A_pᵀ A_p`.
+    pub(super) fn products(&self, d: &[f64], w: &[f64]) -> (f64, f64) {
+        let (u, v) = (self.f.wt_times(d), self.f.wt_times(w));
+        let ku = self.k_times(&u);
+        let dot = |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(x, y)| x * y).sum::<f64>();
+        (dot(&ku, &v), dot(&ku, &u))
+    }
+
+    /// ‖A_p w − t_p‖² given `atr` = A_pᵀ t_p.
+    pub(super) fn data_term(&self, w: &[f64], atr: &[f64]) -> f64 {
+        let v = self.f.wt_times(w);
+        let kv = self.k_times(&v);
+        let vkv: f64 = v.iter().zip(&kv).map(|(a, b)| a * b).sum();
+        let wa: f64 = w.iter().zip(atr).map(|(a, b)| a * b).sum();
+        (vkv - 2.0 * wa + self.tt).max(0.0)
+    }
+}
