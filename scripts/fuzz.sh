@@ -6,7 +6,7 @@
 # non-finite output or silently accepted nonsense fails a property, so the script's exit
 # status is the campaign's verdict.
 #
-#   bash scripts/fuzz.sh                     # default budget (about 3 minutes on 2 cores)
+#   bash scripts/fuzz.sh                     # default budget (2-3 minutes on 2 cores)
 #   RUST_CASES=20000 PY_EXAMPLES=5000 bash scripts/fuzz.sh
 #
 # Python needs lgi installed (the test command's virtualenv, $LGI_TEST_VENV or .venv-test, is
