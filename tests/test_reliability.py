@@ -304,3 +304,22 @@ def test_obj_vertex_beyond_the_coordinate_bound_is_a_dataset_error_naming_the_fi
     p.write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1e31\nf 1 2 3\nf 1 2 4\n")
     with pytest.raises(lgi.DatasetError, match=r"far\.obj.*vertex 3"):
         lgi.Dataset.from_obj(p)
+
+
+# -- silent degradation ----------------------------------------------------------------------
+
+
+def test_a_build_config_that_leaves_most_markers_without_tets_warns_with_the_reason(small) -> None:  # type: ignore[no-untyped-def]
+    s, d, _ = small
+    with pytest.warns(lgi.LgiWarning, match=r"will only be projected.*min_quality 2"):
+        model = lgi.Model.build(d, s.markers_rest, config=lgi.BuildConfig(min_quality=2.0))
+    assert np.isfinite(model.solve(s.markers_rest[None], quiet=True).vertices).all()
+
+
+def test_the_default_build_of_the_sample_does_not_warn(small) -> None:  # type: ignore[no-untyped-def]
+    import warnings
+
+    s, d, _ = small
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", lgi.LgiWarning)
+        lgi.Model.build(d, s.markers_rest)

@@ -12,6 +12,7 @@ from lgi.errors import (
     FileWriteError,
     InputError,
     LgiError,
+    LgiWarning,
     MarkerError,
     ModelFormatError,
 )
@@ -26,6 +27,7 @@ __all__ = [
     "FileWriteError",
     "InputError",
     "LgiError",
+    "LgiWarning",
     "MarkerError",
     "Model",
     "ModelFormatError",

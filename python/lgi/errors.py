@@ -25,6 +25,11 @@ class MarkerError(InputError):
     """A marker cannot be placed on the neutral surface: probably mislabelled or wrong unit."""
 
 
+class LgiWarning(UserWarning):
+    """A result that is valid but probably not what was meant (e.g. a build that left most
+    markers without tets)."""
+
+
 class ModelFormatError(LgiError):
     """A saved model file is corrupt, truncated, foreign or from an unsupported version."""
 
@@ -35,6 +40,7 @@ __all__ = [
     "FileWriteError",
     "InputError",
     "LgiError",
+    "LgiWarning",
     "MarkerError",
     "ModelFormatError",
 ]

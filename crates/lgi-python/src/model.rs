@@ -96,6 +96,7 @@ impl Model {
         let model = py
             .detach(move || CoreModel::build_shared(data, &markers, &cfg, jaw))
             .map_err(PyLgiError)?;
+        warn_if_mostly_projected(py, &model)?;
         Ok(Model {
             inner: Arc::new(model),
         })
@@ -493,6 +494,32 @@ pub struct SolveOutput {
     /// (F, 3) float64: the jaw pose each frame was solved at; None without poses.
     #[pyo3(get)]
     jaw_theta: Option<Py<PyAny>>,
+}
+
+/// Warns (`lgi.LgiWarning`) when the build left more than half of the markers whose clouds
+/// could hold a tet (4+ points) without any: a config like `min_quality=2` that makes a model
+/// which only projects should not pass without a word. (Refusing it in the core would also
+/// refuse legitimately flat datasets.)
+fn warn_if_mostly_projected(py: Python<'_>, model: &CoreModel) -> PyResult<()> {
+    let stats = model.bundle_stats();
+    let could = stats.iter().filter(|s| s.points >= 4).count();
+    let without = stats
+        .iter()
+        .filter(|s| s.points >= 4 && s.tets == 0)
+        .count();
+    if could == 0 || without * 2 <= could {
+        return Ok(());
+    }
+    let c = model.config();
+    let msg = format!(
+        "{without} of the {could} markers whose clouds could hold tets have none: they will \
+         only be projected, never interpolated by the dataset's local geometry; BuildConfig is \
+         probably too strict (min_quality {}, max_edge {}, max_tets {}, tet_neighbours {})",
+        c.min_quality, c.max_edge, c.max_tets, c.tet_neighbours
+    );
+    let category = py.import("lgi.errors")?.getattr("LgiWarning")?;
+    let msg = std::ffi::CString::new(msg).map_err(|e| input_error(e.to_string()))?;
+    PyErr::warn(py, &category, &msg, 2)
 }
 
 /// The payload that unwinds a solve stopped by Ctrl-C or a failing progress callback.
