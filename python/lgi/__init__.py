@@ -9,8 +9,10 @@ from lgi._lgi import Dataset, __version__
 from lgi.errors import (
     DatasetError,
     DatasetFileError,
+    FileWriteError,
     InputError,
     LgiError,
+    LgiWarning,
     MarkerError,
     ModelFormatError,
 )
@@ -22,8 +24,10 @@ __all__ = [
     "Dataset",
     "DatasetError",
     "DatasetFileError",
+    "FileWriteError",
     "InputError",
     "LgiError",
+    "LgiWarning",
     "MarkerError",
     "Model",
     "ModelFormatError",

@@ -11,6 +11,7 @@ from typing_extensions import NotRequired, Self, disjoint_base
 __all__ = [
     "FIT_L2",
     "FIT_PENALTY",
+    "MAGNITUDE_LIMIT",
     "BlendshapeSolver",
     "BuildConfig",
     "Dataset",
@@ -19,11 +20,21 @@ __all__ = [
     "RbfInterpolator",
     "SolveOutput",
     "__version__",
+    "check_count",
+    "check_marker_frames",
 ]
 
 __version__: str
 FIT_L2: float
 FIT_PENALTY: float
+MAGNITUDE_LIMIT: float
+
+def check_count(value: object, name: str) -> int:
+    """`value` as a count (an int >= 0); else `lgi.InputError` naming `name`."""
+
+def check_marker_frames(frames: ArrayLike, markers_rest: ArrayLike, diagonal: float) -> None:
+    """Raise `lgi.InputError` (naming frame and marker) for frames (F, B, 3) that break the
+    magnitude policy of every method."""
 
 _Path = str | os.PathLike[str]
 

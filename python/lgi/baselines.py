@@ -40,14 +40,16 @@ def _diagonal(points: F64) -> float:
     return float(np.linalg.norm(points.max(axis=0) - points.min(axis=0)))
 
 
-def _frames(frames: ArrayLike, b: int) -> F64:
+def _frames(frames: ArrayLike, surface: _Surface) -> F64:
+    """Frames as (F, B, 3) float64, checked by the same rules as `Model.solve` (shape, no
+    infinities, magnitudes within `lgi._lgi.MAGNITUDE_LIMIT` face sizes, 3 markers present)."""
+    b = surface.num_bundles
     arr = np.asarray(frames, dtype=np.float64)
     if arr.ndim == 2:
         arr = arr[None]
     if arr.ndim != 3 or arr.shape[1:] != (b, 3):
         raise InputError(f"frames: expected shape (F, {b}, 3), got {arr.shape}")
-    if np.isinf(arr).any():
-        raise InputError("frames: infinite coordinate")
+    _lgi.check_marker_frames(arr, surface.markers_rest, surface.diagonal)
     return arr
 
 
@@ -63,6 +65,7 @@ class _Surface:
         markers = np.asarray(markers_rest)
         if not np.issubdtype(markers.dtype, np.floating):
             raise InputError(f"markers_rest: expected a float array, got dtype {markers.dtype}")
+        self.markers_rest = np.asarray(markers, dtype=np.float64)
         self.rbf = _lgi.RbfInterpolator.from_dataset(
             dataset, markers, float(surface_tolerance) * self.diagonal
         )
@@ -126,7 +129,7 @@ class DisplacementInterpolation:
 
     def solve(self, frames: ArrayLike, *, quiet: bool = False, **_: Any) -> SolveResult:
         """Frames (F, B, 3) (NaN rows missing) -> meshes through the markers."""
-        fr = _frames(frames, self.num_bundles)
+        fr = _frames(frames, self._s)
         disp = self._s.rbf.interpolate(fr - self._s.rest[None])
         return self._s.result(self._s.neutral[None] + disp, fr)
 
@@ -170,14 +173,14 @@ class BlendshapeFit:
 
     def weights(self, frames: ArrayLike) -> F64:
         """(F, S) fitted weights."""
-        fr = _frames(frames, self.num_bundles)
+        fr = _frames(frames, self._s)
         target = (fr - self._s.rest[None]).reshape(fr.shape[0], -1)
         w, it = self._solver.solve(target)
         self.last_iterations = it
         return w
 
     def solve(self, frames: ArrayLike, *, quiet: bool = False, **_: Any) -> SolveResult:
-        fr = _frames(frames, self.num_bundles)
+        fr = _frames(frames, self._s)
         w = self.weights(fr)
         self.last_weights = w
         verts = self._s.neutral[None] + np.einsum("fk,kvd->fvd", w, self._shapes)
@@ -239,7 +242,7 @@ class LgiRbf:
     def solve(
         self, frames: ArrayLike, *, temporal: bool = True, quiet: bool = False
     ) -> SolveResult:
-        fr = _frames(frames, self.num_bundles)
+        fr = _frames(frames, self._s)
         lgi_res = self.model.solve(fr, temporal=temporal, quiet=quiet)
         ch = lgi_res.choices
         nf, b = fr.shape[:2]

@@ -13,12 +13,21 @@ class DatasetFileError(DatasetError, FileNotFoundError):
     """A dataset file is missing or unreadable."""
 
 
+class FileWriteError(LgiError, OSError):
+    """A file could not be written (missing directory, permissions, disk full)."""
+
+
 class InputError(LgiError, ValueError):
     """An argument has the wrong shape, dtype or value (message names the argument)."""
 
 
 class MarkerError(InputError):
     """A marker cannot be placed on the neutral surface: probably mislabelled or wrong unit."""
+
+
+class LgiWarning(UserWarning):
+    """A result that is valid but probably not what was meant (e.g. a build that left most
+    markers without tets)."""
 
 
 class ModelFormatError(LgiError):
@@ -28,8 +37,10 @@ class ModelFormatError(LgiError):
 __all__ = [
     "DatasetError",
     "DatasetFileError",
+    "FileWriteError",
     "InputError",
     "LgiError",
+    "LgiWarning",
     "MarkerError",
     "ModelFormatError",
 ]

@@ -348,8 +348,7 @@ class Model:
         is given (`marker_noise=0` for noise-free markers), so the recommended call on real
         capture is `solve(frames, marker_noise=sigma)`. Not offered with `smooth_window`. The
         fit costs time with many shapes (docs/performance.md)."""
-        if smooth_window < 0:
-            raise InputError(f"smooth_window must be >= 0, got {smooth_window}")
+        smooth_window = _lgi.check_count(smooth_window, "smooth_window")
         arr = np.asarray(frames)
         if arr.ndim == 2:
             arr = arr[None]

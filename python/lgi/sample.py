@@ -30,6 +30,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from lgi import _lgi
 from lgi.errors import DatasetError, DatasetFileError, InputError
 from lgi.jaw import JawRig
 
@@ -61,6 +62,8 @@ _JAW_LATERAL = 0.12  # rad; the chin moves about 7 mm sideways
 _JAW_FORWARD = 0.6  # cm
 _WRINKLE_POWER = 1.5
 _MIN_RESOLUTION = 40
+# About 0.83 r^2 vertices: 800 rows are ~530,000 vertices, beyond any test or demo.
+_MAX_RESOLUTION = 800
 
 
 @dataclass(frozen=True, eq=False, repr=False)
@@ -779,8 +782,12 @@ def make_sample(
     12,000 vertices); `noise_mm` the standard deviation of the marker noise per coordinate in
     millimetres; `dropout` the fraction of (frame, marker) entries lost (NaN), in short runs.
     """
-    if int(resolution) != resolution or resolution < _MIN_RESOLUTION:
-        raise InputError(f"resolution must be an integer >= {_MIN_RESOLUTION}, got {resolution}")
+    resolution = _lgi.check_count(resolution, "resolution")
+    if not _MIN_RESOLUTION <= resolution <= _MAX_RESOLUTION:
+        raise InputError(
+            f"resolution must be an integer from {_MIN_RESOLUTION} to {_MAX_RESOLUTION}, "
+            f"got {resolution}"
+        )
     if int(num_frames) != num_frames or num_frames < 1:
         raise InputError(f"num_frames must be a positive integer, got {num_frames}")
     if not np.isfinite(noise_mm) or noise_mm < 0:

@@ -40,6 +40,12 @@ impl Dataset {
                 (i / 3) % v
             )));
         }
+        crate::magnitude::check_dataset(
+            &neutral.positions,
+            &displacements,
+            &names,
+            neutral.diagonal(),
+        )?;
         let mut seen = std::collections::HashSet::new();
         for (k, n) in names.iter().enumerate() {
             if !seen.insert(n.as_str()) {

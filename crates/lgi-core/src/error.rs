@@ -15,6 +15,14 @@ pub enum LgiError {
         /// What the operating system said.
         message: String,
     },
+    /// A file could not be written (directory missing, permissions, disk full, ...).
+    #[error("cannot write {path}: {message}")]
+    Write {
+        /// The file.
+        path: PathBuf,
+        /// What the operating system said.
+        message: String,
+    },
     /// A file was read but its content is malformed.
     #[error("{path}:{line}: {message}")]
     Parse {
@@ -61,6 +69,14 @@ impl LgiError {
     /// An `Io` error for `path` from a `std::io::Error`.
     pub fn io(path: impl Into<PathBuf>, err: &std::io::Error) -> Self {
         LgiError::Io {
+            path: path.into(),
+            message: err.to_string(),
+        }
+    }
+
+    /// A `Write` error for `path` from a `std::io::Error`.
+    pub fn write(path: impl Into<PathBuf>, err: &std::io::Error) -> Self {
+        LgiError::Write {
             path: path.into(),
             message: err.to_string(),
         }

@@ -26,6 +26,7 @@ mod geom;
 mod io;
 mod jaw;
 mod linalg;
+mod magnitude;
 mod mesh;
 mod model;
 mod polygons;
@@ -43,6 +44,7 @@ mod uvspace;
 pub use augment::{augment, recipes, Recipe};
 pub use dataset::Dataset;
 pub use error::{LgiError, Result};
+pub use magnitude::{check_dataset, Extent, MAGNITUDE_LIMIT, MAX_COORDINATE, MIN_PRESENT_MARKERS};
 pub use mesh::{Mesh, SurfacePoint};
 pub use model::{
     default_marker_names, BinParts, BinPartsRef, BuildConfig, BundleStats, Frame, FrameInfo,
@@ -55,7 +57,7 @@ pub use prior::{FitPrior, FrameFit, FIT_L2, FIT_PENALTY, RESIDUAL_LENGTH};
 // Files: meshes, datasets and the `.lgi` model file.
 pub use io::glob::expand as expand_glob;
 pub use io::gltf::read_gltf;
-pub use io::model_file::{load as load_model, save as save_model};
+pub use io::model_file::{load as load_model, save as save_model, save_parts as save_model_parts};
 pub use io::obj::{parse_obj, read_obj, read_obj_polygons, read_obj_positions, write_obj};
 
 // The jaw (Eq. 2) and the baselines.

@@ -1,5 +1,6 @@
 //! `lgi._lgi.RbfInterpolator` and `lgi._lgi.BlendshapeSolver`: the numerical kernels of the
-//! baselines (python/lgi/baselines.py wraps them with the `lgi.Model` solve API).
+//! baselines (python/lgi/baselines.py wraps them with the `lgi.Model` solve API), and the
+//! marker-frame check they share with `Model.solve`.
 
 use crate::convert::{flat_to_array, float_array, points as read_points};
 use crate::dataset::Dataset;
@@ -204,4 +205,25 @@ impl BlendshapeSolver {
             flat_to_array(py, it, &[nf])?,
         ))
     }
+}
+
+/// Checks marker frames (F, B, 3) against the magnitude policy of every method
+/// ([`lgi_core::Extent`]): the error names frame and marker.
+#[pyfunction]
+pub fn check_marker_frames(
+    frames: &Bound<'_, PyAny>,
+    markers_rest: &Bound<'_, PyAny>,
+    diagonal: f64,
+) -> PyResult<()> {
+    let rest = read_points(markers_rest, "markers_rest", None, false)?;
+    let frames = crate::convert::point_sets(
+        frames,
+        "frames",
+        ("frame", "marker"),
+        Some(rest.len()),
+        true,
+    )?;
+    lgi_core::Extent::new(&rest, diagonal)
+        .check_frames(&frames)
+        .map_err(|e| PyLgiError(e).into())
 }

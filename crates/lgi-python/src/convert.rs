@@ -187,3 +187,39 @@ pub fn index_array(obj: &Bound<'_, PyAny>, name: &str, cols: usize) -> PyResult<
         })
         .collect()
 }
+
+/// A count argument (a Python int >= 0 that fits the platform's `usize`, not a bool): the
+/// message names the argument instead of a bare `OverflowError` or `TypeError`.
+pub fn count(obj: &Bound<'_, PyAny>, name: &str) -> PyResult<usize> {
+    let int_type = obj.py().get_type::<pyo3::types::PyInt>();
+    let is_int = obj.is_instance(&int_type)? && !obj.is_instance_of::<pyo3::types::PyBool>();
+    let is_numpy_int = obj
+        .getattr("dtype")
+        .and_then(|d| d.getattr("kind"))
+        .and_then(|k| k.extract::<String>())
+        .is_ok_and(|k| k == "i" || k == "u")
+        && obj.getattr("ndim").and_then(|n| n.extract::<usize>()).ok() == Some(0);
+    let shown = || obj.repr().map_or_else(|_| "?".into(), |r| r.to_string());
+    if !(is_int || is_numpy_int) {
+        return Err(input_error(format!(
+            "{name}: expected an integer >= 0, got {}",
+            shown()
+        )));
+    }
+    // Beyond i128 the extraction fails: out of range like any other too-large value.
+    let value: Option<i128> = obj.call_method0("__int__")?.extract().ok();
+    value.and_then(|v| usize::try_from(v).ok()).ok_or_else(|| {
+        input_error(format!(
+            "{name}: expected an integer from 0 to {}, got {}",
+            usize::MAX,
+            shown()
+        ))
+    })
+}
+
+/// `lgi._lgi.check_count(value, name)`: [`count`] for the Python side (one rule for every
+/// count argument, e.g. `smooth_window`); returns the value as an int.
+#[pyfunction]
+pub fn check_count(value: &Bound<'_, PyAny>, name: &str) -> PyResult<usize> {
+    count(value, name)
+}

@@ -2,7 +2,7 @@
 //! from numpy arrays. File reading runs with the GIL released. The `.npz` layout is numpy's
 //! and is read and written in Python (`lgi.dataset`); `from_npz`/`to_npz` only forward there.
 
-use crate::convert::{flat_to_array, float_array, index_array, points, points_to_array};
+use crate::convert::{count, flat_to_array, float_array, index_array, points, points_to_array};
 use crate::error::{input_error, lgi_exception, PyLgiError, PyLgiResult};
 use lgi_core::{DVec2, LgiError, Mesh};
 use numpy::PyArrayDyn;
@@ -91,7 +91,8 @@ impl Dataset {
     /// A new dataset with in-between shapes (`name@0.5`, …) and pairwise sums added to the
     /// shapes, at least `min_shapes` when there are enough pairs (the neutral is shared).
     /// Runs with the GIL released.
-    fn augmented(&self, py: Python<'_>, min_shapes: usize) -> PyResult<Dataset> {
+    fn augmented(&self, py: Python<'_>, min_shapes: &Bound<'_, PyAny>) -> PyResult<Dataset> {
+        let min_shapes = count(min_shapes, "min_shapes")?;
         let inner = self.inner.clone();
         let d = py
             .detach(|| lgi_core::augment(&inner, min_shapes))

@@ -34,6 +34,7 @@ impl From<PyLgiError> for PyErr {
     fn from(e: PyLgiError) -> PyErr {
         let class = match &e.0 {
             LgiError::Io { .. } => "DatasetFileError",
+            LgiError::Write { .. } => "FileWriteError",
             LgiError::Parse { .. } | LgiError::Dataset(_) => "DatasetError",
             LgiError::Input(_) => "InputError",
             LgiError::MarkerOffSurface { .. } => "MarkerError",

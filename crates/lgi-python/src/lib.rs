@@ -26,5 +26,8 @@ fn _lgi(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<model::SolveOutput>()?;
     m.add_class::<baselines::RbfInterpolator>()?;
     m.add_class::<baselines::BlendshapeSolver>()?;
+    m.add_function(wrap_pyfunction!(baselines::check_marker_frames, m)?)?;
+    m.add_function(wrap_pyfunction!(convert::check_count, m)?)?;
+    m.add("MAGNITUDE_LIMIT", lgi_core::MAGNITUDE_LIMIT)?;
     Ok(())
 }

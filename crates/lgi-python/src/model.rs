@@ -4,7 +4,7 @@
 use crate::config::BuildConfig;
 use crate::convert::{flat_to_array, float_array, point_sets, points, points_to_array};
 use crate::dataset::Dataset;
-use crate::error::{input_error, internal_error, PyLgiError};
+use crate::error::{input_error, PyLgiError};
 use crate::jaw::{frame_from_array, JawRig};
 use glam::{DMat3, DVec3};
 use lgi_core::{JawBins, JawInput, JawParams, JawRig as CoreRig, Model as CoreModel, SolveOptions};
@@ -104,6 +104,7 @@ impl Model {
                     .and_then(|m| m.with_labels(names, units))
             })
             .map_err(PyLgiError)?;
+        warn_if_mostly_projected(py, &model)?;
         Ok(Model {
             inner: Arc::new(model),
         })
@@ -205,18 +206,41 @@ impl Model {
                     "out: the array is not writeable (read-only, or borrowed elsewhere): {e}"
                 ))
             })?;
-            let flat = rw.as_slice_mut().map_err(internal_error)?;
-            let out: &mut [DVec3] = bytemuck::try_cast_slice_mut(flat).map_err(internal_error)?;
-            py.detach(move || {
-                model.solve_sequence_with(&frames, thetas.as_deref(), &options, out, |f| {
-                    if let Some(cb) = &progress {
-                        Python::attach(|py| {
-                            let _ = cb.call1(py, (f,));
+            let flat = rw
+                .as_slice_mut()
+                .map_err(|e| input_error(format!("out: the array must be C-contiguous: {e}")))?;
+            let out: &mut [DVec3] = bytemuck::try_cast_slice_mut(flat).map_err(|e| {
+                input_error(format!(
+                    "out: the array's memory must be aligned to 8 bytes (a fresh np.empty is): {e}"
+                ))
+            })?;
+            let mut stopped: Option<PyErr> = None;
+            let solved = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+                py.detach(|| {
+                    model.solve_sequence_with(&frames, thetas.as_deref(), &options, out, |f| {
+                        // Ctrl-C and a failing callback stop the solve after this frame.
+                        let called = Python::attach(|py| {
+                            py.check_signals()?;
+                            match &progress {
+                                Some(cb) => cb.call1(py, (f,)).map(drop),
+                                None => Ok(()),
+                            }
                         });
-                    }
+                        if let Err(e) = called {
+                            stopped = Some(e);
+                            // The core's progress hook cannot fail: unwind out of the solve
+                            // with a private payload (resume_unwind runs no panic hook, so
+                            // nothing is printed) and raise the Python error below.
+                            std::panic::resume_unwind(Box::new(SolveStopped));
+                        }
+                    })
                 })
-            })
-            .map_err(PyLgiError)?
+            }));
+            match (solved, stopped) {
+                (_, Some(e)) => return Err(e),
+                (Ok(r), None) => r.map_err(PyLgiError)?,
+                (Err(panic), None) => std::panic::resume_unwind(panic),
+            }
         };
         let mut res = Vec::with_capacity(nf * b);
         let mut pos = Vec::with_capacity(nf * b * 3);
@@ -492,6 +516,35 @@ pub struct SolveOutput {
     #[pyo3(get)]
     jaw_theta: Option<Py<PyAny>>,
 }
+
+/// Warns (`lgi.LgiWarning`) when the build left more than half of the markers whose clouds
+/// could hold a tet (4+ points) without any: a config like `min_quality=2` that makes a model
+/// which only projects should not pass without a word. (Refusing it in the core would also
+/// refuse legitimately flat datasets.)
+fn warn_if_mostly_projected(py: Python<'_>, model: &CoreModel) -> PyResult<()> {
+    let stats = model.bundle_stats();
+    let could = stats.iter().filter(|s| s.points >= 4).count();
+    let without = stats
+        .iter()
+        .filter(|s| s.points >= 4 && s.tets == 0)
+        .count();
+    if could == 0 || without * 2 <= could {
+        return Ok(());
+    }
+    let c = model.config();
+    let msg = format!(
+        "{without} of the {could} markers whose clouds could hold tets have none: they will \
+         only be projected, never interpolated by the dataset's local geometry; BuildConfig is \
+         probably too strict (min_quality {}, max_edge {}, max_tets {}, tet_neighbours {})",
+        c.min_quality, c.max_edge, c.max_tets, c.tet_neighbours
+    );
+    let category = py.import("lgi.errors")?.getattr("LgiWarning")?;
+    let msg = std::ffi::CString::new(msg).map_err(|e| input_error(e.to_string()))?;
+    PyErr::warn(py, &category, &msg, 2)
+}
+
+/// The payload that unwinds a solve stopped by Ctrl-C or a failing progress callback.
+struct SolveStopped;
 
 /// A caller's output array for `solve(out=...)`: float64, C-contiguous, writeable, of `shape`.
 fn output_array<'py>(

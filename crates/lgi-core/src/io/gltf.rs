@@ -1,6 +1,8 @@
 //! glTF 2.0 reader (`.gltf` with embedded or external buffers, or `.glb`): the first mesh is
 //! the neutral and its morph targets are the shapes, which glTF already stores as
-//! displacements. Node transforms are ignored: the mesh is taken in its own space.
+//! displacements. Node transforms are ignored: the mesh is taken in its own space. The `gltf`
+//! crate trusts its input in places (asserts, `unreachable!`, unchecked indices), so every
+//! accessor is checked before it is read and any panic left is caught here, at the boundary.
 
 use crate::dataset::Dataset;
 use crate::error::{LgiError, Result};
@@ -14,12 +16,32 @@ use std::path::Path;
 /// becomes the UVs with UV index == vertex index; either every primitive has it or none.
 /// Missing indices mean sequential triangles. Morph targets become shapes (a target without
 /// positions is a zero displacement); names come from the mesh's `extras.targetNames` when
-/// present, else `target{k}`. Every error names the file.
+/// present, else `target{k}`. Every error names the file; a file the `gltf` crate cannot
+/// parse without panicking is an [`LgiError::Io`] ("cannot read"), never a panic.
 pub fn read_gltf(path: &Path) -> Result<Dataset> {
-    let (doc, buffers, _images) = gltf::import(path).map_err(|e| match e {
+    std::panic::catch_unwind(|| read_gltf_unguarded(path)).unwrap_or_else(|panic| {
+        let why = super::panic_message(panic.as_ref());
+        Err(LgiError::Io {
+            path: path.to_path_buf(),
+            message: format!("malformed glTF (the glTF parser failed: {why})"),
+        })
+    })
+}
+
+/// [`read_gltf`] without the panic guard.
+fn read_gltf_unguarded(path: &Path) -> Result<Dataset> {
+    let bytes = std::fs::read(path).map_err(|e| LgiError::io(path, &e))?;
+    let parse_error = |e: gltf::Error| match e {
         gltf::Error::Io(io) => LgiError::io(path, &io),
         other => LgiError::parse(path, 0, format!("not a readable glTF file: {other}")),
-    })?;
+    };
+    // gltf's own validation indexes accessors unchecked: check the indices first.
+    let unchecked = gltf::Gltf::from_slice_without_validation(&bytes).map_err(parse_error)?;
+    check_indices(unchecked.document.as_json()).map_err(|m| LgiError::parse(path, 0, m))?;
+    let gltf = gltf::Gltf::from_slice(&bytes).map_err(parse_error)?;
+    let buffers =
+        gltf::import_buffers(&gltf.document, path.parent(), gltf.blob).map_err(parse_error)?;
+    let doc = gltf.document;
     let bad = |msg: String| LgiError::parse(path, 0, msg);
     let gmesh = doc
         .meshes()
@@ -37,6 +59,7 @@ pub fn read_gltf(path: &Path) -> Result<Dataset> {
                 prim.mode()
             )));
         }
+        check_accessors(&prim, &buffers).map_err(|m| bad(format!("primitive {pi}: {m}")))?;
         let reader = prim.reader(|b| buffers.get(b.index()).map(|d| &d.0[..]));
         let base = mesh.positions.len();
         let positions = reader
@@ -126,6 +149,134 @@ pub fn read_gltf(path: &Path) -> Result<Dataset> {
         LgiError::Dataset(m) => LgiError::Dataset(format!("{what}: {m}")),
         other => other,
     })
+}
+
+/// Checks the indices between the document's arrays that gltf's validation follows without
+/// a bounds check (attributes, indices and targets to accessors, accessors and sparse parts
+/// to buffer views, views to buffers).
+fn check_indices(root: &gltf::json::Root) -> std::result::Result<(), String> {
+    let (na, nv, nb) = (
+        root.accessors.len(),
+        root.buffer_views.len(),
+        root.buffers.len(),
+    );
+    let check = |what: String, i: usize, n: usize, of: &str| {
+        if i < n {
+            Ok(())
+        } else {
+            Err(format!("{what} refers to {of} {i}, but the file has {n}"))
+        }
+    };
+    for (m, mesh) in root.meshes.iter().enumerate() {
+        for (p, prim) in mesh.primitives.iter().enumerate() {
+            let at = |x: &str| format!("mesh {m}, primitive {p}: {x}");
+            for (semantic, a) in &prim.attributes {
+                check(
+                    at(&format!("attribute {semantic:?}")),
+                    a.value(),
+                    na,
+                    "accessor",
+                )?;
+            }
+            if let Some(a) = prim.indices {
+                check(at("indices"), a.value(), na, "accessor")?;
+            }
+            for (k, t) in prim.targets.iter().flatten().enumerate() {
+                for a in [t.positions, t.normals, t.tangents].into_iter().flatten() {
+                    check(at(&format!("morph target {k}")), a.value(), na, "accessor")?;
+                }
+            }
+        }
+    }
+    for (i, a) in root.accessors.iter().enumerate() {
+        if let Some(v) = a.buffer_view {
+            check(format!("accessor {i}"), v.value(), nv, "buffer view")?;
+        }
+        if let Some(s) = &a.sparse {
+            check(
+                format!("accessor {i} (sparse indices)"),
+                s.indices.buffer_view.value(),
+                nv,
+                "buffer view",
+            )?;
+            check(
+                format!("accessor {i} (sparse values)"),
+                s.values.buffer_view.value(),
+                nv,
+                "buffer view",
+            )?;
+        }
+    }
+    for (i, v) in root.buffer_views.iter().enumerate() {
+        check(format!("buffer view {i}"), v.buffer.value(), nb, "buffer")?;
+    }
+    Ok(())
+}
+
+/// Checks every accessor a primitive's reading touches against what the `gltf` reader assumes
+/// (it asserts or panics otherwise): the component and element types of indices, positions,
+/// UVs and morph-target positions, a non-zero count, and a byte stride and range that fit
+/// the buffer view and the buffer (a sparse accessor's own index and value views are left
+/// to the reader and the panic guard).
+fn check_accessors(
+    prim: &gltf::Primitive<'_>,
+    buffers: &[gltf::buffer::Data],
+) -> std::result::Result<(), String> {
+    use gltf::accessor::{DataType as T, Dimensions as D};
+    use gltf::Semantic;
+    let mut used: Vec<(String, gltf::Accessor<'_>, &[T], D)> = Vec::new();
+    if let Some(a) = prim.indices() {
+        used.push(("indices".into(), a, &[T::U8, T::U16, T::U32], D::Scalar));
+    }
+    if let Some(a) = prim.get(&Semantic::Positions) {
+        used.push(("POSITION".into(), a, &[T::F32], D::Vec3));
+    }
+    if let Some(a) = prim.get(&Semantic::TexCoords(0)) {
+        used.push(("TEXCOORD_0".into(), a, &[T::U8, T::U16, T::F32], D::Vec2));
+    }
+    for (k, t) in prim.morph_targets().enumerate() {
+        if let Some(a) = t.positions() {
+            used.push((format!("morph target {k} POSITION"), a, &[T::F32], D::Vec3));
+        }
+    }
+    for (what, a, types, dims) in used {
+        let at = || format!("{what} (accessor {})", a.index());
+        if !types.contains(&a.data_type()) || a.dimensions() != dims {
+            return Err(format!(
+                "{} is {:?} {:?}; expected {dims:?} of {types:?}",
+                at(),
+                a.dimensions(),
+                a.data_type()
+            ));
+        }
+        if a.count() == 0 {
+            return Err(format!("{} has no elements", at()));
+        }
+        let Some(view) = a.view() else {
+            continue; // no view: the reader reports the attribute as absent
+        };
+        let size = a.size();
+        let stride = view.stride().unwrap_or(size);
+        if stride < size {
+            return Err(format!(
+                "{}: byteStride {stride} is smaller than its element ({size} bytes)",
+                at()
+            ));
+        }
+        let end = (a.count() - 1)
+            .checked_mul(stride)
+            .and_then(|e| e.checked_add(size))
+            .and_then(|e| e.checked_add(a.offset()));
+        let buffer_len = buffers.get(view.buffer().index()).map_or(0, |b| b.0.len());
+        let view_end = view.offset().checked_add(view.length());
+        if end.is_none_or(|e| e > view.length()) || view_end.is_none_or(|e| e > buffer_len) {
+            return Err(format!(
+                "{} reaches past the end of its buffer view or buffer",
+                at()
+            ));
+        }
+    }
+    Ok(())
 }
 
 /// Morph-target names from the de-facto convention `mesh.extras.targetNames`.

@@ -5,3 +5,13 @@ pub mod glob;
 pub mod gltf;
 pub mod model_file;
 pub mod obj;
+
+/// The message of a caught panic (`&str` or `String` payloads; the readers turn panics of
+/// their dependencies into errors naming the file).
+pub(crate) fn panic_message(payload: &(dyn std::any::Any + Send)) -> String {
+    payload
+        .downcast_ref::<&str>()
+        .map(|s| s.to_string())
+        .or_else(|| payload.downcast_ref::<String>().cloned())
+        .unwrap_or_else(|| "unknown reason".into())
+}

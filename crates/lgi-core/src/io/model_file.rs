@@ -203,6 +203,14 @@ pub fn save(model: &Model, path: &Path) -> Result<()> {
     write(&model.parts(), model.marker_names(), model.units(), path)
 }
 
+/// Writes model parts to `path` as [`save`] would, with the default marker names and no unit:
+/// for tools and tests that craft files (a crafted file gets a valid checksum, so only
+/// [`load`]'s sanity check stands in its way).
+pub fn save_parts(parts: &ModelPartsRef<'_>, path: &Path) -> Result<()> {
+    let names = crate::model::default_marker_names(parts.markers_rest.len());
+    write(parts, &names, "", path)
+}
+
 /// Writes a model's parts and labels to `path`.
 fn write(
     parts: &ModelPartsRef<'_>,
@@ -322,11 +330,24 @@ fn write(
     out.extend_from_slice(&(payload.len() as u64).to_le_bytes());
     out.extend_from_slice(&checksum(&payload).to_le_bytes());
     out.extend_from_slice(&payload);
-    std::fs::write(path, out).map_err(|e| LgiError::io(path, &e))
+    std::fs::write(path, out).map_err(|e| LgiError::write(path, &e))
 }
 
-/// Reads a model written by [`save`]; every inconsistency is `LgiError::ModelFormat`.
+/// Reads a model written by [`save`]; every inconsistency is `LgiError::ModelFormat`, and a
+/// model that loads passes [`Model::sanity_check`].
 pub fn load(path: &Path) -> Result<Model> {
+    // The sanity check runs before assembly; the guard is for what it does not foresee.
+    std::panic::catch_unwind(|| load_unguarded(path)).unwrap_or_else(|panic| {
+        let why = super::panic_message(panic.as_ref());
+        Err(LgiError::ModelFormat {
+            path: path.to_path_buf(),
+            message: format!("not a valid model (loading it failed: {why})"),
+        })
+    })
+}
+
+/// [`load`] without the panic guard.
+fn load_unguarded(path: &Path) -> Result<Model> {
     let bytes = std::fs::read(path).map_err(|e| LgiError::io(path, &e))?;
     let bad = |m: &str| LgiError::ModelFormat {
         path: path.to_path_buf(),
@@ -516,9 +537,16 @@ pub fn load(path: &Path) -> Result<Model> {
         markers_rest: markers,
         bins: built,
     };
+    // A file can carry a valid checksum and still be wrong (edited, then re-summed, or
+    // written by something else): its parts must pass every invariant of a built model before
+    // assembly, and whatever assembly still refuses is a format error too, not a user's.
+    parts
+        .as_parts_ref()
+        .sanity_check()
+        .map_err(|m| bad(&format!("not a valid model: {m}")))?;
     let model = Model::from_parts(parts).map_err(|e| match e {
         PartsError::Inconsistent(m) => bad(&m),
-        PartsError::Build(e) => e,
+        PartsError::Build(e) => bad(&format!("not a valid model: {e}")),
     })?;
     match labels {
         None => Ok(model),

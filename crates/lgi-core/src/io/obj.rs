@@ -80,7 +80,13 @@ impl Dataset {
                 })?;
             named.push((name, r?));
         }
-        Dataset::from_shape_positions(mesh, named)?.with_polygons(polygons)
+        // The dataset's own checks (magnitudes, names) name shape and vertex; add the file.
+        Dataset::from_shape_positions(mesh, named)
+            .map_err(|e| match e {
+                LgiError::Dataset(m) => LgiError::Dataset(format!("{}: {m}", neutral.display())),
+                other => other,
+            })?
+            .with_polygons(polygons)
     }
 }
 
@@ -96,11 +102,11 @@ pub fn write_obj(path: &Path, positions: &[DVec3], mesh: &Mesh) -> Result<()> {
             mesh.num_vertices()
         )));
     }
-    let file = std::fs::File::create(path).map_err(|e| LgiError::io(path, &e))?;
+    let file = std::fs::File::create(path).map_err(|e| LgiError::write(path, &e))?;
     let mut w = std::io::BufWriter::new(file);
     write_obj_to(&mut w, positions, mesh)
         .and_then(|()| w.flush())
-        .map_err(|e| LgiError::io(path, &e))
+        .map_err(|e| LgiError::write(path, &e))
 }
 
 fn write_obj_to(w: &mut impl Write, positions: &[DVec3], mesh: &Mesh) -> std::io::Result<()> {

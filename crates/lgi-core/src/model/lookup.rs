@@ -28,6 +28,7 @@ use crate::cloud::BundleCloud;
 use crate::dataset::Dataset;
 use crate::error::{LgiError, Result};
 use crate::jaw::{JawParams, JawRig};
+use crate::magnitude::Extent;
 use crate::mesh::Mesh;
 use crate::prior::FitPrior;
 use crate::tet_index::TetIndex;
@@ -282,6 +283,13 @@ pub(super) fn lookup_sources(
             thetas.len(),
             dataset.num_shapes()
         )));
+    }
+    let extent = Extent::new(&dataset.neutral().positions, dataset.neutral().diagonal());
+    extent.check_point(rig.pivot, "jaw pivot")?;
+    for (k, t) in thetas.iter().enumerate() {
+        t.validate()
+            .and_then(|()| extent.check_jaw(t))
+            .map_err(|e| LgiError::Input(format!("shape {k}'s jaw pose: {e}")))?;
     }
     let Some(bins) = &j.bins else {
         return Ok(vec![LookupSource {

@@ -4,7 +4,7 @@
 //!
 //! The rooms: `config` (build parameters), [`lookup`] (jaw-bin lookups and the shape-id
 //! spaces), `build` (build and assembly), `parts` (what a saved model is made of), `solve`
-//! (per-frame and sequence solves) and `frame` (what a solve returns). A solve goes down the
+//! (per-frame and sequence solves), `sanity` (the invariants of a model's parts) and `frame` (what a solve returns). A solve goes down the
 //! layers once: `solve` checks the targets and maps them into the jaw bin, the choice is
 //! [`choose`](crate::choose)'s over the bin's tet indices, then one call into
 //! [`sew`](crate::sew) (plan and sewing pass, the jaw map applied inside it) writes the
@@ -29,6 +29,7 @@ mod frame;
 mod labels;
 pub mod lookup;
 mod parts;
+mod sanity;
 mod solve;
 #[cfg(test)]
 mod tests;

@@ -9,6 +9,7 @@ use crate::choose::{choose, Choice, ChoiceParams, FrameErrors, Scoring, Scratch,
 use crate::error::{LgiError, Result};
 use crate::jaw::JawParams;
 use crate::linalg::Lu;
+use crate::magnitude::Extent;
 use crate::prior::{FitPrior, FrameFit};
 use crate::sew::{BundleTargets, Pieces};
 use crate::smooth::smooth_choices_in_bins;
@@ -209,6 +210,11 @@ impl Model {
                 "frame has {} bundles, the model has {b}",
                 targets.len()
             )));
+        }
+        let extent = Extent::new(&self.markers_rest, self.diagonal);
+        extent.check_frame(targets)?;
+        if let Some(t) = &jaw {
+            extent.check_jaw(t)?;
         }
         let mut present = Vec::with_capacity(b);
         let mut targets_clean = targets.to_vec();
@@ -743,6 +749,7 @@ impl Model {
         on_frame: impl FnMut(usize),
     ) -> Result<Vec<FrameInfo>> {
         options.validate()?;
+        Extent::new(&self.markers_rest, self.diagonal).check_marker_noise(options.marker_noise)?;
         let (temporal, smooth_window) = (options.temporal, options.smooth_window);
         let nv = self.dataset.num_vertices();
         if vertices.len() != frames.len() * nv {
