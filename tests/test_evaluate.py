@@ -57,14 +57,17 @@ def test_markdown_and_csv_round_trip(tmp_path: Path) -> None:
     assert (tmp_path / "r.csv").read_text().splitlines()[1] == "a,0.5"
 
 
-def test_cli_evaluate_writes_results(tmp_path: Path) -> None:
+def test_cli_evaluate_writes_results_and_a_heatmap_panel_of_every_method(tmp_path: Path) -> None:
     from lgi.cli import main
 
-    assert (
-        main(["evaluate", "--data", "sample", "--protocol", "performance", "--out", str(tmp_path)])
-        == 0
-    )
+    argv = ["evaluate", "--data", "sample", "--protocol", "performance", "--out", str(tmp_path)]
+    assert main([*argv, "-q"]) == 0
     text = (tmp_path / "results.md").read_text()
     for name in ("displacement interpolation", "blendshape fit", "LGI-RBF", "| LGI |"):
         assert name in text
     assert (tmp_path / "results.csv").is_file()
+    # The panel: truth plus four methods, two views (render.panel's 3-inch cells at 100 dpi).
+    png = (tmp_path / "panel.png").read_bytes()
+    assert png[:8] == b"\x89PNG\r\n\x1a\n"
+    width, height = int.from_bytes(png[16:20], "big"), int.from_bytes(png[20:24], "big")
+    assert width > 4 * height / 2 and height >= 2 * 250

@@ -31,10 +31,16 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
     if args.data == "ict" and ict_dir is None:
         ict_dir = ict.find(os.environ.get(ict.ENV))
     rows = evaluate.run_protocol(
-        args.data, args.protocol, args.out, ict_dir, sigma=args.sigma, holdout=args.holdout
+        args.data,
+        args.protocol,
+        args.out,
+        ict_dir,
+        sigma=args.sigma,
+        holdout=args.holdout,
+        quiet=args.quiet,
     )
     print(evaluate.to_markdown(rows), end="")
-    print(f"wrote {args.out}/results.md and {args.out}/results.csv")
+    print(f"wrote {args.out}/results.md, {args.out}/results.csv and {args.out}/panel.png")
     return 0
 
 
@@ -353,6 +359,7 @@ def build_parser() -> argparse.ArgumentParser:
         default=0.0,
         help="capture protocol: fraction of the shapes the methods do not get (default 0)",
     )
+    ev.add_argument("-q", "--quiet", action="store_true", help="no progress bars")
     ev.add_argument(
         "--out", type=_out_folder, default="lgi-evaluate-output", help="output folder (created)"
     )

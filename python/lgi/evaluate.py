@@ -96,13 +96,15 @@ def evaluate(
     region: ArrayLike | None = None,
     diagonal: float | None = None,
     temporal: bool = True,
+    quiet: bool = True,
 ) -> list[Row]:
     """Solves `frames` (F, B, 3) with every method and scores it against `truth` (F, V, 3) on
-    the vertices `region` (default all; ICT: the face skin, `lgi.ict.skin()`)."""
+    the vertices `region` (default all; ICT: the face skin, `lgi.ict.skin()`); a progress bar
+    over the methods unless `quiet`."""
     fr = np.asarray(frames, dtype=np.float64)
     tr = np.asarray(truth, dtype=np.float64)
     rows = []
-    for name, m in methods.items():
+    for name, m in _steps(list(methods.items()), "lgi evaluate", quiet):
         t0 = time.perf_counter()
         res = m.solve(fr, temporal=temporal, quiet=True)
         rows.append(score(name, res, tr, time.perf_counter() - t0, region, diagonal))
@@ -134,15 +136,17 @@ def leave_one_out(
     method_factory: Callable[[Dataset, ArrayLike], Mapping[str, Solver]],
     shapes: Sequence[int] | None = None,
     region: ArrayLike | None = None,
+    quiet: bool = True,
 ) -> list[Row]:
     """For each shape k: methods built without k solve the markers on shape k; the rows pool
-    all held-out shapes (build time not counted; jitter is not meaningful and is NaN)."""
+    all held-out shapes (build time not counted; jitter is not meaningful and is NaN); a
+    progress bar over the shapes unless `quiet`."""
     frames, truth = verification(dataset, markers)
     ks = list(range(dataset.num_shapes)) if shapes is None else list(shapes)
     verts: dict[str, list[F64]] = {}
     res_max: dict[str, float] = {}
     secs: dict[str, float] = {}
-    for k in ks:
+    for k in _steps(ks, "lgi evaluate: leave one out", quiet):
         methods = method_factory(_without(dataset, k), markers)
         for name, m in methods.items():
             t0 = time.perf_counter()
@@ -298,28 +302,73 @@ def capture_protocol(
     frames: int = 200,
     dropout: float = 0.02,
     seed: int = 3,
+    panel: str | os.PathLike[str] | None = None,
+    quiet: bool = True,
 ) -> list[Row]:
     """The capture protocol: each Live Link Face recording (`lgi.takes.read_livelinkface`,
     subsampled to about `frames` frames) drives `dataset`, its jaw-open shape turning about the
     hinge fitted to the `jaw_rigid` vertices (`lgi.capture.HingeJaw`); markers carry noise
     `sigma` and `dropout`; a `holdout` fraction of the shapes is kept from the methods
-    (`lgi.capture.make_capture`). Rows per recording and method ("recording: method")."""
+    (`lgi.capture.make_capture`). Rows per recording and method ("recording: method"). With
+    `panel`, the first recording's most expressive frame as a heatmap panel (`error_panel`);
+    a progress bar over the recordings unless `quiet`."""
     from lgi.capture import HingeJaw, make_capture
     from lgi.takes import read_livelinkface
 
     hinge = HingeJaw.fit(dataset, jaw_rigid)
     rows: list[Row] = []
-    for rec in recordings:
+    for i, rec in enumerate(_steps(list(recordings), "lgi evaluate: capture", quiet)):
         w = read_livelinkface(rec).for_dataset(dataset.names)
         w = w[:: max(1, w.shape[0] // max(1, frames))]
         take = make_capture(
             dataset, w, markers, sigma=sigma, dropout=dropout, holdout=holdout, seed=seed, jaw=hinge
         )
         methods = capture_methods(take.dataset, markers, sigma)
+        if panel is not None and i == 0:
+            f = _most_expressive(take.truth, np.asarray(dataset.neutral))
+            error_panel(panel, methods, take.frames[f], take.truth[f], dataset.triangles, region)
         for row in capture(methods, take.frames, take.truth, take.jaw_open, region):
             row["method"] = f"{Path(rec).stem}: {row['method']}"
             rows.append(row)
     return rows
+
+
+def _steps(items: Sequence[Any], desc: str, quiet: bool) -> Any:
+    """`items` with a progress bar on stderr (none when `quiet`)."""
+    from tqdm import tqdm
+
+    return tqdm(items, desc=desc, disable=quiet or len(items) < 2, leave=False)
+
+
+def error_panel(
+    path: str | os.PathLike[str],
+    methods: Mapping[str, Solver],
+    frame: ArrayLike,
+    truth: ArrayLike,
+    triangles: ArrayLike,
+    region: ArrayLike | None = None,
+) -> None:
+    """Writes the heatmap panel (`lgi.render.panel`) of one frame: the truth, then each
+    method's per-vertex error (cm) on one colour scale; vertices outside `region` are drawn
+    with error 0."""
+    from lgi import render
+
+    fr = np.asarray(frame, dtype=np.float64)[None]
+    tr = np.asarray(truth, dtype=np.float64)
+    keep = np.zeros(tr.shape[0], dtype=bool)
+    keep[slice(None) if region is None else np.asarray(region)] = True
+    meshes: dict[str, ArrayLike] = {"ground truth": tr}
+    errors: dict[str, ArrayLike] = {}
+    for name, m in methods.items():
+        v = np.asarray(m.solve(fr, temporal=False, quiet=True).vertices)[0]
+        meshes[name] = v
+        errors[name] = np.where(keep, np.linalg.norm(v - tr, axis=1), 0.0)
+    render.panel(path, meshes, triangles, errors, units="cm")
+
+
+def _most_expressive(truth: F64, neutral: F64) -> int:
+    """The frame that moves furthest from the neutral on average."""
+    return int(np.argmax(np.linalg.norm(truth - neutral[None], axis=2).mean(axis=1)))
 
 
 def run_protocol(
@@ -330,10 +379,13 @@ def run_protocol(
     *,
     sigma: float = 0.05,
     holdout: float = 0.0,
+    quiet: bool = False,
 ) -> list[Row]:
     """Runs `protocol` on `data` ("sample", or "ict" read from the folder `ict_dir`) and writes
-    results.md and results.csv into `out`. `sigma` and `holdout` are the capture protocol's
-    (ICT with the Live Link Face recordings beside it)."""
+    results.md, results.csv and panel.png (the heatmap of one frame: the most expressive; for
+    leave-one-out, the most displaced shape held out) into `out`. `sigma` and `holdout` are the
+    capture protocol's (ICT with the Live Link Face recordings beside it). Progress bars on
+    stderr unless `quiet`."""
     from lgi import ict
     from lgi.errors import InputError
     from lgi.sample import make_sample
@@ -375,9 +427,21 @@ def run_protocol(
             holdout=holdout,
             jaw_rigid=ict.lower_teeth(),
             region=region,
+            panel=outp / "panel.png",
+            quiet=quiet,
         )
     elif protocol == "loo":
-        rows = leave_one_out(ds, markers, default_methods, region=region)
+        rows = leave_one_out(ds, markers, default_methods, region=region, quiet=quiet)
+        frames, truth = verification(ds, markers)
+        k = _most_expressive(truth, np.asarray(ds.neutral))
+        error_panel(
+            outp / "panel.png",
+            default_methods(_without(ds, k), markers),
+            frames[k],
+            truth[k],
+            ds.triangles,
+            region,
+        )
     else:
         methods = default_methods(ds, markers)
         if protocol == "performance":
@@ -399,7 +463,9 @@ def run_protocol(
         elif protocol == "dropout":
             rows = dropout_sweep(methods, frames, truth, region=region, temporal=temporal)
         else:
-            rows = evaluate(methods, frames, truth, region, temporal=temporal)
+            rows = evaluate(methods, frames, truth, region, temporal=temporal, quiet=quiet)
+        f = _most_expressive(np.asarray(truth), np.asarray(ds.neutral))
+        error_panel(outp / "panel.png", methods, frames[f], truth[f], ds.triangles, region)
         if not temporal:
             for r in rows:
                 r["jitter"] = float("nan")  # independent frames: not a sequence
