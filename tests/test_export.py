@@ -105,6 +105,30 @@ def test_chunked_usd_writing_equals_one_call_and_keeps_jaw_and_residual_attribut
     assert not s1.HasAuthoredMetadata("metersPerUnit")
 
 
+def test_usd_cache_keeps_the_head_transform_per_frame_and_refuses_half_of_one(
+    quads, tmp_path: Path
+) -> None:  # type: ignore[no-untyped-def]
+    from scipy.spatial.transform import Rotation
+
+    v = frames(4, 7)
+    rot = Rotation.from_rotvec(np.random.default_rng(3).normal(0, 0.1, (4, 3))).as_matrix()
+    shift = np.random.default_rng(4).normal(size=(4, 3))
+    cache = export.UsdCache(tmp_path / "head.usda", export.topology(quads), fps=24.0)
+    cache.add(v, head_rotations=rot, head_translations=shift)
+    cache.close()
+    stage = Usd.Stage.Open(str(tmp_path / "head.usda"))
+    prim = stage.GetPrimAtPath("/Face/Mesh")
+    for t in range(4):
+        got = np.array(prim.GetAttribute("lgi:headRotation").Get(t))
+        np.testing.assert_allclose(got, rot[t], rtol=0, atol=1e-15)
+        np.testing.assert_allclose(
+            np.array(prim.GetAttribute("lgi:headTranslation").Get(t)), shift[t], atol=1e-15
+        )
+    other = export.UsdCache(tmp_path / "half.usda", export.topology(quads), fps=24.0)
+    with pytest.raises(lgi.InputError, match="rotations .* and translations .* together"):
+        other.add(v, head_rotations=rot)
+
+
 def test_a_dataset_without_polygons_exports_its_triangles(tmp_path: Path) -> None:
     tri = lgi.Dataset.from_arrays(np.eye(3), np.array([[0, 1, 2]]))
     assert tri.polygons is None

@@ -54,6 +54,14 @@ def test_cli_triangulate_writes_the_stabilised_bundles(take, tmp_path: Path, cap
         np.testing.assert_allclose(z["frames"], want.frames, rtol=0, atol=1e-12)
         np.testing.assert_array_equal(z["views"], want.triangulation.views)
         assert z["rotations"].shape == (30, 3, 3)
+    # The bundles file is a take: `lgi solve` reads it by label, the head transform with it.
+    from lgi import takes
+
+    read = takes.read(out, [f"m{i}" for i in range(len(rest))][::-1])
+    np.testing.assert_array_equal(read.frames, want.frames[:, ::-1])
+    assert read.head is not None
+    np.testing.assert_array_equal(read.head.rotations, want.alignment.rotations)
+    np.testing.assert_array_equal(read.head.translations, want.alignment.translations)
 
 
 def test_cli_triangulate_names_the_bad_file_and_exits_2(take, tmp_path: Path, capsys) -> None:  # type: ignore[no-untyped-def]

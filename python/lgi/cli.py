@@ -263,17 +263,19 @@ def _fraction(text: str) -> float:
     return x
 
 
-def _read_rest(path: Path) -> np.ndarray:
-    """Marker rest positions (B, 3): `.npy`, or a layout CSV (`lgi.takes.read_layout`)."""
+def _read_rest(path: Path) -> tuple[np.ndarray, list[str]]:
+    """Marker rest positions (B, 3) and names: a layout CSV (`lgi.takes.read_layout`), or
+    `.npy` positions (names `m000`, ...)."""
     if path.suffix.lower() != ".npy":
-        return lgi.takes.read_layout(path).positions
+        layout = lgi.takes.read_layout(path)
+        return layout.positions, list(layout.names)
     try:
         rest = np.asarray(np.load(path), dtype=np.float64)
     except (OSError, ValueError) as e:
         raise lgi.InputError(f"{path}: cannot read marker rest positions ({e})") from None
     if rest.ndim != 2 or rest.shape[1] != 3:
         raise lgi.InputError(f"{path}: expected (B, 3) marker positions, got {rest.shape}")
-    return rest
+    return rest, [f"m{i:03d}" for i in range(rest.shape[0])]
 
 
 def _cmd_triangulate(args: argparse.Namespace) -> int:
@@ -281,9 +283,9 @@ def _cmd_triangulate(args: argparse.Namespace) -> int:
 
     cams = camera.load_cameras(args.cameras)
     uv = frontend.read_tracks(args.tracks, len(cams))
-    rest = _read_rest(Path(args.rest))
+    rest, names = _read_rest(Path(args.rest))
     front = frontend.process(cams, uv, rest, max_error=args.max_error, despike=not args.no_despike)
-    frontend.write_bundles(args.out, front)
+    frontend.write_bundles(args.out, front, names)
     print(front.summary())
     print(f"wrote {args.out}")
     return 0

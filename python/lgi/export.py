@@ -125,8 +125,10 @@ class UsdCache:
     `UsdGeom.Mesh` `/Face/Mesh` (subdivisionScheme none: the points are the result, not a
     cage), UVs as the face-varying indexed primvar `st`, `timeCodesPerSecond` = `fps`,
     `metersPerUnit` from `units` (left at USD's default when None), Y up. Optional per-frame
-    attributes on the mesh: `lgi:jawTheta` (float3: open, lateral, forward) and
-    `lgi:markerResidual` (float[] per marker)."""
+    attributes on the mesh: `lgi:jawTheta` (float3: open, lateral, forward),
+    `lgi:markerResidual` (float[] per marker), and the head transform when known
+    (`lgi:headRotation`, matrix3d with the rotation's rows as its rows, and
+    `lgi:headTranslation`, double3: capture = R rest + t, `lgi.stabilize.align`)."""
 
     def __init__(
         self,
@@ -175,6 +177,7 @@ class UsdCache:
         self._extent = mesh.CreateExtentAttr()
         self._jaw = None
         self._residual = None
+        self._head: tuple[Any, Any] | None = None
         self._sdf = Sdf
 
     @property
@@ -187,9 +190,11 @@ class UsdCache:
         *,
         jaw_theta: Any | None = None,
         marker_residuals: Any | None = None,
+        head_rotations: Any | None = None,
+        head_translations: Any | None = None,
     ) -> None:
-        """Appends frames (F, V, 3) (or one (V, 3) mesh), with optional (F, 3) jaw poses and
-        (F, B) marker residuals."""
+        """Appends frames (F, V, 3) (or one (V, 3) mesh), with optional (F, 3) jaw poses,
+        (F, B) marker residuals and the head's (F, 3, 3) rotations and (F, 3) translations."""
         v = _frames(vertices, self._topo.num_vertices, "UsdCache.add")
         n = v.shape[0]
         jaw = None if jaw_theta is None else np.asarray(jaw_theta, dtype=np.float64)
@@ -198,7 +203,24 @@ class UsdCache:
         res = None if marker_residuals is None else np.asarray(marker_residuals, dtype=np.float64)
         if res is not None and (res.ndim != 2 or res.shape[0] != n):
             raise InputError(f"UsdCache.add: marker_residuals must be ({n}, B), got {res.shape}")
+        rot = None if head_rotations is None else np.asarray(head_rotations, dtype=np.float64)
+        shift = None if head_translations is None else np.asarray(head_translations, dtype=float)
+        if (rot is None) != (shift is None) or (
+            rot is not None
+            and shift is not None
+            and (rot.shape != (n, 3, 3) or shift.shape != (n, 3))
+        ):
+            raise InputError(
+                f"UsdCache.add: the head transform needs rotations ({n}, 3, 3) and "
+                f"translations ({n}, 3) together"
+            )
         Usd, Vt, Gf, Sdf = self._Usd, self._Vt, self._Gf, self._sdf
+        if rot is not None and self._head is None:
+            prim = self._mesh.GetPrim()
+            self._head = (
+                prim.CreateAttribute("lgi:headRotation", Sdf.ValueTypeNames.Matrix3d),
+                prim.CreateAttribute("lgi:headTranslation", Sdf.ValueTypeNames.Double3),
+            )
         if jaw is not None and self._jaw is None:
             self._jaw = self._mesh.GetPrim().CreateAttribute(
                 "lgi:jawTheta", Sdf.ValueTypeNames.Float3
@@ -221,6 +243,9 @@ class UsdCache:
                 self._jaw.Set(Gf.Vec3f(*map(float, jaw[i])), t)
             if res is not None and self._residual is not None:
                 self._residual.Set(Vt.FloatArray.FromNumpy(res[i].astype(np.float32)), t)
+            if rot is not None and shift is not None and self._head is not None:
+                self._head[0].Set(Gf.Matrix3d(*map(float, rot[i].ravel())), t)
+                self._head[1].Set(Gf.Vec3d(*map(float, shift[i])), t)
             self._next += 1
 
     def close(self) -> Path:

@@ -103,13 +103,19 @@ def read_tracks(path: str | Path, num_cameras: int) -> F64:
     return uv
 
 
-def write_bundles(path: str | Path, front: FrontEnd) -> None:
-    """Writes the stabilised bundles and the stages' outputs to an `.npz`: `frames`,
-    `points` (rig space), `rotations`, `translations`, `views`, `reprojection_error`,
-    `ray_origins`, `ray_directions` (rest space), `weights`, `spikes`."""
+def write_bundles(path: str | Path, front: FrontEnd, names: Sequence[str]) -> None:
+    """Writes the stabilised bundles and the stages' outputs to an `.npz` that is also a take
+    (`lgi.takes.read_npz`: `markers` and the layout's `names`, so `lgi solve` reads it, with
+    the head transforms `rotations`, `translations`): `frames` (= `markers`), `points` (rig
+    space), `views`, `reprojection_error`, `ray_origins`, `ray_directions` (rest space),
+    `weights`, `spikes`."""
     rays = front.rays
+    if len(names) != front.frames.shape[1]:
+        raise InputError(f"{len(names)} marker names for {front.frames.shape[1]} markers")
     np.savez(
         Path(path),
+        markers=front.frames,
+        names=np.asarray(list(names), dtype=str),
         frames=front.frames,
         points=front.triangulation.points,
         rotations=front.alignment.rotations,

@@ -225,9 +225,16 @@ class _Sink:
         residuals: np.ndarray,
         missing: np.ndarray,
         jaw_theta: np.ndarray | None,
+        head: takes.HeadMotion | None = None,
     ) -> None:
         if self.usd is not None:
-            self.usd.add(vertices, jaw_theta=jaw_theta, marker_residuals=residuals)
+            self.usd.add(
+                vertices,
+                jaw_theta=jaw_theta,
+                marker_residuals=residuals,
+                head_rotations=None if head is None else head.rotations,
+                head_translations=None if head is None else head.translations,
+            )
         elif self.kind == "obj":
             export.write_obj_sequence(
                 self.out.parent, self.topo, vertices, name=self.out.stem, start=self.next
@@ -269,10 +276,12 @@ def write_output(
     start: int,
     units: str | None,
     jaw_theta: np.ndarray | None,
+    head: takes.HeadMotion | None = None,
     quiet: bool = False,
 ) -> Path:
     """Writes solved frames as `kind` (`output_kind`) to `out`, `CHUNK_FRAMES` at a time with
-    a progress bar; returns the path written (`NAME.NNNN.obj` for a sequence)."""
+    a progress bar (the head transform, when known, beside them in a USD cache); returns the
+    path written (`NAME.NNNN.obj` for a sequence)."""
     from tqdm import tqdm
 
     sink = _Sink(kind, out, topo, names=names, fps=fps, start=start, units=units)
@@ -285,6 +294,7 @@ def write_output(
                 residuals[a:b],
                 missing[a:b],
                 None if jaw_theta is None else jaw_theta[a:b],
+                None if head is None else head[a:b],
             )
             bar.update(b - a)
     return sink.close()
@@ -498,6 +508,7 @@ def solve_file(
         say(f"left out {len(t.ignored)} labels unknown to the model: {', '.join(t.ignored)}")
     rng = frame_range(frames, t.num_frames)
     x = t.frames[rng]
+    head = None if t.head is None else t.head[rng]
     rate = frame_rate(fps, t.fps, kind)
     sigma = marker_noise(noise, x)
     jaw_mode = None if m.jaw_rig is None or jaw == "rest" else jaw
@@ -523,6 +534,7 @@ def solve_file(
             start=start,
             units=m.units,
             jaw_theta=res.jaw_theta,
+            head=head,
             quiet=quiet,
         )
         return written, int(x.shape[0])
@@ -535,7 +547,13 @@ def solve_file(
         for a in range(0, n, size):
             b = min(n, a + size)
             res = m.solve(x[a:b], jaw=jaw_mode, marker_noise=sigma, quiet=True, out=buf[: b - a])
-            sink.add(res.vertices, res.bundle_residuals, res.missing, res.jaw_theta)
+            sink.add(
+                res.vertices,
+                res.bundle_residuals,
+                res.missing,
+                res.jaw_theta,
+                None if head is None else head[a:b],
+            )
             bar.update(b - a)
     return sink.close(), n
 

@@ -28,6 +28,7 @@ __all__ = [
     "TAKE_SUFFIXES",
     "Curves",
     "Layout",
+    "HeadMotion",
     "RawTake",
     "Take",
     "arkit_to_dataset",
@@ -51,6 +52,20 @@ ARKIT_BOTH_SIDES = ("BrowInnerUp", "CheekPuff")
 """ARKit curves with no side that drive both a `_L` and an `_R` shape in a two-sided rig."""
 
 _TIMECODE_RATES = (24, 25, 30, 48, 50, 60, 120)
+
+
+@dataclass(frozen=True)
+class HeadMotion:
+    """The head's rigid motion per frame as `lgi.stabilize.align` found it (capture =
+    R_f rest + t_f), kept with the take so an exporter can write it beside the solved face."""
+
+    rotations: F64
+    """(F, 3, 3)."""
+    translations: F64
+    """(F, 3), in the take's units."""
+
+    def __getitem__(self, frames: slice) -> HeadMotion:
+        return HeadMotion(self.rotations[frames], self.translations[frames])
 
 
 @dataclass(frozen=True)
@@ -301,6 +316,8 @@ class RawTake:
     path: str
     first_frame: int = 0
     """The file's number of the first frame (C3D header, TRC `Frame#`)."""
+    head: HeadMotion | None = None
+    """The head's rigid motion per frame, when the file carries it (`lgi triangulate`)."""
 
 
 @dataclass(frozen=True)
@@ -320,6 +337,9 @@ class Take:
     first_frame: int = 0
     ignored: tuple[str, ...] = ()
     """Labels of the file unknown to the layout, left out (only with `allow_missing`)."""
+    head: HeadMotion | None = None
+    """The head's rigid motion per frame, when the file carries it (`lgi triangulate`:
+    the stabilisation's transforms), translations in `units`."""
 
     @property
     def num_frames(self) -> int:
@@ -511,6 +531,12 @@ def read_npz(path: str | os.PathLike[str]) -> RawTake:
             names = [str(x) for x in np.asarray(z["names"]).ravel()]
             fps = float(z["fps"]) if "fps" in z.files else None
             units = str(z["units"]) if "units" in z.files else None
+            head = None
+            if "rotations" in z.files and "translations" in z.files:
+                head = HeadMotion(
+                    np.asarray(z["rotations"], dtype=np.float64),
+                    np.asarray(z["translations"], dtype=np.float64),
+                )
     except InputError:
         raise
     except Exception as e:  # garbled archive: numpy raises various classes
@@ -522,7 +548,17 @@ def read_npz(path: str | os.PathLike[str]) -> RawTake:
     m = markers.astype(np.float64)
     if np.isinf(m).any():
         raise InputError(f"{p}: infinite coordinate")
-    return RawTake(names, m, fps, units or None, p)
+    f = m.shape[0]
+    if head is not None and (
+        head.rotations.shape != (f, 3, 3)
+        or head.translations.shape != (f, 3)
+        or not (np.isfinite(head.rotations).all() and np.isfinite(head.translations).all())
+    ):
+        raise InputError(
+            f"{p}: 'rotations' must be ({f}, 3, 3) and 'translations' ({f}, 3), finite; got "
+            f"{head.rotations.shape} and {head.translations.shape}"
+        )
+    return RawTake(names, m, fps, units or None, p, head=head)
 
 
 _READERS = {".c3d": read_c3d, ".trc": read_trc, ".csv": read_csv, ".npz": read_npz}
@@ -621,8 +657,11 @@ def read(
     else:
         frames, ignored = match_layout(raw, layout, allow_missing)
         names = list(layout)
+    head = raw.head
     if source is not None and target is not None:
         frames = convert_units(frames, source, target)
+        if head is not None:
+            head = HeadMotion(head.rotations, convert_units(head.translations, source, target))
     elif source is not None and target is None and layout is not None:
         raise InputError(
             f"{raw.path}: the take is in {source!r} but the model has no unit to convert to; "
@@ -637,4 +676,5 @@ def read(
         path=raw.path,
         first_frame=raw.first_frame,
         ignored=ignored,
+        head=head,
     )
