@@ -125,7 +125,7 @@ def test_usd_cache_keeps_the_head_transform_per_frame_and_refuses_half_of_one(
             np.array(prim.GetAttribute("lgi:headTranslation").Get(t)), shift[t], atol=1e-15
         )
     other = export.UsdCache(tmp_path / "half.usda", export.topology(quads), fps=24.0)
-    with pytest.raises(lgi.InputError, match="rotations .* and translations .* together"):
+    with pytest.raises(lgi.InputError, match=r"rotations .* and translations .* together"):
         other.add(v, head_rotations=rot)
 
 
