@@ -209,3 +209,40 @@ def test_solve_out_rejects_a_read_only_array(sample, sample_model):
     with pytest.raises(lgi.errors.InputError, match="writeable"):
         sample_model.solve(frames, quiet=True, out=buf)
     assert not buf.any()
+
+
+@pytest.mark.parametrize("chunk", [1, 7, 64])
+def test_solve_iter_chunks_equal_one_solve_bit_for_bit(sample, sample_dataset, chunk) -> None:  # type: ignore[no-untyped-def]
+    model = lgi.Model.build(sample_dataset, sample.markers_rest)  # jaw rig, pose from the fit
+    frames = sample.performance[:40]
+    for kw in ({}, {"marker_noise": 0.02}):
+        whole = model.solve(frames, quiet=True, **kw)
+        parts = list(model.solve_iter(frames, chunk=chunk, quiet=True, **kw))
+        assert parts[0].vertices.shape[0] == min(chunk, 40) and len(parts) == -(-40 // chunk)
+        np.testing.assert_array_equal(np.concatenate([p.vertices for p in parts]), whole.vertices)
+        np.testing.assert_array_equal(
+            np.concatenate([p.choices.shapes for p in parts]), whole.choices.shapes
+        )
+        assert whole.jaw_theta is not None
+        np.testing.assert_array_equal(
+            np.concatenate([p.jaw_theta for p in parts if p.jaw_theta is not None]),
+            whole.jaw_theta,
+        )
+
+
+def test_solve_iter_writes_every_chunk_into_one_buffer_and_checks_its_arguments(
+    sample, sample_model
+) -> None:  # type: ignore[no-untyped-def]
+    frames = sample.performance[:20]
+    want = sample_model.solve(frames, quiet=True).vertices
+    buf = np.empty((8, sample_model.num_vertices, 3))
+    got = [p.vertices.copy() for p in sample_model.solve_iter(frames, chunk=8, out=buf, quiet=True)]
+    np.testing.assert_array_equal(np.concatenate(got), want)
+    assert all(
+        np.shares_memory(p.vertices, buf)
+        for p in sample_model.solve_iter(frames, chunk=8, out=buf, quiet=True)
+    )
+    with pytest.raises(lgi.InputError, match="chunk"):
+        next(sample_model.solve_iter(frames, chunk=0))
+    with pytest.raises(lgi.InputError, match="jaw must be"):
+        next(sample_model.solve_iter(frames, jaw=np.zeros((20, 3))))

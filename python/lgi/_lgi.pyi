@@ -19,6 +19,7 @@ __all__ = [
     "Model",
     "RbfInterpolator",
     "SolveOutput",
+    "SolveState",
     "__version__",
     "check_count",
     "check_marker_frames",
@@ -199,6 +200,13 @@ class SolveOutput:
     def fit_weights(self) -> NDArray[np.float64] | None: ...
     @property
     def jaw_theta(self) -> NDArray[np.float64] | None: ...
+    @property
+    def state(self) -> SolveState | None: ...
+
+@final
+class SolveState:
+    """The last frame's choices and jaw bin of a temporal solve (opaque): the next chunk's
+    ``previous``."""
 
 # The dicts the inspection methods return, key by key (they exist only in this stub).
 class _BundleStats(TypedDict):
@@ -280,10 +288,12 @@ class Model:
         fit: bool | None = None,
         marker_noise: float | None = None,
         refine_jaw: bool = False,
+        previous: SolveState | None = None,
     ) -> SolveOutput:
         """Solves (F, B, 3) frames (vertices into `out` if given); ``fit`` offers the global
         fit as a candidate (None: exactly when ``marker_noise`` is given), ``marker_noise``
-        (data units) solves noise-aware, ``refine_jaw`` refines ``jaw_theta`` per frame."""
+        (data units) solves noise-aware, ``refine_jaw`` refines ``jaw_theta`` per frame,
+        ``previous`` (a temporal solve's ``state``) continues that solve."""
     def bundle_positions(self, meshes: ArrayLike) -> NDArray[np.float64]:
         """(F, V, 3) meshes -> (F, B, 3) bundle surface positions."""
     def bundle_stats(self) -> _BundleStats:

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import os
 import warnings
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from functools import cached_property
 from typing import Any
@@ -352,38 +352,77 @@ class Model:
         arr = np.asarray(frames)
         if arr.ndim == 2:
             arr = arr[None]
+        total = int(arr.shape[0]) if arr.ndim == 3 else 0
+        with _progress_bar(total, "lgi solve", quiet) as bar:
+            res = self._solve_core(
+                arr, bar, None, temporal, jaw, smooth_window, out, marker_noise, fit
+            )
+        return _result(res)
+
+    def solve_iter(
+        self,
+        frames: ArrayLike,
+        *,
+        chunk: int = 256,
+        temporal: bool = True,
+        jaw: str | None = "auto",
+        quiet: bool = False,
+        out: NDArray[np.float64] | None = None,
+        marker_noise: float | None = None,
+        fit: bool | None = None,
+    ) -> Iterator[SolveResult]:
+        """Solves `frames` (F, B, 3; a numpy memmap keeps a long take on disk) `chunk` frames
+        at a time and yields each chunk's `SolveResult`, so memory stays flat however long
+        the take. A temporal solve continues across chunks (each starts from the last frame's
+        choices and jaw bin of the one before), so the chunks together equal `solve(frames)`
+        bit for bit, except with `jaw="track"` (poses tracked chunk by chunk). `out`: a
+        (chunk, V, 3) float64 buffer every chunk is written into (a yielded result's vertices
+        are then overwritten by the next chunk: copy what you keep). Smoothing is not offered
+        (it needs frames beyond the chunk); give poses as arrays by solving chunks with
+        `solve`. Other options as in `solve`."""
+        n = _lgi.check_count(chunk, "chunk")
+        if n < 1:
+            raise InputError(f"chunk must be >= 1 frames, got {n}")
+        if jaw is not None and not isinstance(jaw, str):
+            raise InputError("solve_iter: jaw must be 'auto', 'fit', 'track' or None")
+        arr = frames if isinstance(frames, np.ndarray) else np.asarray(frames)
+        if arr.ndim != 3:
+            raise InputError(f"frames must have shape (F, B, 3), got {arr.shape}")
+        state: _lgi.SolveState | None = None
+        with _progress_bar(int(arr.shape[0]), "lgi solve", quiet) as bar:
+            for a in range(0, int(arr.shape[0]), n):
+                part = np.asarray(arr[a : a + n])
+                buf = None if out is None else out[: part.shape[0]]
+                res = self._solve_core(part, bar, state, temporal, jaw, 0, buf, marker_noise, fit)
+                state = res.state if temporal else None
+                yield _result(res)
+
+    def _solve_core(
+        self,
+        arr: NDArray[Any],
+        bar: Any,
+        previous: _lgi.SolveState | None,
+        temporal: bool,
+        jaw: str | ArrayLike | None,
+        smooth_window: int,
+        out: NDArray[np.float64] | None,
+        marker_noise: float | None,
+        fit: bool | None,
+    ) -> _lgi.SolveOutput:
         theta = self._jaw_theta(arr, jaw)
         # A pose from the fit is refined in the core, in the jaw's unskinned space.
         refine = theta is not None and isinstance(jaw, str) and jaw in ("auto", "fit")
-        total = int(arr.shape[0]) if arr.ndim == 3 else 0
-        with _progress_bar(total, "lgi solve", quiet) as bar:
-            res = self._core.solve(
-                arr,
-                progress=lambda _f: bar.update(1),
-                temporal=temporal,
-                jaw_theta=theta,
-                smooth_window=smooth_window,
-                out=out,
-                fit=None if fit is None else bool(fit),
-                marker_noise=None if marker_noise is None else _noise(marker_noise),
-                refine_jaw=refine,
-            )
-        return SolveResult(
-            vertices=res.vertices,
-            bundle_residuals=res.bundle_residuals,
-            bundle_positions=res.bundle_positions,
-            missing=res.missing,
-            jaw_theta=res.jaw_theta,
-            jaw_bin=None if theta is None else res.jaw_bin,
-            marker_corrections=res.marker_corrections,
-            fit_weights=res.fit_weights,
-            choices=Choices(
-                shapes=res.choice_shapes,
-                weights=res.choice_weights,
-                tets=res.choice_tets,
-                projected=res.choice_projected,
-                fit=res.choice_fit,
-            ),
+        return self._core.solve(
+            arr,
+            progress=lambda _f: bar.update(1),
+            temporal=temporal,
+            jaw_theta=theta,
+            smooth_window=smooth_window,
+            out=out,
+            fit=None if fit is None else bool(fit),
+            marker_noise=None if marker_noise is None else _noise(marker_noise),
+            refine_jaw=refine,
+            previous=previous,
         )
 
     def _jaw_theta(
@@ -437,7 +476,10 @@ class Model:
         # bundle.
         fr = np.where(np.isinf(fr).any(axis=2, keepdims=True), np.nan, fr)
         w, _ = solver.solve((fr - rest[None]).reshape(fr.shape[0], -1))
-        return np.asarray(np.clip(w, 0.0, 1.0) @ shape_theta, dtype=np.float64)
+        # Summed per frame in a fixed order (not a matrix product, whose blocking depends on
+        # the number of frames): a take solved in chunks gets the same poses.
+        weighted = np.clip(w, 0.0, 1.0)[:, :, None] * np.asarray(shape_theta)[None]
+        return np.asarray(weighted.sum(axis=1), dtype=np.float64)
 
     def bundle_positions(self, meshes: ArrayLike) -> NDArray[np.float64]:
         """Marker surface positions (F, B, 3) on meshes (F, V, 3) or (V, 3) -> (B, 3)."""
@@ -461,3 +503,24 @@ def _auto_rig(dataset: Dataset) -> tuple[JawRig | None, NDArray[np.float64] | No
         warnings.warn(f"jaw='auto': no jaw rig ({e}); building without one", stacklevel=3)
         return None, None
     return rig, np.asarray(theta, dtype=np.float64)
+
+
+def _result(res: _lgi.SolveOutput) -> SolveResult:
+    """The typed result of the core's output."""
+    return SolveResult(
+        vertices=res.vertices,
+        bundle_residuals=res.bundle_residuals,
+        bundle_positions=res.bundle_positions,
+        missing=res.missing,
+        jaw_theta=res.jaw_theta,
+        jaw_bin=None if res.jaw_theta is None else res.jaw_bin,
+        marker_corrections=res.marker_corrections,
+        fit_weights=res.fit_weights,
+        choices=Choices(
+            shapes=res.choice_shapes,
+            weights=res.choice_weights,
+            tets=res.choice_tets,
+            projected=res.choice_projected,
+            fit=res.choice_fit,
+        ),
+    )

@@ -24,6 +24,7 @@ fn _lgi(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<jaw::JawRig>()?;
     m.add_class::<model::Model>()?;
     m.add_class::<model::SolveOutput>()?;
+    m.add_class::<model::SolveState>()?;
     m.add_class::<baselines::RbfInterpolator>()?;
     m.add_class::<baselines::BlendshapeSolver>()?;
     m.add_function(wrap_pyfunction!(baselines::check_marker_frames, m)?)?;

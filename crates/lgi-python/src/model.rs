@@ -162,8 +162,10 @@ impl Model {
     /// frame's global blendshape fit beside its tets (None: exactly when `marker_noise` is
     /// given); `marker_noise` (data units) solves noise-aware (None: every marker
     /// interpolated as given); `refine_jaw` refines each frame's `jaw_theta` to the pose the
-    /// dataset's fit explains best (the poses used are `jaw_theta` of the output).
-    #[pyo3(signature = (frames, progress=None, temporal=true, jaw_theta=None, smooth_window=0, out=None, fit=None, marker_noise=None, refine_jaw=false))]
+    /// dataset's fit explains best (the poses used are `jaw_theta` of the output);
+    /// `previous` (a temporal solve's `state`) continues that solve: the first frame prefers
+    /// its choices and keeps its jaw bin, so chunks solved in turn equal one call.
+    #[pyo3(signature = (frames, progress=None, temporal=true, jaw_theta=None, smooth_window=0, out=None, fit=None, marker_noise=None, refine_jaw=false, previous=None))]
     #[allow(clippy::too_many_arguments)]
     fn solve<'py>(
         &self,
@@ -177,7 +179,9 @@ impl Model {
         fit: Option<bool>,
         marker_noise: Option<f64>,
         refine_jaw: bool,
+        previous: Option<PyRef<'py, SolveState>>,
     ) -> PyResult<SolveOutput> {
+        let previous = previous.map(|p| p.inner.clone());
         let mut options = SolveOptions::new(temporal, smooth_window, fit, marker_noise);
         options.refine_jaw = refine_jaw;
         let b = self.inner.num_bundles();
@@ -217,7 +221,8 @@ impl Model {
             let mut stopped: Option<PyErr> = None;
             let solved = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
                 py.detach(|| {
-                    model.solve_sequence_with(&frames, thetas.as_deref(), &options, out, |f| {
+                    let (th, prev) = (thetas.as_deref(), previous.as_ref());
+                    model.solve_sequence_after(&frames, th, &options, prev, out, |f| {
                         // Ctrl-C and a failing callback stop the solve after this frame.
                         let called = Python::attach(|py| {
                             py.check_signals()?;
@@ -311,6 +316,10 @@ impl Model {
                 Some(w) => Some(flat_to_array(py, w, &[nf, ns])?.into_any().unbind()),
                 None => None,
             },
+            state: solved
+                .last()
+                .map(|fr| Py::new(py, SolveState { inner: fr.state() }))
+                .transpose()?,
             jaw_theta: match poses.filter(|_| nf > 0) {
                 Some(t) => Some(flat_to_array(py, t, &[nf, 3])?.into_any().unbind()),
                 None => None,
@@ -515,6 +524,16 @@ pub struct SolveOutput {
     /// (F, 3) float64: the jaw pose each frame was solved at; None without poses.
     #[pyo3(get)]
     jaw_theta: Option<Py<PyAny>>,
+    /// What the frame after the last one needs (`solve(previous=...)`); None for no frames.
+    #[pyo3(get)]
+    state: Option<Py<SolveState>>,
+}
+
+/// The last frame's choices and jaw bin of a temporal solve: pass it as the next chunk's
+/// `previous` to continue the solve (opaque).
+#[pyclass(frozen, module = "lgi._lgi")]
+pub struct SolveState {
+    inner: lgi_core::FrameState,
 }
 
 /// Warns (`lgi.LgiWarning`) when the build left more than half of the markers whose clouds

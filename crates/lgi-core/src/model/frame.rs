@@ -40,6 +40,17 @@ pub struct FrameInfo {
     pub theta: Option<JawParams>,
 }
 
+impl FrameInfo {
+    /// What the next frame needs from this one (to continue a temporal solve,
+    /// [`Model::solve_sequence_after`](super::Model::solve_sequence_after)).
+    pub fn state(&self) -> FrameState {
+        FrameState {
+            choices: self.choices.clone(),
+            bin: Some(self.bin),
+        }
+    }
+}
+
 /// What the next frame needs from the previous one.
 #[derive(Debug, Clone, Default)]
 pub struct FrameState {

@@ -748,6 +748,23 @@ impl Model {
         vertices: &mut [DVec3],
         on_frame: impl FnMut(usize),
     ) -> Result<Vec<FrameInfo>> {
+        self.solve_sequence_after(frames, jaw, options, None, vertices, on_frame)
+    }
+
+    /// [`solve_sequence_with`](Self::solve_sequence_with) continuing a temporal solve: the
+    /// first frame prefers `previous`'s choices and keeps its jaw bin as the frame after
+    /// `previous` would in one call, so a take solved chunk by chunk, each chunk given the
+    /// last frame's state of the one before ([`FrameInfo::state`]), is the take solved at
+    /// once (frames are independent otherwise; smoothing sees only its own chunk).
+    pub fn solve_sequence_after(
+        &self,
+        frames: &[Vec<DVec3>],
+        jaw: Option<&[JawParams]>,
+        options: &SolveOptions,
+        previous: Option<&FrameState>,
+        vertices: &mut [DVec3],
+        on_frame: impl FnMut(usize),
+    ) -> Result<Vec<FrameInfo>> {
         options.validate()?;
         Extent::new(&self.markers_rest, self.diagonal).check_marker_noise(options.marker_noise)?;
         let (temporal, smooth_window) = (options.temporal, options.smooth_window);
@@ -773,8 +790,12 @@ impl Model {
         // Bins are picked in order: in a temporal solve a frame keeps the previous frame's bin
         // while its opening allows (hysteresis).
         let mut prepared: Vec<Prepared> = Vec::with_capacity(frames.len());
+        let previous = previous.filter(|_| temporal);
         for (f, t) in frames.iter().enumerate() {
-            let previous_bin = prepared.last().filter(|_| temporal).map(|p| p.bin);
+            let previous_bin = match prepared.last() {
+                Some(p) => Some(p.bin).filter(|_| temporal),
+                None => previous.and_then(|s| s.bin),
+            };
             let prep = self
                 .prepare(t, theta(f), previous_bin)
                 .map_err(|e| frame_context(e, f))?;
@@ -796,7 +817,7 @@ impl Model {
             })?;
         }
         match (smooth_window <= 1, temporal) {
-            (true, true) => self.solve_temporal_pipelined(&prepared, vertices, on_frame),
+            (true, true) => self.solve_temporal_pipelined(&prepared, previous, vertices, on_frame),
             (true, false) => self.solve_independent(&prepared, vertices, on_frame),
             (false, _) => {
                 self.solve_smoothed(&prepared, temporal, smooth_window, vertices, on_frame)
@@ -811,13 +832,20 @@ impl Model {
     fn solve_temporal_pipelined(
         &self,
         prepared: &[Prepared],
+        previous: Option<&FrameState>,
         vertices: &mut [DVec3],
         mut on_frame: impl FnMut(usize),
     ) -> Result<Vec<FrameInfo>> {
         // An empty mesh still gets one (empty) slot per frame.
         let slots = vertices.chunks_mut(self.dataset.num_vertices().max(1));
         let mut out: Vec<FrameInfo> = Vec::with_capacity(prepared.len());
-        let mut current = prepared.first().map(|p| self.choose_all(p, None));
+        let mut current = prepared.first().map(|p| {
+            // The frame before this call, as the loop below hands a frame to the next.
+            let before = previous
+                .filter(|s| s.bin.is_none_or(|b| b == p.bin))
+                .map(|s| self.lookups[p.bin].localize(&s.choices));
+            self.choose_all(p, before.as_deref())
+        });
         for (f, (prep, slot)) in prepared.iter().zip(slots).enumerate() {
             let choices = current.take().unwrap_or_default();
             let pieces = Pieces::from_choices_with_fit(&choices, prep.fit_weights());

@@ -472,6 +472,69 @@ fn a_temporal_solve_picks_bins_by_hysteresis_and_reports_dataset_shape_ids() {
 }
 
 /// The owned copy of a model's borrowed parts (what a reader of the file produces).
+#[test]
+fn a_take_solved_in_chunks_each_given_the_last_state_equals_the_take_solved_at_once() {
+    let (model, data, _) = binned_model(vec![0.0, 0.25, 0.5], 0.06).unwrap();
+    // Bin 1 entered at frame 3 and kept by hysteresis at frame 4 (0.2 lies in its widened
+    // range): a chunk boundary after frame 3 must carry the bin and the choices.
+    let opens = [0.0, 0.2, 0.29, 0.32, 0.2, 0.18, 0.5];
+    let frames: Vec<Vec<DVec3>> = (0..opens.len())
+        .map(|f| {
+            let k = [0, 3, 5, 7, 4, 1, 9][f];
+            model.bundle_positions(&shape_mesh(&data, k)).unwrap()
+        })
+        .collect();
+    let poses: Vec<JawParams> = opens
+        .iter()
+        .map(|&open| JawParams {
+            open,
+            ..JawParams::ZERO
+        })
+        .collect();
+    let nv = data.num_vertices();
+    let options = SolveOptions::exact(true, 0);
+    let mut whole = vec![DVec3::ZERO; frames.len() * nv];
+    let want = model
+        .solve_sequence_with(&frames, Some(&poses), &options, &mut whole, |_| {})
+        .unwrap();
+    for split in [1, 4, 6] {
+        let mut parts = vec![DVec3::ZERO; frames.len() * nv];
+        let (a, b) = parts.split_at_mut(split * nv);
+        let first = model
+            .solve_sequence_with(&frames[..split], Some(&poses[..split]), &options, a, |_| {})
+            .unwrap();
+        let state = first.last().map(FrameInfo::state);
+        let second = model
+            .solve_sequence_after(
+                &frames[split..],
+                Some(&poses[split..]),
+                &options,
+                state.as_ref(),
+                b,
+                |_| {},
+            )
+            .unwrap();
+        assert_eq!(parts, whole, "split after {split}");
+        for (got, want) in first.iter().chain(&second).zip(&want) {
+            assert_eq!(got.bin, want.bin);
+            assert_eq!(got.choices, want.choices);
+        }
+    }
+    // Without the state the chunk after frame 3 starts afresh: frame 4 leaves bin 1.
+    let mut rest = vec![DVec3::ZERO; 3 * nv];
+    let fresh = model
+        .solve_sequence_after(
+            &frames[4..],
+            Some(&poses[4..]),
+            &options,
+            None,
+            &mut rest,
+            |_| {},
+        )
+        .unwrap();
+    assert_eq!((fresh[0].bin, want[4].bin), (0, 1));
+}
+
 fn owned_parts(model: &Model) -> ModelParts {
     let p = model.parts();
     ModelParts {
