@@ -406,26 +406,30 @@ fn bin_selection_follows_a_hand_written_sequence_with_hysteresis() {
     assert_eq!(bins.select(0.6, None), 2);
 }
 
-#[test]
-fn a_temporal_solve_picks_bins_by_hysteresis_and_reports_dataset_shape_ids() {
-    let (model, data, _) = binned_model(vec![0.0, 0.25, 0.5], 0.06).unwrap();
+/// Seven frames of shapes at jaw openings that enter bin 1 of the 0 / 0.25 / 0.5 bins at
+/// frame 3 and stay there by hysteresis at frame 4: the frames and their poses.
+fn hysteresis_take(model: &Model, data: &Dataset) -> (Vec<Vec<DVec3>>, Vec<JawParams>) {
     let opens = [0.0, 0.2, 0.29, 0.32, 0.2, 0.18, 0.5];
-    let want = [0, 0, 0, 1, 1, 0, 1];
-    let frames: Vec<Vec<DVec3>> = opens
+    let shapes = [0, 3, 5, 7, 4, 1, 9];
+    let frames = shapes
         .iter()
-        .enumerate()
-        .map(|(f, _)| {
-            let k = [0, 3, 5, 7, 4, 1, 9][f];
-            model.bundle_positions(&shape_mesh(&data, k)).unwrap()
-        })
+        .map(|&k| model.bundle_positions(&shape_mesh(data, k)).unwrap())
         .collect();
-    let poses: Vec<JawParams> = opens
+    let poses = opens
         .iter()
         .map(|&open| JawParams {
             open,
             ..JawParams::ZERO
         })
         .collect();
+    (frames, poses)
+}
+
+#[test]
+fn a_temporal_solve_picks_bins_by_hysteresis_and_reports_dataset_shape_ids() {
+    let (model, data, _) = binned_model(vec![0.0, 0.25, 0.5], 0.06).unwrap();
+    let want = [0, 0, 0, 1, 1, 0, 1];
+    let (frames, poses) = hysteresis_take(&model, &data);
     for window in [0, 3] {
         let out = model
             .solve_sequence(&frames, Some(&poses), true, window, |_| {})
@@ -477,20 +481,7 @@ fn a_take_solved_in_chunks_each_given_the_last_state_equals_the_take_solved_at_o
     let (model, data, _) = binned_model(vec![0.0, 0.25, 0.5], 0.06).unwrap();
     // Bin 1 entered at frame 3 and kept by hysteresis at frame 4 (0.2 lies in its widened
     // range): a chunk boundary after frame 3 must carry the bin and the choices.
-    let opens = [0.0, 0.2, 0.29, 0.32, 0.2, 0.18, 0.5];
-    let frames: Vec<Vec<DVec3>> = (0..opens.len())
-        .map(|f| {
-            let k = [0, 3, 5, 7, 4, 1, 9][f];
-            model.bundle_positions(&shape_mesh(&data, k)).unwrap()
-        })
-        .collect();
-    let poses: Vec<JawParams> = opens
-        .iter()
-        .map(|&open| JawParams {
-            open,
-            ..JawParams::ZERO
-        })
-        .collect();
+    let (frames, poses) = hysteresis_take(&model, &data);
     let nv = data.num_vertices();
     let options = SolveOptions::exact(true, 0);
     let mut whole = vec![DVec3::ZERO; frames.len() * nv];
