@@ -6,7 +6,7 @@
 
 use crate::baselines::BlendshapeSolver;
 use crate::error::{LgiError, Result};
-use crate::linalg::Lu;
+use crate::linalg::{cholesky, cholesky_solve, Lu};
 use glam::DVec3;
 
 /// Ridge weight of the fit, relative to the mean squared column norm of its matrix.
@@ -133,6 +133,63 @@ impl FitPrior {
         weights.push(0.0);
         weights.extend_from_slice(&solution.weights);
         Ok((FrameFit { weights, positions }, changes))
+    }
+
+    /// What of `targets` (B, NaN rows missing) the shapes `active` (0-based shape indices)
+    /// cannot explain without the fit's ridge and box: the residual of the least-squares
+    /// projection of `targets − rest` onto those shapes' displacements over the present rows,
+    /// and the same projection's residual of each of `directions` (B points each). Zero for
+    /// a dataset shape's own markers when it is active; rows missing from `targets` are zero.
+    pub fn active_residuals(
+        &self,
+        targets: &[DVec3],
+        directions: &[Vec<DVec3>],
+        active: &[usize],
+    ) -> Result<(Vec<DVec3>, Vec<Vec<DVec3>>)> {
+        let b = self.rest.len();
+        let present: Vec<usize> = (0..b).filter(|&i| !targets[i].is_nan()).collect();
+        let k = active.len();
+        let col = |j: usize, n: usize| self.displacements[active[j] * b + n];
+        let mut g = vec![0.0; k * k];
+        for i in 0..k {
+            for j in 0..=i {
+                let x: f64 = present.iter().map(|&n| col(i, n).dot(col(j, n))).sum();
+                g[i * k + j] = x;
+                g[j * k + i] = x;
+            }
+        }
+        // A whisker of ridge keeps collinear shapes (an augmented dataset's) solvable; it is
+        // far below the fit's own.
+        let trace: f64 = (0..k).map(|i| g[i * k + i]).sum();
+        for i in 0..k {
+            g[i * k + i] += 1e-12 * trace / k.max(1) as f64 + f64::MIN_POSITIVE;
+        }
+        let factor = if k > 0 { Some(cholesky(k, g)?) } else { None };
+        let project = |v: &[DVec3]| -> Vec<DVec3> {
+            let mut out = vec![DVec3::ZERO; b];
+            for &n in &present {
+                out[n] = v[n];
+            }
+            if let Some(l) = &factor {
+                let c: Vec<f64> = (0..k)
+                    .map(|j| present.iter().map(|&n| col(j, n).dot(v[n])).sum())
+                    .collect();
+                let x = cholesky_solve(k, l, &c);
+                for &n in &present {
+                    let fitted: DVec3 = (0..k).map(|j| col(j, n) * x[j]).sum();
+                    out[n] -= fitted;
+                }
+            }
+            out
+        };
+        let offset: Vec<DVec3> = targets
+            .iter()
+            .zip(&self.rest)
+            .map(|(t, r)| if t.is_nan() { DVec3::ZERO } else { *t - *r })
+            .collect();
+        let r = project(&offset);
+        let dirs = directions.iter().map(|d| project(d)).collect();
+        Ok((r, dirs))
     }
 
     /// Noise-aware targets: the fit's positions plus its residuals smoothed across

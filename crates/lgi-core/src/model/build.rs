@@ -2,7 +2,7 @@
 //! tets (the expensive part, which a saved model stores), then the cheap assembly shared with
 //! loading (tet indices, alias groups, sewing weights, the bundles' jaw weights).
 
-use super::lookup::{lookup_sources, Lookup, LookupParts};
+use super::lookup::{lookup_sources, Lookup, LookupParts, LookupSource};
 use super::{labels, BuildConfig, JawInput, JawSetup, Model};
 use crate::cloud::{build_cloud, BundleCloud};
 use crate::correspond::correspond;
@@ -50,7 +50,8 @@ impl Model {
         };
         let mut parts = Vec::with_capacity(sources.len());
         for source in sources {
-            let shape_positions = shape_bundle_positions(source.data(), &bundles);
+            let shape_positions =
+                lookup_bundle_positions(&dataset, &source, &bundles, jaw.as_ref())?;
             let s1 = source.num_shapes() + 1;
             let built: Vec<(BundleCloud, Vec<Tet>)> = (0..b)
                 .into_par_iter()
@@ -99,14 +100,7 @@ impl Model {
         let jaw = match jaw {
             None => None,
             Some(input) => {
-                let bundle_weights = bundles
-                    .iter()
-                    .map(|b| {
-                        input
-                            .rig
-                            .interpolate_weight(mesh.triangles[b.triangle as usize], b.bary)
-                    })
-                    .collect::<Result<_>>()?;
+                let bundle_weights = jaw_bundle_weights(&input, mesh, &bundles)?;
                 Some(JawSetup {
                     input,
                     bundle_weights,
@@ -142,6 +136,59 @@ pub(super) fn locate_bundles(
     .into_iter()
     .map(|(sp, _)| sp)
     .collect())
+}
+
+/// Every bundle's jaw weight: the barycentric blend of its triangle's vertex weights.
+pub(super) fn jaw_bundle_weights(
+    input: &JawInput,
+    mesh: &crate::mesh::Mesh,
+    bundles: &[SurfacePoint],
+) -> Result<Vec<f64>> {
+    bundles
+        .iter()
+        .map(|b| {
+            input
+                .rig
+                .interpolate_weight(mesh.triangles[b.triangle as usize], b.bary)
+        })
+        .collect()
+}
+
+/// The bundles' positions on a lookup's neutral and member shapes, `(members + 1) × B`, that
+/// its clouds, alias groups and fit are built from. With a jaw they are the dataset's own
+/// (skinned) bundle positions moved into the lookup's space the way a frame's markers are
+/// (`Model::repose_bundles`: each bundle with its interpolated jaw weight, unskinned by the
+/// shape's pose, skinned to the bin's reference), so a dataset shape's own markers at its own
+/// pose land exactly on its cloud point; sampling the shapes unskinned vertex by vertex would
+/// differ where jaw weights blend (the mouth corners, the chin and neck).
+pub(super) fn lookup_bundle_positions(
+    dataset: &Dataset,
+    source: &LookupSource,
+    bundles: &[SurfacePoint],
+    jaw: Option<&JawInput>,
+) -> Result<Vec<DVec3>> {
+    let Some(input) = jaw else {
+        return Ok(shape_bundle_positions(source.data(), bundles));
+    };
+    let b = bundles.len();
+    let skinned = shape_bundle_positions(dataset, bundles);
+    let weights = jaw_bundle_weights(input, dataset.neutral(), bundles)?;
+    let rig = &input.rig;
+    let mut out = Vec::with_capacity((source.num_shapes() + 1) * b);
+    let ids = std::iter::once(None).chain(source.members().iter().map(|&m| Some(m as usize)));
+    for member in ids {
+        let row = &skinned[member.map_or(0, |m| m + 1) * b..][..b];
+        let mut unskinned = row.to_vec();
+        if let Some(m) = member {
+            rig.unskin_weighted(row, &weights, input.shape_thetas[m], &mut unskinned)?;
+        }
+        let mut moved = unskinned.clone();
+        if let Some(r) = source.reference() {
+            rig.skin_weighted(&unskinned, &weights, r, &mut moved)?;
+        }
+        out.extend(moved);
+    }
+    Ok(out)
 }
 
 /// Bundle positions on every shape, `(S + 1) × B` with shape id 0 the neutral (the

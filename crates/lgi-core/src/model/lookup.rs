@@ -183,6 +183,14 @@ impl LookupSource {
     pub(super) fn data(&self) -> &Dataset {
         &self.data
     }
+    /// Dataset shape index (0-based) of each member.
+    pub(super) fn members(&self) -> &[u32] {
+        &self.members
+    }
+    /// The bin's reference pose (`None` unbinned).
+    pub(super) fn reference(&self) -> Option<JawParams> {
+        self.reference
+    }
 }
 
 /// A lookup's source with its built clouds and tets (what a saved model stores).

@@ -3,7 +3,7 @@
 //! ([`Model::parts`]) and gets a model back from it ([`Model::from_parts`]), which recomputes
 //! everything cheap, so the file format never sees the model's internals.
 
-use super::build::{locate_bundles, shape_bundle_positions};
+use super::build::{locate_bundles, lookup_bundle_positions};
 use super::lookup::{lookup_sources, LookupParts};
 use super::{BuildConfig, JawInput, Model};
 use crate::cloud::BundleCloud;
@@ -124,7 +124,9 @@ impl Model {
                     "bin {bin}, bundle {i}: shape id out of range"
                 )));
             }
-            let shape_positions = shape_bundle_positions(source.data(), &bundles);
+            let shape_positions =
+                lookup_bundle_positions(&dataset, &source, &bundles, jaw.as_ref())
+                    .map_err(PartsError::Build)?;
             lookups.push(LookupParts {
                 source,
                 shape_positions,

@@ -369,14 +369,21 @@ impl Model {
                         .collect::<Vec<_>>(),
                 );
             }
-            let (fit, changes) = prior.fit_with_directions(&u, &dirs, last.as_ref())?;
+            let (fit, _) = prior.fit_with_directions(&u, &[], last.as_ref())?;
+            // The residual of the fit's active shapes without its ridge: zero at a dataset
+            // shape's own pose, so the refinement is not pulled off it by the ridge.
+            let active: Vec<usize> = (1..fit.weights.len())
+                .filter(|&j| fit.weights[j] > 0.0)
+                .map(|j| j - 1)
+                .collect();
+            let (res, pjs) = prior.active_residuals(&u, &dirs, &active)?;
             let n = dims.len();
             let (mut m, mut g, mut e) = (vec![0.0; n * n], vec![[0.0; 3]; n], 0.0);
             for &i in &prep.present {
                 let i = i as usize;
-                let r = u[i] - fit.positions[i];
+                let r = res[i];
                 e += r.length_squared();
-                let pj: Vec<DVec3> = (0..n).map(|a| dirs[a][i] - changes[a][i]).collect();
+                let pj: Vec<DVec3> = (0..n).map(|a| pjs[a][i]).collect();
                 for a in 0..n {
                     g[a][0] -= pj[a].dot(r);
                     for b in 0..n {
