@@ -642,45 +642,13 @@ mod tests {
         }
     }
 
-    /// A wavy n×n grid of quads (UVs = xy) with smooth shapes, its quads kept as polygons.
+    /// The model tests' wavy grid with 5 shapes, its quads kept as polygons.
     fn quad_patch(n: usize) -> Dataset {
-        let mut positions = Vec::new();
-        let mut uvs = Vec::new();
-        for y in 0..n {
-            for x in 0..n {
-                let (u, v) = (x as f64 / (n - 1) as f64, y as f64 / (n - 1) as f64);
-                positions.push(DVec3::new(u, v, 0.1 * (3.0 * u).sin() * (2.0 * v).cos()));
-                uvs.push(DVec2::new(u, v));
-            }
+        let mut polygons = Polygons::default();
+        for q in crate::model::tests::patch_quads(n) {
+            polygons.push(&q, Some(&q));
         }
-        let (mut triangles, mut polygons) = (Vec::new(), Polygons::default());
-        for y in 0..n - 1 {
-            for x in 0..n - 1 {
-                let a = (y * n + x) as u32;
-                let q = [a, a + 1, a + n as u32 + 1, a + n as u32];
-                triangles.push([q[0], q[1], q[2]]);
-                triangles.push([q[0], q[2], q[3]]);
-                polygons.push(&q, Some(&q));
-            }
-        }
-        let mesh = Mesh {
-            positions: positions.clone(),
-            uv_triangles: triangles.clone(),
-            triangles,
-            uvs,
-        };
-        let shapes = (0..5)
-            .map(|k| {
-                let f = k as f64 + 1.0;
-                let pos = positions
-                    .iter()
-                    .map(|p| *p + DVec3::new(0.0, 0.0, 0.05 * (f * p.x + 0.3 * f * p.y).sin()))
-                    .collect();
-                (format!("s{k}"), pos)
-            })
-            .collect();
-        Dataset::from_shape_positions(mesh, shapes)
-            .unwrap()
+        crate::model::tests::patch_with(n, 5)
             .with_polygons(polygons)
             .unwrap()
     }

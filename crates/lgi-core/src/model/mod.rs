@@ -32,7 +32,7 @@ mod parts;
 mod sanity;
 mod solve;
 #[cfg(test)]
-mod tests;
+pub(crate) mod tests;
 
 pub use config::BuildConfig;
 pub use frame::{Frame, FrameInfo, FrameState};

@@ -12,8 +12,14 @@ use crate::sew::plan::SewContext;
 use crate::sew::Pieces;
 use glam::DVec2;
 
-/// A wavy n×n grid patch with UVs = xy and a few smooth shapes.
+/// A wavy n×n grid (UVs = xy) with 6 smooth shapes.
 fn patch(n: usize) -> Dataset {
+    patch_with(n, 6)
+}
+
+/// A wavy n×n grid (UVs = xy), each quad split into two triangles, with `shapes` smooth
+/// shapes (the model-file tests share it).
+pub(crate) fn patch_with(n: usize, shapes: usize) -> Dataset {
     let mut positions = Vec::new();
     let mut uvs = Vec::new();
     for y in 0..n {
@@ -23,22 +29,17 @@ fn patch(n: usize) -> Dataset {
             uvs.push(DVec2::new(u, v));
         }
     }
-    let mut triangles = Vec::new();
-    for y in 0..n - 1 {
-        for x in 0..n - 1 {
-            let a = (y * n + x) as u32;
-            let (b, c, d) = (a + 1, a + n as u32 + 1, a + n as u32);
-            triangles.push([a, b, c]);
-            triangles.push([a, c, d]);
-        }
-    }
+    let triangles: Vec<[u32; 3]> = patch_quads(n)
+        .iter()
+        .flat_map(|q| [[q[0], q[1], q[2]], [q[0], q[2], q[3]]])
+        .collect();
     let mesh = Mesh {
         positions: positions.clone(),
         uv_triangles: triangles.clone(),
         triangles,
         uvs,
     };
-    let shapes = (0..6)
+    let shapes = (0..shapes)
         .map(|k| {
             let f = k as f64 + 1.0;
             let pos = positions
@@ -49,6 +50,15 @@ fn patch(n: usize) -> Dataset {
         })
         .collect();
     Dataset::from_shape_positions(mesh, shapes).unwrap()
+}
+
+/// The quads of [`patch_with`]'s grid, row by row (corners counter-clockwise).
+pub(crate) fn patch_quads(n: usize) -> Vec<[u32; 4]> {
+    let n32 = n as u32;
+    (0..n32 - 1)
+        .flat_map(|y| (0..n32 - 1).map(move |x| y * n32 + x))
+        .map(|a| [a, a + 1, a + n32 + 1, a + n32])
+        .collect()
 }
 
 /// Same sparsity pattern, values within `tol` (0: equal).
