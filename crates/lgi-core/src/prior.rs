@@ -91,48 +91,34 @@ impl FitPrior {
 
     /// The fit of `targets` (B, NaN rows missing).
     pub fn fit(&self, targets: &[DVec3]) -> Result<FrameFit> {
-        Ok(self.fit_with_directions(targets, &[], None)?.0)
+        self.fit_from(targets, None)
     }
 
-    /// [`fit`](Self::fit), and for each of `directions` (B points each, a change of the
-    /// targets) the change of the fit's positions per unit of it, the fit's clamped weights
-    /// held (the derivative of the fit's positions with respect to its targets). `start`: a
-    /// nearby fit to start from (its `weights`).
-    pub fn fit_with_directions(
-        &self,
-        targets: &[DVec3],
-        directions: &[Vec<DVec3>],
-        start: Option<&FrameFit>,
-    ) -> Result<(FrameFit, Vec<Vec<DVec3>>)> {
+    /// [`fit`](Self::fit) started at `start` (a nearby fit's weights, e.g. the previous step
+    /// of the jaw refinement's): the same minimum in fewer steps.
+    pub fn fit_from(&self, targets: &[DVec3], start: Option<&FrameFit>) -> Result<FrameFit> {
         let b = self.rest.len();
         let mut rhs = Vec::with_capacity(3 * b);
         for (t, r) in targets.iter().zip(&self.rest) {
             rhs.extend_from_slice(&(*t - *r).to_array());
         }
-        let flat: Vec<Vec<f64>> = directions
-            .iter()
-            .map(|d| d.iter().flat_map(|p| p.to_array()).collect())
-            .collect();
         let from = start.and_then(|f| f.weights.get(1..));
-        let (solution, dw) = self.solver.solve_with_derivatives(&rhs, &flat, from)?;
-        let moved = |w: &[f64], base: &[DVec3]| -> Vec<DVec3> {
-            let mut out = base.to_vec();
-            for (k, &x) in w.iter().enumerate() {
-                if x != 0.0 {
-                    for (p, d) in out.iter_mut().zip(&self.displacements[k * b..(k + 1) * b]) {
-                        *p += *d * x;
-                    }
+        let (solution, _) = self.solver.solve_with_derivatives(&rhs, &[], from)?;
+        let mut positions = self.rest.clone();
+        for (k, &x) in solution.weights.iter().enumerate() {
+            if x != 0.0 {
+                for (p, d) in positions
+                    .iter_mut()
+                    .zip(&self.displacements[k * b..(k + 1) * b])
+                {
+                    *p += *d * x;
                 }
             }
-            out
-        };
-        let positions = moved(&solution.weights, &self.rest);
-        let zero = vec![DVec3::ZERO; b];
-        let changes = dw.iter().map(|w| moved(w, &zero)).collect();
+        }
         let mut weights = Vec::with_capacity(solution.weights.len() + 1);
         weights.push(0.0);
         weights.extend_from_slice(&solution.weights);
-        Ok((FrameFit { weights, positions }, changes))
+        Ok(FrameFit { weights, positions })
     }
 
     /// What of `targets` (B, NaN rows missing) the shapes `active` (0-based shape indices)

@@ -369,7 +369,7 @@ impl Model {
                         .collect::<Vec<_>>(),
                 );
             }
-            let (fit, _) = prior.fit_with_directions(&u, &[], last.as_ref())?;
+            let fit = prior.fit_from(&u, last.as_ref())?;
             // The residual of the fit's active shapes without its ridge: zero at a dataset
             // shape's own pose, so the refinement is not pulled off it by the ridge.
             let active: Vec<usize> = (1..fit.weights.len())
