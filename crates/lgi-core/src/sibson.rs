@@ -81,6 +81,8 @@ struct Scratch<'a> {
     nn: NaturalNeighbor<'a, DelaunayTriangulation<Site>>,
     spade_out: Vec<(FixedVertexHandle, f64)>,
     unfiltered: Vec<(u32, f64)>,
+    /// The last row before barriers and the drop of tiny weights.
+    support: Vec<(u32, f64)>,
     visit: VisitStamps,
 }
 
@@ -175,46 +177,78 @@ impl SibsonWeights {
 
     /// Weights of every query point (V rows, B columns), computed in parallel (rayon).
     pub fn weights(&self, queries: &[DVec2]) -> SparseWeights {
+        self.rows(queries, false).0
+    }
+
+    /// [`weights`](Self::weights), and each row's columns before barriers hide any and tiny
+    /// weights are dropped (the natural neighbours, or the nearest hull edge's ends; weights
+    /// as they were), sorted: every site whose removal could change the row.
+    pub fn weights_and_support(&self, queries: &[DVec2]) -> (SparseWeights, SparseWeights) {
+        self.rows(queries, true)
+    }
+
+    fn rows(&self, queries: &[DVec2], with_support: bool) -> (SparseWeights, SparseWeights) {
         const CHUNK: usize = 256;
-        let chunks: Vec<(Vec<u32>, Vec<u32>, Vec<f64>)> = queries
+        type Part = (Vec<u32>, Vec<u32>, Vec<f64>);
+        let chunks: Vec<(Part, Part)> = queries
             .par_chunks(CHUNK)
             .map_init(
                 || self.scratch(),
                 |scratch, chunk| {
-                    let mut lens = Vec::with_capacity(chunk.len());
-                    let mut cols = Vec::with_capacity(chunk.len() * 6);
-                    let mut vals = Vec::with_capacity(chunk.len() * 6);
+                    let mut main: Part = (
+                        Vec::with_capacity(chunk.len()),
+                        Vec::with_capacity(chunk.len() * 6),
+                        Vec::with_capacity(chunk.len() * 6),
+                    );
+                    let mut support: Part = Default::default();
                     let mut row = Vec::new();
                     for &q in chunk {
                         self.row_into(q, scratch, &mut row);
-                        lens.push(row.len() as u32);
+                        main.0.push(row.len() as u32);
                         for &(c, w) in &row {
-                            cols.push(c);
-                            vals.push(w);
+                            main.1.push(c);
+                            main.2.push(w);
+                        }
+                        if with_support {
+                            let s = &mut scratch.support;
+                            s.sort_unstable_by_key(|&(c, _)| c);
+                            support.0.push(s.len() as u32);
+                            for &(c, w) in s.iter() {
+                                support.1.push(c);
+                                support.2.push(w);
+                            }
                         }
                     }
-                    (lens, cols, vals)
+                    (main, support)
                 },
             )
             .collect();
-        let nnz: usize = chunks.iter().map(|c| c.1.len()).sum();
-        let mut out = SparseWeights {
-            row_start: Vec::with_capacity(queries.len() + 1),
-            cols: Vec::with_capacity(nnz),
-            vals: Vec::with_capacity(nnz),
-            num_cols: self.sites.len(),
-        };
-        out.row_start.push(0);
-        for (lens, cols, vals) in chunks {
-            let mut at = out.cols.len() as u32;
-            for l in lens {
-                at += l;
-                out.row_start.push(at);
+        let assemble = |parts: &mut dyn Iterator<Item = Part>, rows: usize| {
+            let mut out = SparseWeights {
+                row_start: Vec::with_capacity(rows + 1),
+                cols: Vec::new(),
+                vals: Vec::new(),
+                num_cols: self.sites.len(),
+            };
+            out.row_start.push(0);
+            for (lens, cols, vals) in parts {
+                let mut at = out.cols.len() as u32;
+                for l in lens {
+                    at += l;
+                    out.row_start.push(at);
+                }
+                out.cols.extend(cols);
+                out.vals.extend(vals);
             }
-            out.cols.extend(cols);
-            out.vals.extend(vals);
-        }
-        out
+            out
+        };
+        let (main, support): (Vec<Part>, Vec<Part>) = chunks.into_iter().unzip();
+        let n = queries.len();
+        let support = match with_support {
+            true => assemble(&mut support.into_iter(), n),
+            false => SparseWeights::empty(self.sites.len()),
+        };
+        (assemble(&mut main.into_iter(), n), support)
     }
 
     /// Delaunay neighbours of each site (sorted), excluding pairs whose connecting segment
@@ -241,6 +275,7 @@ impl SibsonWeights {
             nn: self.tri.natural_neighbor(),
             spade_out: Vec::new(),
             unfiltered: Vec::new(),
+            support: Vec::new(),
             visit: VisitStamps::new(self.barriers.len()),
         }
     }
@@ -261,6 +296,7 @@ impl SibsonWeights {
     /// The weights of one query, sorted by column, into `out`.
     fn row_into(&self, q: DVec2, s: &mut Scratch<'_>, out: &mut Vec<(u32, f64)>) {
         out.clear();
+        s.support.clear();
         let Some(q) = self.to_local(q) else {
             return;
         };
@@ -294,6 +330,7 @@ impl SibsonWeights {
             self.hull_weights(q, out);
         }
         normalise(out);
+        s.support.extend_from_slice(out);
         if !self.barriers.is_empty() {
             self.hide_behind_barriers(q, s, out);
         }

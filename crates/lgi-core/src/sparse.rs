@@ -17,6 +17,23 @@ pub struct SparseWeights {
 }
 
 impl SparseWeights {
+    /// No rows, `num_cols` columns.
+    pub fn empty(num_cols: usize) -> SparseWeights {
+        SparseWeights {
+            row_start: vec![0],
+            cols: Vec::new(),
+            vals: Vec::new(),
+            num_cols,
+        }
+    }
+
+    /// Appends a row.
+    pub fn push_row(&mut self, cols: &[u32], vals: &[f64]) {
+        self.cols.extend_from_slice(cols);
+        self.vals.extend_from_slice(vals);
+        self.row_start.push(self.cols.len() as u32);
+    }
+
     /// Number of rows (query points).
     pub fn num_rows(&self) -> usize {
         self.row_start.len().saturating_sub(1)
@@ -77,6 +94,113 @@ impl SparseWeights {
                 "row {r}: weights sum to {sum}"
             );
         }
+    }
+}
+
+/// A matrix's rows with some of them replaced: the plan of a missing set shares the full
+/// plan's rows and keeps only those that the missing bundles change.
+#[derive(Debug, Clone)]
+pub struct PatchedWeights {
+    base: std::sync::Arc<SparseWeights>,
+    /// The replacing rows.
+    patch: SparseWeights,
+    /// Per row of `base`: its row in `patch`, or `u32::MAX` (empty: none replaced).
+    patched: Vec<u32>,
+}
+
+impl PatchedWeights {
+    /// `base`'s rows, none replaced.
+    pub fn whole(base: std::sync::Arc<SparseWeights>) -> PatchedWeights {
+        PatchedWeights {
+            base,
+            patch: SparseWeights::empty(0),
+            patched: Vec::new(),
+        }
+    }
+
+    /// `base` with the rows `rows` (row, its columns and weights; each row once) replaced.
+    pub fn new<'a>(
+        base: std::sync::Arc<SparseWeights>,
+        rows: impl IntoIterator<Item = (u32, (&'a [u32], &'a [f64]))>,
+    ) -> PatchedWeights {
+        let mut patched = vec![u32::MAX; base.num_rows()];
+        let mut patch = SparseWeights::empty(base.num_cols);
+        for (r, (cols, vals)) in rows {
+            patched[r as usize] = patch.num_rows() as u32;
+            patch.push_row(cols, vals);
+        }
+        PatchedWeights {
+            base,
+            patch,
+            patched,
+        }
+    }
+
+    /// The rows before replacement.
+    pub fn base(&self) -> &SparseWeights {
+        &self.base
+    }
+
+    /// The rows before replacement, shared.
+    pub fn shared_base(&self) -> std::sync::Arc<SparseWeights> {
+        self.base.clone()
+    }
+
+    /// Columns and weights of row `r` (panics out of range, like slice indexing).
+    pub fn row(&self, r: usize) -> (&[u32], &[f64]) {
+        self.view().row(r)
+    }
+
+    /// A borrowed view for reading rows.
+    pub fn view(&self) -> WeightRows<'_> {
+        WeightRows {
+            base: &self.base,
+            patch: (!self.patched.is_empty()).then_some((&self.patch, &self.patched[..])),
+        }
+    }
+
+    /// The rows as one matrix (tests).
+    pub fn to_sparse(&self) -> SparseWeights {
+        let view = self.view();
+        let mut out = SparseWeights::empty(self.base.num_cols);
+        for r in 0..self.base.num_rows() {
+            let (cols, vals) = view.row(r);
+            out.push_row(cols, vals);
+        }
+        out
+    }
+}
+
+/// Rows of a [`SparseWeights`] or a [`PatchedWeights`], read the same way.
+#[derive(Debug, Clone, Copy)]
+pub struct WeightRows<'a> {
+    base: &'a SparseWeights,
+    patch: Option<(&'a SparseWeights, &'a [u32])>,
+}
+
+impl<'a> WeightRows<'a> {
+    /// Columns and weights of row `r` (panics out of range, like slice indexing).
+    #[inline]
+    pub fn row(&self, r: usize) -> (&'a [u32], &'a [f64]) {
+        if let Some((patch, patched)) = self.patch {
+            let p = patched[r];
+            if p != u32::MAX {
+                return patch.row(p as usize);
+            }
+        }
+        self.base.row(r)
+    }
+}
+
+impl<'a> From<&'a PatchedWeights> for WeightRows<'a> {
+    fn from(w: &'a PatchedWeights) -> Self {
+        w.view()
+    }
+}
+
+impl<'a> From<&'a SparseWeights> for WeightRows<'a> {
+    fn from(base: &'a SparseWeights) -> Self {
+        WeightRows { base, patch: None }
     }
 }
 

@@ -9,10 +9,11 @@ use crate::error::Result;
 use crate::geom::interpolate3;
 use crate::linalg::Lu;
 use crate::mesh::SurfacePoint;
-use crate::sparse::SparseWeights;
+use crate::sparse::WeightRows;
 use glam::DVec3;
 use rayon::prelude::*;
 
+mod memo;
 pub mod plan;
 
 pub use plan::{SewGeometry, SewPlan, SewPlans};
@@ -92,10 +93,10 @@ impl Pieces {
 
 /// Blends the pieces: writes `x0 + Σ_i W_vi Σ_j α_ij s_k(v)` into `out`.
 /// `displacements` is the dataset's `S × V × 3` (shape id k ≥ 1 reads shape k − 1).
-pub fn blend(
-    x0: &[DVec3],
-    displacements: &[f32],
-    weights: &SparseWeights,
+pub fn blend<'a>(
+    x0: &'a [DVec3],
+    displacements: &'a [f32],
+    weights: impl Into<WeightRows<'a>>,
     pieces: &Pieces,
     out: &mut [DVec3],
 ) {
@@ -116,7 +117,7 @@ pub fn blend(
 pub struct BlendInput<'a> {
     x0: &'a [DVec3],
     displacements: &'a [f32],
-    weights: &'a SparseWeights,
+    weights: WeightRows<'a>,
     start: Vec<u32>,
     terms: Vec<(usize, f64)>,
     /// Per bundle: its piece is `fit_terms` (empty when no bundle's is).
@@ -130,9 +131,10 @@ impl<'a> BlendInput<'a> {
     pub fn new(
         x0: &'a [DVec3],
         displacements: &'a [f32],
-        weights: &'a SparseWeights,
+        weights: impl Into<WeightRows<'a>>,
         pieces: &Pieces,
     ) -> Self {
+        let weights = weights.into();
         let nv = x0.len();
         let flatten = |shapes: &[u32], alphas: &[f64], terms: &mut Vec<(usize, f64)>| {
             for (&k, &a) in shapes.iter().zip(alphas) {
@@ -319,7 +321,7 @@ impl ResidualPass {
     pub fn new(
         triangles: &[[u32; 3]],
         bundles: &[SurfacePoint],
-        weights: &SparseWeights,
+        weights: WeightRows<'_>,
         present: &[u32],
     ) -> Result<Self> {
         let n = present.len();
@@ -434,7 +436,7 @@ impl ResidualPass {
         &self,
         triangles: &[[u32; 3]],
         bundles: &[SurfacePoint],
-        weights: &SparseWeights,
+        weights: WeightRows<'_>,
         targets: &[DVec3],
         tolerance: f64,
         x: &mut [DVec3],

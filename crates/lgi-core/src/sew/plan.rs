@@ -1,7 +1,13 @@
 //! Sewing plans: for one set of present bundles, the V × B natural-neighbour weights (Sibson
 //! in UV, minus paths that detour around a hole) and the residual pass, built once for all
 //! bundles and per set of missing bundles on demand (derived from the full plan, cached).
+//!
+//! A missing set's plan costs about the same however many distinct sets a take has: each
+//! bundle's rows with that bundle alone missing are computed the first time it goes missing
+//! and kept ([`WithoutOne`]); a set's plan reuses them wherever no other missing bundle is a
+//! natural neighbour of the row, and recomputes only rows that two missing bundles share.
 
+use super::memo::{Gone, RowMemo, Rows};
 use super::{BlendInput, BundleTargets, Pieces, ResidualPass};
 use crate::dataset::Dataset;
 use crate::error::{LgiError, Result};
@@ -10,7 +16,7 @@ use crate::jaw::VertexMap;
 use crate::mesh::Mesh;
 use crate::mesh::SurfacePoint;
 use crate::sibson::SibsonWeights;
-use crate::sparse::SparseWeights;
+use crate::sparse::{PatchedWeights, SparseWeights};
 use crate::uvspace::{self, SewingSpace};
 use glam::DVec3;
 use rayon::prelude::*;
@@ -21,7 +27,7 @@ use std::sync::{Arc, Mutex};
 #[derive(Debug)]
 pub struct SewPlan {
     /// V × B weights (columns of missing bundles are empty).
-    pub weights: SparseWeights,
+    pub weights: PatchedWeights,
     residual: ResidualPass,
 }
 
@@ -46,7 +52,7 @@ impl SewPlan {
         at: &BundleTargets<'_>,
         out: &mut [DVec3],
     ) -> Option<usize> {
-        let input = BlendInput::new(x0, displacements, &self.weights, pieces);
+        let input = BlendInput::new(x0, displacements, self.weights.view(), pieces);
         match jaw {
             Some(m) => self.residual.sew(&input, |v, p| m.apply(v, p), at, out),
             None => self.residual.sew(&input, |_, p| p, at, out),
@@ -125,15 +131,26 @@ impl SewGeometry {
     }
 }
 
-/// A model's sewing plans: the full plan (every bundle present), the natural-neighbour support
-/// that tells which rows a missing bundle changes, and a cache of the plans of missing sets.
+/// A model's sewing plans: the full plan (every bundle present), which rows each bundle's
+/// absence can change, the rows kept without one bundle or a pair, and a cache of the plans
+/// of missing sets.
 #[derive(Debug)]
 pub struct SewPlans {
     geometry: SewGeometry,
     full: Arc<SewPlan>,
     /// Every sewn vertex's natural neighbours among all bundles, before barriers and detours
-    /// (rows of the sewn vertices in order): which rows a missing bundle can change.
+    /// (rows of the sewn vertices in order), for the tests' reference derivation.
+    #[cfg(test)]
     support: SparseWeights,
+    /// The sewn vertices, in the order of `support`'s rows.
+    sewn: Vec<u32>,
+    /// Per sewn vertex: the vertices whose row is its row (itself and those it is the proxy of).
+    by_proxy: Proxied,
+    /// Per bundle: the sewn rows (ascending) whose support or full-plan row has it, i.e. the
+    /// rows that can change when it is missing.
+    touching: Vec<Vec<u32>>,
+    /// Rows kept with a few bundles missing, for the plans of later missing sets.
+    memo: RowMemo,
     cache: Mutex<HashMap<Vec<u32>, Arc<SewPlan>>>,
 }
 
@@ -149,10 +166,27 @@ impl SewPlans {
         let all: Vec<u32> = (0..bundles.len() as u32).collect();
         let full = Arc::new(sew.plan(&all)?);
         let support = sew.support()?;
+        let sewn: Vec<u32> = (0..dataset.num_vertices())
+            .filter(|&v| geometry.space.contains(v))
+            .map(|v| v as u32)
+            .collect();
+        let mut touching = vec![Vec::new(); bundles.len()];
+        for (r, &v) in sewn.iter().enumerate() {
+            let (a, b) = (support.row(r).0, full.weights.row(v as usize).0);
+            for &c in a.iter().chain(b.iter().filter(|c| !a.contains(c))) {
+                touching[c as usize].push(r as u32);
+            }
+        }
+        let by_proxy = Proxied::new(&geometry.space.proxy);
         Ok(SewPlans {
             geometry,
             full,
+            #[cfg(test)]
             support,
+            sewn,
+            by_proxy,
+            touching,
+            memo: RowMemo::new(bundles.len()),
             cache: Mutex::new(HashMap::new()),
         })
     }
@@ -175,7 +209,7 @@ impl SewPlans {
             }
         }
         let ctx = self.geometry.context(dataset, bundles);
-        let plan = Arc::new(ctx.plan_without(present, &self.full, &self.support)?);
+        let plan = Arc::new(self.derive(&ctx, present)?);
         if let Ok(mut cache) = self.cache.lock() {
             if cache.len() >= PLAN_CACHE {
                 cache.clear();
@@ -183,6 +217,99 @@ impl SewPlans {
             cache.insert(key, plan.clone());
         }
         Ok(plan)
+    }
+
+    /// The plan for `present` from the full plan and the rows kept without one bundle or a
+    /// pair ([`RowMemo`]). Removing sites changes only the rows of points that had one of them
+    /// as a natural neighbour (the rule [`SewContext::plan_without`] applies from the full
+    /// set): so a sewn row that no missing bundle touches (columns or support) is the full
+    /// plan's, and one that missing bundles G touch is its row without G, provided no other
+    /// missing bundle touches that row; if one does, G grows by it (one to a pair). The rows
+    /// that three or more missing bundles touch are recomputed.
+    fn derive(&self, ctx: &SewContext<'_>, present: &[u32]) -> Result<SewPlan> {
+        let nb = self.touching.len();
+        let mut is_missing = vec![true; nb];
+        for &b in present {
+            is_missing[b as usize] = false;
+        }
+        // Per sewn row touched by a missing bundle: the first two of them (None: more).
+        let mut slot = vec![u32::MAX; self.sewn.len()];
+        let mut touched: Vec<(u32, Option<Gone>)> = Vec::new();
+        for m in (0..nb as u32).filter(|&b| is_missing[b as usize]) {
+            for &r in &self.touching[m as usize] {
+                let s = &mut slot[r as usize];
+                if *s == u32::MAX {
+                    *s = touched.len() as u32;
+                    touched.push((r, Some(Gone::One(m))));
+                } else {
+                    let e = &mut touched[*s as usize].1;
+                    *e = match *e {
+                        Some(Gone::One(a)) => Some(Gone::two(a, m)),
+                        _ => None,
+                    };
+                }
+            }
+        }
+        let mut view = self.memo.view();
+        // Per touched row: the kept rows holding it and its index there, once resolved.
+        let mut found: Vec<Option<(Arc<Rows>, u32)>> = vec![None; touched.len()];
+        let mut pending: Vec<usize> = (0..touched.len()).collect();
+        while !pending.is_empty() {
+            let mut queue: HashMap<Gone, Vec<u32>> = HashMap::new();
+            let mut next = Vec::new();
+            for k in pending {
+                let (r, Some(gone)) = touched[k] else {
+                    continue;
+                };
+                let Some((rows, i)) = view.find(gone, r) else {
+                    queue.entry(gone).or_default().push(r);
+                    next.push(k);
+                    continue;
+                };
+                // Other missing bundles touching the row kept without `gone`.
+                let (cols, support) = (rows.weights.row(i).0, rows.support.row(i).0);
+                let mut other = cols
+                    .iter()
+                    .chain(support)
+                    .filter(|&&c| is_missing[c as usize] && !gone.has(c));
+                match (other.next(), gone) {
+                    (None, _) => found[k] = Some((rows.clone(), i as u32)),
+                    (Some(&c), Gone::One(m)) if other.all(|&d| d == c) => {
+                        touched[k].1 = Some(Gone::two(m, c));
+                        next.push(k);
+                    }
+                    _ => touched[k].1 = None,
+                }
+            }
+            for (gone, mut rows) in queue {
+                rows.sort_unstable();
+                view.compute(ctx, gone, rows, &self.touching, &self.sewn)?;
+            }
+            pending = next;
+        }
+        // The rest: recomputed.
+        let mut direct: Vec<usize> = touched
+            .iter()
+            .zip(&found)
+            .filter(|(_, f)| f.is_none())
+            .map(|((r, _), _)| self.sewn[*r as usize] as usize)
+            .collect();
+        direct.sort_unstable();
+        let recomputed = match direct.is_empty() {
+            true => SparseWeights::empty(nb),
+            false => ctx.rows_for(present, &direct)?,
+        };
+        let mut changed: Vec<(u32, Row<'_>)> = direct
+            .iter()
+            .enumerate()
+            .map(|(i, &v)| (v as u32, recomputed.row(i)))
+            .collect();
+        for ((r, _), f) in touched.iter().zip(&found) {
+            if let Some((rows, i)) = f {
+                changed.push((self.sewn[*r as usize], rows.weights.row(*i as usize)));
+            }
+        }
+        ctx.plan_patched(present, &self.full.weights, &self.by_proxy, changed)
     }
 
     /// The plan with every bundle present.
@@ -198,10 +325,50 @@ impl SewPlans {
     pub(crate) fn geometry(&self) -> &SewGeometry {
         &self.geometry
     }
+    /// Rows kept without one bundle and without pairs.
+    #[cfg(test)]
+    pub(crate) fn kept_rows(&self) -> (usize, usize) {
+        self.memo.kept_rows()
+    }
     /// Natural neighbours of every sewn vertex among all bundles (no barrier, no detour).
     #[cfg(test)]
     pub(crate) fn support(&self) -> &SparseWeights {
         &self.support
+    }
+}
+
+/// One row's columns and weights.
+type Row<'w> = (&'w [u32], &'w [f64]);
+
+/// The vertices grouped by their proxy (CSR).
+#[derive(Debug)]
+struct Proxied {
+    start: Vec<u32>,
+    vertices: Vec<u32>,
+}
+
+impl Proxied {
+    fn new(proxy: &[u32]) -> Proxied {
+        let mut start = vec![0u32; proxy.len() + 1];
+        for &p in proxy {
+            start[p as usize + 1] += 1;
+        }
+        for i in 0..proxy.len() {
+            start[i + 1] += start[i];
+        }
+        let mut at = start.clone();
+        let mut vertices = vec![0u32; proxy.len()];
+        for (v, &p) in proxy.iter().enumerate() {
+            vertices[at[p as usize] as usize] = v as u32;
+            at[p as usize] += 1;
+        }
+        Proxied { start, vertices }
+    }
+
+    /// The vertices whose proxy is `v`.
+    fn of(&self, v: u32) -> &[u32] {
+        let (a, b) = (self.start[v as usize], self.start[v as usize + 1]);
+        &self.vertices[a as usize..b as usize]
     }
 }
 
@@ -232,7 +399,7 @@ impl SewContext<'_> {
 
     /// Sibson rows (minus detours) of `vertices` for the present bundles; columns are bundle
     /// indices.
-    fn rows_for(&self, present: &[u32], vertices: &[usize]) -> Result<SparseWeights> {
+    pub(crate) fn rows_for(&self, present: &[u32], vertices: &[usize]) -> Result<SparseWeights> {
         let sp = self.space;
         let sites: Vec<_> = present.iter().map(|&i| sp.bundle_uv[i as usize]).collect();
         let sib = SibsonWeights::new(&sites, &sp.barriers)?;
@@ -243,6 +410,28 @@ impl SewContext<'_> {
         }
         w.num_cols = self.bundles.len();
         Ok(w)
+    }
+
+    /// [`rows_for`](Self::rows_for), with each row's columns before barriers and detours (the
+    /// Sibson row's support: its natural neighbours, or the nearest hull edge's ends).
+    pub(crate) fn rows_and_support_for(
+        &self,
+        present: &[u32],
+        vertices: &[usize],
+    ) -> Result<(SparseWeights, SparseWeights)> {
+        let sp = self.space;
+        let sites: Vec<_> = present.iter().map(|&i| sp.bundle_uv[i as usize]).collect();
+        let sib = SibsonWeights::new(&sites, &sp.barriers)?;
+        let queries: Vec<_> = vertices.iter().map(|&v| sp.vertex_uv[v]).collect();
+        let (w, mut support) = sib.weights_and_support(&queries);
+        let mut w = self.drop_detours(w, vertices, present);
+        for m in [&mut w, &mut support] {
+            for c in &mut m.cols {
+                *c = present[*c as usize];
+            }
+            m.num_cols = self.bundles.len();
+        }
+        Ok((w, support))
     }
 
     /// The plan whose row for vertex v is `sewn_row(proxy[v])` (a sewn vertex is its own
@@ -267,7 +456,29 @@ impl SewContext<'_> {
             weights.row_start.push(weights.cols.len() as u32);
         }
         let tris = &self.dataset.neutral().triangles;
-        let residual = ResidualPass::new(tris, self.bundles, &weights, present)?;
+        let residual = ResidualPass::new(tris, self.bundles, (&weights).into(), present)?;
+        Ok(SewPlan {
+            weights: PatchedWeights::whole(Arc::new(weights)),
+            residual,
+        })
+    }
+
+    /// The plan whose rows are `full`'s with those of `changed` (sewn vertex, its row)
+    /// replaced, for them and the vertices they are the proxy of, with the residual pass for
+    /// the present bundles.
+    fn plan_patched<'w>(
+        &self,
+        present: &[u32],
+        full: &PatchedWeights,
+        by_proxy: &Proxied,
+        changed: Vec<(u32, Row<'w>)>,
+    ) -> Result<SewPlan> {
+        let rows = changed
+            .into_iter()
+            .flat_map(|(v, row)| by_proxy.of(v).iter().map(move |&u| (u, row)));
+        let weights = PatchedWeights::new(full.shared_base(), rows);
+        let tris = &self.dataset.neutral().triangles;
+        let residual = ResidualPass::new(tris, self.bundles, weights.view(), present)?;
         Ok(SewPlan { weights, residual })
     }
 
@@ -284,7 +495,9 @@ impl SewContext<'_> {
 
     /// The plan for `present` bundles derived from the full plan: removing a site changes the
     /// natural-neighbour weights only of points that had it as a natural neighbour, so only
-    /// those rows are recomputed (same rules as [`plan`](Self::plan)).
+    /// those rows are recomputed (same rules as [`plan`](Self::plan)). The tests' reference
+    /// for [`SewPlans::plan_for`], which keeps rows across plans.
+    #[cfg(test)]
     pub(crate) fn plan_without(
         &self,
         present: &[u32],

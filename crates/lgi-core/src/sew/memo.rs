@@ -1,0 +1,218 @@
+//! Rows kept for the plans of missing sets: the sewn rows that one missing bundle, or a pair,
+//! change, with them missing, computed the first time a frame needs them and kept for the
+//! take's later frames. A plan then recomputes only the rows that three or more missing
+//! bundles share, so its cost stays about the same however many distinct sets a take has.
+
+use super::plan::SewContext;
+use crate::error::Result;
+use crate::sparse::SparseWeights;
+use std::collections::HashMap;
+use std::sync::{Arc, Mutex, OnceLock};
+
+/// Rows kept for pairs in all (about 200 bytes each) before those are cleared.
+const PAIR_ROWS: usize = 1 << 18;
+
+/// A pair's rows kept in more pieces than this are merged into one.
+const MERGE_PIECES: usize = 4;
+
+/// Which bundles a kept row is without: one, or a pair (ascending).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub(crate) enum Gone {
+    One(u32),
+    Two(u32, u32),
+}
+
+impl Gone {
+    /// The pair of `a` and `b` (any order).
+    pub(crate) fn two(a: u32, b: u32) -> Gone {
+        Gone::Two(a.min(b), a.max(b))
+    }
+
+    /// True when `b` is one of the bundles.
+    pub(crate) fn has(self, b: u32) -> bool {
+        match self {
+            Gone::One(m) => m == b,
+            Gone::Two(m, n) => m == b || n == b,
+        }
+    }
+
+    fn bundles(self) -> Vec<u32> {
+        match self {
+            Gone::One(m) => vec![m],
+            Gone::Two(m, n) => vec![m, n],
+        }
+    }
+}
+
+/// Some sewn rows with the bundles of a [`Gone`] missing.
+#[derive(Debug)]
+pub(crate) struct Rows {
+    /// The sewn rows (ascending).
+    rows: Vec<u32>,
+    /// Their rows as [`SewContext::rows_for`] makes them without those bundles.
+    pub(crate) weights: SparseWeights,
+    /// Every column their Sibson rows had before barriers and detours (natural neighbours, or
+    /// the hull edge's ends): which other missing bundle could change them.
+    pub(crate) support: SparseWeights,
+}
+
+impl Rows {
+    /// Index of sewn row `r` among these rows.
+    pub(crate) fn find(&self, r: u32) -> Option<usize> {
+        self.rows.binary_search(&r).ok()
+    }
+
+    /// The rows of `pieces` in one, ascending (a row kept twice, by plans made at the same
+    /// time, is the same row: the first is kept).
+    fn merged(pieces: &[Arc<Rows>]) -> Rows {
+        let mut order: Vec<(u32, usize, usize)> = Vec::new();
+        for (p, piece) in pieces.iter().enumerate() {
+            order.extend(piece.rows.iter().enumerate().map(|(i, &r)| (r, p, i)));
+        }
+        order.sort_unstable();
+        order.dedup_by_key(|e| e.0);
+        let num_cols = pieces.first().map_or(0, |p| p.weights.num_cols);
+        let mut out = Rows {
+            rows: Vec::with_capacity(order.len()),
+            weights: SparseWeights::empty(num_cols),
+            support: SparseWeights::empty(num_cols),
+        };
+        for &(r, p, i) in &order {
+            out.rows.push(r);
+            let (cols, vals) = pieces[p].weights.row(i);
+            out.weights.push_row(cols, vals);
+            let (cols, vals) = pieces[p].support.row(i);
+            out.support.push_row(cols, vals);
+        }
+        out
+    }
+}
+
+/// The kept rows, shared by the plans of all frames: each bundle's (all the rows it touches,
+/// made once), and pairs' (the rows asked for so far, bounded).
+#[derive(Debug)]
+pub(crate) struct RowMemo {
+    one: Vec<OnceLock<Arc<Rows>>>,
+    two: Mutex<Pairs>,
+}
+
+#[derive(Debug, Default)]
+struct Pairs {
+    rows: HashMap<(u32, u32), Vec<Arc<Rows>>>,
+    count: usize,
+}
+
+impl RowMemo {
+    /// An empty memo for `num_bundles` bundles.
+    pub(crate) fn new(num_bundles: usize) -> RowMemo {
+        RowMemo {
+            one: (0..num_bundles).map(|_| OnceLock::new()).collect(),
+            two: Mutex::new(Pairs::default()),
+        }
+    }
+
+    /// Rows kept without one bundle and without pairs.
+    #[cfg(test)]
+    pub(crate) fn kept_rows(&self) -> (usize, usize) {
+        let ones = self
+            .one
+            .iter()
+            .filter_map(|c| c.get())
+            .map(|r| r.rows.len())
+            .sum();
+        (ones, self.two.lock().map_or(0, |p| p.count))
+    }
+
+    /// A plan's view of the memo.
+    pub(crate) fn view(&self) -> View<'_> {
+        View {
+            memo: self,
+            pairs: HashMap::new(),
+        }
+    }
+}
+
+/// One plan's view of a [`RowMemo`]: the pairs it has looked up, so that the memo's lock is
+/// taken once per pair and not once per row.
+pub(crate) struct View<'m> {
+    memo: &'m RowMemo,
+    pairs: HashMap<(u32, u32), Vec<Arc<Rows>>>,
+}
+
+impl View<'_> {
+    /// Sewn row `r` without `gone`, if kept: its rows and index there.
+    pub(crate) fn find(&mut self, gone: Gone, r: u32) -> Option<(&Arc<Rows>, usize)> {
+        match gone {
+            Gone::One(m) => {
+                let rows = self.memo.one.get(m as usize)?.get()?;
+                rows.find(r).map(|i| (rows, i))
+            }
+            Gone::Two(m, n) => {
+                let memo = self.memo;
+                let pieces = self.pairs.entry((m, n)).or_insert_with(|| {
+                    memo.two
+                        .lock()
+                        .ok()
+                        .and_then(|p| p.rows.get(&(m, n)).cloned())
+                        .unwrap_or_default()
+                });
+                pieces.iter().find_map(|p| p.find(r).map(|i| (p, i)))
+            }
+        }
+    }
+
+    /// Computes and keeps the rows `rows` (sewn rows, ascending) without `gone`; a single
+    /// bundle keeps every row it touches (`touching`) instead, as it will be missing again.
+    pub(crate) fn compute(
+        &mut self,
+        ctx: &SewContext<'_>,
+        gone: Gone,
+        rows: Vec<u32>,
+        touching: &[Vec<u32>],
+        sewn: &[u32],
+    ) -> Result<()> {
+        let nb = ctx.bundles.len() as u32;
+        let bundles = gone.bundles();
+        let present: Vec<u32> = (0..nb).filter(|b| !bundles.contains(b)).collect();
+        let rows = match gone {
+            Gone::One(m) => touching[m as usize].clone(),
+            Gone::Two(..) => rows,
+        };
+        let vertices: Vec<usize> = rows.iter().map(|&r| sewn[r as usize] as usize).collect();
+        let (weights, support) = ctx.rows_and_support_for(&present, &vertices)?;
+        let kept = Arc::new(Rows {
+            rows,
+            weights,
+            support,
+        });
+        match gone {
+            Gone::One(m) => {
+                if let Some(cell) = self.memo.one.get(m as usize) {
+                    // Another frame may have set it meanwhile: the same rows either way.
+                    let _ = cell.set(kept);
+                }
+            }
+            Gone::Two(m, n) => {
+                self.pairs.entry((m, n)).or_default().push(kept.clone());
+                if let Ok(mut pairs) = self.memo.two.lock() {
+                    let added = kept.rows.len();
+                    if pairs.count + added > PAIR_ROWS {
+                        pairs.rows.clear();
+                        pairs.count = 0;
+                    }
+                    let pieces = pairs.rows.entry((m, n)).or_default();
+                    pieces.push(kept);
+                    let mut count = added;
+                    if pieces.len() > MERGE_PIECES {
+                        let before: usize = pieces.iter().map(|p| p.rows.len()).sum();
+                        let merged = Rows::merged(pieces);
+                        count = (added + merged.rows.len()).saturating_sub(before);
+                        *pieces = vec![Arc::new(merged)];
+                    }
+                    pairs.count += count;
+                }
+            }
+        }
+        Ok(())
+    }
+}
