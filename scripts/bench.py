@@ -10,7 +10,8 @@ is found ($LGI_SHARED_DATA, else ../shared/data beside the checkout); else the s
 Frames: bundle positions of seeded random convex combinations of 1-4 dataset shapes plus
 Gaussian marker noise (0.05 data units), so some targets fall outside every tet.
 
-    python scripts/bench.py [--frames N] [--quick] [--shapes 57] [--out docs/performance.md]
+    python scripts/bench.py [--frames N] [--quick] [--shapes 57] [--streamed 20000]
+                            [--out docs/performance.md]
 """
 
 from __future__ import annotations
@@ -31,6 +32,7 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 ICT_SHAPES = 300
+DROPOUT_FRAMES = 500
 NOISE = 0.05
 SEED = 1
 
@@ -114,6 +116,15 @@ def memcpy_bandwidth(mb: int = 256, reps: int = 5) -> float:
     return 2 * src.nbytes / best
 
 
+def per_frame_ms(solve: Any, frames: np.ndarray, **options: Any) -> tuple[np.ndarray, Any]:
+    """Milliseconds each frame of `solve(frames, progress=..., **options)` took, and what it
+    returned."""
+    stamps: list[float] = []
+    t0 = time.perf_counter()
+    res = solve(frames, progress=lambda _f: stamps.append(time.perf_counter()), **options)
+    return np.diff(np.array([t0, *stamps])) * 1e3, res
+
+
 def worker(args: argparse.Namespace) -> dict[str, Any]:
     import lgi
 
@@ -125,13 +136,8 @@ def worker(args: argparse.Namespace) -> dict[str, Any]:
     model = lgi.Model.build(data, markers, jaw=None)
     out["build_s"] = time.perf_counter() - t
     frames = make_frames(model, data, args.frames)
-    stamps: list[float] = []
-    t0 = time.perf_counter()
-    res = model.core.solve(
-        frames, progress=lambda _f: stamps.append(time.perf_counter()), temporal=True
-    )
-    total = time.perf_counter() - t0
-    per = np.diff(np.array([t0, *stamps])) * 1e3
+    per, res = per_frame_ms(model.core.solve, frames, temporal=True)
+    total = per.sum() / 1e3
     out["solve_ms_median"] = float(np.median(per))
     out["solve_ms_p95"] = float(np.percentile(per, 95))
     out["solve_ms_mean"] = float(per.mean())
@@ -139,53 +145,44 @@ def worker(args: argparse.Namespace) -> dict[str, Any]:
     # Again into the now-warm result array (`out=`): what a pipeline solving chunk after chunk
     # into one buffer sees, without the first touch of fresh pages.
     warm = np.asarray(res.vertices)
-    stamps = []
-    t0 = time.perf_counter()
-    model.core.solve(
-        frames, progress=lambda _f: stamps.append(time.perf_counter()), temporal=True, out=warm
-    )
-    per_warm = np.diff(np.array([t0, *stamps])) * 1e3
+    per_warm, _ = per_frame_ms(model.core.solve, frames, temporal=True, out=warm)
     out["solve_out_ms_median"] = float(np.median(per_warm))
     out["solve_out_ms_p95"] = float(np.percentile(per_warm, 95))
     out["frames"] = len(frames)
     out["projected_fraction"] = float(np.asarray(res.choice_projected).mean())
     out["peak_rss_mib"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
-    # Messy capture, after the RSS reading (its result would add to the peak): a new set of
-    # 1-3 missing markers on every frame (seeded), the worst case for the sewing plans (each
-    # new set derives its weights; plans are cached per set).
-    drop = frames[: min(len(frames), 200)].copy()
+    # Messy capture, after the RSS reading (its result would add to the peak): 2 % and 10 %
+    # of the markers missing, a fresh set on every one of DROPOUT_FRAMES frames (the take's
+    # frames repeated; seeded), the worst case for the sewing plans: no set repeats, so every
+    # frame makes its plan from the rows the model keeps without one missing bundle or a
+    # pair. Those are made as the take goes on (every bundle's at the first missing marker):
+    # the first 20 frames show that; the median over the rest is a frame's cost after.
     rng = np.random.default_rng(SEED + 1)
-    for f in range(len(drop)):
-        drop[f, rng.choice(drop.shape[1], 1 + f % 3, replace=False)] = np.nan
-    stamps = []
-    t0 = time.perf_counter()
-    model.core.solve(drop, progress=lambda _f: stamps.append(time.perf_counter()), temporal=True)
-    per_drop = np.diff(np.array([t0, *stamps])) * 1e3
-    out["dropout_ms_median"] = float(np.median(per_drop))
-    out["dropout_ms_p95"] = float(np.percentile(per_drop, 95))
-    out["dropout_frames"] = len(drop)
-    # 10 % of the markers missing, a fresh set every frame (issue 15's messy capture).
-    drop10 = frames[: min(len(frames), 200)].copy()
-    k10 = max(1, round(0.1 * drop10.shape[1]))
-    for f in range(len(drop10)):
-        drop10[f, rng.choice(drop10.shape[1], k10, replace=False)] = np.nan
-    stamps = []
-    t0 = time.perf_counter()
-    model.core.solve(drop10, progress=lambda _f: stamps.append(time.perf_counter()), temporal=True)
-    per_drop10 = np.diff(np.array([t0, *stamps])) * 1e3
-    out["dropout10_ms_median"] = float(np.median(per_drop10))
-    out["dropout10_markers"] = k10
+    for pct in (2, 10):
+        drop = np.resize(frames, (DROPOUT_FRAMES, *frames.shape[1:]))
+        k = max(1, round(pct / 100 * drop.shape[1]))
+        for f in range(len(drop)):
+            drop[f, rng.choice(drop.shape[1], k, replace=False)] = np.nan
+        per_drop, _ = per_frame_ms(model.core.solve, drop, temporal=True)
+        out[f"dropout{pct}_ms_median"] = float(np.median(per_drop[20:]))
+        out[f"dropout{pct}_ms_first20"] = float(per_drop[:20].mean())
+        out[f"dropout{pct}_markers"] = k
+    out["dropout_frames"] = DROPOUT_FRAMES
+    # What a blendshape solver spends at least to output a mesh: the dense evaluation
+    # x0 + sum_k w_k s_k of every shape (float32, numpy/BLAS at this thread count).
+    flat = data.shapes.reshape(data.shapes.shape[0], -1)
+    weights = rng.uniform(0, 1, (20, flat.shape[0])).astype(np.float32)
+    x0 = data.neutral.astype(np.float32).reshape(-1)
+    dense = []
+    for w in weights:
+        t = time.perf_counter()
+        mesh = x0 + w @ flat
+        dense.append(time.perf_counter() - t)
+    del mesh
+    out["dense_eval_ms_median"] = float(np.median(dense) * 1e3)
     # Noise-aware solving (the recommended path's core: the fit candidate, the noise-aware
     # targets) on the same frames, at their noise, beside the exact solve above.
-    stamps = []
-    t0 = time.perf_counter()
-    model.core.solve(
-        frames,
-        progress=lambda _f: stamps.append(time.perf_counter()),
-        temporal=True,
-        marker_noise=NOISE,
-    )
-    per_noise = np.diff(np.array([t0, *stamps])) * 1e3
+    per_noise, _ = per_frame_ms(model.core.solve, frames, temporal=True, marker_noise=NOISE)
     out["noise_ms_median"] = float(np.median(per_noise))
     out["noise_ms_p95"] = float(np.percentile(per_noise, 95))
     # The recommended path end to end: the default build (a jaw rig from the jaw shapes) and
@@ -251,6 +248,45 @@ def worker(args: argparse.Namespace) -> dict[str, Any]:
 USD_FRAMES = 1000
 
 
+def streamed(args: argparse.Namespace) -> dict[str, Any]:
+    """Peak RSS and time of a long take solved chunk by chunk from a memmap on disk
+    (`Model.solve_iter`, the recommended build and exact targets), the results dropped as
+    they come: the memory a streamed take needs beyond the model."""
+    import lgi
+
+    name, data, markers = load_workload(args.streamed_shapes)
+    model = lgi.Model.build(data, markers)
+    base = make_frames(model, data, 500)
+    with tempfile.TemporaryDirectory() as d:
+        frames = np.lib.format.open_memmap(
+            Path(d) / "take.npy",
+            mode="w+",
+            dtype=np.float64,
+            shape=(args.streamed, *base.shape[1:]),
+        )
+        for a in range(0, args.streamed, len(base)):
+            n = min(len(base), args.streamed - a)
+            frames[a : a + n] = base[:n] + 1e-4 * (a // len(base))
+        frames.flush()
+        del frames
+        take = np.load(Path(d) / "take.npy", mmap_mode="r")
+        before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+        t = time.perf_counter()
+        out = np.empty((256, data.neutral.shape[0], 3))
+        for _ in model.solve_iter(take, chunk=256, out=out, quiet=True):
+            pass
+        seconds = time.perf_counter() - t
+        del take
+    return {
+        "streamed_workload": name,
+        "streamed_frames": args.streamed,
+        "streamed_s": seconds,
+        "streamed_rss_before_mib": before,
+        "streamed_peak_rss_mib": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
+        "threads": os.environ.get("RAYON_NUM_THREADS"),
+    }
+
+
 def writing(data: Any, vertices: np.ndarray) -> dict[str, Any]:
     """Time to write a `USD_FRAMES`-frame USD point cache chunk by chunk as `lgi solve` does
     (100 frames a chunk, file included); and OBJ frames of the same mesh."""
@@ -296,7 +332,9 @@ def baselines(data: Any, markers: np.ndarray, frames: np.ndarray, n: int) -> dic
     return out
 
 
-def run_threads(threads: int, args: argparse.Namespace, reference: bool) -> dict[str, Any]:
+def run_threads(
+    threads: int, args: argparse.Namespace, reference: bool, stream: bool = False
+) -> dict[str, Any]:
     # numpy's BLAS gets the same thread count, so the baselines compare like for like.
     env = dict(
         os.environ,
@@ -305,11 +343,14 @@ def run_threads(threads: int, args: argparse.Namespace, reference: bool) -> dict
         OMP_NUM_THREADS=str(threads),
     )
     cmd = [sys.executable, __file__, "--worker", "--frames", str(args.frames)]
-    cmd += ["--shapes", str(args.shapes)]
+    cmd += ["--shapes", str(args.shapes), "--streamed", str(args.streamed)]
+    cmd += ["--streamed-shapes", str(args.streamed_shapes)]
     if args.quick:
         cmd.append("--quick")
     if reference:
         cmd.append("--reference")
+    if stream:
+        cmd.append("--stream-worker")
     p = subprocess.run(cmd, env=env, capture_output=True, text=True, check=False)
     if p.returncode != 0:
         sys.stderr.write(p.stderr)
@@ -360,21 +401,25 @@ def table(r1: dict[str, Any], r2: dict[str, Any]) -> str:
                 f"median {r['solve_out_ms_median']:.2f} ms, p95 {r['solve_out_ms_p95']:.2f} ms",
             )
         )
-    for r in (r1, r2):
-        rows.append(
-            (
-                f"Solve per frame with a new set of 1-3 missing markers every frame "
-                f"({r['dropout_frames']} frames), {r['threads']} thread(s)",
-                f"median {r['dropout_ms_median']:.2f} ms, p95 {r['dropout_ms_p95']:.2f} ms",
+    for pct in (2, 10):
+        for r in (r1, r2):
+            rows.append(
+                (
+                    f"Solve per frame with a new set of {r[f'dropout{pct}_markers']} missing "
+                    f"markers ({pct} %) every frame ({r['dropout_frames']} frames), "
+                    f"{r['threads']} thread(s)",
+                    f"median after the first 20 {r[f'dropout{pct}_ms_median']:.2f} ms = "
+                    f"{r[f'dropout{pct}_ms_median'] / r['solve_ms_median']:.2f} x clean; "
+                    f"first 20 frames {r[f'dropout{pct}_ms_first20']:.2f} ms",
+                )
             )
-        )
     for r in (r1, r2):
         rows.append(
             (
-                f"Solve per frame with a new set of {r['dropout10_markers']} missing markers "
-                f"(10 %) every frame, {r['threads']} thread(s)",
-                f"median {r['dropout10_ms_median']:.2f} ms = "
-                f"{r['dropout10_ms_median'] / r['solve_ms_median']:.2f} x clean",
+                f"Dense blendshape evaluation of every shape (numpy float32), "
+                f"{r['threads']} thread(s)",
+                f"median {r['dense_eval_ms_median']:.2f} ms = "
+                f"{r['dense_eval_ms_median'] / r['solve_ms_median']:.2f} x lgi's solve",
             )
         )
     for r in (r1, r2):
@@ -393,6 +438,17 @@ def table(r1: dict[str, Any], r2: dict[str, Any]) -> str:
                 f"marker_noise={NOISE})` through `lgi.Model`), {r['threads']} thread(s)",
                 f"mean {r['recommended_ms_mean']:.2f} ms = "
                 f"{r['recommended_ms_mean'] / r['solve_ms_mean']:.2f} x the exact solve's mean",
+            )
+        )
+    if "streamed_frames" in r2:
+        rows.append(
+            (
+                f"Streamed take: {r2['streamed_frames']} frames from a memmap through "
+                "`Model.solve_iter(chunk=256, out=...)`, default build of "
+                f"{r2['streamed_workload'].split(':')[0]}, 2 threads",
+                f"peak RSS {r2['streamed_peak_rss_mib']:.0f} MiB "
+                f"({r2['streamed_rss_before_mib']:.0f} MiB before the solve); "
+                f"{r2['streamed_s'] / r2['streamed_frames'] * 1e3:.2f} ms/frame",
             )
         )
     rows += [
@@ -466,14 +522,29 @@ def main() -> None:
     ap.add_argument("--out", type=Path, help="write the table and machine to this markdown file")
     ap.add_argument("--worker", action="store_true", help=argparse.SUPPRESS)
     ap.add_argument("--reference", action="store_true", help=argparse.SUPPRESS)
+    ap.add_argument(
+        "--streamed",
+        type=int,
+        default=20000,
+        help="frames of the streamed take whose peak RSS is measured (default 20000; 0: none)",
+    )
+    ap.add_argument(
+        "--streamed-shapes",
+        type=int,
+        default=57,
+        help="ICT shapes of the streamed take's model (default 57: ICT-FaceKit as shipped)",
+    )
+    ap.add_argument("--stream-worker", action="store_true", help=argparse.SUPPRESS)
     args = ap.parse_args()
     if args.quick:
         args.frames = min(args.frames, 100)
     if args.worker:
-        print(json.dumps(worker(args)))
+        print(json.dumps(streamed(args) if args.stream_worker else worker(args)))
         return
     r1 = run_threads(1, args, reference=True)
     r2 = run_threads(2, args, reference=False)
+    if args.streamed > 0:
+        r2.update(run_threads(2, args, reference=False, stream=True))
     text = table(r1, r2)
     desc = machine()
     print(f"Machine: {desc}\n\n{text}")

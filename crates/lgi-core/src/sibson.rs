@@ -188,10 +188,12 @@ impl SibsonWeights {
     }
 
     fn rows(&self, queries: &[DVec2], with_support: bool) -> (SparseWeights, SparseWeights) {
-        const CHUNK: usize = 256;
+        // Up to 256 queries a task, fewer for a few hundred (a missing set's rows) so that
+        // every thread gets some.
+        let chunk = (queries.len() / (4 * rayon::current_num_threads())).clamp(16, 256);
         type Part = (Vec<u32>, Vec<u32>, Vec<f64>);
         let chunks: Vec<(Part, Part)> = queries
-            .par_chunks(CHUNK)
+            .par_chunks(chunk)
             .map_init(
                 || self.scratch(),
                 |scratch, chunk| {

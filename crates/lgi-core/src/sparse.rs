@@ -123,8 +123,16 @@ impl PatchedWeights {
         base: std::sync::Arc<SparseWeights>,
         rows: impl IntoIterator<Item = (u32, (&'a [u32], &'a [f64]))>,
     ) -> PatchedWeights {
+        let rows: Vec<_> = rows.into_iter().collect();
+        let nnz = rows.iter().map(|(_, (c, _))| c.len()).sum();
         let mut patched = vec![u32::MAX; base.num_rows()];
-        let mut patch = SparseWeights::empty(base.num_cols);
+        let mut patch = SparseWeights {
+            row_start: Vec::with_capacity(rows.len() + 1),
+            cols: Vec::with_capacity(nnz),
+            vals: Vec::with_capacity(nnz),
+            num_cols: base.num_cols,
+        };
+        patch.row_start.push(0);
         for (r, (cols, vals)) in rows {
             patched[r as usize] = patch.num_rows() as u32;
             patch.push_row(cols, vals);

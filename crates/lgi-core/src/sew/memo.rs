@@ -1,11 +1,13 @@
 //! Rows kept for the plans of missing sets: the sewn rows that one missing bundle, or a pair,
-//! change, with them missing, computed the first time a frame needs them and kept for the
-//! take's later frames. A plan then recomputes only the rows that three or more missing
-//! bundles share, so its cost stays about the same however many distinct sets a take has.
+//! change, with them missing, computed the first time a frame needs them (every bundle's at
+//! once) and kept for the take's later frames. A plan then recomputes only the rows that
+//! three or more missing bundles share, so its cost stays about the same however many
+//! distinct sets a take has.
 
 use super::plan::SewContext;
 use crate::error::Result;
 use crate::sparse::SparseWeights;
+use rayon::prelude::*;
 use std::collections::HashMap;
 use std::sync::{Arc, Mutex, OnceLock};
 
@@ -57,6 +59,20 @@ pub(crate) struct Rows {
 }
 
 impl Rows {
+    /// The sewn rows `rows` (ascending; `sewn` maps them to vertices) with the bundles `gone`
+    /// missing.
+    fn without(ctx: &SewContext<'_>, gone: &[u32], rows: Vec<u32>, sewn: &[u32]) -> Result<Rows> {
+        let nb = ctx.bundles.len() as u32;
+        let present: Vec<u32> = (0..nb).filter(|b| !gone.contains(b)).collect();
+        let vertices: Vec<usize> = rows.iter().map(|&r| sewn[r as usize] as usize).collect();
+        let (weights, support) = ctx.rows_and_support_for(&present, &vertices)?;
+        Ok(Rows {
+            rows,
+            weights,
+            support,
+        })
+    }
+
     /// Index of sewn row `r` among these rows.
     pub(crate) fn find(&self, r: u32) -> Option<usize> {
         self.rows.binary_search(&r).ok()
@@ -163,6 +179,8 @@ impl View<'_> {
 
     /// Computes and keeps the rows `rows` (sewn rows, ascending) without `gone`; a single
     /// bundle keeps every row it touches (`touching`) instead, as it will be missing again.
+    /// The first time any single bundle is asked for, every bundle's rows are made at once
+    /// (in parallel; a take with one missing marker soon has others).
     pub(crate) fn compute(
         &mut self,
         ctx: &SewContext<'_>,
@@ -171,27 +189,23 @@ impl View<'_> {
         touching: &[Vec<u32>],
         sewn: &[u32],
     ) -> Result<()> {
-        let nb = ctx.bundles.len() as u32;
-        let bundles = gone.bundles();
-        let present: Vec<u32> = (0..nb).filter(|b| !bundles.contains(b)).collect();
-        let rows = match gone {
-            Gone::One(m) => touching[m as usize].clone(),
-            Gone::Two(..) => rows,
-        };
-        let vertices: Vec<usize> = rows.iter().map(|&r| sewn[r as usize] as usize).collect();
-        let (weights, support) = ctx.rows_and_support_for(&present, &vertices)?;
-        let kept = Arc::new(Rows {
-            rows,
-            weights,
-            support,
-        });
-        match gone {
-            Gone::One(m) => {
-                if let Some(cell) = self.memo.one.get(m as usize) {
+        if let Gone::One(_) = gone {
+            let made: Vec<Result<()>> = (0..self.memo.one.len() as u32)
+                .into_par_iter()
+                .filter(|&m| self.memo.one[m as usize].get().is_none())
+                .map(|m| {
+                    let rows = touching[m as usize].clone();
+                    let kept = Rows::without(ctx, &[m], rows, sewn)?;
                     // Another frame may have set it meanwhile: the same rows either way.
-                    let _ = cell.set(kept);
-                }
-            }
+                    let _ = self.memo.one[m as usize].set(Arc::new(kept));
+                    Ok(())
+                })
+                .collect();
+            return made.into_iter().collect();
+        }
+        let kept = Arc::new(Rows::without(ctx, &gone.bundles(), rows, sewn)?);
+        match gone {
+            Gone::One(_) => {}
             Gone::Two(m, n) => {
                 self.pairs.entry((m, n)).or_default().push(kept.clone());
                 if let Ok(mut pairs) = self.memo.two.lock() {
