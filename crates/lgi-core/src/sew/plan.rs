@@ -219,20 +219,20 @@ impl SewPlans {
         Ok(plan)
     }
 
-    /// The plan for `present` from the full plan and the rows kept without one bundle or a
-    /// pair ([`RowMemo`]). Removing sites changes only the rows of points that had one of them
-    /// as a natural neighbour (the rule [`SewContext::plan_without`] applies from the full
-    /// set): so a sewn row that no missing bundle touches (columns or support) is the full
-    /// plan's, and one that missing bundles G touch is its row without G, provided no other
-    /// missing bundle touches that row; if one does, G grows by it (one to a pair). The rows
-    /// that three or more missing bundles touch are recomputed.
+    /// The plan for `present` from the full plan and the rows kept without a few bundles
+    /// ([`RowMemo`]). Removing sites changes only the rows of points that had one of them as
+    /// a natural neighbour (the rule [`SewContext::plan_without`] applies from the full set):
+    /// so a sewn row that no missing bundle touches (columns or support) is the full plan's,
+    /// and one that missing bundles G touch is its row without G, provided no other missing
+    /// bundle touches that row; if some do, G grows by them and the test repeats. Rows that
+    /// G would grow beyond [`MAX_GONE`](super::memo::MAX_GONE) for are recomputed.
     fn derive(&self, ctx: &SewContext<'_>, present: &[u32]) -> Result<SewPlan> {
         let nb = self.touching.len();
         let mut is_missing = vec![true; nb];
         for &b in present {
             is_missing[b as usize] = false;
         }
-        // Per sewn row touched by a missing bundle: the first two of them (None: more).
+        // Per sewn row touched by a missing bundle: those bundles (None: too many to keep).
         let mut slot = vec![u32::MAX; self.sewn.len()];
         let mut touched: Vec<(u32, Option<Gone>)> = Vec::new();
         for m in (0..nb as u32).filter(|&b| is_missing[b as usize]) {
@@ -240,13 +240,10 @@ impl SewPlans {
                 let s = &mut slot[r as usize];
                 if *s == u32::MAX {
                     *s = touched.len() as u32;
-                    touched.push((r, Some(Gone::One(m))));
+                    touched.push((r, Some(Gone::one(m))));
                 } else {
                     let e = &mut touched[*s as usize].1;
-                    *e = match *e {
-                        Some(Gone::One(a)) => Some(Gone::two(a, m)),
-                        _ => None,
-                    };
+                    *e = e.and_then(|g| g.with(m));
                 }
             }
         }
@@ -266,19 +263,22 @@ impl SewPlans {
                     next.push(k);
                     continue;
                 };
-                // Other missing bundles touching the row kept without `gone`.
+                // The row kept without `gone` holds, unless other missing bundles touch it:
+                // then it is the row without those too.
                 let (cols, support) = (rows.weights.row(i).0, rows.support.row(i).0);
-                let mut other = cols
-                    .iter()
-                    .chain(support)
-                    .filter(|&&c| is_missing[c as usize] && !gone.has(c));
-                match (other.next(), gone) {
-                    (None, _) => found[k] = Some((rows.clone(), i as u32)),
-                    (Some(&c), Gone::One(m)) if other.all(|&d| d == c) => {
-                        touched[k].1 = Some(Gone::two(m, c));
+                let mut grown = Some(gone);
+                for &c in cols.iter().chain(support) {
+                    if is_missing[c as usize] {
+                        grown = grown.and_then(|g| g.with(c));
+                    }
+                }
+                match grown {
+                    Some(g) if g == gone => found[k] = Some((rows.clone(), i as u32)),
+                    Some(g) => {
+                        touched[k].1 = Some(g);
                         next.push(k);
                     }
-                    _ => touched[k].1 = None,
+                    None => touched[k].1 = None,
                 }
             }
             for (gone, mut rows) in queue {
