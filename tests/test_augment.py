@@ -102,3 +102,9 @@ def test_polar_gives_rotations_and_symmetric_stretches() -> None:
     assert np.allclose(np.linalg.det(r), 1.0)
     assert np.allclose(s, np.transpose(s, (0, 2, 1)))
     assert np.allclose(r @ s, f, atol=1e-12)
+
+
+def test_arap_augmenting_a_dataset_without_shapes_is_a_dataset_error() -> None:
+    x, tris = ellipsoid(4)
+    with pytest.raises(lgi.DatasetError, match="without shapes"):
+        lgi.Dataset.from_arrays(x, tris).augmented(3, method="arap")

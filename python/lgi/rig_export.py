@@ -17,7 +17,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from lgi._lgi import Dataset
-from lgi.errors import InputError
+from lgi.errors import FileWriteError, InputError
 from lgi.export import _new_stage, _out_path, define_usd_mesh, topology
 from lgi.rig import CORRECTIVE_PREFIX
 from lgi.takes import METERS_PER_UNIT, normalize_unit
@@ -132,7 +132,7 @@ def write_gltf_rig(path: str | os.PathLike[str], dataset: Dataset) -> Path:
             )
             out.write_bytes(struct.pack("<III", 0x46546C67, 2, 12 + len(chunks)) + chunks)
     except OSError as e:
-        raise InputError(f"glTF output {out}: cannot be written: {e}") from None
+        raise FileWriteError(f"glTF output {out}: cannot be written: {e}") from None
     return out
 
 
@@ -222,5 +222,5 @@ def write_usd_rig(
     try:
         stage.GetRootLayer().Save()
     except Exception as e:  # Tf.ErrorException on I/O failures
-        raise InputError(f"USD output {out}: cannot be written: {e}") from None
+        raise FileWriteError(f"USD output {out}: cannot be written: {e}") from None
     return out
