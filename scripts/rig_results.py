@@ -125,8 +125,9 @@ def part_rig(folder: Path, out_dir: Path, quiet: bool) -> list[str]:
         "",
         "| combination | method | area ratio outside [0.5, 2] (% of triangles) | area ratio "
         "min / max | edge-length change p99 / max | flipped triangles | local volume change "
-        "(%) | lip self-intersections |",
-        "|---|---|---|---|---|---|---|---|",
+        "(%) | lip self-intersections | corrective = distance from the linear sum, mean on "
+        "the moved skin / max (cm) |",
+        "|---|---|---|---|---|---|---|---|---|",
     ]
     identities = sorted((folder / "identities").glob("identity*.obj"))
     per: dict[tuple[int, str], list[dict[str, float]]] = {}
@@ -174,7 +175,11 @@ def part_rig(folder: Path, out_dir: Path, quiet: bool) -> list[str]:
                     )
                     if who == identities[0] and c == 0:
                         picture = (neutral, linear, recon)
-                per.setdefault((c, label), []).append(figures(neutral, recon, skin, lips, moved))
+                f = figures(neutral, recon, skin, lips, moved)
+                gap = np.linalg.norm(recon - linear, axis=1)[: ict.SKIN_VERTICES]
+                f["gap_mean"] = float(gap[moved[: ict.SKIN_VERTICES]].mean())
+                f["gap_max"] = float(gap.max())
+                per.setdefault((c, label), []).append(f)
         if not quiet:
             print(f"{who.stem}: {time.perf_counter() - t0:.0f} s", file=sys.stderr)
     for c, names in enumerate(COMBINATIONS):
@@ -186,7 +191,12 @@ def part_rig(folder: Path, out_dir: Path, quiet: bool) -> list[str]:
                 f"{min(x['area_min'] for x in f):.2f} / {max(x['area_max'] for x in f):.2f} | "
                 f"{mean['edge_p99']:.3f} / {max(x['edge_max'] for x in f):.2f} | "
                 f"{sum(x['flipped'] for x in f)} | {mean['volume']:+.2f} | "
-                f"{sum(x['lips_x'] for x in f)} |"
+                f"{sum(x['lips_x'] for x in f)} | "
+                + (
+                    f"{mean['gap_mean']:.3f} / {max(x['gap_max'] for x in f):.3f} |"
+                    if "gap_mean" in mean
+                    else "— |"
+                )
             )
     lines += [
         "",

@@ -130,10 +130,7 @@ impl Dataset {
 
     /// The recipes of `augmented(min_shapes)`, in its order: `(name, [(shape, weight), ...])`
     /// per shape of the augmented dataset (originals first, weight 1).
-    fn augment_recipes(
-        &self,
-        min_shapes: &Bound<'_, PyAny>,
-    ) -> PyResult<Vec<(String, Vec<(usize, f32)>)>> {
+    fn augment_recipes(&self, min_shapes: &Bound<'_, PyAny>) -> PyResult<Vec<lgi_core::Recipe>> {
         let min_shapes = count(min_shapes, "min_shapes")?;
         Ok(lgi_core::recipes(self.inner.names(), min_shapes))
     }
