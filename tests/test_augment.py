@@ -108,3 +108,14 @@ def test_arap_augmenting_a_dataset_without_shapes_is_a_dataset_error() -> None:
     x, tris = ellipsoid(4)
     with pytest.raises(lgi.DatasetError, match="without shapes"):
         lgi.Dataset.from_arrays(x, tris).augmented(3, method="arap")
+
+
+def test_augment_recipes_are_the_linear_augmented_shapes(sample_dataset) -> None:  # type: ignore[no-untyped-def]
+    n = sample_dataset.num_shapes + 40
+    recipes = sample_dataset.augment_recipes(n)
+    lin = sample_dataset.augmented(n)
+    assert [name for name, _ in recipes] == lin.names
+    shapes = np.asarray(sample_dataset.shapes, np.float64)
+    for k, (_, terms) in enumerate(recipes):
+        expected = sum(w * shapes[i] for i, w in terms)
+        assert np.abs(lin.shapes[k] - expected).max() < 1e-5
