@@ -4,7 +4,7 @@ Every marker ("bundle") looks up local geometry that really occurred in a datase
 shapes; the pieces are sewn so that the surface passes exactly through every marker.
 """
 
-from lgi import camera, export, jaw, stabilize, takes
+from lgi import camera, export, jaw, rig, rig_export, stabilize, takes
 from lgi._lgi import Dataset, __version__
 from lgi.errors import (
     DatasetError,
@@ -37,6 +37,8 @@ __all__ = [
     "estimate_marker_noise",
     "export",
     "jaw",
+    "rig",
+    "rig_export",
     "stabilize",
     "takes",
 ]

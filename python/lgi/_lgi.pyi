@@ -65,8 +65,13 @@ class Dataset:
         """An archive with keys neutral, triangles[, shapes, names, uvs, uv_triangles]."""
     def to_npz(self, path: _Path) -> None:
         """Writes the keys read by ``from_npz`` (numpy appends ``.npz`` if missing)."""
-    def augmented(self, min_shapes: int) -> Dataset:
-        """Adds in-betweens (``name@0.5``) and pairwise sums, to at least ``min_shapes``."""
+    def augmented(
+        self, min_shapes: int, method: str | None = None, *, quiet: bool = False
+    ) -> Dataset:
+        """Adds in-betweens (``name@0.5``) and pairwise sums, to at least ``min_shapes``;
+        ``method`` "linear" (default, sums) or "arap" (rotations interpolated)."""
+    def augment_recipes(self, min_shapes: int) -> list[tuple[str, list[tuple[int, float]]]]:
+        """``(name, [(shape, weight), ...])`` of each shape ``augmented(min_shapes)`` makes."""
     @property
     def num_vertices(self) -> int: ...
     @property

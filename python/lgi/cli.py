@@ -1,6 +1,6 @@
 """The `lgi` command line: argument (and environment) handling only. `lgi demo` runs the whole
 pipeline on the built-in sample (`lgi.demo`); `lgi evaluate` a protocol (`lgi.evaluate`); the
-file pipeline `lgi build` / `solve` / `export` / `info` is `lgi.pipeline`'s. Every user
+file pipeline `lgi build` / `solve` / `export` / `info` / `rig` is `lgi.pipeline`'s. Every user
 mistake ends as `lgi: error: ...` and exit status 2."""
 
 from __future__ import annotations
@@ -96,6 +96,21 @@ def _cmd_export(args: argparse.Namespace) -> int:
         args.result, args.out, frames=args.frames, fps=args.fps, quiet=args.quiet
     )
     print(f"wrote {out} ({n} frames)")
+    return 0
+
+
+def _cmd_rig(args: argparse.Namespace) -> int:
+    out, n = pipeline.rig_file(
+        args.model,
+        args.neutral,
+        args.shapes,
+        args.out,
+        combine=args.combine,
+        noise=args.marker_noise,
+        quiet=args.quiet,
+        say=_say(args),
+    )
+    print(f"wrote {out} ({n} shapes)")
     return 0
 
 
@@ -196,6 +211,41 @@ def _add_pipeline_commands(sub: Any) -> None:
     e.add_argument("--fps", type=float, default=None, help="frame rate (default: the result's)")
     e.add_argument("-q", "--quiet", action="store_true", help="no progress bars")
     e.set_defaults(func=_cmd_export)
+
+    r = sub.add_parser(
+        "rig",
+        help="an actor rig from a template rig: its shapes and correctives through MODEL",
+        description="Reconstruct the template rig's shapes (NEUTRAL + SHAPES, the model's "
+        "topology) and --combine combinations with MODEL; --out's suffix picks the format.",
+    )
+    r.add_argument("model", metavar="MODEL", help="the actor's model file (.lgi)")
+    r.add_argument("neutral", metavar="NEUTRAL", help="template neutral: .obj, .gltf/.glb or .npz")
+    r.add_argument(
+        "shapes",
+        metavar="SHAPES",
+        help="template shape OBJs (folder, glob or file); '-' when NEUTRAL holds them",
+    )
+    r.add_argument(
+        "-o",
+        "--out",
+        required=True,
+        help="output: .usd/.usdc/.usda (UsdSkel blendshapes), .gltf/.glb (morph targets), .npz",
+    )
+    r.add_argument(
+        "--combine",
+        action="append",
+        default=[],
+        metavar="A+B",
+        help="a combination of template shapes to make a corrective for (repeatable)",
+    )
+    r.add_argument(
+        "--marker-noise",
+        default=None,
+        metavar="SIGMA|none",
+        help="as for lgi solve (default none: markers interpolated exactly)",
+    )
+    r.add_argument("-q", "--quiet", action="store_true", help="no progress output")
+    r.set_defaults(func=_cmd_rig)
 
     i = sub.add_parser("info", help="summarise a model, a take, a solved .npz or a USD file")
     i.add_argument("file", metavar="FILE")

@@ -5,7 +5,7 @@ sample as a dataset, and datasets with shapes left out (leave-one-out protocols)
 from __future__ import annotations
 
 import os
-from collections.abc import Iterable
+from collections.abc import Iterable, Sequence
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -119,17 +119,15 @@ def sample_dataset(sample: Sample) -> Dataset:
     )
 
 
-def without_shapes(dataset: Dataset, drop: Iterable[int]) -> Dataset:
-    """A copy of `dataset` without the shapes at indices `drop` (same neutral, topology, UVs,
-    source polygons)."""
-    gone = set(drop)
-    keep = [i for i in range(dataset.num_shapes) if i not in gone]
+def with_shapes(dataset: Dataset, shapes: Any, names: Sequence[str]) -> Dataset:
+    """A dataset with `dataset`'s neutral, topology, UVs and source polygons and new `shapes`
+    (S, V, 3) displacements named `names`."""
     has_uv = np.asarray(dataset.uv_triangles).size > 0
     out = Dataset.from_arrays(
         dataset.neutral,
         dataset.triangles,
-        np.asarray(dataset.shapes)[keep],
-        names=[dataset.names[i] for i in keep],
+        shapes,
+        names=list(names),
         uvs=dataset.uvs if has_uv else None,
         uv_triangles=dataset.uv_triangles if has_uv else None,
     )
@@ -137,3 +135,11 @@ def without_shapes(dataset: Dataset, drop: Iterable[int]) -> Dataset:
         counts, vertices, uvs = dataset.polygons
         out = out.with_polygons(counts, vertices, uvs if has_uv else None)
     return out
+
+
+def without_shapes(dataset: Dataset, drop: Iterable[int]) -> Dataset:
+    """A copy of `dataset` without the shapes at indices `drop` (same neutral, topology, UVs,
+    source polygons)."""
+    gone = set(drop)
+    keep = [i for i in range(dataset.num_shapes) if i not in gone]
+    return with_shapes(dataset, np.asarray(dataset.shapes)[keep], [dataset.names[i] for i in keep])

@@ -118,6 +118,25 @@ def _new_stage(usd: Any, sdf: Any, path: Path) -> Any:
         raise InputError(f"USD output {path}: cannot be created: {e}") from None
 
 
+def define_usd_mesh(stage: Any, prim_path: str, topo: Topology) -> Any:
+    """A `UsdGeom.Mesh` at `prim_path` with `topo`'s faces (subdivisionScheme none: the
+    points are the result, not a cage) and its UVs as the face-varying indexed primvar `st`;
+    no points yet."""
+    from pxr import Sdf, UsdGeom, Vt
+
+    mesh = UsdGeom.Mesh.Define(stage, prim_path)
+    mesh.CreateSubdivisionSchemeAttr(UsdGeom.Tokens.none)
+    mesh.CreateFaceVertexCountsAttr(Vt.IntArray.FromNumpy(topo.counts.astype(np.int32)))
+    mesh.CreateFaceVertexIndicesAttr(Vt.IntArray.FromNumpy(topo.indices.astype(np.int32)))
+    if topo.uvs is not None and topo.uv_indices is not None:
+        st = UsdGeom.PrimvarsAPI(mesh).CreatePrimvar(
+            "st", Sdf.ValueTypeNames.TexCoord2fArray, UsdGeom.Tokens.faceVarying
+        )
+        st.Set(Vt.Vec2fArray.FromNumpy(np.asarray(topo.uvs, dtype=np.float32)))
+        st.SetIndices(Vt.IntArray.FromNumpy(topo.uv_indices.astype(np.int32)))
+    return mesh
+
+
 class UsdCache:
     """A USD point cache written chunk by chunk: `add(vertices)` appends frames (time codes
     `start`, `start + 1`, ...), `close()` writes the file (its format by suffix: `.usd`/`.usdc`
@@ -162,16 +181,7 @@ class UsdCache:
         stage.SetFramesPerSecond(float(fps))
         root = UsdGeom.Xform.Define(stage, "/Face")
         stage.SetDefaultPrim(root.GetPrim())
-        mesh = UsdGeom.Mesh.Define(stage, "/Face/Mesh")
-        mesh.CreateSubdivisionSchemeAttr(UsdGeom.Tokens.none)
-        mesh.CreateFaceVertexCountsAttr(Vt.IntArray.FromNumpy(topo.counts.astype(np.int32)))
-        mesh.CreateFaceVertexIndicesAttr(Vt.IntArray.FromNumpy(topo.indices.astype(np.int32)))
-        if topo.uvs is not None and topo.uv_indices is not None:
-            st = UsdGeom.PrimvarsAPI(mesh).CreatePrimvar(
-                "st", Sdf.ValueTypeNames.TexCoord2fArray, UsdGeom.Tokens.faceVarying
-            )
-            st.Set(Vt.Vec2fArray.FromNumpy(np.asarray(topo.uvs, dtype=np.float32)))
-            st.SetIndices(Vt.IntArray.FromNumpy(topo.uv_indices.astype(np.int32)))
+        mesh = define_usd_mesh(stage, "/Face/Mesh", topo)
         self._stage, self._mesh = stage, mesh
         self._points = mesh.GetPointsAttr()
         self._extent = mesh.CreateExtentAttr()

@@ -1,9 +1,11 @@
-"""The file pipeline behind `lgi build` / `solve` / `export` / `info`: files in (a neutral and
-its shapes, a named marker layout, a take), files out (a model file, a USD point cache, an OBJ
-sequence, a solved `.npz`), and one-paragraph summaries of each kind of file. The readers and
-writers themselves are `lgi.takes` and `lgi.export`; the CLI only parses arguments and calls
-`build_file`, `solve_file`, `export_file` and `describe`. Error messages name the CLI's
-arguments and options (`--frames`, `MARKERS`), which these functions' parameters mirror."""
+"""The file pipeline behind `lgi build` / `solve` / `export` / `info` / `rig`: files in (a
+neutral and its shapes, a named marker layout, a take, a template rig), files out (a model
+file, a USD point cache, an OBJ sequence, a solved `.npz`, a blendshape rig), and
+one-paragraph summaries of each kind of file. The readers and writers themselves are
+`lgi.takes`, `lgi.export` and `lgi.rig_export`; the CLI only parses arguments and calls
+`build_file`, `solve_file`, `export_file`, `rig_file` and `describe`. Error messages name the
+CLI's arguments and options (`--frames`, `MARKERS`), which these functions' parameters
+mirror."""
 
 from __future__ import annotations
 
@@ -31,6 +33,7 @@ __all__ = [
     "marker_noise",
     "output_kind",
     "read_dataset",
+    "rig_file",
     "solve_file",
 ]
 
@@ -590,3 +593,58 @@ def export_file(
         quiet=quiet,
     )
     return written, int(r.vertices[rng].shape[0])
+
+
+RIG_OUTPUTS = (".usd", ".usdc", ".usda", ".gltf", ".glb", ".npz")
+"""`lgi rig --out` suffixes: a USD blendshape rig, glTF morph targets or a dataset `.npz`."""
+
+
+def rig_file(
+    model: str | os.PathLike[str],
+    neutral: str,
+    shapes: str,
+    out: str | os.PathLike[str],
+    *,
+    combine: list[str] | None = None,
+    noise: str | None = None,
+    quiet: bool = False,
+    say: Say = _silent,
+) -> tuple[Path, int]:
+    """`lgi rig`: the actor rig of MODEL from the template NEUTRAL + SHAPES (`read_dataset`;
+    `lgi.rig.actor_rig`), each `combine` entry ('A+B[+C]', template shape names) adding a
+    corrective, written by `out`'s suffix (`RIG_OUTPUTS`: `lgi.rig_export.write_usd_rig`,
+    `write_gltf_rig`, or `Dataset.to_npz`). `noise`: `--marker-noise` as a number or
+    'none' ('auto' has no take to look at). Returns the path and the number of shapes."""
+    from lgi import rig, rig_export
+
+    dest = output_file(os.fspath(out), "--out")
+    suffix = dest.suffix.lower()
+    if suffix not in RIG_OUTPUTS:
+        raise InputError(
+            f"--out {dest}: unknown rig format {suffix or '(no suffix)'!r}; use "
+            ".usd/.usdc/.usda (UsdSkel blendshapes), .gltf/.glb (morph targets) or .npz"
+        )
+    not_an_input(dest, model, neutral, *([] if shapes == "-" else [shapes]))
+    if noise == "auto":
+        raise InputError("--marker-noise auto: a rig has no take to estimate it from")
+    sigma = marker_noise(noise, np.zeros((0, 0, 3)))
+    m = Model.load(existing_file(os.fspath(model), "MODEL"))
+    template = read_dataset(neutral, shapes)
+    combos = []
+    for spec in combine or []:
+        names = spec.split("+")
+        if len(names) < 2 or any(not n for n in names):
+            raise InputError(f"--combine {spec!r}: expected template shape names joined by '+'")
+        combos.append(names)
+    say(f"template: {template.num_shapes} shapes, {len(combos)} combinations")
+    try:
+        result = rig.actor_rig(m, template, combos, marker_noise=sigma, quiet=quiet)
+    except InputError as e:
+        raise InputError(f"--combine: {e}" if str(e).startswith("combination") else str(e)) from e
+    if suffix in (".gltf", ".glb"):
+        rig_export.write_gltf_rig(dest, result)
+    elif suffix == ".npz":
+        result.to_npz(dest)
+    else:
+        rig_export.write_usd_rig(dest, result, units=m.units)
+    return dest, result.num_shapes

@@ -77,11 +77,13 @@ def panel(
     cell_inches: float = 3.0,
     dpi: int = 100,
     units: str = "",
+    label: str = "vertex error",
 ) -> tuple[int, int]:
     """Side-by-side panel: one column per mesh (e.g. ground truth | displacement interpolation
     | blendshape fit | LGI-RBF | LGI), one row per view (front, three-quarter). Meshes without
     an entry in `errors` are drawn grey. Every column shares one colour scale (0..`vmax`,
-    default the largest error). Writes a PNG; returns its (width, height) in pixels."""
+    default the largest error), named `label` (in `units`) on the colour bar. Writes a PNG;
+    returns its (width, height) in pixels."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.cm import ScalarMappable
     from matplotlib.colors import Normalize
@@ -107,7 +109,7 @@ def panel(
     fig.subplots_adjust(left=0.01, right=1 - 0.9 / width_in, top=0.92, bottom=0.01, wspace=0.02)
     cax = fig.add_axes((1 - 0.75 / width_in, 0.1, 0.15 / width_in, 0.75))
     cb = fig.colorbar(ScalarMappable(norm=norm, cmap=cmap), cax=cax)
-    cb.set_label(f"vertex error{' (' + units + ')' if units else ''}")
+    cb.set_label(f"{label}{' (' + units + ')' if units else ''}")
     fig.savefig(os.fspath(path), dpi=dpi)
     w, h = fig.canvas.get_width_height()
     return int(w), int(h)

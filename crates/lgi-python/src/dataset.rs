@@ -90,14 +90,49 @@ impl Dataset {
 
     /// A new dataset with in-between shapes (`name@0.5`, …) and pairwise sums added to the
     /// shapes, at least `min_shapes` when there are enough pairs (the neutral is shared).
-    /// Runs with the GIL released.
-    fn augmented(&self, py: Python<'_>, min_shapes: &Bound<'_, PyAny>) -> PyResult<Dataset> {
+    /// `method="linear"` (default) sums displacements (here, with the GIL released);
+    /// `"arap"` interpolates rotations instead (`lgi.augment.arap_augmented`, a progress bar
+    /// unless `quiet`).
+    #[pyo3(signature = (min_shapes, method = None, *, quiet = false))]
+    fn augmented(
+        slf: &Bound<'_, Self>,
+        min_shapes: &Bound<'_, PyAny>,
+        method: Option<&Bound<'_, PyAny>>,
+        quiet: bool,
+    ) -> PyResult<Py<Dataset>> {
+        let py = slf.py();
         let min_shapes = count(min_shapes, "min_shapes")?;
-        let inner = self.inner.clone();
-        let d = py
-            .detach(|| lgi_core::augment(&inner, min_shapes))
-            .map_err(PyLgiError)?;
-        Ok(Dataset { inner: Arc::new(d) })
+        let method = match method {
+            None => "linear".to_string(),
+            Some(m) => m.extract::<String>().map_err(|_| {
+                let shown = m.repr().map_or_else(|_| "?".into(), |r| r.to_string());
+                input_error(format!("method must be 'linear' or 'arap', got {shown}"))
+            })?,
+        };
+        match method.as_str() {
+            "linear" => {
+                let inner = slf.get().inner.clone();
+                let d = py
+                    .detach(|| lgi_core::augment(&inner, min_shapes))
+                    .map_err(PyLgiError)?;
+                Py::new(py, Dataset { inner: Arc::new(d) })
+            }
+            "arap" => Ok(py
+                .import("lgi.augment")?
+                .call_method1("arap_augmented", (slf, min_shapes, quiet))?
+                .cast_into::<Dataset>()?
+                .unbind()),
+            other => Err(input_error(format!(
+                "method must be 'linear' or 'arap', got {other:?}"
+            ))),
+        }
+    }
+
+    /// The recipes of `augmented(min_shapes)`, in its order: `(name, [(shape, weight), ...])`
+    /// per shape of the augmented dataset (originals first, weight 1).
+    fn augment_recipes(&self, min_shapes: &Bound<'_, PyAny>) -> PyResult<Vec<lgi_core::Recipe>> {
+        let min_shapes = count(min_shapes, "min_shapes")?;
+        Ok(lgi_core::recipes(self.inner.names(), min_shapes))
     }
 
     /// Number of vertices V.
