@@ -195,8 +195,9 @@ def _add_pipeline_commands(sub: Any) -> None:
         type=_positive_int,
         default=None,
         metavar="N",
-        help="solve and write N frames at a time (bounded memory; each chunk starts without "
-        "a previous frame); default: the whole range in one solve",
+        help="solve and write N frames at a time (bounded memory; each chunk continues from "
+        "the last frame of the one before, so the result is that of one solve); default: the "
+        "whole range in one solve",
     )
     s.add_argument("-q", "--quiet", action="store_true", help="no progress bars")
     s.set_defaults(func=_cmd_solve)

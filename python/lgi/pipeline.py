@@ -489,8 +489,9 @@ def solve_file(
     the whole range), `frames` is `--frames A:B`. By default the range is solved in one
     `Model.solve` (frames prefer their predecessor's choices across the whole range), then
     written chunk by chunk; `chunk` (`--chunk N`) solves and writes N frames at a time into
-    one reused buffer, so the solve's memory stays that of N frames (each chunk starts
-    without a previous frame to prefer). Returns the path written (the `NAME.NNNN.obj`
+    one reused buffer, so the solve's memory stays that of N frames (each chunk continues
+    from the last frame of the one before: the same frames as one solve, except with
+    `--jaw track`, tracked chunk by chunk). Returns the path written (the `NAME.NNNN.obj`
     pattern for OBJ sequences) and the frame count."""
     if chunk is not None and (isinstance(chunk, bool) or int(chunk) < 1):
         raise InputError(f"--chunk {chunk}: must be a whole number of frames >= 1")
@@ -546,10 +547,12 @@ def solve_file(
     n, size = int(x.shape[0]), int(chunk)
     sink = _Sink(kind, dest, topo, names=m.marker_names, fps=rate, start=start, units=m.units)
     buf = np.empty((min(size, n), m.num_vertices, 3))
+    # Each chunk continues the temporal solve from the last frame of the one before
+    # (`Model.solve_iter`): the chunks together are one `solve` of the range.
+    chunks = m.solve_iter(x, chunk=size, jaw=jaw_mode, marker_noise=sigma, quiet=True, out=buf)
     with tqdm(total=n, desc="lgi solve", unit="frame", disable=quiet, leave=False) as bar:
-        for a in range(0, n, size):
+        for a, res in zip(range(0, n, size), chunks, strict=True):
             b = min(n, a + size)
-            res = m.solve(x[a:b], jaw=jaw_mode, marker_noise=sigma, quiet=True, out=buf[: b - a])
             sink.add(
                 res.vertices,
                 res.bundle_residuals,
