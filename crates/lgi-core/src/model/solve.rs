@@ -216,24 +216,15 @@ impl Model {
         if let Some(t) = &jaw {
             extent.check_jaw(t)?;
         }
+        // `check_frame` refused infinite coordinates and too few present markers.
         let mut present = Vec::with_capacity(b);
         let mut targets_clean = targets.to_vec();
         for (i, t) in targets.iter().enumerate() {
-            if t.to_array().iter().any(|x| x.is_infinite()) {
-                return Err(LgiError::Input(format!(
-                    "bundle {i} has an infinite coordinate {t:?}"
-                )));
-            } else if t.is_nan() {
+            if t.is_nan() {
                 targets_clean[i] = DVec3::NAN;
             } else {
                 present.push(i as u32);
             }
-        }
-        if present.len() < 3 {
-            return Err(LgiError::Input(format!(
-                "only {} bundles present: at least 3 are needed",
-                present.len()
-            )));
         }
         // With a jaw, bundles are indexed in the unskinned space of the dataset's pieces.
         let theta = match (&self.jaw, jaw) {

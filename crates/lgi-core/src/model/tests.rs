@@ -1014,5 +1014,17 @@ fn on_the_ict_face_plans_from_kept_rows_match_plans_derived_from_the_full_plan()
             worst = worst.max((a - b).abs());
         }
     }
-    eprintln!("ICT: kept vs derived rows differ by at most {worst:e}");
+    let (ones, sets) = model.sewing.kept_rows();
+    eprintln!(
+        "ICT: kept vs derived rows differ by at most {worst:e}; rows kept: {ones} without one \
+         bundle, {sets} without two, for {} sewn vertices",
+        model
+            .sewing
+            .space()
+            .proxy
+            .iter()
+            .enumerate()
+            .filter(|(v, p)| **p as usize == *v)
+            .count()
+    );
 }
