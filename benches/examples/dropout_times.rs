@@ -83,6 +83,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             })
             .collect();
         for (k, frames) in [&clean, &messy].into_iter().enumerate() {
+            // LGI_STAGE=clean or messy solves only those frames (for profiling one alone).
+            if std::env::var("LGI_STAGE").is_ok_and(|s| s != ["clean", "messy"][k]) {
+                continue;
+            }
             let (w, c) = solve(frames)?;
             wall[k] = wall[k].min(w);
             if pass == 0 {

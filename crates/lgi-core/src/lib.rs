@@ -74,7 +74,7 @@ pub use correspond::{correspond, SurfaceIndex};
 pub use geom::{closest_point_on_triangle, interpolate3};
 pub use sew::{blend, BundleTargets, Pieces, SewPlan};
 pub use sibson::{Barrier, SibsonWeights};
-pub use sparse::{PatchedWeights, SparseWeights, WeightRows};
+pub use sparse::SparseWeights;
 pub use tet_index::TetIndex;
 pub use tets::{all_tets, closest_point_in_tet, generate_tets, tet_quality, Tet, TetConfig};
 pub use uvspace::{boundary_barriers, vertex_charts, SewingSpace, UvIslands};

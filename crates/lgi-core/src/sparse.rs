@@ -2,6 +2,9 @@
 //! built from and the plans for missing markers. One general type so those stages share it;
 //! `sanity_check` states its invariants for tests and fuzzers.
 
+/// One row's columns and weights.
+pub type Row<'a> = (&'a [u32], &'a [f64]);
+
 /// Sparse row-major weights: row `r` has entries `cols[row_start[r]..row_start[r + 1]]` with
 /// `vals` at the same positions (f64, > 0, summing to 1 in every non-empty row, columns sorted).
 #[derive(Debug, Clone, PartialEq)]
@@ -32,6 +35,36 @@ impl SparseWeights {
         self.cols.extend_from_slice(cols);
         self.vals.extend_from_slice(vals);
         self.row_start.push(self.cols.len() as u32);
+    }
+
+    /// These rows with some replaced: `rows` (row, its columns and weights), ascending by
+    /// row, each row once. The runs of rows in between are copied whole.
+    pub fn with_rows_replaced(&self, rows: &[(u32, Row<'_>)]) -> SparseWeights {
+        let extra: usize = rows.iter().map(|(_, (c, _))| c.len()).sum();
+        let mut out = SparseWeights {
+            row_start: Vec::with_capacity(self.row_start.len()),
+            cols: Vec::with_capacity(self.cols.len() + extra),
+            vals: Vec::with_capacity(self.vals.len() + extra),
+            num_cols: self.num_cols,
+        };
+        out.row_start.push(0);
+        let mut next = 0;
+        let ends = rows.iter().map(|&(r, row)| (r as usize, Some(row)));
+        for (end, row) in ends.chain([(self.num_rows(), None)]) {
+            // Rows next..end unchanged: their entries in one copy, their starts shifted.
+            let (a, b) = (self.row_start[next] as usize, self.row_start[end] as usize);
+            let at = out.cols.len();
+            out.cols.extend_from_slice(&self.cols[a..b]);
+            out.vals.extend_from_slice(&self.vals[a..b]);
+            let starts = &self.row_start[next + 1..=end];
+            out.row_start
+                .extend(starts.iter().map(|&s| (s as usize - a + at) as u32));
+            if let Some((cols, vals)) = row {
+                out.push_row(cols, vals);
+            }
+            next = end + 1;
+        }
+        out
     }
 
     /// Number of rows (query points).
@@ -97,121 +130,6 @@ impl SparseWeights {
     }
 }
 
-/// A matrix's rows with some of them replaced: the plan of a missing set shares the full
-/// plan's rows and keeps only those that the missing bundles change.
-#[derive(Debug, Clone)]
-pub struct PatchedWeights {
-    base: std::sync::Arc<SparseWeights>,
-    /// The replacing rows.
-    patch: SparseWeights,
-    /// Per row of `base`: its row in `patch`, or `u32::MAX` (empty: none replaced).
-    patched: Vec<u32>,
-}
-
-impl PatchedWeights {
-    /// `base`'s rows, none replaced.
-    pub fn whole(base: std::sync::Arc<SparseWeights>) -> PatchedWeights {
-        PatchedWeights {
-            base,
-            patch: SparseWeights::empty(0),
-            patched: Vec::new(),
-        }
-    }
-
-    /// `base` with the rows `rows` (row, its columns and weights; each row once) replaced.
-    pub fn new<'a>(
-        base: std::sync::Arc<SparseWeights>,
-        rows: impl IntoIterator<Item = (u32, (&'a [u32], &'a [f64]))>,
-    ) -> PatchedWeights {
-        let rows: Vec<_> = rows.into_iter().collect();
-        let nnz = rows.iter().map(|(_, (c, _))| c.len()).sum();
-        let mut patched = vec![u32::MAX; base.num_rows()];
-        let mut patch = SparseWeights {
-            row_start: Vec::with_capacity(rows.len() + 1),
-            cols: Vec::with_capacity(nnz),
-            vals: Vec::with_capacity(nnz),
-            num_cols: base.num_cols,
-        };
-        patch.row_start.push(0);
-        for (r, (cols, vals)) in rows {
-            patched[r as usize] = patch.num_rows() as u32;
-            patch.push_row(cols, vals);
-        }
-        PatchedWeights {
-            base,
-            patch,
-            patched,
-        }
-    }
-
-    /// The rows before replacement.
-    pub fn base(&self) -> &SparseWeights {
-        &self.base
-    }
-
-    /// The rows before replacement, shared.
-    pub fn shared_base(&self) -> std::sync::Arc<SparseWeights> {
-        self.base.clone()
-    }
-
-    /// Columns and weights of row `r` (panics out of range, like slice indexing).
-    pub fn row(&self, r: usize) -> (&[u32], &[f64]) {
-        self.view().row(r)
-    }
-
-    /// A borrowed view for reading rows.
-    pub fn view(&self) -> WeightRows<'_> {
-        WeightRows {
-            base: &self.base,
-            patch: (!self.patched.is_empty()).then_some((&self.patch, &self.patched[..])),
-        }
-    }
-
-    /// The rows as one matrix (tests).
-    pub fn to_sparse(&self) -> SparseWeights {
-        let view = self.view();
-        let mut out = SparseWeights::empty(self.base.num_cols);
-        for r in 0..self.base.num_rows() {
-            let (cols, vals) = view.row(r);
-            out.push_row(cols, vals);
-        }
-        out
-    }
-}
-
-/// Rows of a [`SparseWeights`] or a [`PatchedWeights`], read the same way.
-#[derive(Debug, Clone, Copy)]
-pub struct WeightRows<'a> {
-    base: &'a SparseWeights,
-    patch: Option<(&'a SparseWeights, &'a [u32])>,
-}
-
-impl<'a> WeightRows<'a> {
-    /// Columns and weights of row `r` (panics out of range, like slice indexing).
-    #[inline]
-    pub fn row(&self, r: usize) -> (&'a [u32], &'a [f64]) {
-        if let Some((patch, patched)) = self.patch {
-            let p = patched[r];
-            if p != u32::MAX {
-                return patch.row(p as usize);
-            }
-        }
-        self.base.row(r)
-    }
-}
-
-impl<'a> From<&'a PatchedWeights> for WeightRows<'a> {
-    fn from(w: &'a PatchedWeights) -> Self {
-        w.view()
-    }
-}
-
-impl<'a> From<&'a SparseWeights> for WeightRows<'a> {
-    fn from(base: &'a SparseWeights) -> Self {
-        WeightRows { base, patch: None }
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -233,6 +151,37 @@ mod tests {
         assert_eq!(w.row(0), (&[0, 2][..], &[0.25, 0.75][..]));
         assert_eq!(w.row(1), (&[][..], &[][..]));
         assert_eq!(w.row(2), (&[1][..], &[1.0][..]));
+    }
+
+    proptest::proptest! {
+        /// Replacing any ascending subset of rows (first, last, neighbours, empty rows) gives
+        /// the matrix rebuilt row by row with those rows swapped in.
+        #[test]
+        fn rows_replaced_equal_the_matrix_rebuilt_row_by_row(
+            lens in proptest::collection::vec(0usize..4, 1..12),
+            pick in proptest::collection::vec(proptest::bool::ANY, 12),
+            new_len in 0usize..4,
+        ) {
+            let mut w = SparseWeights::empty(4);
+            for (r, &n) in lens.iter().enumerate() {
+                let cols: Vec<u32> = (0..n as u32).collect();
+                let vals: Vec<f64> = (0..n).map(|j| (r * 10 + j) as f64).collect();
+                w.push_row(&cols, &vals);
+            }
+            let cols: Vec<u32> = (0..new_len as u32).collect();
+            let vals: Vec<f64> = (0..new_len).map(|j| -1.0 - j as f64).collect();
+            let rows: Vec<(u32, Row<'_>)> = (0..lens.len())
+                .filter(|&r| pick[r])
+                .map(|r| (r as u32, (&cols[..], &vals[..])))
+                .collect();
+            let got = w.with_rows_replaced(&rows);
+            let mut want = SparseWeights::empty(4);
+            for (r, &swap) in pick.iter().enumerate().take(lens.len()) {
+                let (c, v) = if swap { (&cols[..], &vals[..]) } else { w.row(r) };
+                want.push_row(c, v);
+            }
+            proptest::prop_assert_eq!(got, want);
+        }
     }
 
     #[test]

@@ -9,7 +9,7 @@ use crate::error::Result;
 use crate::geom::interpolate3;
 use crate::linalg::Lu;
 use crate::mesh::SurfacePoint;
-use crate::sparse::WeightRows;
+use crate::sparse::SparseWeights;
 use glam::DVec3;
 use rayon::prelude::*;
 
@@ -93,10 +93,10 @@ impl Pieces {
 
 /// Blends the pieces: writes `x0 + Σ_i W_vi Σ_j α_ij s_k(v)` into `out`.
 /// `displacements` is the dataset's `S × V × 3` (shape id k ≥ 1 reads shape k − 1).
-pub fn blend<'a>(
-    x0: &'a [DVec3],
-    displacements: &'a [f32],
-    weights: impl Into<WeightRows<'a>>,
+pub fn blend(
+    x0: &[DVec3],
+    displacements: &[f32],
+    weights: &SparseWeights,
     pieces: &Pieces,
     out: &mut [DVec3],
 ) {
@@ -117,7 +117,7 @@ pub fn blend<'a>(
 pub struct BlendInput<'a> {
     x0: &'a [DVec3],
     displacements: &'a [f32],
-    weights: WeightRows<'a>,
+    weights: &'a SparseWeights,
     start: Vec<u32>,
     terms: Vec<(usize, f64)>,
     /// Per bundle: its piece is `fit_terms` (empty when no bundle's is).
@@ -131,10 +131,9 @@ impl<'a> BlendInput<'a> {
     pub fn new(
         x0: &'a [DVec3],
         displacements: &'a [f32],
-        weights: impl Into<WeightRows<'a>>,
+        weights: &'a SparseWeights,
         pieces: &Pieces,
     ) -> Self {
-        let weights = weights.into();
         let nv = x0.len();
         let flatten = |shapes: &[u32], alphas: &[f64], terms: &mut Vec<(usize, f64)>| {
             for (&k, &a) in shapes.iter().zip(alphas) {
@@ -321,7 +320,7 @@ impl ResidualPass {
     pub fn new(
         triangles: &[[u32; 3]],
         bundles: &[SurfacePoint],
-        weights: WeightRows<'_>,
+        weights: &SparseWeights,
         present: &[u32],
     ) -> Result<Self> {
         let n = present.len();
@@ -436,7 +435,7 @@ impl ResidualPass {
         &self,
         triangles: &[[u32; 3]],
         bundles: &[SurfacePoint],
-        weights: WeightRows<'_>,
+        weights: &SparseWeights,
         targets: &[DVec3],
         tolerance: f64,
         x: &mut [DVec3],

@@ -16,7 +16,7 @@ use crate::jaw::VertexMap;
 use crate::mesh::Mesh;
 use crate::mesh::SurfacePoint;
 use crate::sibson::SibsonWeights;
-use crate::sparse::{PatchedWeights, SparseWeights};
+use crate::sparse::{Row, SparseWeights};
 use crate::uvspace::{self, SewingSpace};
 use glam::DVec3;
 use rayon::prelude::*;
@@ -27,7 +27,7 @@ use std::sync::{Arc, Mutex};
 #[derive(Debug)]
 pub struct SewPlan {
     /// V × B weights (columns of missing bundles are empty).
-    pub weights: PatchedWeights,
+    pub weights: SparseWeights,
     residual: ResidualPass,
 }
 
@@ -52,7 +52,7 @@ impl SewPlan {
         at: &BundleTargets<'_>,
         out: &mut [DVec3],
     ) -> Option<usize> {
-        let input = BlendInput::new(x0, displacements, self.weights.view(), pieces);
+        let input = BlendInput::new(x0, displacements, &self.weights, pieces);
         match jaw {
             Some(m) => self.residual.sew(&input, |v, p| m.apply(v, p), at, out),
             None => self.residual.sew(&input, |_, p| p, at, out),
@@ -337,9 +337,6 @@ impl SewPlans {
     }
 }
 
-/// One row's columns and weights.
-type Row<'w> = (&'w [u32], &'w [f64]);
-
 /// The vertices grouped by their proxy (CSR).
 #[derive(Debug)]
 struct Proxied {
@@ -456,11 +453,8 @@ impl SewContext<'_> {
             weights.row_start.push(weights.cols.len() as u32);
         }
         let tris = &self.dataset.neutral().triangles;
-        let residual = ResidualPass::new(tris, self.bundles, (&weights).into(), present)?;
-        Ok(SewPlan {
-            weights: PatchedWeights::whole(Arc::new(weights)),
-            residual,
-        })
+        let residual = ResidualPass::new(tris, self.bundles, &weights, present)?;
+        Ok(SewPlan { weights, residual })
     }
 
     /// The plan whose rows are `full`'s with those of `changed` (sewn vertex, its row)
@@ -469,16 +463,18 @@ impl SewContext<'_> {
     fn plan_patched<'w>(
         &self,
         present: &[u32],
-        full: &PatchedWeights,
+        full: &SparseWeights,
         by_proxy: &Proxied,
         changed: Vec<(u32, Row<'w>)>,
     ) -> Result<SewPlan> {
-        let rows = changed
+        let mut rows: Vec<(u32, Row<'w>)> = changed
             .into_iter()
-            .flat_map(|(v, row)| by_proxy.of(v).iter().map(move |&u| (u, row)));
-        let weights = PatchedWeights::new(full.shared_base(), rows);
+            .flat_map(|(v, row)| by_proxy.of(v).iter().map(move |&u| (u, row)))
+            .collect();
+        rows.sort_unstable_by_key(|&(u, _)| u);
+        let weights = full.with_rows_replaced(&rows);
         let tris = &self.dataset.neutral().triangles;
-        let residual = ResidualPass::new(tris, self.bundles, weights.view(), present)?;
+        let residual = ResidualPass::new(tris, self.bundles, &weights, present)?;
         Ok(SewPlan { weights, residual })
     }
 
