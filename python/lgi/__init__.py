@@ -5,7 +5,7 @@ shapes; the pieces are sewn so that the surface passes exactly through every mar
 """
 
 from lgi import camera, export, jaw, stabilize, takes
-from lgi._lgi import Dataset, __version__
+from lgi._lgi import Dataset, __version__, get_num_threads, set_num_threads
 from lgi.errors import (
     DatasetError,
     DatasetFileError,
@@ -36,7 +36,9 @@ __all__ = [
     "camera",
     "estimate_marker_noise",
     "export",
+    "get_num_threads",
     "jaw",
+    "set_num_threads",
     "stabilize",
     "takes",
 ]
