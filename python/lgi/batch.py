@@ -311,17 +311,14 @@ def _connect(
                 n_workers=n,
                 threads_per_worker=1,
                 processes=True,
-                dashboard_address=None,
+                # A free port on this machine only: the default 8787 may be taken by another
+                # cluster (a warning) and need not be open to the network.
+                dashboard_address="127.0.0.1:0",
             ) as cluster,
             Client(cluster) as c,
         ):
             yield c, per
         return
-    if workers is not None:
-        raise InputError(
-            "workers sizes the embedded cluster; a scheduler's workers are its own (start "
-            "them with `dask worker`)"
-        )
     if isinstance(client, str):
         try:
             c = Client(client, timeout="30s")
@@ -330,12 +327,23 @@ def _connect(
         with c:
             yield c, threads
         return
-    if not isinstance(client, Client):
+    yield client, threads
+
+
+def _check_client(client: Any, workers: int | None) -> None:
+    """`client` is None, an address or a `Client`; `workers` goes only with None."""
+    from dask.distributed import Client
+
+    if client is not None and not isinstance(client, (str, Client)):
         raise InputError(
             f"client: expected a dask.distributed.Client, a scheduler address or None, got "
             f"{type(client).__name__}"
         )
-    yield client, threads
+    if client is not None and workers is not None:
+        raise InputError(
+            "workers sizes the embedded cluster; a scheduler's workers are its own (start "
+            "them with `dask worker`)"
+        )
 
 
 def solve_shots(
@@ -388,6 +396,7 @@ def solve_shots(
         raise InputError(f"threads must be a whole number >= 1, got {threads!r}")
     if fps is not None and not (isinstance(fps, (int, float)) and np.isfinite(fps) and fps > 0):
         raise InputError(f"fps must be a positive number, got {fps!r}")
+    _check_client(client, workers)
     options_json = _check_options(solve_options)
     if isinstance(model, Model):
         the_model: Model = model
@@ -497,7 +506,7 @@ def solve_shots(
             records[name] = _record(shot)
             _write_manifest(manifest, model_info, records)
             bar.update(1)
-            if shot.status != "done":
+            if shot.status != "done" and not quiet:
                 bar.write(f"lgi batch: {name} failed: {shot.error}")
     return BatchResult(shots={n: result[n] for n in inputs}, manifest=manifest)
 
