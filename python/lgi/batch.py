@@ -157,7 +157,8 @@ def _take_inputs(
                 "the shot's output file)"
             )
         if isinstance(take, (str, os.PathLike)):
-            p = Path(take)
+            # Absolute: a worker's working folder need not be the caller's.
+            p = Path(take).absolute()
             if not p.is_file():
                 out[name] = (os.fspath(p), None, f"InputError: {p}: no such take file")
             else:
