@@ -13,6 +13,7 @@ import shutil
 import subprocess
 import sys
 from pathlib import Path
+from typing import Any, ClassVar
 
 import numpy as np
 import pytest
@@ -180,6 +181,103 @@ def test_a_model_on_a_shared_path_is_loaded_once_per_worker(client, named_model,
         assert np.array_equal(
             written.vertices, direct(named_model, take).vertices.astype(np.float32)
         )
+
+
+def test_the_model_is_scattered_once_to_both_workers_and_every_task_uses_that_copy(  # type: ignore[no-untyped-def]
+    client, named_model, shots, tmp_path
+):
+    from dask.distributed import Client, Future
+
+    class Recording(Client):
+        """The module's cluster, recording what the batch sends through the client."""
+
+        scattered: ClassVar[list[tuple[Any, dict[str, Any]]]] = []
+        submitted: ClassVar[list[tuple[Any, ...]]] = []
+
+        def scatter(self, data, **kwargs):  # type: ignore[no-untyped-def]
+            future = super().scatter(data, **kwargs)
+            self.scattered.append((future, kwargs))
+            return future
+
+        def submit(self, func, *args, **kwargs):  # type: ignore[no-untyped-def]
+            self.submitted.append(args)
+            return super().submit(func, *args, **kwargs)
+
+    many = {f"shot{k}": shots["sh040"] for k in range(4)}
+    with Recording(client.scheduler.address) as rec:
+        result = batch.solve_shots(named_model, many, tmp_path, client=rec, quiet=True)
+        models = [(f, kw) for f, kw in rec.scattered if f.type is lgi.Model]
+        assert len(models) == 1 and models[0][1].get("broadcast") is True
+        model_future = models[0][0]
+        assert isinstance(model_future, Future)
+        assert len(rec.who_has(model_future)[model_future.key]) == 2
+        assert len(rec.submitted) == 4
+        assert all(args[0] is model_future for args in rec.submitted)
+    assert result.failed == []
+
+
+def test_usd_and_obj_outputs_hold_the_solve_and_a_rerun_skips_them(  # type: ignore[no-untyped-def]
+    client, named_model, shots, tmp_path
+):
+    from pxr import Usd, UsdGeom
+
+    take = {"sh020": shots["sh020"]}
+    ref = direct(named_model, shots["sh020"])
+    usd = batch.solve_shots(
+        named_model,
+        take,
+        tmp_path / "usd",
+        client=client,
+        output="usd",
+        quiet=True,
+        marker_noise=0.01,
+    )
+    assert usd.shots["sh020"].output == os.fspath((tmp_path / "usd" / "sh020.usdc").resolve())
+    stage = Usd.Stage.Open(usd.shots["sh020"].output)
+    assert stage.GetTimeCodesPerSecond() == FPS
+    points = UsdGeom.Mesh(stage.GetPrimAtPath("/Face/Mesh")).GetPointsAttr()
+    times = points.GetTimeSamples()
+    assert len(times) == ref.vertices.shape[0]
+    for f, t in enumerate(times):
+        got = np.array(points.Get(t))
+        assert np.array_equal(got, ref.vertices[f].astype(np.float32))
+    obj = batch.solve_shots(
+        named_model,
+        take,
+        tmp_path / "obj",
+        client=client,
+        output="obj",
+        quiet=True,
+        marker_noise=0.01,
+    )
+    files = sorted((tmp_path / "obj").glob("sh020.*.obj"))
+    assert len(files) == ref.vertices.shape[0]
+    first = np.array(
+        [line.split()[1:] for line in files[0].read_text().splitlines() if line.startswith("v ")],
+        dtype=np.float64,
+    )
+    np.testing.assert_allclose(first, ref.vertices[0], rtol=0, atol=1e-6 * named_model.diagonal)
+    assert obj.shots["sh020"].output.endswith("sh020.NNNN.obj")
+    again = batch.solve_shots(
+        named_model,
+        take,
+        tmp_path / "obj",
+        client=client,
+        output="obj",
+        quiet=True,
+        marker_noise=0.01,
+    )
+    assert again.skipped == ["sh020"]
+
+
+def test_progress_shows_shots_as_they_finish_unless_quiet(
+    client, named_model, shots, tmp_path, capsys
+):  # type: ignore[no-untyped-def]
+    take = {"sh040": shots["sh040"]}
+    batch.solve_shots(named_model, take, tmp_path / "a", client=client, quiet=True)
+    assert "lgi batch" not in capsys.readouterr().err
+    batch.solve_shots(named_model, take, tmp_path / "b", client=client)
+    assert "lgi batch: 100%" in capsys.readouterr().err
 
 
 def test_solve_shots_refuses_bad_arguments_before_starting_anything(named_model, tmp_path):  # type: ignore[no-untyped-def]
