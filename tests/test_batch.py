@@ -300,6 +300,10 @@ def test_solve_shots_refuses_bad_arguments_before_starting_anything(named_model,
         ({"client": 3}, "client: expected"),
         ({"client": "tcp://127.0.0.1:8786", "workers": 2}, "workers sizes the embedded"),
     ]
+    inside = tmp_path / "o" / "a.npz"
+    inside.parent.mkdir()
+    np.savez(inside, frames=take)
+    cases.append(({"takes": {"a": inside}}, "the file its output would replace"))
     for kwargs, message in cases:
         args = {"model": named_model, "takes": {"a": take}, "out_dir": tmp_path / "o", **kwargs}
         with pytest.raises(lgi.InputError, match=message):

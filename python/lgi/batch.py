@@ -13,6 +13,7 @@ import json
 import os
 import re
 import time
+from collections import OrderedDict
 from collections.abc import Iterator, Mapping
 from contextlib import contextmanager
 from dataclasses import asdict, dataclass, field
@@ -23,7 +24,7 @@ import numpy as np
 
 from lgi import export
 from lgi import takes as take_files
-from lgi.errors import InputError
+from lgi.errors import FileWriteError, InputError
 from lgi.model import Model, estimate_marker_noise
 
 __all__ = [
@@ -45,9 +46,11 @@ OUTPUT_FORMATS = {"npz": ".npz", "usd": ".usdc", "obj": ".obj"}
 
 _SHOT_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]*")
 
-# What a worker process keeps between its tasks: models loaded from a shared path, by
-# (path, content hash), so each worker reads a model file once, not once per shot.
-_LOADED: dict[tuple[str, str], Model] = {}
+# What a worker process keeps between its tasks: the models it loaded from a shared path, by
+# (path, content hash), so each worker reads a model file once, not once per shot; the two
+# used last (a long-lived worker serving many actors does not keep every model).
+_LOADED: OrderedDict[tuple[str, str], Model] = OrderedDict()
+_KEEP_LOADED = 2
 
 
 @dataclass(frozen=True)
@@ -219,6 +222,9 @@ def _worker_model(model: Model | tuple[str, str]) -> Model:
         return model
     if model not in _LOADED:
         _LOADED[model] = Model.load(model[0])
+        while len(_LOADED) > _KEEP_LOADED:
+            _LOADED.popitem(last=False)
+    _LOADED.move_to_end(model)
     return _LOADED[model]
 
 
@@ -419,7 +425,17 @@ def solve_shots(
     if out.exists() and not out.is_dir():
         raise InputError(f"out_dir {out}: is a file, expected a folder")
     inputs = _take_inputs(takes, the_model.num_bundles)
-    out.mkdir(parents=True, exist_ok=True)
+    for name, (take, _, _) in inputs.items():
+        dest = out.absolute() / f"{name}{OUTPUT_FORMATS[output]}"
+        if isinstance(take, str) and Path(take).resolve() == dest.resolve():
+            raise InputError(
+                f"takes: {name}'s take {take} is the file its output would replace; choose "
+                "another out_dir (nothing given is modified)"
+            )
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as e:
+        raise FileWriteError(f"out_dir {out}: cannot create the folder ({e})") from None
     import lgi
 
     settings_hash = hashlib.sha256(
