@@ -1,11 +1,12 @@
 """Throughput of `lgi.batch.solve_shots` (docs/scale.md): the same shots solved by a plain
 loop in this process, then on a LocalCluster of 1 and of 2 worker processes, all in one run.
-Each shot is a C3D take of the built-in sample's held-out performance (its own noise seed)
-solved on the recommended path (`marker_noise="auto"`, the default jaw) into a solved `.npz`.
+Each shot is a C3D take of the built-in sample's held-out performance (its own noise seed; with
+`--ict`, ICT-FaceKit performing a Live Link Face recording, `scripts/ict_take.py`) solved on
+the recommended path (`marker_noise="auto"`, the default jaw) into a solved `.npz`.
 Prints shots/min and frames/s for each, the cluster's start-up time, the engine's overhead per
-shot against the loop, and the workers' memory.
+shot against the loop, and the workers' peak memory.
 
-    python scripts/batch_bench.py [--shots 8] [--repeat 2] [--out /tmp/lgi-batch-bench]
+    python scripts/batch_bench.py [--shots 8] [--repeat 2] [--ict] [--out /tmp/lgi-batch-bench]
 """
 
 from __future__ import annotations
@@ -45,6 +46,39 @@ def make_takes(folder: Path, shots: int) -> tuple[lgi.Model, dict[str, Path], in
     return model, takes, int(perf.shape[0])
 
 
+def make_ict_takes(folder: Path, shots: int) -> tuple[lgi.Model, dict[str, Path], int]:
+    """ICT-FaceKit (`../shared/data`): the model `lgi build` makes (120 named markers, cm) and
+    `scripts/ict_take.py`'s take (a Live Link Face recording, in mm), once per shot with its
+    own extra 0.005 cm of noise."""
+    import subprocess
+
+    from lgi import ict, pipeline
+
+    data = ict.find(os.environ.get(ict.ENV), start=Path(__file__).resolve().parents[1])
+    if data is None:
+        raise SystemExit(f"ICT-FaceKit data not found (set {ict.ENV})")
+    model_path = folder / "ict.lgi"
+    pipeline.build_file(
+        data / "generic_neutral_mesh.obj",
+        os.fspath(data / "shapes"),
+        data / "markers_120.csv",
+        model_path,
+        units="cm",
+    )
+    model = lgi.Model.load(model_path)
+    base = folder / "base.c3d"
+    script = Path(__file__).resolve().parent / "ict_take.py"
+    subprocess.run([sys.executable, os.fspath(script), os.fspath(base)], check=True)
+    raw = lgi.takes.read_raw(base)
+    takes = {}
+    for k in range(shots):
+        noise = np.random.default_rng(k).normal(scale=0.05, size=raw.points.shape)  # mm
+        takes[f"sh{k:03d}"] = folder / f"sh{k:03d}.c3d"
+        fps = raw.fps if raw.fps is not None else FPS
+        write_c3d(takes[f"sh{k:03d}"], raw.points + noise, raw.labels, fps, raw.units or "mm")
+    return model, takes, int(raw.points.shape[0])
+
+
 def plain_loop(model: lgi.Model, takes: dict[str, Path], out: Path) -> float:
     """What one process does without an engine: read, solve, write, shot after shot."""
     lgi.set_num_threads(os.cpu_count() or 1)
@@ -75,7 +109,7 @@ def on_cluster(
     model: lgi.Model, takes: dict[str, Path], out: Path, workers: int
 ) -> tuple[float, float, float, list[int]]:
     """Start-up seconds, batch seconds, the tasks' own seconds (summed), and each worker's
-    resident memory after the batch."""
+    peak resident memory."""
     from dask.distributed import Client, LocalCluster
 
     threads = max(1, (os.cpu_count() or 1) // workers)
@@ -101,9 +135,10 @@ def on_cluster(
         tasks = sum(s.seconds or 0.0 for s in result.shots.values())
 
         def rss() -> int:
-            import psutil
+            """The worker process's peak resident memory (Linux: ru_maxrss in KiB)."""
+            import resource
 
-            return int(psutil.Process().memory_info().rss)
+            return int(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss) * 1024
 
         memory = sorted(client.run(rss).values())
     return started, took, tasks, memory
@@ -113,12 +148,14 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--shots", type=int, default=8)
     ap.add_argument("--repeat", type=int, default=2)
+    ap.add_argument("--ict", action="store_true", help="ICT-FaceKit shots instead of the sample")
     ap.add_argument("--out", default="/tmp/lgi-batch-bench")
     args = ap.parse_args()
     root = Path(args.out)
     shutil.rmtree(root, ignore_errors=True)
     (root / "takes").mkdir(parents=True)
-    model, takes, frames = make_takes(root / "takes", args.shots)
+    make = make_ict_takes if args.ict else make_takes
+    model, takes, frames = make(root / "takes", args.shots)
     n, total = len(takes), len(takes) * frames
     print(
         f"{n} shots of {frames} frames; model: {model.num_vertices} vertices, "
@@ -134,7 +171,7 @@ def main() -> None:
             runs[workers].append(on_cluster(model, takes, root / f"w{workers}-{r}", workers))
     loop = min(loops)
     print(f"best of {args.repeat} interleaved runs")
-    print("| run | wall s | shots/min | frames/s | cluster start-up s | worker RSS MB |")
+    print("| run | wall s | shots/min | frames/s | cluster start-up s | worker peak RSS MB |")
     print("|---|---|---|---|---|---|")
     print(
         f"| plain loop, 1 process x {cores} threads | {loop:.2f} | {60 * n / loop:.1f} | "
