@@ -286,6 +286,26 @@ def test_progress_shows_shots_as_they_finish_unless_quiet(
     assert "lgi batch: 100%" in capsys.readouterr().err
 
 
+def test_a_scheduler_address_runs_the_batch_on_that_cluster(client, named_model, shots, tmp_path):  # type: ignore[no-untyped-def]
+    from dask.distributed import get_task_stream
+
+    with get_task_stream(client) as stream:
+        result = batch.solve_shots(
+            named_model,
+            {"sh040": shots["sh040"]},
+            tmp_path,
+            client=client.scheduler.address,
+            quiet=True,
+            marker_noise=0.01,
+        )
+    # The task ran on this module's cluster (no cluster of its own was started).
+    assert any(str(t["key"]).startswith("lgi-shot-sh040-") for t in stream.data)
+    assert result.failed == []
+    written = lgi.export.read_result_npz(result.shots["sh040"].output)
+    ref = direct(named_model, shots["sh040"])
+    assert np.array_equal(written.vertices, ref.vertices.astype(np.float32))
+
+
 def test_solve_shots_refuses_bad_arguments_before_starting_anything(named_model, tmp_path):  # type: ignore[no-untyped-def]
     take = np.zeros((2, named_model.num_bundles, 3))
     cases = [
