@@ -1,14 +1,17 @@
 """Pickling (what Dask, Ray and multiprocessing ship to a worker) goes through the versioned
 model format: a model from bytes solves bit for bit like the original, corrupt bytes raise the
 error a corrupt file raises, a dataset round trips with its polygons; and the thread count
-`lgi.set_num_threads` sets is the one lgi's parallel work runs on, without changing a result."""
+`lgi.set_num_threads` sets is the one lgi's parallel work runs on, without changing a result
+or the way Ctrl-C stops a solve."""
 
 from __future__ import annotations
 
 import os
 import pickle
+import signal
 import subprocess
 import sys
+import threading
 
 import numpy as np
 import pytest
@@ -174,6 +177,33 @@ def test_without_set_num_threads_the_count_is_rayons_default_from_rayon_num_thre
         check=True,
     ).stdout.split()
     assert out == ["3", "2"]
+
+
+def test_on_lgi_own_pool_ctrl_c_and_a_failing_callback_still_stop_a_solve_early(  # type: ignore[no-untyped-def]
+    sample, sample_model, default_threads
+):
+    lgi.set_num_threads(2)
+    frames = np.repeat(sample.markers_rest[None], 4000, axis=0)
+    calls: list[int] = []
+
+    def interrupt_at_10(f: int) -> None:
+        calls.append(f)
+        if f == 10:  # a real SIGINT, delivered to the main thread's handler
+            threading.Thread(target=os.kill, args=(os.getpid(), signal.SIGINT)).start()
+
+    with pytest.raises(KeyboardInterrupt):
+        sample_model.core.solve(frames, progress=interrupt_at_10, temporal=True)
+    assert 10 < len(calls) < 4000
+
+    def fail_at_4(f: int) -> None:
+        if f == 4:
+            raise ValueError("stop here")
+
+    with pytest.raises(ValueError, match="stop here"):
+        sample_model.core.solve(frames[:50], progress=fail_at_4, temporal=True)
+    # The pool is whole afterwards.
+    assert lgi.get_num_threads() == 2
+    assert sample_model.solve(frames[:3], quiet=True).vertices.shape[0] == 3
 
 
 @pytest.mark.parametrize("bad", [0, -1, 1.5, True, "2", lgi._lgi.MAX_THREADS + 1])

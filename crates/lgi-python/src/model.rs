@@ -244,12 +244,17 @@ impl Model {
                 ))
             })?;
             let mut stopped: Option<PyErr> = None;
+            let interrupt = std::sync::Mutex::new(None);
             let solved = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
-                threads::detach(py, || {
+                threads::detach_watching(py, &interrupt, || {
                     let (th, prev) = (thetas.as_deref(), previous.as_ref());
                     model.solve_sequence_after(&frames, th, &options, prev, out, |f| {
                         // Ctrl-C and a failing callback stop the solve after this frame.
                         let called = Python::attach(|py| {
+                            let caught = interrupt.lock().map(|mut i| i.take());
+                            if let Ok(Some(e)) = caught {
+                                return Err(e);
+                            }
                             py.check_signals()?;
                             match &progress {
                                 Some(cb) => cb.call1(py, (f,)).map(drop),

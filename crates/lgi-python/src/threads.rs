@@ -6,7 +6,9 @@
 use crate::convert::count;
 use crate::error::input_error;
 use pyo3::prelude::*;
-use std::sync::{Arc, RwLock};
+use std::sync::mpsc::RecvTimeoutError;
+use std::sync::{Arc, Mutex, RwLock};
+use std::time::Duration;
 
 /// The most threads `set_num_threads` accepts (a typo like 10**6 must not spawn a million).
 pub const MAX_THREADS: usize = 1024;
@@ -27,6 +29,44 @@ pub fn detach<T: Send>(py: Python<'_>, work: impl FnOnce() -> T + Send) -> T {
         Some(pool) => py.detach(move || pool.install(work)),
     }
 }
+
+/// [`detach`] for work that reports progress: on lgi's own pool the work runs off the calling
+/// thread, where Python cannot see signals, so the calling thread waits by checking them
+/// (every 20 ms) and puts a raised one (Ctrl-C: `KeyboardInterrupt`) in `interrupt`, which the
+/// work's progress hook takes and stops with. On rayon's global pool the work runs on the
+/// calling thread and its hook checks signals itself.
+pub fn detach_watching<T: Send>(
+    py: Python<'_>,
+    interrupt: &Mutex<Option<PyErr>>,
+    work: impl FnOnce() -> T + Send,
+) -> T {
+    let Some(pool) = current() else {
+        return py.detach(work);
+    };
+    py.detach(move || {
+        std::thread::scope(|s| {
+            let (done, finished) = std::sync::mpsc::channel::<()>();
+            let worker = s.spawn(move || {
+                // Dropped when the work returns or unwinds: the wait below ends either way.
+                let _done = done;
+                pool.install(work)
+            });
+            while let Err(RecvTimeoutError::Timeout) = finished.recv_timeout(WATCH) {
+                if let Err(e) = Python::attach(|py| py.check_signals()) {
+                    *interrupt.lock().unwrap_or_else(|e| e.into_inner()) = Some(e);
+                }
+            }
+            match worker.join() {
+                Ok(value) => value,
+                // The work's own unwinding (a stopped solve's private payload) goes on up.
+                Err(payload) => std::panic::resume_unwind(payload),
+            }
+        })
+    })
+}
+
+/// How often [`detach_watching`] checks for signals.
+const WATCH: Duration = Duration::from_millis(20);
 
 /// `lgi.set_num_threads(n)`: lgi's parallel work (build, load and unpickling, solve, the
 /// baselines) runs on a pool of `n` threads from the next call on; None returns to rayon's
