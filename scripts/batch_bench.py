@@ -135,10 +135,11 @@ def on_cluster(
         tasks = sum(s.seconds or 0.0 for s in result.shots.values())
 
         def rss() -> int:
-            """The worker process's peak resident memory (Linux: ru_maxrss in KiB)."""
-            import resource
-
-            return int(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss) * 1024
+            """The worker process's peak resident memory: Linux's VmHWM of its own address
+            space (ru_maxrss would carry the spawning process's peak across exec)."""
+            with open("/proc/self/status", encoding="ascii") as f:
+                line = next(x for x in f if x.startswith("VmHWM:"))
+            return int(line.split()[1]) * 1024
 
         memory = sorted(client.run(rss).values())
     return started, took, tasks, memory
