@@ -304,14 +304,15 @@ def solve_shot(
 
 @contextmanager
 def _connect(
-    client: Any, workers: int | None, threads: int | None
+    client: Any, workers: int | None, threads: int | None, shots: int
 ) -> Iterator[tuple[Any, int | None]]:
     """The client to run on and the threads each task solves with: the given `Client`, one
-    connected to a scheduler address, or an embedded `LocalCluster` (closed afterwards)."""
+    connected to a scheduler address, or an embedded `LocalCluster` (closed afterwards) of at
+    most one worker per shot to solve."""
     from dask.distributed import Client, LocalCluster
 
     if client is None:
-        n = default_workers() if workers is None else workers
+        n = min(shots, default_workers() if workers is None else workers)
         per = threads if threads is not None else max(1, (os.cpu_count() or 1) // n)
         with (
             LocalCluster(
@@ -474,7 +475,7 @@ def solve_shots(
     if not todo:
         return BatchResult(shots=result, manifest=manifest)
     with (
-        _connect(client, workers, threads) as (c, per_task),
+        _connect(client, workers, threads, len(todo)) as (c, per_task),
         tqdm(total=len(todo), desc="lgi batch", unit="shot", disable=quiet) as bar,
     ):
         from dask.distributed import as_completed
