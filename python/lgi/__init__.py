@@ -5,7 +5,7 @@ shapes; the pieces are sewn so that the surface passes exactly through every mar
 """
 
 from lgi import camera, export, jaw, rig, rig_export, stabilize, takes
-from lgi._lgi import Dataset, __version__
+from lgi._lgi import Dataset, __version__, get_num_threads, set_num_threads
 from lgi.errors import (
     DatasetError,
     DatasetFileError,
@@ -36,9 +36,11 @@ __all__ = [
     "camera",
     "estimate_marker_noise",
     "export",
+    "get_num_threads",
     "jaw",
     "rig",
     "rig_export",
+    "set_num_threads",
     "stabilize",
     "takes",
 ]

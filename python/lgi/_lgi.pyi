@@ -12,6 +12,7 @@ __all__ = [
     "FIT_L2",
     "FIT_PENALTY",
     "MAGNITUDE_LIMIT",
+    "MAX_THREADS",
     "BlendshapeSolver",
     "BuildConfig",
     "Dataset",
@@ -23,12 +24,22 @@ __all__ = [
     "__version__",
     "check_count",
     "check_marker_frames",
+    "get_num_threads",
+    "set_num_threads",
 ]
 
 __version__: str
 FIT_L2: float
 FIT_PENALTY: float
 MAGNITUDE_LIMIT: float
+MAX_THREADS: int
+
+def set_num_threads(n: int | None) -> None:
+    """lgi's parallel work runs on a pool of ``n`` threads (1..MAX_THREADS) from the next call
+    on; None: rayon's global pool again. A second call replaces the pool."""
+
+def get_num_threads() -> int:
+    """The number of threads lgi's parallel work runs on now."""
 
 def check_count(value: object, name: str) -> int:
     """`value` as a count (an int >= 0); else `lgi.InputError` naming `name`."""
@@ -49,6 +60,12 @@ class Dataset:
     @staticmethod
     def from_gltf(path: _Path) -> Dataset:
         """First mesh of a glTF/GLB file; morph targets are the shapes."""
+    def to_bytes(self) -> bytes:
+        """The model file's dataset part as bytes (magic ``LGIDATAS``)."""
+    @staticmethod
+    def from_bytes(data: bytes | bytearray) -> Dataset:
+        """A dataset from ``to_bytes``; corrupt bytes raise ``lgi.ModelFormatError``."""
+    def __reduce__(self) -> tuple[Callable[[bytes], Dataset], tuple[bytes]]: ...
     @staticmethod
     def from_arrays(
         neutral: ArrayLike,
@@ -262,6 +279,12 @@ class Model:
         """Loads a model written by ``save``."""
     def save(self, path: _Path) -> None:
         """Writes the model (versioned binary file)."""
+    def to_bytes(self) -> bytes:
+        """The bytes ``save`` writes."""
+    @staticmethod
+    def from_bytes(data: bytes | bytearray) -> Model:
+        """A model from ``to_bytes`` (checked like ``load``)."""
+    def __reduce__(self) -> tuple[Callable[[bytes], Model], tuple[bytes]]: ...
     @property
     def num_bundles(self) -> int: ...
     @property

@@ -1,7 +1,7 @@
 """The `lgi` command line: argument (and environment) handling only. `lgi demo` runs the whole
 pipeline on the built-in sample (`lgi.demo`); `lgi evaluate` a protocol (`lgi.evaluate`); the
-file pipeline `lgi build` / `solve` / `export` / `info` / `rig` is `lgi.pipeline`'s. Every user
-mistake ends as `lgi: error: ...` and exit status 2."""
+file pipeline `lgi build` / `solve` / `export` / `info` / `rig` is `lgi.pipeline`'s, `lgi batch`
+`lgi.batch`'s. Every user mistake ends as `lgi: error: ...` and exit status 2."""
 
 from __future__ import annotations
 
@@ -118,6 +118,126 @@ def _cmd_info(args: argparse.Namespace) -> int:
     for line in pipeline.describe(args.file, model=args.model):
         print(line)
     return 0
+
+
+def _cmd_batch(args: argparse.Namespace) -> int:
+    from lgi import batch
+
+    shots: dict[str, str] = {}
+    for take in args.takes:
+        name = Path(take).stem
+        if name in shots:
+            raise lgi.InputError(
+                f"two takes named {name!r}: {shots[name]} and {take} (shots are named after "
+                "their files' stems)"
+            )
+        shots[name] = take
+    if args.scheduler is not None and args.workers is not None:
+        raise lgi.InputError(
+            "--workers sizes the local cluster; with --scheduler the workers are the "
+            "cluster's own (start them with `dask worker ADDRESS`)"
+        )
+    options: dict[str, Any] = {}
+    if args.marker_noise is not None:
+        options["marker_noise"] = args.marker_noise
+    if args.jaw != "auto":
+        options["jaw"] = None if args.jaw == "rest" else args.jaw
+    model = pipeline.existing_file(args.model, "MODEL")
+    result = batch.solve_shots(
+        model,
+        shots,
+        args.out,
+        client=args.scheduler,
+        workers=args.workers,
+        threads=args.threads,
+        output=args.format,
+        fps=args.fps,
+        allow_missing=args.allow_missing,
+        take_units=args.take_units,
+        quiet=args.quiet,
+        **options,
+    )
+    failed = result.failed
+    print(
+        f"{len(result.shots) - len(failed)} of {len(result.shots)} shots done "
+        f"({len(result.skipped)} skipped: done before); manifest {result.manifest}"
+    )
+    if failed:
+        why = "; ".join(f"{n}: {result.shots[n].error}" for n in failed)
+        raise lgi.InputError(f"{len(failed)} of {len(result.shots)} shots failed ({why})")
+    return 0
+
+
+def _marker_noise_option(text: str) -> float | str | None:
+    """`lgi batch --marker-noise`: a sigma >= 0, 'auto' (per take) or 'none'."""
+    if text in ("auto", "none"):
+        return None if text == "none" else text
+    try:
+        return _non_negative(text)
+    except argparse.ArgumentTypeError:
+        raise argparse.ArgumentTypeError(
+            f"expected a number >= 0 (model units), 'auto' or 'none', got {text!r}"
+        ) from None
+
+
+def _add_batch_command(sub: Any) -> None:
+    """`lgi batch`: many takes as tasks on dask.distributed (`lgi.batch`)."""
+    from lgi.batch import OUTPUT_FORMATS
+
+    b = sub.add_parser(
+        "batch",
+        help="solve many takes with one model on a Dask cluster (embedded by default)",
+        description="Solve every TAKE with MODEL, one dask.distributed task per take, into "
+        "OUT/NAME.npz (or --format), NAME the take's file stem; OUT/manifest.json records "
+        "each shot, and a rerun skips the shots already done with the same take and settings.",
+    )
+    b.add_argument("model", metavar="MODEL", help="model file (.lgi) from lgi build")
+    b.add_argument("takes", metavar="TAKE", nargs="+", help="marker takes: .c3d .trc .csv .npz")
+    b.add_argument("-o", "--out", required=True, help="output folder (created)")
+    b.add_argument(
+        "--scheduler",
+        default=None,
+        metavar="ADDRESS",
+        help="a running Dask scheduler (tcp://host:8786); default: a local cluster",
+    )
+    b.add_argument(
+        "--workers",
+        type=_positive_int,
+        default=None,
+        metavar="N",
+        help="worker processes of the local cluster (default: one per two cores)",
+    )
+    b.add_argument(
+        "--threads",
+        type=_positive_int,
+        default=None,
+        metavar="N",
+        help="solve threads per task (default: the cores shared among the local workers)",
+    )
+    b.add_argument(
+        "--format",
+        choices=list(OUTPUT_FORMATS),
+        default="npz",
+        help="output per shot: npz (solved take), usd (NAME.usdc), obj (NAME.NNNN.obj)",
+    )
+    b.add_argument(
+        "--marker-noise",
+        type=_marker_noise_option,
+        default=None,
+        metavar="SIGMA|auto|none",
+        help="markers' noise sigma in model units (auto: estimated per take); default none",
+    )
+    b.add_argument(
+        "--jaw",
+        choices=list(pipeline.JAW_POSES),
+        default="auto",
+        help="as lgi solve --jaw",
+    )
+    b.add_argument("--fps", type=float, default=None, help="frame rate of takes without one")
+    b.add_argument("--allow-missing", action="store_true", help="as lgi solve --allow-missing")
+    b.add_argument("--take-units", default=None, help="the takes' length unit, overriding theirs")
+    b.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
+    b.set_defaults(func=_cmd_batch)
 
 
 def _add_pipeline_commands(sub: Any) -> None:
@@ -424,6 +544,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     ev.set_defaults(func=_cmd_evaluate)
     _add_pipeline_commands(sub)
+    _add_batch_command(sub)
     _add_front_end_commands(sub)
     return p
 

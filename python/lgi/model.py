@@ -247,6 +247,21 @@ class Model:
         """Writes the model (versioned binary `.lgi` file)."""
         self._core.save(os.fspath(path))
 
+    def to_bytes(self) -> bytes:
+        """The bytes `save` writes (the versioned model format, checksum included)."""
+        return self._core.to_bytes()
+
+    @classmethod
+    def from_bytes(cls, data: bytes | bytearray) -> Model:
+        """A model from `to_bytes` (or a model file's bytes), with every check of `load`:
+        corrupt or truncated bytes raise `lgi.ModelFormatError`."""
+        return cls(_lgi.Model.from_bytes(data))
+
+    def __reduce__(self) -> tuple[Any, tuple[bytes]]:
+        # Pickled as the model file's bytes: a worker process gets a model exactly as valid
+        # as one loaded from a file, and solves bit-identically.
+        return (Model.from_bytes, (self.to_bytes(),))
+
     @property
     def num_bundles(self) -> int:
         return self._core.num_bundles

@@ -57,7 +57,10 @@ pub use prior::{FitPrior, FrameFit, FIT_L2, FIT_PENALTY, RESIDUAL_LENGTH};
 // Files: meshes, datasets and the `.lgi` model file.
 pub use io::glob::expand as expand_glob;
 pub use io::gltf::read_gltf;
-pub use io::model_file::{load as load_model, save as save_model, save_parts as save_model_parts};
+pub use io::model_file::{
+    dataset_from_bytes, dataset_to_bytes, from_bytes as model_from_bytes, load as load_model,
+    save as save_model, save_parts as save_model_parts, to_bytes as model_to_bytes,
+};
 pub use io::obj::{parse_obj, read_obj, read_obj_polygons, read_obj_positions, write_obj};
 
 // The jaw (Eq. 2) and the baselines.

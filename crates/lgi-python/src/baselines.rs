@@ -5,6 +5,7 @@
 use crate::convert::{flat_to_array, float_array, points as read_points};
 use crate::dataset::Dataset;
 use crate::error::{input_error, PyLgiError};
+use crate::threads;
 use glam::DVec3;
 use lgi_core::{BlendshapeSolver as CoreBlend, RbfInterpolator as CoreRbf};
 use numpy::PyArrayDyn;
@@ -47,9 +48,7 @@ impl RbfInterpolator {
                 )
             })
             .collect();
-        let inner = py
-            .detach(move || CoreRbf::new(pts, samples))
-            .map_err(PyLgiError)?;
+        let inner = threads::detach(py, move || CoreRbf::new(pts, samples)).map_err(PyLgiError)?;
         Ok(RbfInterpolator { inner })
     }
 
@@ -63,9 +62,10 @@ impl RbfInterpolator {
     ) -> PyResult<Self> {
         let markers = read_points(markers_rest, "markers_rest", None, false)?;
         let data = dataset.inner.clone();
-        let inner = py
-            .detach(move || CoreRbf::from_dataset(&data, &markers, tolerance))
-            .map_err(PyLgiError)?;
+        let inner = threads::detach(py, move || {
+            CoreRbf::from_dataset(&data, &markers, tolerance)
+        })
+        .map_err(PyLgiError)?;
         Ok(RbfInterpolator { inner })
     }
 
@@ -128,14 +128,13 @@ impl RbfInterpolator {
             .collect();
         let nf = frames.len();
         let inner = &self.inner;
-        let out = py
-            .detach(|| {
-                frames
-                    .iter()
-                    .map(|f| inner.interpolate(f))
-                    .collect::<lgi_core::Result<Vec<_>>>()
-            })
-            .map_err(PyLgiError)?;
+        let out = threads::detach(py, || {
+            frames
+                .iter()
+                .map(|f| inner.interpolate(f))
+                .collect::<lgi_core::Result<Vec<_>>>()
+        })
+        .map_err(PyLgiError)?;
         let flat: Vec<f64> = out.iter().flatten().flat_map(|p| [p.x, p.y, p.z]).collect();
         flat_to_array(py, flat, &[nf, inner.num_points(), 3])
     }
@@ -190,7 +189,7 @@ impl BlendshapeSolver {
             .collect();
         let nf = rows.len();
         let inner = &self.inner;
-        let sols = py.detach(|| inner.solve_many(&rows)).map_err(PyLgiError)?;
+        let sols = threads::detach(py, || inner.solve_many(&rows)).map_err(PyLgiError)?;
         let s = inner.num_shapes();
         let w: Vec<f64> = sols
             .iter()

@@ -7,7 +7,7 @@ use crate::error::{input_error, lgi_exception, PyLgiError, PyLgiResult};
 use lgi_core::{DVec2, LgiError, Mesh};
 use numpy::PyArrayDyn;
 use pyo3::prelude::*;
-use pyo3::types::PyString;
+use pyo3::types::{PyBytes, PyString};
 use std::path::PathBuf;
 use std::sync::Arc;
 
@@ -47,6 +47,33 @@ impl Dataset {
             .detach(|| lgi_core::read_gltf(&path))
             .map_err(PyLgiError)?;
         Ok(Dataset { inner: Arc::new(d) })
+    }
+
+    /// The dataset as bytes: the model file's dataset part (neutral, shape names,
+    /// displacements, source polygons) in the model format's framing, magic `LGIDATAS`.
+    fn to_bytes<'py>(&self, py: Python<'py>) -> Bound<'py, PyBytes> {
+        let data = self.inner.clone();
+        let bytes = py.detach(move || lgi_core::dataset_to_bytes(&data));
+        PyBytes::new(py, &bytes)
+    }
+
+    /// A dataset from `to_bytes`'s bytes, with every check of a dataset built from arrays;
+    /// corrupt bytes raise `lgi.ModelFormatError`.
+    #[staticmethod]
+    fn from_bytes(py: Python<'_>, data: &Bound<'_, PyAny>) -> PyResult<Dataset> {
+        let d = crate::model::with_bytes(data, "Dataset.from_bytes", |bytes| {
+            py.detach(|| lgi_core::dataset_from_bytes(bytes))
+                .map_err(PyLgiError)
+        })??;
+        Ok(Dataset { inner: Arc::new(d) })
+    }
+
+    /// Pickles as `to_bytes` (`from_bytes` rebuilds it, checked).
+    fn __reduce__<'py>(
+        slf: &Bound<'py, Self>,
+    ) -> PyResult<(Bound<'py, PyAny>, (Bound<'py, PyBytes>,))> {
+        let bytes = slf.get().to_bytes(slf.py());
+        Ok((slf.get_type().getattr("from_bytes")?, (bytes,)))
     }
 
     /// A dataset from arrays: `neutral` (V, 3) float, `triangles` (T, 3) int, `shapes`

@@ -1,5 +1,6 @@
 //! Python binding of lgi-core: numpy in, numpy out. Conversions live in `convert.rs`, the
-//! error mapping in `error.rs`; every heavy call releases the GIL with `py.detach`.
+//! error mapping in `error.rs`; every heavy call releases the GIL
+//! (`threads::detach`: on the pool `set_num_threads` chose).
 
 mod baselines;
 mod config;
@@ -8,6 +9,7 @@ mod dataset;
 mod error;
 mod jaw;
 mod model;
+mod threads;
 
 use pyo3::prelude::*;
 
@@ -29,6 +31,9 @@ fn _lgi(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<baselines::BlendshapeSolver>()?;
     m.add_function(wrap_pyfunction!(baselines::check_marker_frames, m)?)?;
     m.add_function(wrap_pyfunction!(convert::check_count, m)?)?;
+    m.add_function(wrap_pyfunction!(threads::set_num_threads, m)?)?;
+    m.add_function(wrap_pyfunction!(threads::get_num_threads, m)?)?;
+    m.add("MAX_THREADS", threads::MAX_THREADS)?;
     m.add("MAGNITUDE_LIMIT", lgi_core::MAGNITUDE_LIMIT)?;
     Ok(())
 }

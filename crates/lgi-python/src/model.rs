@@ -6,11 +6,12 @@ use crate::convert::{flat_to_array, float_array, point_sets, points, points_to_a
 use crate::dataset::Dataset;
 use crate::error::{input_error, PyLgiError};
 use crate::jaw::{frame_from_array, JawRig};
+use crate::threads;
 use glam::{DMat3, DVec3};
 use lgi_core::{JawBins, JawInput, JawParams, JawRig as CoreRig, Model as CoreModel, SolveOptions};
 use numpy::{PyArray3, PyArrayDyn, PyArrayMethods, PyUntypedArrayMethods};
 use pyo3::prelude::*;
-use pyo3::types::PyDict;
+use pyo3::types::{PyByteArray, PyBytes, PyDict};
 use std::sync::Arc;
 
 /// A built LGI model (immutable, thread-safe).
@@ -98,12 +99,11 @@ impl Model {
             }
         };
         let units = units.unwrap_or_default();
-        let model = py
-            .detach(move || {
-                CoreModel::build_shared(data, &markers, &cfg, jaw)
-                    .and_then(|m| m.with_labels(names, units))
-            })
-            .map_err(PyLgiError)?;
+        let model = threads::detach(py, move || {
+            CoreModel::build_shared(data, &markers, &cfg, jaw)
+                .and_then(|m| m.with_labels(names, units))
+        })
+        .map_err(PyLgiError)?;
         warn_if_mostly_projected(py, &model)?;
         Ok(Model {
             inner: Arc::new(model),
@@ -113,12 +113,37 @@ impl Model {
     /// Loads a model written by `save` (GIL released).
     #[staticmethod]
     fn load(py: Python<'_>, path: std::path::PathBuf) -> PyResult<Model> {
-        let model = py
-            .detach(move || lgi_core::load_model(&path))
-            .map_err(PyLgiError)?;
+        let model = threads::detach(py, move || lgi_core::load_model(&path)).map_err(PyLgiError)?;
         Ok(Model {
             inner: Arc::new(model),
         })
+    }
+
+    /// The bytes `save` writes (the versioned model format, checksum included).
+    fn to_bytes<'py>(&self, py: Python<'py>) -> Bound<'py, PyBytes> {
+        let model = self.inner.clone();
+        let bytes = py.detach(move || lgi_core::model_to_bytes(&model));
+        PyBytes::new(py, &bytes)
+    }
+
+    /// A model from `to_bytes`'s bytes (or a model file's), with every check of `load`
+    /// (GIL released); corrupt bytes raise `lgi.ModelFormatError`.
+    #[staticmethod]
+    fn from_bytes(py: Python<'_>, data: &Bound<'_, PyAny>) -> PyResult<Model> {
+        let model = with_bytes(data, "Model.from_bytes", |bytes| {
+            threads::detach(py, || lgi_core::model_from_bytes(bytes)).map_err(PyLgiError)
+        })??;
+        Ok(Model {
+            inner: Arc::new(model),
+        })
+    }
+
+    /// Pickles as the model file's bytes (`from_bytes` rebuilds it, checked like `load`).
+    fn __reduce__<'py>(
+        slf: &Bound<'py, Self>,
+    ) -> PyResult<(Bound<'py, PyAny>, (Bound<'py, PyBytes>,))> {
+        let bytes = slf.get().to_bytes(slf.py());
+        Ok((slf.get_type().getattr("from_bytes")?, (bytes,)))
     }
 
     /// Writes the model to `path` (GIL released).
@@ -219,12 +244,17 @@ impl Model {
                 ))
             })?;
             let mut stopped: Option<PyErr> = None;
+            let interrupt = std::sync::Mutex::new(None);
             let solved = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
-                py.detach(|| {
+                threads::detach_watching(py, &interrupt, || {
                     let (th, prev) = (thetas.as_deref(), previous.as_ref());
                     model.solve_sequence_after(&frames, th, &options, prev, out, |f| {
                         // Ctrl-C and a failing callback stop the solve after this frame.
                         let called = Python::attach(|py| {
+                            let caught = interrupt.lock().map(|mut i| i.take());
+                            if let Ok(Some(e)) = caught {
+                                return Err(e);
+                            }
                             py.check_signals()?;
                             match &progress {
                                 Some(cb) => cb.call1(py, (f,)).map(drop),
@@ -560,6 +590,26 @@ fn warn_if_mostly_projected(py: Python<'_>, model: &CoreModel) -> PyResult<()> {
     let category = py.import("lgi.errors")?.getattr("LgiWarning")?;
     let msg = std::ffi::CString::new(msg).map_err(|e| input_error(e.to_string()))?;
     PyErr::warn(py, &category, &msg, 2)
+}
+
+/// Runs `read` on the bytes of `data` (`bytes`, borrowed; `bytearray`, copied); anything else
+/// is an `lgi.InputError` naming `what`.
+pub fn with_bytes<T>(
+    data: &Bound<'_, PyAny>,
+    what: &str,
+    read: impl FnOnce(&[u8]) -> T,
+) -> PyResult<T> {
+    if let Ok(b) = data.cast::<PyBytes>() {
+        return Ok(read(b.as_bytes()));
+    }
+    if let Ok(b) = data.cast::<PyByteArray>() {
+        return Ok(read(&b.to_vec()));
+    }
+    let kind = data
+        .get_type()
+        .name()
+        .map_or_else(|_| "?".into(), |n| n.to_string());
+    Err(input_error(format!("{what}: expected bytes, got {kind}")))
 }
 
 /// The payload that unwinds a solve stopped by Ctrl-C or a failing progress callback.

@@ -5,6 +5,12 @@
 //!
 //! Versions: 2 (no jaw bins), 3 (jaw bins), 4 (this build: + marker names, unit, the neutral's
 //! source polygons). Older files still load: default names `m000…`, no unit, no polygons.
+//!
+//! The same bytes travel in memory ([`to_bytes`] / [`from_bytes`]: what pickling a model
+//! ships to another process) with the same checks on the way in. A dataset alone
+//! ([`dataset_to_bytes`] / [`dataset_from_bytes`]) is the model format's dataset part (the
+//! neutral, shape names, displacements, then the source polygons) in the same framing under
+//! its own magic.
 
 use crate::cloud::BundleCloud;
 use crate::dataset::Dataset;
@@ -21,6 +27,10 @@ use std::path::Path;
 use std::sync::Arc;
 
 const MAGIC: &[u8; 8] = b"LGIMODEL";
+/// The magic of a dataset on its own (the model format's dataset part).
+const DATASET_MAGIC: &[u8; 8] = b"LGIDATAS";
+/// What errors name as the file when the bytes came from memory, not from a file.
+const IN_MEMORY: &str = "<in-memory bytes>";
 /// Format version written by this build; readers accept exactly the versions they know.
 pub const FORMAT_VERSION: u32 = 4;
 /// The oldest version read (no jaw bins: an unbinned model).
@@ -113,6 +123,13 @@ struct Reader<'a> {
 }
 
 impl<'a> Reader<'a> {
+    /// A format error without a position (a section's content, not its bytes, is wrong).
+    fn bad(&self, what: &str) -> LgiError {
+        LgiError::ModelFormat {
+            path: self.path.to_path_buf(),
+            message: what.to_string(),
+        }
+    }
     fn err(&self, what: &str) -> LgiError {
         LgiError::ModelFormat {
             path: self.path.to_path_buf(),
@@ -200,7 +217,13 @@ fn to_tris(r: &Reader<'_>, v: Vec<u32>) -> Result<Vec<[u32; 3]>> {
 
 /// Writes `model` to `path` (overwrites).
 pub fn save(model: &Model, path: &Path) -> Result<()> {
-    write(&model.parts(), model.marker_names(), model.units(), path)
+    let bytes = to_bytes(model);
+    std::fs::write(path, bytes).map_err(|e| LgiError::write(path, &e))
+}
+
+/// The bytes [`save`] writes: the whole file, header and checksum included.
+pub fn to_bytes(model: &Model) -> Vec<u8> {
+    encode(&model.parts(), model.marker_names(), model.units())
 }
 
 /// Writes model parts to `path` as [`save`] would, with the default marker names and no unit:
@@ -208,34 +231,68 @@ pub fn save(model: &Model, path: &Path) -> Result<()> {
 /// [`load`]'s sanity check stands in its way).
 pub fn save_parts(parts: &ModelPartsRef<'_>, path: &Path) -> Result<()> {
     let names = crate::model::default_marker_names(parts.markers_rest.len());
-    write(parts, &names, "", path)
+    let bytes = encode(parts, &names, "");
+    std::fs::write(path, bytes).map_err(|e| LgiError::write(path, &e))
 }
 
-/// Writes a model's parts and labels to `path`.
-fn write(
-    parts: &ModelPartsRef<'_>,
-    marker_names: &[String],
-    units: &str,
-    path: &Path,
-) -> Result<()> {
-    let mut w = Writer::default();
-    let c = parts.config;
-    for x in [
-        c.surface_tolerance,
-        c.prune_motion,
-        c.duplicate_distance,
-        c.min_quality,
-        c.max_edge,
-        c.containment_eps,
-        c.temporal_weight,
-        c.detour_ratio,
-    ] {
-        w.f64(x);
+/// The header (magic, version, payload length, checksum) and the payload.
+fn framed(magic: &[u8; 8], payload: &[u8]) -> Vec<u8> {
+    let mut out = Vec::with_capacity(HEADER + payload.len());
+    out.extend_from_slice(magic);
+    out.extend_from_slice(&FORMAT_VERSION.to_le_bytes());
+    out.extend_from_slice(&(payload.len() as u64).to_le_bytes());
+    out.extend_from_slice(&checksum(payload).to_le_bytes());
+    out.extend_from_slice(payload);
+    out
+}
+
+/// The payload of `bytes` after checking magic, version, length and checksum, and its
+/// version; `what` names the kind of bytes in the bad-magic message.
+fn unframed<'a>(
+    bytes: &'a [u8],
+    magic: &[u8; 8],
+    what: &str,
+    source: &Path,
+) -> Result<(u32, &'a [u8])> {
+    let bad = |m: &str| LgiError::ModelFormat {
+        path: source.to_path_buf(),
+        message: m.to_string(),
+    };
+    if bytes.len() < HEADER || &bytes[..8] != magic {
+        return Err(bad(&format!("not {what} (bad magic)")));
     }
-    for n in [c.tet_neighbours, c.max_tets, c.projection_candidates] {
-        w.u64(n as u64);
+    let version = u32::from_le_bytes([bytes[8], bytes[9], bytes[10], bytes[11]]);
+    if !(PREVIOUS_VERSION..=FORMAT_VERSION).contains(&version) {
+        return Err(bad(&format!(
+            "format version {version}; this lgi reads versions {PREVIOUS_VERSION} to \
+             {FORMAT_VERSION}: rebuild the model"
+        )));
     }
-    let d = parts.dataset;
+    let mut u = [0u8; 8];
+    u.copy_from_slice(&bytes[12..20]);
+    let len = u64::from_le_bytes(u) as usize;
+    u.copy_from_slice(&bytes[20..28]);
+    let sum = u64::from_le_bytes(u);
+    let payload = &bytes[HEADER..];
+    if payload.len() != len {
+        return Err(bad(&format!(
+            "truncated or padded: {} payload bytes, header says {len}",
+            payload.len()
+        )));
+    }
+    let computed = if version == PREVIOUS_VERSION {
+        checksum_v2(payload)
+    } else {
+        checksum(payload)
+    };
+    if computed != sum {
+        return Err(bad("checksum mismatch: the file is corrupt"));
+    }
+    Ok((version, payload))
+}
+
+/// The neutral mesh, the shape names and the displacements (the model format's dataset part).
+fn write_dataset(w: &mut Writer, d: &Dataset) {
     let m = d.neutral();
     w.f64s(vec3s(&m.positions));
     w.u32s(
@@ -266,6 +323,70 @@ fn write(
         w.str(n);
     }
     w.f32s(d.displacements());
+}
+
+/// The neutral's source polygons (0 = none; 1 = counts, vertex indices, UV indices).
+fn write_polygons(w: &mut Writer, d: &Dataset) {
+    match d.polygons() {
+        None => w.u64(0),
+        Some(p) => {
+            w.u64(1);
+            w.u32s(p.counts.iter().copied());
+            w.u32s(p.vertices.iter().copied());
+            w.u32s(p.uvs.iter().copied());
+        }
+    }
+}
+
+/// A dataset as bytes: the model format's dataset part and polygons, framed under their own
+/// magic (what pickling an `lgi.Dataset` ships).
+pub fn dataset_to_bytes(dataset: &Dataset) -> Vec<u8> {
+    let mut w = Writer::default();
+    write_dataset(&mut w, dataset);
+    write_polygons(&mut w, dataset);
+    framed(DATASET_MAGIC, &w.0)
+}
+
+/// Reads what [`dataset_to_bytes`] wrote, with the checks of [`Dataset::new`] and
+/// [`Dataset::with_polygons`]; every inconsistency is `LgiError::ModelFormat`.
+pub fn dataset_from_bytes(bytes: &[u8]) -> Result<Dataset> {
+    let source = Path::new(IN_MEMORY);
+    guarded(source, || {
+        let (_, payload) = unframed(bytes, DATASET_MAGIC, "lgi dataset bytes", source)?;
+        let mut r = Reader {
+            bytes: payload,
+            at: 0,
+            path: source,
+        };
+        let dataset = read_dataset(&mut r)?;
+        let dataset = read_polygons(&mut r, dataset)?;
+        if r.at != payload.len() {
+            return Err(r.bad("trailing bytes after the last section"));
+        }
+        Ok(dataset)
+    })
+}
+
+/// Writes a model's parts and labels: the whole file.
+fn encode(parts: &ModelPartsRef<'_>, marker_names: &[String], units: &str) -> Vec<u8> {
+    let mut w = Writer::default();
+    let c = parts.config;
+    for x in [
+        c.surface_tolerance,
+        c.prune_motion,
+        c.duplicate_distance,
+        c.min_quality,
+        c.max_edge,
+        c.containment_eps,
+        c.temporal_weight,
+        c.detour_ratio,
+    ] {
+        w.f64(x);
+    }
+    for n in [c.tet_neighbours, c.max_tets, c.projection_candidates] {
+        w.u64(n as u64);
+    }
+    write_dataset(&mut w, parts.dataset);
     w.f64s(vec3s(parts.markers_rest));
     write_clouds(&mut w, &parts.bins[0]);
     // The jaw section: 0 = none; 1 = pivot, vertex weights, shape poses (identity frame, the
@@ -314,79 +435,104 @@ fn write(
         w.str(n);
     }
     w.str(units);
-    match parts.dataset.polygons() {
-        None => w.u64(0),
-        Some(p) => {
-            w.u64(1);
-            w.u32s(p.counts.iter().copied());
-            w.u32s(p.vertices.iter().copied());
-            w.u32s(p.uvs.iter().copied());
-        }
-    }
-    let payload = w.0;
-    let mut out = Vec::with_capacity(HEADER + payload.len());
-    out.extend_from_slice(MAGIC);
-    out.extend_from_slice(&FORMAT_VERSION.to_le_bytes());
-    out.extend_from_slice(&(payload.len() as u64).to_le_bytes());
-    out.extend_from_slice(&checksum(&payload).to_le_bytes());
-    out.extend_from_slice(&payload);
-    std::fs::write(path, out).map_err(|e| LgiError::write(path, &e))
+    write_polygons(&mut w, parts.dataset);
+    framed(MAGIC, &w.0)
 }
 
 /// Reads a model written by [`save`]; every inconsistency is `LgiError::ModelFormat`, and a
 /// model that loads passes [`Model::sanity_check`].
 pub fn load(path: &Path) -> Result<Model> {
-    // The sanity check runs before assembly; the guard is for what it does not foresee.
-    std::panic::catch_unwind(|| load_unguarded(path)).unwrap_or_else(|panic| {
+    guarded(path, || {
+        let bytes = std::fs::read(path).map_err(|e| LgiError::io(path, &e))?;
+        decode(&bytes, path)
+    })
+}
+
+/// Reads a model from the bytes [`to_bytes`] gives, with every check of [`load`] (a model
+/// from bytes is exactly as valid as one from a file); errors name `<in-memory bytes>`.
+pub fn from_bytes(bytes: &[u8]) -> Result<Model> {
+    let source = Path::new(IN_MEMORY);
+    guarded(source, || decode(bytes, source))
+}
+
+/// Runs a reader with a panic guard: the sanity checks run before assembly; the guard is for
+/// what they do not foresee.
+fn guarded<T>(source: &Path, read: impl FnOnce() -> Result<T>) -> Result<T> {
+    std::panic::catch_unwind(std::panic::AssertUnwindSafe(read)).unwrap_or_else(|panic| {
         let why = super::panic_message(panic.as_ref());
         Err(LgiError::ModelFormat {
-            path: path.to_path_buf(),
+            path: source.to_path_buf(),
             message: format!("not a valid model (loading it failed: {why})"),
         })
     })
 }
 
-/// [`load`] without the panic guard.
-fn load_unguarded(path: &Path) -> Result<Model> {
-    let bytes = std::fs::read(path).map_err(|e| LgiError::io(path, &e))?;
+/// The neutral, names and displacements [`write_dataset`] wrote, checked by [`Dataset::new`].
+fn read_dataset(r: &mut Reader<'_>) -> Result<Dataset> {
+    let positions = {
+        let v = r.f64s()?;
+        to_vec3s(r, v)?
+    };
+    let triangles = {
+        let v = r.u32s()?;
+        to_tris(r, v)?
+    };
+    let uvs = r.f64s()?;
+    if uvs.len() % 2 != 0 {
+        return Err(r.err("UV array length not a multiple of 2"));
+    }
+    let uvs = uvs
+        .chunks_exact(2)
+        .map(|c| DVec2::new(c[0], c[1]))
+        .collect();
+    let uv_triangles = {
+        let v = r.u32s()?;
+        to_tris(r, v)?
+    };
+    let mesh = Mesh {
+        positions,
+        triangles,
+        uvs,
+        uv_triangles,
+    };
+    let num_names = r.len(8)?;
+    let names = (0..num_names)
+        .map(|_| r.str())
+        .collect::<Result<Vec<_>>>()?;
+    let displacements = r.f32s()?;
+    Dataset::new(mesh, displacements, names).map_err(|e| r.bad(&e.to_string()))
+}
+
+/// `dataset` with the polygons [`write_polygons`] wrote, checked by
+/// [`Dataset::with_polygons`].
+fn read_polygons(r: &mut Reader<'_>, dataset: Dataset) -> Result<Dataset> {
+    match r.u64()? {
+        0 => Ok(dataset),
+        1 => {
+            let polygons = Polygons {
+                counts: r.u32s()?,
+                vertices: r.u32s()?,
+                uvs: r.u32s()?,
+            };
+            dataset
+                .with_polygons(polygons)
+                .map_err(|e| r.bad(&e.to_string()))
+        }
+        _ => Err(r.err("unknown polygons section")),
+    }
+}
+
+/// A model from the bytes of a model file; `source` is the file (or [`IN_MEMORY`]).
+fn decode(bytes: &[u8], source: &Path) -> Result<Model> {
     let bad = |m: &str| LgiError::ModelFormat {
-        path: path.to_path_buf(),
+        path: source.to_path_buf(),
         message: m.to_string(),
     };
-    if bytes.len() < HEADER || &bytes[..8] != MAGIC {
-        return Err(bad("not an lgi model file (bad magic)"));
-    }
-    let version = u32::from_le_bytes([bytes[8], bytes[9], bytes[10], bytes[11]]);
-    if !(PREVIOUS_VERSION..=FORMAT_VERSION).contains(&version) {
-        return Err(bad(&format!(
-            "format version {version}; this lgi reads versions {PREVIOUS_VERSION} to \
-             {FORMAT_VERSION}: rebuild the model"
-        )));
-    }
-    let mut u = [0u8; 8];
-    u.copy_from_slice(&bytes[12..20]);
-    let len = u64::from_le_bytes(u) as usize;
-    u.copy_from_slice(&bytes[20..28]);
-    let sum = u64::from_le_bytes(u);
-    let payload = &bytes[HEADER..];
-    if payload.len() != len {
-        return Err(bad(&format!(
-            "truncated or padded: {} payload bytes, header says {len}",
-            payload.len()
-        )));
-    }
-    let computed = if version == PREVIOUS_VERSION {
-        checksum_v2(payload)
-    } else {
-        checksum(payload)
-    };
-    if computed != sum {
-        return Err(bad("checksum mismatch: the file is corrupt"));
-    }
+    let (version, payload) = unframed(bytes, MAGIC, "an lgi model file", source)?;
     let mut r = Reader {
         bytes: payload,
         at: 0,
-        path,
+        path: source,
     };
     let mut f = [0.0; 8];
     for x in &mut f {
@@ -409,38 +555,7 @@ fn load_unguarded(path: &Path) -> Result<Model> {
         max_tets: n[1],
         projection_candidates: n[2],
     };
-    let positions = {
-        let v = r.f64s()?;
-        to_vec3s(&r, v)?
-    };
-    let triangles = {
-        let v = r.u32s()?;
-        to_tris(&r, v)?
-    };
-    let uvs = r.f64s()?;
-    if uvs.len() % 2 != 0 {
-        return Err(r.err("UV array length not a multiple of 2"));
-    }
-    let uvs = uvs
-        .chunks_exact(2)
-        .map(|c| DVec2::new(c[0], c[1]))
-        .collect();
-    let uv_triangles = {
-        let v = r.u32s()?;
-        to_tris(&r, v)?
-    };
-    let mesh = Mesh {
-        positions,
-        triangles,
-        uvs,
-        uv_triangles,
-    };
-    let num_names = r.len(8)?;
-    let names = (0..num_names)
-        .map(|_| r.str())
-        .collect::<Result<Vec<_>>>()?;
-    let displacements = r.f32s()?;
-    let mut dataset = Dataset::new(mesh, displacements, names).map_err(|e| bad(&e.to_string()))?;
+    let mut dataset = read_dataset(&mut r)?;
     let markers = {
         let v = r.f64s()?;
         to_vec3s(&r, v)?
@@ -501,20 +616,7 @@ fn load_unguarded(path: &Path) -> Result<Model> {
         let n = r.len(8)?;
         let names = (0..n).map(|_| r.str()).collect::<Result<Vec<_>>>()?;
         let units = r.str()?;
-        dataset = match r.u64()? {
-            0 => dataset,
-            1 => {
-                let polygons = Polygons {
-                    counts: r.u32s()?,
-                    vertices: r.u32s()?,
-                    uvs: r.u32s()?,
-                };
-                dataset
-                    .with_polygons(polygons)
-                    .map_err(|e| bad(&e.to_string()))?
-            }
-            _ => return Err(r.err("unknown polygons section")),
-        };
+        dataset = read_polygons(&mut r, dataset)?;
         Some((names, units))
     } else {
         None
@@ -709,6 +811,99 @@ mod tests {
         assert_eq!(back.units(), "");
         assert!(back.dataset().polygons().is_none());
         std::fs::remove_dir_all(&dir).ok();
+    }
+
+    #[test]
+    fn to_bytes_are_the_file_and_from_bytes_solves_bit_identically() {
+        let model = labelled_model();
+        let dir = std::env::temp_dir().join(format!("lgi-bytes-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("m.lgi");
+        save(&model, &path).unwrap();
+        let bytes = to_bytes(&model);
+        assert_eq!(bytes, std::fs::read(&path).unwrap());
+        let back = from_bytes(&bytes).unwrap();
+        back.sanity_check().unwrap();
+        assert_eq!(back.marker_names(), model.marker_names());
+        assert_eq!(back.units(), model.units());
+        assert_eq!(to_bytes(&back), bytes);
+        // Frames between the dataset's shapes: the markers on blends of shapes 1 and 2.
+        let d = model.dataset();
+        let frames: Vec<Vec<DVec3>> = [0.0, 0.3, 0.7, 1.0]
+            .iter()
+            .map(|&t| {
+                let mesh: Vec<DVec3> = (0..d.num_vertices())
+                    .map(|v| {
+                        d.neutral().positions[v]
+                            + d.displacement(0, v) * t
+                            + d.displacement(1, v) * (1.0 - t)
+                    })
+                    .collect();
+                model.bundle_positions(&mesh).unwrap()
+            })
+            .collect();
+        let a = model
+            .solve_sequence(&frames, None, true, 0, |_| {})
+            .unwrap();
+        let b = back.solve_sequence(&frames, None, true, 0, |_| {}).unwrap();
+        for (fa, fb) in a.iter().zip(&b) {
+            let bits = |f: &crate::model::Frame| {
+                f.vertices
+                    .iter()
+                    .flat_map(|p| [p.x.to_bits(), p.y.to_bits(), p.z.to_bits()])
+                    .collect::<Vec<_>>()
+            };
+            assert_eq!(bits(fa), bits(fb));
+        }
+        std::fs::remove_dir_all(&dir).ok();
+    }
+
+    #[test]
+    fn corrupt_truncated_or_foreign_bytes_are_model_format_errors_naming_memory() {
+        let bytes = to_bytes(&labelled_model());
+        let mut flipped = bytes.clone();
+        flipped[HEADER + 100] ^= 0x10;
+        let dataset = dataset_to_bytes(labelled_model().dataset());
+        let cases: [(&[u8], &str); 5] = [
+            (&flipped, "checksum mismatch"),
+            (&bytes[..bytes.len() - 1], "truncated"),
+            (&bytes[..10], "bad magic"),
+            (b"", "bad magic"),
+            (&dataset, "bad magic"),
+        ];
+        for (b, why) in cases {
+            let Err(e) = from_bytes(b) else {
+                panic!("{why}: loaded")
+            };
+            assert!(matches!(e, LgiError::ModelFormat { .. }), "{why}: {e}");
+            let msg = e.to_string();
+            assert!(msg.contains(why) && msg.contains(IN_MEMORY), "{why}: {msg}");
+        }
+    }
+
+    #[test]
+    fn a_dataset_round_trips_through_bytes_with_its_polygons_and_refuses_corruption() {
+        let d = quad_patch(9);
+        let bytes = dataset_to_bytes(&d);
+        let back = dataset_from_bytes(&bytes).unwrap();
+        assert_eq!(back.neutral(), d.neutral());
+        assert_eq!(back.names(), d.names());
+        assert_eq!(back.displacements(), d.displacements());
+        assert_eq!(back.polygons(), d.polygons());
+        let mut flipped = bytes.clone();
+        flipped[HEADER + 8] ^= 1;
+        let model = to_bytes(&labelled_model());
+        for (b, why) in [
+            (&flipped[..], "checksum mismatch"),
+            (&bytes[..HEADER + 3], "truncated"),
+            (&model[..], "bad magic"),
+        ] {
+            let e = dataset_from_bytes(b).err().map(|e| e.to_string());
+            assert!(
+                e.as_deref().is_some_and(|m| m.contains(why)),
+                "{why}: {e:?}"
+            );
+        }
     }
 
     #[test]
