@@ -33,6 +33,20 @@ def test_c3d_reads_back_labels_rate_units_and_float32_points(tmp_path: Path) -> 
     assert np.isnan(raw.points[2, 1]).all() and not np.isnan(raw.points[2, 0]).any()
 
 
+@pytest.mark.parametrize("keep", [0.5, 2 / 3, 0.95])
+def test_a_truncated_c3d_is_refused_naming_the_frames_its_header_gives(
+    tmp_path: Path, keep: float
+) -> None:
+    p = tmp_path / "whole.c3d"
+    write_c3d(p, frames(30, 6), [f"m{i}" for i in range(6)], 60.0, "mm")
+    assert takes.read_c3d(p).points.shape[0] == 30
+    data = p.read_bytes()
+    cut = tmp_path / "cut.c3d"
+    cut.write_bytes(data[: int(len(data) * keep)])
+    with pytest.raises(InputError, match=r"cut\.c3d: truncated C3D file: .*\(30\), only \d+ are"):
+        takes.read_c3d(cut)
+
+
 def test_c3d_zero_points_are_missing_and_labels_past_255_come_from_labels2(tmp_path: Path) -> None:
     x = frames(3, 300)
     x[1, 299] = 0.0

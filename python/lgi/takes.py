@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import csv
 import os
+import struct
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -361,6 +362,7 @@ def read_c3d(path: str | os.PathLike[str]) -> RawTake:
         c = ezc3d.c3d(p)
     except Exception as e:  # ezc3d raises RuntimeError/IOError/ValueError for bad files
         raise InputError(f"{p}: not a readable C3D file: {e}") from None
+    _check_c3d_frames(p, int(np.shape(c["data"]["points"])[-1]))
     point = c["parameters"]["POINT"]
     labels: list[str] = []
     for key in ["LABELS", *(f"LABELS{k}" for k in range(2, 100))]:
@@ -385,6 +387,29 @@ def read_c3d(path: str | os.PathLike[str]) -> RawTake:
     fps = float(rate_v[0]) if len(rate_v) and float(rate_v[0]) > 0 else None
     first = int(c["header"]["points"].get("first_frame", 0))
     return RawTake(labels[:n], xyz, fps, units, p, first)
+
+
+def _check_c3d_frames(p: str, read: int) -> None:
+    """Refuses a C3D file with fewer frames than its header's first and last frame give (a
+    truncated copy: ezc3d reads what is there and rewrites its header and `POINT:FRAMES` to
+    match, so only the file's own header bytes tell). Header words 4 and 5, in the byte
+    order of the processor the parameter section names (MIPS: big-endian); a header last
+    frame of 65535 is the format's ceiling, so a longer take is not checked past it."""
+    with open(p, "rb") as f:
+        head = f.read(512)
+        block = head[0] if head else 0
+        f.seek(max(block - 1, 0) * 512)
+        params = f.read(4)
+    if len(head) < 10 or len(params) < 4:
+        return
+    order = ">" if params[3] == 86 else "<"
+    first, last = struct.unpack(f"{order}HH", head[6:10])
+    expected = last - first + 1
+    if expected > read and not (last == 0xFFFF and read >= expected):
+        raise InputError(
+            f"{p}: truncated C3D file: its header gives frames {first}-{last} ({expected}), "
+            f"only {read} are in the file"
+        )
 
 
 def read_trc(path: str | os.PathLike[str]) -> RawTake:
