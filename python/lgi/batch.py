@@ -269,22 +269,10 @@ def solve_shot(
         if kind == "usd" and rate is None:
             raise InputError("the take has no frame rate; a USD point cache needs fps=")
         res = m.solve(x, quiet=True, **opts)
-        from lgi.pipeline import write_output
+        from lgi.pipeline import write_solved
 
-        written = write_output(
-            kind,
-            Path(dest),
-            export.topology(m.dataset),
-            res.vertices,
-            residuals=res.bundle_residuals,
-            missing=res.missing,
-            names=m.marker_names,
-            fps=rate,
-            start=start,
-            units=m.units,
-            jaw_theta=res.jaw_theta,
-            quiet=True,
-        )
+        topo = export.topology(m.dataset)
+        written = write_solved(kind, Path(dest), topo, res, m, fps=rate, start=start, quiet=True)
         return {
             "status": "done",
             "frames": frames,

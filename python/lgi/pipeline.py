@@ -21,7 +21,7 @@ import numpy as np
 from lgi import export, takes
 from lgi._lgi import BuildConfig, Dataset
 from lgi.errors import InputError, MarkerError
-from lgi.model import Model, estimate_marker_noise
+from lgi.model import Model, SolveResult, estimate_marker_noise
 
 __all__ = [
     "CHUNK_FRAMES",
@@ -303,6 +303,36 @@ def write_output(
     return sink.close()
 
 
+def write_solved(
+    kind: str,
+    out: Path,
+    topo: export.Topology,
+    res: SolveResult,
+    m: Model,
+    *,
+    fps: float | None,
+    start: int,
+    head: takes.HeadMotion | None = None,
+    quiet: bool = False,
+) -> Path:
+    """`write_output` of a whole `SolveResult` of model `m` (its marker names and unit)."""
+    return write_output(
+        kind,
+        out,
+        topo,
+        res.vertices,
+        residuals=res.bundle_residuals,
+        missing=res.missing,
+        names=m.marker_names,
+        fps=fps,
+        start=start,
+        units=m.units,
+        jaw_theta=res.jaw_theta,
+        head=head,
+        quiet=quiet,
+    )
+
+
 def describe(
     path: str | os.PathLike[str], model: str | os.PathLike[str] | None = None
 ) -> list[str]:
@@ -526,20 +556,8 @@ def solve_file(
     start = t.first_frame + rng.start
     if chunk is None:
         res = m.solve(x, jaw=jaw_mode, marker_noise=sigma, quiet=quiet)
-        written = write_output(
-            kind,
-            dest,
-            topo,
-            res.vertices,
-            residuals=res.bundle_residuals,
-            missing=res.missing,
-            names=m.marker_names,
-            fps=rate,
-            start=start,
-            units=m.units,
-            jaw_theta=res.jaw_theta,
-            head=head,
-            quiet=quiet,
+        written = write_solved(
+            kind, dest, topo, res, m, fps=rate, start=start, head=head, quiet=quiet
         )
         return written, int(x.shape[0])
     from tqdm import tqdm

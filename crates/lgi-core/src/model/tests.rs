@@ -70,15 +70,21 @@ fn assert_weights_match(a: &SparseWeights, b: &SparseWeights, tol: f64, missing:
     }
 }
 
-/// `n` markers on the surface of [`patch`] at seeded pseudo-random (u, v) in [0.05, 0.95]².
-fn patch_markers(seed: u64, n: usize) -> Vec<DVec3> {
+/// Seeded pseudo-random numbers in [0, 1) (a 64-bit LCG: reproducible, not good).
+fn uniforms(seed: u64) -> impl FnMut() -> f64 {
     let mut s = seed;
-    let mut next = || {
+    move || {
         s = s
             .wrapping_mul(6364136223846793005)
             .wrapping_add(1442695040888963407);
-        0.05 + 0.9 * ((s >> 11) as f64 / (1u64 << 53) as f64)
-    };
+        (s >> 11) as f64 / (1u64 << 53) as f64
+    }
+}
+
+/// `n` markers on the surface of [`patch`] at seeded pseudo-random (u, v) in [0.05, 0.95]².
+fn patch_markers(seed: u64, n: usize) -> Vec<DVec3> {
+    let mut uniform = uniforms(seed);
+    let mut next = || 0.05 + 0.9 * uniform();
     (0..n)
         .map(|_| {
             let (u, v) = (next(), next());
@@ -154,13 +160,7 @@ fn plans_from_kept_rows_match_plans_derived_from_the_full_plan_on_fresh_missing_
             .sewing
             .geometry()
             .context(&model.dataset, &model.bundles);
-        let mut s = 11u64;
-        let mut uniform = || {
-            s = s
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            (s >> 11) as f64 / (1u64 << 53) as f64
-        };
+        let mut uniform = uniforms(11);
         let mut worst = 0.0f64;
         for frame in 0..120 {
             let p = 0.1 + 0.2 * (frame % 3) as f64 / 2.0;
@@ -981,13 +981,7 @@ fn on_the_ict_face_plans_from_kept_rows_match_plans_derived_from_the_full_plan()
         .sewing
         .geometry()
         .context(&model.dataset, &model.bundles);
-    let mut s = 3u64;
-    let mut uniform = || {
-        s = s
-            .wrapping_mul(6364136223846793005)
-            .wrapping_add(1442695040888963407);
-        (s >> 11) as f64 / (1u64 << 53) as f64
-    };
+    let mut uniform = uniforms(3);
     let mut worst = 0.0f64;
     for _ in 0..40 {
         let missing: Vec<u32> = (0..nb).filter(|_| uniform() < 0.1).collect();
