@@ -31,6 +31,11 @@ impl SewingSpace {
     pub fn contains(&self, v: usize) -> bool {
         self.proxy[v] as usize == v
     }
+
+    /// The sewn vertices, ascending (the rows of the plans' Sibson weights).
+    pub fn sewn(&self) -> impl Iterator<Item = usize> + '_ {
+        (0..self.proxy.len()).filter(|&v| self.contains(v))
+    }
 }
 
 /// Disjoint sets of `0..n` with path halving; a union keeps the smaller root, so roots do not

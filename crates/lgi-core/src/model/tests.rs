@@ -436,8 +436,9 @@ fn every_member_shape_of_every_bin_is_reproduced_at_its_own_jaw_pose() {
             }
             // f32 storage of the re-posed displacements (like the dataset's) bounds the
             // round trip T(θ_k) T(θ_b)⁻¹ (T(θ_b) T(θ_k)⁻¹ x) at ~1e-7 of the motion.
-            let err = (0..mesh.len())
-                .filter(|&v| model.sewing_space().contains(v))
+            let err = model
+                .sewing_space()
+                .sewn()
                 .map(|v| frame.vertices[v].distance(mesh[v]))
                 .fold(0.0, f64::max);
             assert!(err <= 1e-6 * diag, "bin {bin} shape {k}: {err:e}");
@@ -733,8 +734,9 @@ fn a_tilted_frame_jaw_model_reproduces_its_shapes_and_its_frame_survives_save_lo
         let mesh = shape_mesh(&data, k);
         let targets = model.bundle_positions(&mesh).unwrap();
         let fr = model.solve_frame(&targets, None, Some(thetas[k])).unwrap();
-        let err = (0..mesh.len())
-            .filter(|&v| model.sewing_space().contains(v))
+        let err = model
+            .sewing_space()
+            .sewn()
             .map(|v| fr.vertices[v].distance(mesh[v]))
             .fold(0.0, f64::max);
         assert!(err <= 1e-6 * diag, "shape {k}: {err:e}");
@@ -1006,13 +1008,6 @@ fn on_the_ict_face_plans_from_kept_rows_match_plans_derived_from_the_full_plan()
     eprintln!(
         "ICT: kept vs derived rows differ by at most {worst:e}; rows kept: {ones} without one \
          bundle, {sets} without two, for {} sewn vertices",
-        model
-            .sewing
-            .space()
-            .proxy
-            .iter()
-            .enumerate()
-            .filter(|(v, p)| **p as usize == *v)
-            .count()
+        model.sewing.space().sewn().count()
     );
 }

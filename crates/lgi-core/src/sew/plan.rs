@@ -166,10 +166,7 @@ impl SewPlans {
         let all: Vec<u32> = (0..bundles.len() as u32).collect();
         let full = Arc::new(sew.plan(&all)?);
         let support = sew.support()?;
-        let sewn: Vec<u32> = (0..dataset.num_vertices())
-            .filter(|&v| geometry.space.contains(v))
-            .map(|v| v as u32)
-            .collect();
+        let sewn: Vec<u32> = geometry.space.sewn().map(|v| v as u32).collect();
         let mut touching = vec![Vec::new(); bundles.len()];
         for (r, &v) in sewn.iter().enumerate() {
             let (a, b) = (support.row(r).0, full.weights.row(v as usize).0);
@@ -385,7 +382,7 @@ impl SewContext<'_> {
     /// detours around holes), copied from the proxy for the others; plus the residual pass.
     pub(crate) fn plan(&self, present: &[u32]) -> Result<SewPlan> {
         let nv = self.dataset.num_vertices();
-        let sewn: Vec<usize> = (0..nv).filter(|&v| self.space.contains(v)).collect();
+        let sewn: Vec<usize> = self.space.sewn().collect();
         let w = self.rows_for(present, &sewn)?;
         let mut row_of = vec![usize::MAX; nv];
         for (r, &v) in sewn.iter().enumerate() {
@@ -397,16 +394,7 @@ impl SewContext<'_> {
     /// Sibson rows (minus detours) of `vertices` for the present bundles; columns are bundle
     /// indices.
     pub(crate) fn rows_for(&self, present: &[u32], vertices: &[usize]) -> Result<SparseWeights> {
-        let sp = self.space;
-        let sites: Vec<_> = present.iter().map(|&i| sp.bundle_uv[i as usize]).collect();
-        let sib = SibsonWeights::new(&sites, &sp.barriers)?;
-        let queries: Vec<_> = vertices.iter().map(|&v| sp.vertex_uv[v]).collect();
-        let mut w = self.drop_detours(sib.weights(&queries), vertices, present);
-        for c in &mut w.cols {
-            *c = present[*c as usize];
-        }
-        w.num_cols = self.bundles.len();
-        Ok(w)
+        Ok(self.sibson_rows(present, vertices, false)?.0)
     }
 
     /// [`rows_for`](Self::rows_for), with each row's columns before barriers and detours (the
@@ -416,11 +404,25 @@ impl SewContext<'_> {
         present: &[u32],
         vertices: &[usize],
     ) -> Result<(SparseWeights, SparseWeights)> {
+        self.sibson_rows(present, vertices, true)
+    }
+
+    /// The rows of [`rows_for`](Self::rows_for) and, `with_support`, their supports (else
+    /// an empty matrix), columns as bundle indices.
+    fn sibson_rows(
+        &self,
+        present: &[u32],
+        vertices: &[usize],
+        with_support: bool,
+    ) -> Result<(SparseWeights, SparseWeights)> {
         let sp = self.space;
         let sites: Vec<_> = present.iter().map(|&i| sp.bundle_uv[i as usize]).collect();
         let sib = SibsonWeights::new(&sites, &sp.barriers)?;
         let queries: Vec<_> = vertices.iter().map(|&v| sp.vertex_uv[v]).collect();
-        let (w, mut support) = sib.weights_and_support(&queries);
+        let (w, mut support) = match with_support {
+            true => sib.weights_and_support(&queries),
+            false => (sib.weights(&queries), SparseWeights::empty(0)),
+        };
         let mut w = self.drop_detours(w, vertices, present);
         for m in [&mut w, &mut support] {
             for c in &mut m.cols {
@@ -482,10 +484,7 @@ impl SewContext<'_> {
     pub(crate) fn support(&self) -> Result<SparseWeights> {
         let sp = self.space;
         let sib = SibsonWeights::new(&sp.bundle_uv, &[])?;
-        let queries: Vec<_> = (0..self.dataset.num_vertices())
-            .filter(|&v| sp.contains(v))
-            .map(|v| sp.vertex_uv[v])
-            .collect();
+        let queries: Vec<_> = sp.sewn().map(|v| sp.vertex_uv[v]).collect();
         Ok(sib.weights(&queries))
     }
 
@@ -506,7 +505,7 @@ impl SewContext<'_> {
             missing[b as usize] = false;
         }
         let nv = dataset.num_vertices();
-        let sewn: Vec<usize> = (0..nv).filter(|&v| sp.contains(v)).collect();
+        let sewn: Vec<usize> = sp.sewn().collect();
         let touches = |cols: &[u32]| cols.iter().any(|&c| missing[c as usize]);
         let affected: Vec<usize> = sewn
             .iter()
