@@ -75,9 +75,9 @@ pub use choose::{
 pub use cloud::{build_cloud, BundleCloud};
 pub use correspond::{correspond, SurfaceIndex};
 pub use geom::{closest_point_on_triangle, interpolate3};
-pub use sew::{blend, BundleTargets, Pieces, SewPlan};
+pub use sew::{blend, blend_by_columns, BundleTargets, Pieces, SewPlan};
 pub use sibson::{Barrier, SibsonWeights};
-pub use sparse::SparseWeights;
+pub use sparse::{BlockColumns, SparseWeights};
 pub use tet_index::TetIndex;
 pub use tets::{all_tets, closest_point_in_tet, generate_tets, tet_quality, Tet, TetConfig};
 pub use uvspace::{boundary_barriers, vertex_charts, SewingSpace, UvIslands};

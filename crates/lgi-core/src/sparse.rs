@@ -40,13 +40,26 @@ impl SparseWeights {
     /// These rows with some replaced: `rows` (row, its columns and weights), ascending by
     /// row, each row once. The runs of rows in between are copied whole.
     pub fn with_rows_replaced(&self, rows: &[(u32, Row<'_>)]) -> SparseWeights {
+        self.with_rows_replaced_into(rows, SparseWeights::empty(self.num_cols))
+    }
+
+    /// [`with_rows_replaced`](Self::with_rows_replaced) written into `out`'s buffers (their
+    /// contents dropped, their memory reused): a take with a new missing set every frame
+    /// then copies into memory it has touched before instead of fresh pages, which the
+    /// kernel must clear first (that clearing was most of such a frame's copy).
+    pub fn with_rows_replaced_into(
+        &self,
+        rows: &[(u32, Row<'_>)],
+        mut out: SparseWeights,
+    ) -> SparseWeights {
         let extra: usize = rows.iter().map(|(_, (c, _))| c.len()).sum();
-        let mut out = SparseWeights {
-            row_start: Vec::with_capacity(self.row_start.len()),
-            cols: Vec::with_capacity(self.cols.len() + extra),
-            vals: Vec::with_capacity(self.vals.len() + extra),
-            num_cols: self.num_cols,
-        };
+        out.row_start.clear();
+        out.cols.clear();
+        out.vals.clear();
+        out.num_cols = self.num_cols;
+        out.row_start.reserve(self.row_start.len());
+        out.cols.reserve(self.cols.len() + extra);
+        out.vals.reserve(self.vals.len() + extra);
         out.row_start.push(0);
         let mut next = 0;
         let ends = rows.iter().map(|&(r, row)| (r as usize, Some(row)));
@@ -63,6 +76,54 @@ impl SparseWeights {
                 out.push_row(cols, vals);
             }
             next = end + 1;
+        }
+        out
+    }
+
+    /// These weights by column within blocks of `block` consecutive rows ([`BlockColumns`]).
+    pub fn block_columns(&self, block: usize) -> BlockColumns {
+        let block = block.clamp(1, usize::from(u16::MAX) + 1);
+        let n = self.num_rows();
+        let mut out = BlockColumns {
+            block,
+            block_start: vec![0],
+            col: Vec::new(),
+            col_end: Vec::new(),
+            rows: vec![0; self.cols.len()],
+            vals: vec![0.0; self.cols.len()],
+        };
+        let mut count = vec![0u32; self.num_cols];
+        let mut at = vec![0u32; self.num_cols];
+        for first in (0..n).step_by(block) {
+            let last = (first + block).min(n);
+            let (a, b) = (
+                self.row_start[first] as usize,
+                self.row_start[last] as usize,
+            );
+            // Counting sort of the block's entries by column; rows stay ascending.
+            for &c in &self.cols[a..b] {
+                count[c as usize] += 1;
+            }
+            let mut end = a as u32;
+            for (c, k) in count.iter_mut().enumerate() {
+                if *k > 0 {
+                    at[c] = end;
+                    end += *k;
+                    out.col.push(c as u32);
+                    out.col_end.push(end);
+                    *k = 0;
+                }
+            }
+            for r in first..last {
+                let (s, e) = (self.row_start[r] as usize, self.row_start[r + 1] as usize);
+                for (&c, &v) in self.cols[s..e].iter().zip(&self.vals[s..e]) {
+                    let slot = &mut at[c as usize];
+                    out.rows[*slot as usize] = (r - first) as u16;
+                    out.vals[*slot as usize] = v;
+                    *slot += 1;
+                }
+            }
+            out.block_start.push(out.col.len() as u32);
         }
         out
     }
@@ -130,6 +191,40 @@ impl SparseWeights {
     }
 }
 
+/// Sparse weights by column within blocks of consecutive rows: block `c` covers rows
+/// `c * block..` and lists its columns ascending, each with its entries' rows (offsets in the
+/// block, ascending) and weights. Reading a row's entries column by column in this order
+/// visits, for every row, its entries in the row's own (ascending column) order.
+#[derive(Debug, Clone, PartialEq)]
+pub struct BlockColumns {
+    /// Rows per block.
+    pub block: usize,
+    block_start: Vec<u32>,
+    col: Vec<u32>,
+    col_end: Vec<u32>,
+    rows: Vec<u16>,
+    vals: Vec<f64>,
+}
+
+impl BlockColumns {
+    /// Block `c`'s columns in ascending order, each with its (row offset, weight) entries.
+    pub fn columns(&self, c: usize) -> impl Iterator<Item = (u32, &[u16], &[f64])> + '_ {
+        let (s, e) = (
+            self.block_start.get(c).copied().unwrap_or(0) as usize,
+            self.block_start.get(c + 1).copied().unwrap_or(0) as usize,
+        );
+        (s..e).map(move |j| {
+            let from = if j == 0 {
+                0
+            } else {
+                self.col_end[j - 1] as usize
+            };
+            let to = self.col_end[j] as usize;
+            (self.col[j], &self.rows[from..to], &self.vals[from..to])
+        })
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -180,7 +275,47 @@ mod tests {
                 let (c, v) = if swap { (&cols[..], &vals[..]) } else { w.row(r) };
                 want.push_row(c, v);
             }
-            proptest::prop_assert_eq!(got, want);
+            // Written into another matrix's buffers: that matrix's contents are gone.
+            let mut used = SparseWeights::empty(7);
+            used.push_row(&[5, 6], &[0.5, 0.5]);
+            let into = w.with_rows_replaced_into(&rows, used);
+            proptest::prop_assert_eq!(&got, &want);
+            proptest::prop_assert_eq!(into, want);
+        }
+    }
+
+    proptest::proptest! {
+        /// Reading every block's columns back into rows gives each row's entries in the
+        /// row's own order, for any block size (a partial last block, empty rows).
+        #[test]
+        fn block_columns_read_back_as_the_rows_in_their_order(
+            rows in proptest::collection::vec(proptest::collection::btree_set(0u32..9, 0..5), 0..40),
+            block in 1usize..9,
+        ) {
+            let mut w = SparseWeights::empty(9);
+            for (r, cols) in rows.iter().enumerate() {
+                let cols: Vec<u32> = cols.iter().copied().collect();
+                let vals: Vec<f64> = cols.iter().map(|&c| (r * 16) as f64 + c as f64).collect();
+                w.push_row(&cols, &vals);
+            }
+            let by = w.block_columns(block);
+            let mut back: Vec<Vec<(u32, f64)>> = vec![Vec::new(); w.num_rows()];
+            for c in 0..w.num_rows().div_ceil(block) {
+                let mut last = None;
+                for (col, offsets, vals) in by.columns(c) {
+                    proptest::prop_assert!(last < Some(col), "columns ascending");
+                    last = Some(col);
+                    proptest::prop_assert!(offsets.windows(2).all(|o| o[0] < o[1]));
+                    for (&o, &v) in offsets.iter().zip(vals) {
+                        back[c * block + o as usize].push((col, v));
+                    }
+                }
+            }
+            for (r, got) in back.iter().enumerate() {
+                let (cols, vals) = w.row(r);
+                let want: Vec<(u32, f64)> = cols.iter().copied().zip(vals.iter().copied()).collect();
+                proptest::prop_assert_eq!(got, &want);
+            }
         }
     }
 

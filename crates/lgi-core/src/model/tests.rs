@@ -398,11 +398,18 @@ fn fused_sewing_equals_blend_then_jaw_maps_then_residual_pass_bit_for_bit() {
                 let prep = model.prepare(&t, theta, None).unwrap();
                 let choices = model.choose_all(&prep, None);
                 let pieces = Pieces::from_choices(&choices);
-                let mut fused = vec![DVec3::ZERO; model.dataset.num_vertices()];
-                model
-                    .sew_frame_into(&prep, choices, &pieces, &mut fused)
-                    .unwrap();
-                assert_eq!(fused, staged_sewing(model, &prep, &pieces), "k {k}");
+                // Twice: a plan's second sewing reads its weights by column.
+                let staged = staged_sewing(model, &prep, &pieces);
+                for sewing in 0..2 {
+                    let mut fused = vec![DVec3::ZERO; model.dataset.num_vertices()];
+                    model
+                        .sew_frame_into(&prep, choices.clone(), &pieces, &mut fused)
+                        .unwrap();
+                    let bits = |v: &[DVec3]| -> Vec<[u64; 3]> {
+                        v.iter().map(|p| p.to_array().map(f64::to_bits)).collect()
+                    };
+                    assert_eq!(bits(&fused), bits(&staged), "k {k}, sewing {sewing}");
+                }
                 checked += 1;
             }
         }
