@@ -82,48 +82,13 @@ impl SparseWeights {
 
     /// These weights by column within blocks of `block` consecutive rows ([`BlockColumns`]).
     pub fn block_columns(&self, block: usize) -> BlockColumns {
-        let block = block.clamp(1, usize::from(u16::MAX) + 1);
+        let mut out = BlockColumns::new(block);
+        out.rows.reserve(self.cols.len());
+        out.vals.reserve(self.cols.len());
         let n = self.num_rows();
-        let mut out = BlockColumns {
-            block,
-            block_start: vec![0],
-            col: Vec::new(),
-            col_end: Vec::new(),
-            rows: vec![0; self.cols.len()],
-            vals: vec![0.0; self.cols.len()],
-        };
-        let mut count = vec![0u32; self.num_cols];
-        let mut at = vec![0u32; self.num_cols];
-        for first in (0..n).step_by(block) {
-            let last = (first + block).min(n);
-            let (a, b) = (
-                self.row_start[first] as usize,
-                self.row_start[last] as usize,
-            );
-            // Counting sort of the block's entries by column; rows stay ascending.
-            for &c in &self.cols[a..b] {
-                count[c as usize] += 1;
-            }
-            let mut end = a as u32;
-            for (c, k) in count.iter_mut().enumerate() {
-                if *k > 0 {
-                    at[c] = end;
-                    end += *k;
-                    out.col.push(c as u32);
-                    out.col_end.push(end);
-                    *k = 0;
-                }
-            }
-            for r in first..last {
-                let (s, e) = (self.row_start[r] as usize, self.row_start[r + 1] as usize);
-                for (&c, &v) in self.cols[s..e].iter().zip(&self.vals[s..e]) {
-                    let slot = &mut at[c as usize];
-                    out.rows[*slot as usize] = (r - first) as u16;
-                    out.vals[*slot as usize] = v;
-                    *slot += 1;
-                }
-            }
-            out.block_start.push(out.col.len() as u32);
+        let mut count = Vec::new();
+        for first in (0..n).step_by(out.block) {
+            out.push_block(self, first, (first + out.block).min(n), &mut count);
         }
         out
     }
@@ -207,6 +172,54 @@ pub struct BlockColumns {
 }
 
 impl BlockColumns {
+    /// No blocks yet; blocks of `block` rows (at most 65,536: offsets are 16-bit).
+    fn new(block: usize) -> BlockColumns {
+        BlockColumns {
+            block: block.clamp(1, usize::from(u16::MAX) + 1),
+            block_start: vec![0],
+            col: Vec::new(),
+            col_end: Vec::new(),
+            rows: Vec::new(),
+            vals: Vec::new(),
+        }
+    }
+
+    /// Appends rows `first..last` of `w` (at most `block` of them) as the next block: a
+    /// counting sort of their entries by column (`count`: scratch), rows staying ascending.
+    fn push_block(&mut self, w: &SparseWeights, first: usize, last: usize, count: &mut Vec<u32>) {
+        let last = last.min(first + self.block);
+        let (a, b) = (w.row_start[first] as usize, w.row_start[last] as usize);
+        count.clear();
+        count.resize(w.num_cols, 0);
+        for &c in &w.cols[a..b] {
+            count[c as usize] += 1;
+        }
+        // `count` becomes each column's next slot.
+        let base = self.rows.len();
+        let mut end = base as u32;
+        for (c, k) in count.iter_mut().enumerate() {
+            if *k > 0 {
+                let start = end;
+                end += *k;
+                self.col.push(c as u32);
+                self.col_end.push(end);
+                *k = start;
+            }
+        }
+        self.rows.resize(base + (b - a), 0);
+        self.vals.resize(base + (b - a), 0.0);
+        for r in first..last {
+            let (s, e) = (w.row_start[r] as usize, w.row_start[r + 1] as usize);
+            for (&c, &v) in w.cols[s..e].iter().zip(&w.vals[s..e]) {
+                let slot = &mut count[c as usize];
+                self.rows[*slot as usize] = (r - first) as u16;
+                self.vals[*slot as usize] = v;
+                *slot += 1;
+            }
+        }
+        self.block_start.push(self.col.len() as u32);
+    }
+
     /// Block `c`'s columns in ascending order, each with its (row offset, weight) entries.
     pub fn columns(&self, c: usize) -> impl Iterator<Item = (u32, &[u16], &[f64])> + '_ {
         let (s, e) = (
