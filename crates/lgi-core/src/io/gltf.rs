@@ -13,7 +13,8 @@ use std::path::Path;
 /// Reads the first mesh of a glTF/GLB file as a [`Dataset`].
 ///
 /// All triangle primitives of that mesh are merged (vertices concatenated). `TEXCOORD_0`
-/// becomes the UVs with UV index == vertex index; either every primitive has it or none.
+/// becomes the UVs with UV index == vertex index, v flipped to OBJ's convention (up the
+/// image, as every dataset's UVs are); either every primitive has it or none.
 /// Missing indices mean sequential triangles. Morph targets become shapes (a target without
 /// positions is a zero displacement); names come from the mesh's `extras.targetNames` when
 /// present, else `target{k}`. Every error names the file; a file the `gltf` crate cannot
@@ -78,7 +79,9 @@ fn read_gltf_unguarded(path: &Path) -> Result<Dataset> {
             )));
         }
         if let Some(uvs) = uvs {
-            mesh.uvs.extend(uvs.map(|t| DVec2::from(t.map(f64::from))));
+            // glTF's v runs down the image, the dataset's (OBJ's) up.
+            mesh.uvs
+                .extend(uvs.map(|[u, v]| DVec2::new(f64::from(u), 1.0 - f64::from(v))));
             if mesh.uvs.len() != mesh.positions.len() {
                 return Err(bad(format!(
                     "primitive {pi}: TEXCOORD_0 count differs from POSITION count"
