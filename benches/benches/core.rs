@@ -5,7 +5,9 @@
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};
 use glam::DVec3;
 use lgi_benches::{build_model, load_workload, make_frames, Workload};
-use lgi_core::{blend, Choice, FrameState, Model, Pieces, Scratch, SibsonWeights};
+use lgi_core::{
+    blend, blend_by_columns, Choice, FrameState, Model, Pieces, Scratch, SibsonWeights, BLEND_BLOCK,
+};
 use std::hint::black_box;
 use std::time::{Duration, Instant};
 
@@ -166,6 +168,24 @@ fn stages(c: &mut Criterion) {
                 &mesh.positions,
                 model.dataset().displacements(),
                 model.sew_weights(),
+                &pieces[f],
+                &mut verts,
+            );
+            black_box(verts[0])
+        })
+    });
+
+    // The blend as a plan's second and later sewings read it: by column within blocks.
+    let columns = model.sew_weights().block_columns(BLEND_BLOCK);
+    let mut f = 0;
+    g.bench_function("sew_blend_frame_by_columns", |bench| {
+        bench.iter(|| {
+            f = (f + 1) % fx.frames.len();
+            blend_by_columns(
+                &mesh.positions,
+                model.dataset().displacements(),
+                model.sew_weights(),
+                &columns,
                 &pieces[f],
                 &mut verts,
             );

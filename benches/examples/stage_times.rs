@@ -4,7 +4,7 @@
 
 use glam::DVec3;
 use lgi_benches::{build_model, load_workload, make_frames};
-use lgi_core::{blend, blend_by_columns, FrameState, Pieces, Scratch};
+use lgi_core::{blend, blend_by_columns, FrameState, Pieces, Scratch, BLEND_BLOCK};
 use std::hint::black_box;
 use std::time::Instant;
 
@@ -67,7 +67,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         // The same blend read by column within blocks (a plan's second sewing on), and the
         // transposition that makes those columns.
         let t = Instant::now();
-        let columns = model.sew_weights().block_columns(512);
+        let columns = model.sew_weights().block_columns(BLEND_BLOCK);
         transpose_best = transpose_best.min(t.elapsed().as_secs_f64());
         let t = Instant::now();
         for p in &pieces {

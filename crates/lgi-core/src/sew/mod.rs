@@ -18,8 +18,9 @@ pub mod plan;
 
 pub use plan::{SewGeometry, SewPlan, SewPlans};
 
-/// Vertices per parallel task: large enough to amortise scheduling, small enough to balance.
-const CHUNK: usize = 512;
+/// Vertices per parallel task of the blend, and rows per block of its [`BlockColumns`]: large
+/// enough to amortise scheduling, small enough to balance.
+pub const BLEND_BLOCK: usize = 512;
 
 /// Each bundle's piece of geometry as a sparse shape-weight vector (shape id 0 = neutral):
 /// a choice's 4 weights, or more after temporal smoothing, or the frame's global fit, which is
@@ -101,10 +102,10 @@ pub fn blend(
     out: &mut [DVec3],
 ) {
     let input = BlendInput::new(x0, displacements, weights, pieces);
-    out.par_chunks_mut(CHUNK)
+    out.par_chunks_mut(BLEND_BLOCK)
         .enumerate()
         .for_each(|(c, chunk)| {
-            let block = input.block(c * CHUNK, chunk.len());
+            let block = input.block(c * BLEND_BLOCK, chunk.len());
             for (o, x) in chunk.iter_mut().enumerate() {
                 *x = block.vertex(o);
             }
@@ -112,7 +113,7 @@ pub fn blend(
 }
 
 /// [`blend`] read column by column within blocks of vertices (`columns`, from the same
-/// `weights` with blocks of [`CHUNK`] rows): the same sums in the same order, so the same bits.
+/// `weights` with blocks of [`BLEND_BLOCK`] rows): the same sums in the same order, so the same bits.
 pub fn blend_by_columns(
     x0: &[DVec3],
     displacements: &[f32],
@@ -122,10 +123,10 @@ pub fn blend_by_columns(
     out: &mut [DVec3],
 ) {
     let input = BlendInput::new(x0, displacements, weights, pieces);
-    out.par_chunks_mut(CHUNK)
+    out.par_chunks_mut(BLEND_BLOCK)
         .enumerate()
         .for_each(|(c, chunk)| {
-            let sums = input.summed_by_columns(c, c * CHUNK, chunk.len(), columns);
+            let sums = input.summed_by_columns(c, c * BLEND_BLOCK, chunk.len(), columns);
             chunk.copy_from_slice(&sums);
         });
 }
@@ -291,8 +292,9 @@ impl<'a> BlendInput<'a> {
             .map(|o| {
                 let mut d = d[o];
                 if let Some(&w) = fit_weight.get(o).filter(|&&w| w != 0.0) {
-                    for c in 0..3 {
-                        d[c] += w * fitted[3 * o + c];
+                    let f = fitted.get(3 * o..3 * o + 3).unwrap_or(&[0.0; 3]);
+                    for (d, f) in d.iter_mut().zip(f) {
+                        *d += w * f;
                     }
                 }
                 self.x0[base + o] + DVec3::from_array(d)
@@ -376,8 +378,11 @@ impl Block<'_, '_> {
     #[inline]
     pub fn vertex(&self, o: usize) -> DVec3 {
         self.input.vertex_with(self.base + o, || {
-            let f = &self.fit[3 * o..3 * o + 3];
-            [f[0], f[1], f[2]]
+            // Empty when the fit has no shape terms (the neutral): a zero displacement.
+            match self.fit.get(3 * o..3 * o + 3) {
+                Some(f) => [f[0], f[1], f[2]],
+                None => [0.0; 3],
+            }
         })
     }
 }
@@ -504,11 +509,11 @@ impl ResidualPass {
         if worst.is_nan() || worst > at.tolerance {
             rounds.push(by_bundle(self.lu.solve3(&r)));
         }
-        out.par_chunks_mut(CHUNK)
+        out.par_chunks_mut(BLEND_BLOCK)
             .enumerate()
             .map(|(ci, chunk)| {
                 let mut bad = None;
-                let (base, len) = (ci * CHUNK, chunk.len());
+                let (base, len) = (ci * BLEND_BLOCK, chunk.len());
                 let summed = columns.map(|c| input.summed_by_columns(ci, base, len, c));
                 let block = summed.is_none().then(|| input.block(base, len));
                 for (o, x) in chunk.iter_mut().enumerate() {
@@ -560,17 +565,19 @@ impl ResidualPass {
             }
             let c = self.lu.solve3(&r);
             let slot = &self.slot;
-            x.par_chunks_mut(CHUNK).enumerate().for_each(|(ci, chunk)| {
-                for (o, xv) in chunk.iter_mut().enumerate() {
-                    let (cols, vals) = weights.row(ci * CHUNK + o);
-                    for (&b, &w) in cols.iter().zip(vals) {
-                        let s = slot[b as usize];
-                        if s != u32::MAX {
-                            *xv += DVec3::from_array(c[s as usize]) * w;
+            x.par_chunks_mut(BLEND_BLOCK)
+                .enumerate()
+                .for_each(|(ci, chunk)| {
+                    for (o, xv) in chunk.iter_mut().enumerate() {
+                        let (cols, vals) = weights.row(ci * BLEND_BLOCK + o);
+                        for (&b, &w) in cols.iter().zip(vals) {
+                            let s = slot[b as usize];
+                            if s != u32::MAX {
+                                *xv += DVec3::from_array(c[s as usize]) * w;
+                            }
                         }
                     }
-                }
-            });
+                });
         }
     }
 }
@@ -583,12 +590,14 @@ mod tests {
     proptest! {
         /// The blend read column by column within blocks equals the blend vertex by vertex bit
         /// for bit: partial last blocks, empty rows, bundles without a piece and bundles on
-        /// the shared fit.
+        /// the shared fit (also a fit at the neutral, which has no shape terms: that used to
+        /// index an empty block of fit displacements).
         #[test]
         fn blend_by_columns_equals_blend_bit_for_bit(
             nv in 1usize..1300,
             seed in 0u64..1000,
             with_fit in proptest::bool::ANY,
+            neutral_fit in proptest::bool::ANY,
         ) {
             let (nb, ns) = (7usize, 5usize);
             let mut state = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
@@ -617,13 +626,16 @@ mod tests {
             }
             if with_fit {
                 pieces.fit = (0..nb).map(|b| b % 3 == 2).collect();
-                pieces.fit_shapes = vec![1, 3, 4];
-                pieces.fit_weights = vec![0.3, -0.2, 0.7];
+                // A fit at the neutral has no shape terms at all.
+                (pieces.fit_shapes, pieces.fit_weights) = match neutral_fit {
+                    true => (vec![0], vec![1.0]),
+                    false => (vec![1, 3, 4], vec![0.3, -0.2, 0.7]),
+                };
             }
             let mut rows = vec![DVec3::ZERO; nv];
             blend(&x0, &displacements, &weights, &pieces, &mut rows);
             let mut by_columns = vec![DVec3::ZERO; nv];
-            let columns = weights.block_columns(CHUNK);
+            let columns = weights.block_columns(BLEND_BLOCK);
             blend_by_columns(&x0, &displacements, &weights, &columns, &pieces, &mut by_columns);
             for (v, (a, b)) in rows.iter().zip(&by_columns).enumerate() {
                 prop_assert_eq!(a.to_array().map(f64::to_bits), b.to_array().map(f64::to_bits), "vertex {}", v);

@@ -54,7 +54,7 @@ impl SewPlan {
         }
         Some(
             self.columns
-                .get_or_init(|| self.weights.block_columns(super::CHUNK)),
+                .get_or_init(|| self.weights.block_columns(super::BLEND_BLOCK)),
         )
     }
 
