@@ -190,6 +190,12 @@ def worker(args: argparse.Namespace) -> dict[str, Any]:
     per_noise, _ = per_frame_ms(model.core.solve, frames, temporal=True, marker_noise=NOISE)
     out["noise_ms_median"] = float(np.median(per_noise))
     out["noise_ms_p95"] = float(np.percentile(per_noise, 95))
+    # Both again into the warm result array: a fresh result's first touch costs the
+    # noise-aware solve more (its ratio above swung 1.97-2.48 x between runs of one build).
+    per_noise_out, _ = per_frame_ms(
+        model.core.solve, frames, temporal=True, marker_noise=NOISE, out=warm
+    )
+    out["noise_out_ms_median"] = float(np.median(per_noise_out))
     # The recommended path end to end: the default build (a jaw rig from the jaw shapes) and
     # `solve(frames, marker_noise=...)` (each frame's pose from its fit, refined in the core).
     t = time.perf_counter()
@@ -435,6 +441,15 @@ def table(r1: dict[str, Any], r2: dict[str, Any]) -> str:
                 f"Noise-aware solve per frame (`marker_noise={NOISE}`), {r['threads']} thread(s)",
                 f"median {r['noise_ms_median']:.2f} ms, p95 {r['noise_ms_p95']:.2f} ms = "
                 f"{r['noise_ms_median'] / r['solve_ms_median']:.2f} x the exact solve",
+            )
+        )
+    for r in (r1, r2):
+        rows.append(
+            (
+                f"Noise-aware solve per frame into a reused `out=` array, {r['threads']} thread(s)",
+                f"median {r['noise_out_ms_median']:.2f} ms = "
+                f"{r['noise_out_ms_median'] / r['solve_out_ms_median']:.2f} x the exact solve "
+                "into `out=`",
             )
         )
     for r in (r1, r2):
