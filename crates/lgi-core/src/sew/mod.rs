@@ -101,19 +101,16 @@ pub fn blend(
     pieces: &Pieces,
     out: &mut [DVec3],
 ) {
-    let input = BlendInput::new(x0, displacements, weights, pieces);
-    out.par_chunks_mut(BLEND_BLOCK)
-        .enumerate()
-        .for_each(|(c, chunk)| {
-            let block = input.block(c * BLEND_BLOCK, chunk.len());
-            for (o, x) in chunk.iter_mut().enumerate() {
-                *x = block.vertex(o);
-            }
-        });
+    blend_with(
+        &BlendInput::new(x0, displacements, weights, pieces),
+        None,
+        out,
+    );
 }
 
 /// [`blend`] read column by column within blocks of vertices (`columns`, from the same
-/// `weights` with blocks of [`BLEND_BLOCK`] rows): the same sums in the same order, so the same bits.
+/// `weights` with blocks of [`BLEND_BLOCK`] rows): the same sums in the same order, so the
+/// same bits.
 pub fn blend_by_columns(
     x0: &[DVec3],
     displacements: &[f32],
@@ -123,11 +120,26 @@ pub fn blend_by_columns(
     out: &mut [DVec3],
 ) {
     let input = BlendInput::new(x0, displacements, weights, pieces);
+    blend_with(&input, Some(columns), out);
+}
+
+/// The blend of `input` into `out`, block by block, by column where `columns` are given.
+fn blend_with(input: &BlendInput<'_>, columns: Option<&BlockColumns>, out: &mut [DVec3]) {
     out.par_chunks_mut(BLEND_BLOCK)
         .enumerate()
         .for_each(|(c, chunk)| {
-            let sums = input.summed_by_columns(c, c * BLEND_BLOCK, chunk.len(), columns);
-            chunk.copy_from_slice(&sums);
+            let base = c * BLEND_BLOCK;
+            match columns {
+                Some(columns) => {
+                    chunk.copy_from_slice(&input.summed_by_columns(c, base, chunk.len(), columns))
+                }
+                None => {
+                    let block = input.block(base, chunk.len());
+                    for (o, x) in chunk.iter_mut().enumerate() {
+                        *x = block.vertex(o);
+                    }
+                }
+            }
         });
 }
 
