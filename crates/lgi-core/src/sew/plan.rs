@@ -499,6 +499,11 @@ impl SewContext<'_> {
             weights.vals.extend_from_slice(vals);
             weights.row_start.push(weights.cols.len() as u32);
         }
+        self.with_residual(present, weights)
+    }
+
+    /// The plan of `weights` with the residual pass for the `present` bundles.
+    fn with_residual(&self, present: &[u32], weights: SparseWeights) -> Result<SewPlan> {
         let tris = &self.dataset.neutral().triangles;
         let residual = ResidualPass::new(tris, self.bundles, &weights, present)?;
         Ok(SewPlan::new(weights, residual))
@@ -522,9 +527,7 @@ impl SewContext<'_> {
         rows.sort_unstable_by_key(|&(u, _)| u);
         let into = spare.unwrap_or_else(|| SparseWeights::empty(full.num_cols));
         let weights = full.with_rows_replaced_into(&rows, into);
-        let tris = &self.dataset.neutral().triangles;
-        let residual = ResidualPass::new(tris, self.bundles, &weights, present)?;
-        Ok(SewPlan::new(weights, residual))
+        self.with_residual(present, weights)
     }
 
     /// Natural neighbours of every sewn vertex among all bundles, with no barrier or detour.
