@@ -4,6 +4,9 @@ marker layout CSV, and takes written by independent libraries (ezc3d for C3D) or
 
 from __future__ import annotations
 
+import os
+import subprocess
+import sys
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -108,3 +111,14 @@ def write_c3d(
     res[0][np.isnan(frames).any(axis=2).T] = -1.0
     c["data"]["meta_points"]["residuals"] = res
     c.write(str(path))
+
+
+def lgi_cli(*args: str | Path) -> subprocess.CompletedProcess[str]:
+    """Runs `lgi ARGS…` as a TD would, in a subprocess (warnings are errors)."""
+    return subprocess.run(
+        [sys.executable, "-m", "lgi.cli", *map(str, args)],
+        capture_output=True,
+        text=True,
+        env={**os.environ, "PYTHONWARNINGS": "error"},
+        timeout=600,
+    )

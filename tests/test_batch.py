@@ -10,8 +10,6 @@ import hashlib
 import json
 import os
 import shutil
-import subprocess
-import sys
 from pathlib import Path
 from typing import Any, ClassVar
 
@@ -20,7 +18,7 @@ import pytest
 
 import lgi
 from lgi import batch
-from pipeline_files import write_c3d
+from pipeline_files import lgi_cli, write_c3d
 
 FPS = 30.0
 
@@ -247,15 +245,19 @@ def test_usd_and_obj_outputs_hold_the_solve_and_a_rerun_skips_them(  # type: ign
     for f, t in enumerate(times):
         got = np.array(points.Get(t))
         assert np.array_equal(got, ref.vertices[f].astype(np.float32))
-    obj = batch.solve_shots(
-        named_model,
-        take,
-        tmp_path / "obj",
-        client=client,
-        output="obj",
-        quiet=True,
-        marker_noise=0.01,
-    )
+
+    def to_obj() -> batch.BatchResult:
+        return batch.solve_shots(
+            named_model,
+            take,
+            tmp_path / "obj",
+            client=client,
+            output="obj",
+            quiet=True,
+            marker_noise=0.01,
+        )
+
+    obj = to_obj()
     files = sorted((tmp_path / "obj").glob("sh020.*.obj"))
     assert len(files) == ref.vertices.shape[0]
     first = np.array(
@@ -264,15 +266,7 @@ def test_usd_and_obj_outputs_hold_the_solve_and_a_rerun_skips_them(  # type: ign
     )
     np.testing.assert_allclose(first, ref.vertices[0], rtol=0, atol=1e-6 * named_model.diagonal)
     assert obj.shots["sh020"].output.endswith("sh020.NNNN.obj")
-    again = batch.solve_shots(
-        named_model,
-        take,
-        tmp_path / "obj",
-        client=client,
-        output="obj",
-        quiet=True,
-        marker_noise=0.01,
-    )
+    again = to_obj()
     assert again.skipped == ["sh020"]
 
 
@@ -328,16 +322,6 @@ def test_solve_shots_refuses_bad_arguments_before_starting_anything(named_model,
         args = {"model": named_model, "takes": {"a": take}, "out_dir": tmp_path / "o", **kwargs}
         with pytest.raises(lgi.InputError, match=message):
             batch.solve_shots(quiet=True, **args)
-
-
-def lgi_cli(*args: str | Path) -> subprocess.CompletedProcess[str]:
-    return subprocess.run(
-        [sys.executable, "-m", "lgi.cli", *map(str, args)],
-        capture_output=True,
-        text=True,
-        env={**os.environ, "PYTHONWARNINGS": "error"},
-        timeout=600,
-    )
 
 
 def test_lgi_batch_solves_takes_on_its_own_cluster_and_fails_with_exit_2_on_a_bad_take(  # type: ignore[no-untyped-def]

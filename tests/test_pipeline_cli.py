@@ -5,28 +5,15 @@ pxr, against `Model.solve` on the same frames; then `lgi export` and `lgi info`.
 
 from __future__ import annotations
 
-import os
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 import lgi
-from pipeline_files import write_actor, write_c3d
+from pipeline_files import lgi_cli, write_actor, write_c3d
 
 FPS = 48.0
-
-
-def lgi_cli(*args: str | Path) -> subprocess.CompletedProcess[str]:
-    return subprocess.run(
-        [sys.executable, "-m", "lgi.cli", *map(str, args)],
-        capture_output=True,
-        text=True,
-        env={**os.environ, "PYTHONWARNINGS": "error"},
-        timeout=600,
-    )
 
 
 @pytest.fixture(scope="module")
