@@ -49,6 +49,9 @@ impl SewPlan {
 
     /// The weights by column for a sewing, once the plan has been sewn before.
     fn columns(&self) -> Option<&BlockColumns> {
+        if let Some(columns) = self.columns.get() {
+            return Some(columns);
+        }
         if self.sewings.fetch_add(1, Ordering::Relaxed) == 0 {
             return None;
         }
