@@ -37,17 +37,12 @@ impl SparseWeights {
         self.row_start.push(self.cols.len() as u32);
     }
 
-    /// These rows with some replaced: `rows` (row, its columns and weights), ascending by
-    /// row, each row once. The runs of rows in between are copied whole.
-    pub fn with_rows_replaced(&self, rows: &[(u32, Row<'_>)]) -> SparseWeights {
-        self.with_rows_replaced_into(rows, SparseWeights::empty(self.num_cols))
-    }
-
-    /// [`with_rows_replaced`](Self::with_rows_replaced) written into `out`'s buffers (their
-    /// contents dropped, their memory reused): a take with a new missing set every frame
-    /// then copies into memory it has touched before instead of fresh pages, which the
-    /// kernel must clear first (that clearing was most of such a frame's copy).
-    pub fn with_rows_replaced_into(
+    /// These rows with some replaced, written into `out`'s buffers (its contents dropped,
+    /// its memory reused: a take with a new missing set every frame then copies into memory
+    /// it has touched before rather than fresh pages the kernel must clear). `rows` are (row,
+    /// its columns and weights), ascending by row, each row once; the runs of rows in between
+    /// are copied whole.
+    pub fn with_rows_replaced(
         &self,
         rows: &[(u32, Row<'_>)],
         mut out: SparseWeights,
@@ -282,7 +277,7 @@ mod tests {
                 .filter(|&r| pick[r])
                 .map(|r| (r as u32, (&cols[..], &vals[..])))
                 .collect();
-            let got = w.with_rows_replaced(&rows);
+            let got = w.with_rows_replaced(&rows, SparseWeights::empty(4));
             let mut want = SparseWeights::empty(4);
             for (r, &swap) in pick.iter().enumerate().take(lens.len()) {
                 let (c, v) = if swap { (&cols[..], &vals[..]) } else { w.row(r) };
@@ -291,7 +286,7 @@ mod tests {
             // Written into another matrix's buffers: that matrix's contents are gone.
             let mut used = SparseWeights::empty(7);
             used.push_row(&[5, 6], &[0.5, 0.5]);
-            let into = w.with_rows_replaced_into(&rows, used);
+            let into = w.with_rows_replaced(&rows, used);
             proptest::prop_assert_eq!(&got, &want);
             proptest::prop_assert_eq!(into, want);
         }

@@ -529,7 +529,7 @@ impl SewContext<'_> {
             .collect();
         rows.sort_unstable_by_key(|&(u, _)| u);
         let into = spare.unwrap_or_else(|| SparseWeights::empty(full.num_cols));
-        let weights = full.with_rows_replaced_into(&rows, into);
+        let weights = full.with_rows_replaced(&rows, into);
         self.with_residual(present, weights)
     }
 
