@@ -7,34 +7,12 @@
 //! `cargo run --release -p lgi-benches --example dropout_times [fraction]`; `LGI_PASSES=n`.
 
 use glam::DVec3;
-use lgi_benches::{build_model, load_workload, make_frames, Rng};
+use lgi_benches::{build_model, cpu_seconds, load_workload, make_frames, median, Rng};
 use lgi_core::FrameState;
 use std::time::Instant;
 
 const FRAMES: usize = 100;
 const PASSES: usize = 6;
-
-/// This process's user + system CPU time in seconds (Linux `/proc/self/stat`, 10 ms ticks).
-fn cpu_seconds() -> f64 {
-    let stat = std::fs::read_to_string("/proc/self/stat").unwrap_or_default();
-    // Fields after the command name (which may hold spaces) start at state (field 3).
-    let rest = stat.rsplit_once(')').map_or("", |(_, r)| r);
-    let f: Vec<f64> = rest
-        .split_whitespace()
-        .skip(11)
-        .take(2)
-        .filter_map(|x| x.parse().ok())
-        .collect();
-    f.iter().sum::<f64>() / 100.0
-}
-
-fn median(mut v: Vec<f64>) -> f64 {
-    v.sort_by(f64::total_cmp);
-    match v.len() {
-        0 => f64::NAN,
-        n => v[n / 2],
-    }
-}
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let fraction: f64 = std::env::args()

@@ -251,3 +251,26 @@ pub fn make_frames(model: &Model, n: usize, seed: u64) -> Result<Vec<Vec<DVec3>>
     }
     Ok(frames)
 }
+
+/// This process's user + system CPU time in seconds (Linux `/proc/self/stat`, 10 ms ticks).
+pub fn cpu_seconds() -> f64 {
+    let stat = std::fs::read_to_string("/proc/self/stat").unwrap_or_default();
+    // Fields after the command name (which may hold spaces) start at state (field 3).
+    let rest = stat.rsplit_once(')').map_or("", |(_, r)| r);
+    let f: Vec<f64> = rest
+        .split_whitespace()
+        .skip(11)
+        .take(2)
+        .filter_map(|x| x.parse().ok())
+        .collect();
+    f.iter().sum::<f64>() / 100.0
+}
+
+/// The middle value (upper median); NaN for none.
+pub fn median(mut v: Vec<f64>) -> f64 {
+    v.sort_by(f64::total_cmp);
+    match v.len() {
+        0 => f64::NAN,
+        n => v[n / 2],
+    }
+}

@@ -39,26 +39,33 @@ impl SparseWeights {
 
     /// These rows with some replaced, written into `out`'s buffers (its contents dropped,
     /// its memory reused: a take with a new missing set every frame then copies into memory
-    /// it has touched before rather than fresh pages the kernel must clear). `rows` are (row,
-    /// its columns and weights), ascending by row, each row once; the runs of rows in between
-    /// are copied whole.
-    pub fn with_rows_replaced(
+    /// it has touched before rather than fresh pages the kernel must clear). `replacement(r)`
+    /// is row r's new columns and weights, or `None` to keep it; the runs of kept rows are
+    /// copied whole. (Serial: in a solve the other threads are choosing the next frame, and
+    /// a parallel copy measured no faster there.)
+    pub fn with_rows_replaced<'r>(
         &self,
-        rows: &[(u32, Row<'_>)],
+        replacement: impl Fn(usize) -> Option<Row<'r>>,
         mut out: SparseWeights,
     ) -> SparseWeights {
-        let extra: usize = rows.iter().map(|(_, (c, _))| c.len()).sum();
         out.row_start.clear();
         out.cols.clear();
         out.vals.clear();
         out.num_cols = self.num_cols;
         out.row_start.reserve(self.row_start.len());
-        out.cols.reserve(self.cols.len() + extra);
-        out.vals.reserve(self.vals.len() + extra);
+        out.cols.reserve(self.cols.len());
+        out.vals.reserve(self.vals.len());
         out.row_start.push(0);
+        let n = self.num_rows();
         let mut next = 0;
-        let ends = rows.iter().map(|&(r, row)| (r as usize, Some(row)));
-        for (end, row) in ends.chain([(self.num_rows(), None)]) {
+        for end in 0..=n {
+            let row = match end < n {
+                true => match replacement(end) {
+                    Some(row) => Some(row),
+                    None => continue,
+                },
+                false => None,
+            };
             // Rows next..end unchanged: their entries in one copy, their starts shifted.
             let (a, b) = (self.row_start[next] as usize, self.row_start[end] as usize);
             let at = out.cols.len();
@@ -273,11 +280,8 @@ mod tests {
             }
             let cols: Vec<u32> = (0..new_len as u32).collect();
             let vals: Vec<f64> = (0..new_len).map(|j| -1.0 - j as f64).collect();
-            let rows: Vec<(u32, Row<'_>)> = (0..lens.len())
-                .filter(|&r| pick[r])
-                .map(|r| (r as u32, (&cols[..], &vals[..])))
-                .collect();
-            let got = w.with_rows_replaced(&rows, SparseWeights::empty(4));
+            let rows = |r: usize| pick[r].then_some((&cols[..], &vals[..]));
+            let got = w.with_rows_replaced(rows, SparseWeights::empty(4));
             let mut want = SparseWeights::empty(4);
             for (r, &swap) in pick.iter().enumerate().take(lens.len()) {
                 let (c, v) = if swap { (&cols[..], &vals[..]) } else { w.row(r) };
@@ -286,7 +290,7 @@ mod tests {
             // Written into another matrix's buffers: that matrix's contents are gone.
             let mut used = SparseWeights::empty(7);
             used.push_row(&[5, 6], &[0.5, 0.5]);
-            let into = w.with_rows_replaced(&rows, used);
+            let into = w.with_rows_replaced(rows, used);
             proptest::prop_assert_eq!(&got, &want);
             proptest::prop_assert_eq!(into, want);
         }

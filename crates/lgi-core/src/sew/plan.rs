@@ -523,13 +523,17 @@ impl SewContext<'_> {
         changed: Vec<(u32, Row<'w>)>,
         spare: Option<SparseWeights>,
     ) -> Result<SewPlan> {
-        let mut rows: Vec<(u32, Row<'w>)> = changed
-            .into_iter()
-            .flat_map(|(v, row)| by_proxy.of(v).iter().map(move |&u| (u, row)))
-            .collect();
-        rows.sort_unstable_by_key(|&(u, _)| u);
+        // Each vertex's new row, if any, by a table over the vertices: sorting the list of
+        // ~10k (vertex, row) pairs instead cost ~0.5 ms a plan on ICT.
+        let mut slot = vec![u32::MAX; full.num_rows()];
+        for (i, &(v, _)) in changed.iter().enumerate() {
+            for &u in by_proxy.of(v) {
+                slot[u as usize] = i as u32;
+            }
+        }
+        let rows = |u: usize| changed.get(slot[u] as usize).map(|&(_, row)| row);
         let into = spare.unwrap_or_else(|| SparseWeights::empty(full.num_cols));
-        let weights = full.with_rows_replaced(&rows, into);
+        let weights = full.with_rows_replaced(rows, into);
         self.with_residual(present, weights)
     }
 
