@@ -9,6 +9,7 @@ use crate::error::Result;
 use crate::sparse::SparseWeights;
 use rayon::prelude::*;
 use std::collections::HashMap;
+use std::hash::{BuildHasherDefault, Hash, Hasher};
 use std::sync::{Arc, Mutex, OnceLock};
 
 /// Rows kept for sets of two or more in all (about 200 bytes each) before those are cleared.
@@ -24,7 +25,7 @@ const MERGE_PIECES: usize = 4;
 pub(crate) const MAX_GONE: usize = 2;
 
 /// Which bundles a kept row is without: one to [`MAX_GONE`], ascending.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub(crate) struct Gone {
     bundles: [u32; MAX_GONE],
     len: u8,
@@ -66,8 +67,40 @@ impl Gone {
     }
 
     /// The bundle when there is one.
-    fn single(self) -> Option<u32> {
+    pub(crate) fn single(self) -> Option<u32> {
         (self.len == 1).then_some(self.bundles[0])
+    }
+}
+
+impl Hash for Gone {
+    fn hash<H: Hasher>(&self, h: &mut H) {
+        for &b in self.bundles() {
+            h.write_u32(b);
+        }
+    }
+}
+
+/// A map keyed by [`Gone`]: a plan looks one up for about every other row it takes from the
+/// kept ones, and the default SipHash cost about as much as the rest of such a lookup.
+pub(crate) type GoneMap<V> = HashMap<Gone, V, BuildHasherDefault<GoneHasher>>;
+
+/// A multiply-rotate hash of a few bundle indices (the keys are not chosen by an adversary).
+#[derive(Default)]
+pub(crate) struct GoneHasher(u64);
+
+impl Hasher for GoneHasher {
+    fn write(&mut self, bytes: &[u8]) {
+        for &b in bytes {
+            self.write_u32(u32::from(b));
+        }
+    }
+
+    fn write_u32(&mut self, x: u32) {
+        self.0 = (self.0.rotate_left(5) ^ u64::from(x)).wrapping_mul(0x517c_c1b7_2722_0a95);
+    }
+
+    fn finish(&self) -> u64 {
+        self.0
     }
 }
 
@@ -139,7 +172,7 @@ pub(crate) struct RowMemo {
 
 #[derive(Debug, Default)]
 struct Sets {
-    rows: HashMap<Gone, Vec<Arc<Rows>>>,
+    rows: GoneMap<Vec<Arc<Rows>>>,
     count: usize,
 }
 
@@ -164,11 +197,17 @@ impl RowMemo {
         (ones, self.sets.lock().map_or(0, |p| p.count))
     }
 
+    /// The rows kept without bundle `m` alone, once made: every row `m` touches, in the
+    /// order of its `touching` list.
+    pub(crate) fn without_one(&self, m: u32) -> Option<&Rows> {
+        self.one.get(m as usize)?.get().map(|rows| &**rows)
+    }
+
     /// A plan's view of the memo.
     pub(crate) fn view(&self) -> View<'_> {
         View {
             memo: self,
-            sets: HashMap::new(),
+            sets: GoneMap::default(),
         }
     }
 }
@@ -177,7 +216,7 @@ impl RowMemo {
 /// taken once per set and not once per row.
 pub(crate) struct View<'m> {
     memo: &'m RowMemo,
-    sets: HashMap<Gone, Vec<Arc<Rows>>>,
+    sets: GoneMap<Vec<Arc<Rows>>>,
 }
 
 impl View<'_> {

@@ -7,7 +7,7 @@
 //! and kept ([`WithoutOne`]); a set's plan reuses them wherever no other missing bundle is a
 //! natural neighbour of the row, and recomputes only rows that two missing bundles share.
 
-use super::memo::{Gone, RowMemo, Rows};
+use super::memo::{Gone, GoneMap, RowMemo, Rows};
 use super::{BlendInput, BundleTargets, Pieces, ResidualPass};
 use crate::dataset::Dataset;
 use crate::error::{LgiError, Result};
@@ -276,15 +276,17 @@ impl SewPlans {
         for &b in present {
             is_missing[b as usize] = false;
         }
-        // Per sewn row touched by a missing bundle: those bundles (None: too many to keep).
+        // Per sewn row touched by a missing bundle: those bundles (None: too many to keep),
+        // and its index among the rows the first of them touches (where the rows kept without
+        // that bundle alone hold it).
         let mut slot = vec![u32::MAX; self.sewn.len()];
-        let mut touched: Vec<(u32, Option<Gone>)> = Vec::new();
+        let mut touched: Vec<(u32, Option<Gone>, u32)> = Vec::new();
         for m in (0..nb as u32).filter(|&b| is_missing[b as usize]) {
-            for &r in &self.touching[m as usize] {
+            for (j, &r) in self.touching[m as usize].iter().enumerate() {
                 let s = &mut slot[r as usize];
                 if *s == u32::MAX {
                     *s = touched.len() as u32;
-                    touched.push((r, Some(Gone::one(m))));
+                    touched.push((r, Some(Gone::one(m)), j as u32));
                 } else {
                     let e = &mut touched[*s as usize].1;
                     *e = e.and_then(|g| g.with(m));
@@ -293,23 +295,30 @@ impl SewPlans {
         }
         let mut view = self.memo.view();
         // Per touched row: the kept rows holding it and its index there, once resolved.
-        let mut found: Vec<Option<(Arc<Rows>, u32)>> = vec![None; touched.len()];
+        let mut found: Vec<Option<(Kept<'_>, u32)>> = (0..touched.len()).map(|_| None).collect();
         let mut pending: Vec<usize> = (0..touched.len()).collect();
         while !pending.is_empty() {
-            let mut queue: HashMap<Gone, Vec<u32>> = HashMap::new();
+            let mut queue: GoneMap<Vec<u32>> = GoneMap::default();
             let mut next = Vec::new();
             for k in pending {
-                let (r, Some(gone)) = touched[k] else {
+                let (r, Some(gone), j) = touched[k] else {
                     continue;
                 };
-                let Some((rows, i)) = view.find(gone, r) else {
+                // Alone, a bundle's kept rows are its `touching` rows: the index is known.
+                let hit = match gone.single().and_then(|m| self.memo.without_one(m)) {
+                    Some(rows) => Some((Kept::One(rows), j as usize)),
+                    None => view
+                        .find(gone, r)
+                        .map(|(rows, i)| (Kept::Set(rows.clone()), i)),
+                };
+                let Some((rows, i)) = hit else {
                     queue.entry(gone).or_default().push(r);
                     next.push(k);
                     continue;
                 };
                 // The row kept without `gone` holds, unless other missing bundles touch it:
                 // then it is the row without those too.
-                let (cols, support) = (rows.weights.row(i).0, rows.support.row(i).0);
+                let (cols, support) = (rows.get().weights.row(i).0, rows.get().support.row(i).0);
                 let mut grown = Some(gone);
                 for &c in cols.iter().chain(support) {
                     if is_missing[c as usize] {
@@ -317,7 +326,7 @@ impl SewPlans {
                     }
                 }
                 match grown {
-                    Some(g) if g == gone => found[k] = Some((rows.clone(), i as u32)),
+                    Some(g) if g == gone => found[k] = Some((rows, i as u32)),
                     Some(g) => {
                         touched[k].1 = Some(g);
                         next.push(k);
@@ -336,7 +345,7 @@ impl SewPlans {
             .iter()
             .zip(&found)
             .filter(|(_, f)| f.is_none())
-            .map(|((r, _), _)| self.sewn[*r as usize] as usize)
+            .map(|((r, _, _), _)| self.sewn[*r as usize] as usize)
             .collect();
         direct.sort_unstable();
         let recomputed = match direct.is_empty() {
@@ -348,9 +357,9 @@ impl SewPlans {
             .enumerate()
             .map(|(i, &v)| (v as u32, recomputed.row(i)))
             .collect();
-        for ((r, _), f) in touched.iter().zip(&found) {
+        for ((r, _, _), f) in touched.iter().zip(&found) {
             if let Some((rows, i)) = f {
-                changed.push((self.sewn[*r as usize], rows.weights.row(*i as usize)));
+                changed.push((self.sewn[*r as usize], rows.get().weights.row(*i as usize)));
             }
         }
         let spare = self.cache.lock().ok().and_then(|mut c| c.spare.take());
@@ -379,6 +388,22 @@ impl SewPlans {
     #[cfg(test)]
     pub(crate) fn support(&self) -> &SparseWeights {
         &self.support
+    }
+}
+
+/// Kept rows a plan reads: a bundle's alone borrowed from the memo (no reference count
+/// touched per row), a set's shared.
+enum Kept<'m> {
+    One(&'m Rows),
+    Set(Arc<Rows>),
+}
+
+impl Kept<'_> {
+    fn get(&self) -> &Rows {
+        match self {
+            Kept::One(rows) => rows,
+            Kept::Set(rows) => rows,
+        }
     }
 }
 
@@ -601,6 +626,10 @@ impl SewContext<'_> {
             .par_iter()
             .enumerate()
             .map(|(c, rows)| {
+                // A site no row has: nothing to drop (and no field to fetch).
+                if rows.is_empty() {
+                    return Vec::new();
+                }
                 let b = &self.bundles[present[c] as usize];
                 let origin = b.position(mesh);
                 let reach = rows
