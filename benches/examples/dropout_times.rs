@@ -7,7 +7,10 @@
 //! `cargo run --release -p lgi-benches --example dropout_times [fraction]`; `LGI_PASSES=n`.
 
 use glam::DVec3;
-use lgi_benches::{build_model, cpu_seconds, load_workload, make_frames, median, Rng};
+use lgi_benches::{
+    build_model, cpu_seconds, dropout_settings, load_workload, make_frames, median, with_dropouts,
+    Rng,
+};
 use lgi_core::FrameState;
 use std::time::Instant;
 
@@ -15,14 +18,7 @@ const FRAMES: usize = 100;
 const PASSES: usize = 6;
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
-    let fraction: f64 = std::env::args()
-        .nth(1)
-        .and_then(|a| a.parse().ok())
-        .unwrap_or(0.1);
-    let passes: usize = std::env::var("LGI_PASSES")
-        .ok()
-        .and_then(|p| p.parse().ok())
-        .unwrap_or(PASSES);
+    let (fraction, passes) = dropout_settings(PASSES);
     let workload = load_workload()?;
     let model = build_model(&workload)?;
     let clean = make_frames(&model, FRAMES, 1)?;
@@ -49,17 +45,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let (mut wall, mut cpu) = ([f64::INFINITY; 2], [Vec::new(), Vec::new()]);
     let mut first = [0.0; 2];
     for pass in 0..passes {
-        let messy: Vec<Vec<DVec3>> = clean
-            .iter()
-            .map(|f| {
-                f.iter()
-                    .map(|&t| match rng.uniform() < fraction {
-                        true => DVec3::NAN,
-                        false => t,
-                    })
-                    .collect()
-            })
-            .collect();
+        let messy = with_dropouts(&clean, fraction, &mut rng);
         for (k, frames) in [&clean, &messy].into_iter().enumerate() {
             // LGI_STAGE=clean or messy solves only those frames (for profiling one alone).
             if std::env::var("LGI_STAGE").is_ok_and(|s| s != ["clean", "messy"][k]) {

@@ -10,21 +10,17 @@
 //! `LGI_STAGE=clean|messy` times only those frames (for profiling one alone).
 
 use glam::DVec3;
-use lgi_benches::{build_model, cpu_seconds, load_workload, make_frames, median, Rng};
+use lgi_benches::{
+    build_model, cpu_seconds, dropout_settings, load_workload, make_frames, median, with_dropouts,
+    Rng,
+};
 use std::time::Instant;
 
 const FRAMES: usize = 200;
 const PASSES: usize = 6;
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
-    let fraction: f64 = std::env::args()
-        .nth(1)
-        .and_then(|a| a.parse().ok())
-        .unwrap_or(0.1);
-    let passes: usize = std::env::var("LGI_PASSES")
-        .ok()
-        .and_then(|p| p.parse().ok())
-        .unwrap_or(PASSES);
+    let (fraction, passes) = dropout_settings(PASSES);
     let stage = std::env::var("LGI_STAGE").unwrap_or_default();
     let outside = std::env::var("LGI_OUTSIDE").is_ok_and(|s| s == "1");
     let workload = load_workload()?;
@@ -33,19 +29,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let nv = model.dataset().num_vertices();
     let mut out = vec![DVec3::ZERO; FRAMES * nv];
     let mut rng = Rng::new(5);
-    let mut messy = || -> Vec<Vec<DVec3>> {
-        clean
-            .iter()
-            .map(|f| {
-                f.iter()
-                    .map(|&t| match rng.uniform() < fraction {
-                        true => DVec3::NAN,
-                        false => t,
-                    })
-                    .collect()
-            })
-            .collect()
-    };
+    let mut messy = || with_dropouts(&clean, fraction, &mut rng);
     let mut solve = |frames: &[Vec<DVec3>]| -> Result<(f64, f64), lgi_core::LgiError> {
         let (t, c) = (Instant::now(), cpu_seconds());
         let mut run = || model.solve_sequence_into(frames, None, true, 1, &mut out, |_| {});

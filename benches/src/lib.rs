@@ -274,3 +274,33 @@ pub fn median(mut v: Vec<f64>) -> f64 {
         n => v[n / 2],
     }
 }
+
+/// The dropout examples' settings: the fraction of markers missing (first argument, default
+/// 10 %) and the passes (`LGI_PASSES`, else `default_passes`).
+pub fn dropout_settings(default_passes: usize) -> (f64, usize) {
+    let fraction = std::env::args()
+        .nth(1)
+        .and_then(|a| a.parse().ok())
+        .unwrap_or(0.1);
+    let passes = std::env::var("LGI_PASSES")
+        .ok()
+        .and_then(|p| p.parse().ok())
+        .unwrap_or(default_passes);
+    (fraction, passes)
+}
+
+/// `frames` with each target missing (NaN) with probability `fraction`: a fresh random set
+/// on every frame.
+pub fn with_dropouts(frames: &[Vec<DVec3>], fraction: f64, rng: &mut Rng) -> Vec<Vec<DVec3>> {
+    frames
+        .iter()
+        .map(|f| {
+            f.iter()
+                .map(|&t| match rng.uniform() < fraction {
+                    true => DVec3::NAN,
+                    false => t,
+                })
+                .collect()
+        })
+        .collect()
+}
