@@ -4,6 +4,7 @@
 //! corner (where the lips really join) it does not. Distances are shortest paths along mesh
 //! edges (Dijkstra), bounded by a radius so each bundle explores only its neighbourhood.
 
+use crate::hash::FastMap;
 use crate::mesh::{Mesh, SurfacePoint};
 use std::cmp::Ordering;
 use std::collections::{BinaryHeap, HashMap};
@@ -54,9 +55,9 @@ impl EdgeGraph {
         mesh: &Mesh,
         from: &SurfacePoint,
         radius: f64,
-    ) -> HashMap<u32, f64> {
+    ) -> FastMap<u32, f64> {
         let origin = from.position(mesh);
-        let mut dist: HashMap<u32, f64> = HashMap::new();
+        let mut dist: FastMap<u32, f64> = FastMap::default();
         let mut heap = BinaryHeap::new();
         for &v in &mesh.triangles[from.triangle as usize] {
             let d = origin.distance(mesh.positions[v as usize]);
@@ -84,7 +85,7 @@ pub struct Field {
     /// The radius the field was computed to.
     pub radius: f64,
     /// Vertex → shortest edge-path distance, for every vertex within `radius`.
-    pub distances: HashMap<u32, f64>,
+    pub distances: FastMap<u32, f64>,
 }
 
 /// Distance fields by source, kept across calls: a field computed to radius R answers every
@@ -105,7 +106,7 @@ impl FieldCache {
         &self,
         source: u32,
         radius: f64,
-        compute: impl FnOnce(f64) -> HashMap<u32, f64>,
+        compute: impl FnOnce(f64) -> FastMap<u32, f64>,
     ) -> Arc<Field> {
         let cached = self
             .fields

@@ -23,6 +23,7 @@ mod dataset;
 mod error;
 mod geodesic;
 mod geom;
+mod hash;
 mod io;
 mod jaw;
 mod linalg;

@@ -6,10 +6,10 @@
 
 use super::plan::SewContext;
 use crate::error::Result;
+use crate::hash::FastMap;
 use crate::sparse::SparseWeights;
 use rayon::prelude::*;
-use std::collections::HashMap;
-use std::hash::{BuildHasherDefault, Hash, Hasher};
+use std::hash::{Hash, Hasher};
 use std::sync::{Arc, Mutex, OnceLock};
 
 /// Rows kept for sets of two or more in all (about 200 bytes each) before those are cleared.
@@ -80,29 +80,9 @@ impl Hash for Gone {
     }
 }
 
-/// A map keyed by [`Gone`]: a plan looks one up for about every other row it takes from the
-/// kept ones, and the default SipHash cost about as much as the rest of such a lookup.
-pub(crate) type GoneMap<V> = HashMap<Gone, V, BuildHasherDefault<GoneHasher>>;
-
-/// A multiply-rotate hash of a few bundle indices (the keys are not chosen by an adversary).
-#[derive(Default)]
-pub(crate) struct GoneHasher(u64);
-
-impl Hasher for GoneHasher {
-    fn write(&mut self, bytes: &[u8]) {
-        for &b in bytes {
-            self.write_u32(u32::from(b));
-        }
-    }
-
-    fn write_u32(&mut self, x: u32) {
-        self.0 = (self.0.rotate_left(5) ^ u64::from(x)).wrapping_mul(0x517c_c1b7_2722_0a95);
-    }
-
-    fn finish(&self) -> u64 {
-        self.0
-    }
-}
+/// A map keyed by [`Gone`] (a plan looks one up for about every other row it takes from the
+/// kept ones).
+pub(crate) type GoneMap<V> = FastMap<Gone, V>;
 
 /// Some sewn rows with the bundles of a [`Gone`] missing.
 #[derive(Debug)]
