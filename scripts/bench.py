@@ -84,6 +84,14 @@ def make_frames(model: Any, data: Any, n: int, seed: int = SEED) -> np.ndarray:
     return frames + rng.normal(0.0, NOISE, size=frames.shape)
 
 
+def with_dropouts(frames: np.ndarray, k: int, rng: np.random.Generator) -> np.ndarray:
+    """`frames` (F, B, 3) with a fresh random set of `k` markers missing (NaN) on every frame."""
+    out = frames.copy()
+    for f in range(len(out)):
+        out[f, rng.choice(out.shape[1], k, replace=False)] = np.nan
+    return out
+
+
 def numpy_sew(
     x0: np.ndarray,
     shapes0: np.ndarray,
@@ -160,10 +168,8 @@ def worker(args: argparse.Namespace) -> dict[str, Any]:
     # are still being kept; the take solved again, once they are.
     rng = np.random.default_rng(SEED + 1)
     for pct in (2, 10):
-        drop = np.resize(frames, (DROPOUT_FRAMES, *frames.shape[1:]))
-        k = max(1, round(pct / 100 * drop.shape[1]))
-        for f in range(len(drop)):
-            drop[f, rng.choice(drop.shape[1], k, replace=False)] = np.nan
+        k = max(1, round(pct / 100 * frames.shape[1]))
+        drop = with_dropouts(np.resize(frames, (DROPOUT_FRAMES, *frames.shape[1:])), k, rng)
         per_drop, _ = per_frame_ms(model.core.solve, drop, temporal=True)
         out[f"dropout{pct}_ms_median"] = float(np.median(per_drop[20:]))
         out[f"dropout{pct}_ms_first20"] = float(per_drop[:20].mean())

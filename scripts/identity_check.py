@@ -52,10 +52,7 @@ def main() -> None:
     out["workload"] = {"name": name}
     out["temporal"] = digests(model.solve(frames, quiet=True, fit=False))
     rng = np.random.default_rng(bench.SEED + 2)
-    messy = frames.copy()
-    k = round(0.1 * messy.shape[1])
-    for f in range(len(messy)):
-        messy[f, rng.choice(messy.shape[1], k, replace=False)] = np.nan
+    messy = bench.with_dropouts(frames, round(0.1 * frames.shape[1]), rng)
     out["dropouts_10pct"] = digests(model.solve(messy, quiet=True, fit=False))
 
     from lgi.dataset import sample_dataset

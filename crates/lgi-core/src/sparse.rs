@@ -59,13 +59,11 @@ impl SparseWeights {
         let n = self.num_rows();
         let mut next = 0;
         for end in 0..=n {
-            let row = match end < n {
-                true => match replacement(end) {
-                    Some(row) => Some(row),
-                    None => continue,
-                },
-                false => None,
-            };
+            // A kept row extends the run; a replaced one, or the end, closes it.
+            let row = if end < n { replacement(end) } else { None };
+            if end < n && row.is_none() {
+                continue;
+            }
             // Rows next..end unchanged: their entries in one copy, their starts shifted.
             let (a, b) = (self.row_start[next] as usize, self.row_start[end] as usize);
             let at = out.cols.len();
