@@ -78,7 +78,7 @@ pub use correspond::{correspond, SurfaceIndex};
 pub use geom::{closest_point_on_triangle, interpolate3};
 pub use sew::{blend, blend_by_columns, BundleTargets, Pieces, SewPlan, BLEND_BLOCK};
 pub use sibson::{Barrier, SibsonWeights};
-pub use sparse::{BlockColumns, SparseWeights};
+pub use sparse::{BlockColumns, PatchBuffers, PatchedWeights, SparseWeights, WeightRows};
 pub use tet_index::TetIndex;
 pub use tets::{all_tets, closest_point_in_tet, generate_tets, tet_quality, Tet, TetConfig};
 pub use uvspace::{boundary_barriers, vertex_charts, SewingSpace, UvIslands};

@@ -2,6 +2,8 @@
 //! built from and the plans for missing markers. One general type so those stages share it;
 //! `sanity_check` states its invariants for tests and fuzzers.
 
+use std::sync::Arc;
+
 /// One row's columns and weights.
 pub type Row<'a> = (&'a [u32], &'a [f64]);
 
@@ -37,60 +39,9 @@ impl SparseWeights {
         self.row_start.push(self.cols.len() as u32);
     }
 
-    /// These rows with some replaced, written into `out`'s buffers (its contents dropped,
-    /// its memory reused: a take with a new missing set every frame then copies into memory
-    /// it has touched before rather than fresh pages the kernel must clear). `replacement(r)`
-    /// is row r's new columns and weights, or `None` to keep it; the runs of kept rows are
-    /// copied whole. (Serial: in a solve the other threads are choosing the next frame, and
-    /// a parallel copy measured no faster there.)
-    pub fn with_rows_replaced<'r>(
-        &self,
-        replacement: impl Fn(usize) -> Option<Row<'r>>,
-        mut out: SparseWeights,
-    ) -> SparseWeights {
-        out.row_start.clear();
-        out.cols.clear();
-        out.vals.clear();
-        out.num_cols = self.num_cols;
-        out.row_start.reserve(self.row_start.len());
-        out.cols.reserve(self.cols.len());
-        out.vals.reserve(self.vals.len());
-        out.row_start.push(0);
-        let n = self.num_rows();
-        let mut next = 0;
-        for end in 0..=n {
-            // A kept row extends the run; a replaced one, or the end, closes it.
-            let row = if end < n { replacement(end) } else { None };
-            if end < n && row.is_none() {
-                continue;
-            }
-            // Rows next..end unchanged: their entries in one copy, their starts shifted.
-            let (a, b) = (self.row_start[next] as usize, self.row_start[end] as usize);
-            let at = out.cols.len();
-            out.cols.extend_from_slice(&self.cols[a..b]);
-            out.vals.extend_from_slice(&self.vals[a..b]);
-            let starts = &self.row_start[next + 1..=end];
-            out.row_start
-                .extend(starts.iter().map(|&s| (s as usize - a + at) as u32));
-            if let Some((cols, vals)) = row {
-                out.push_row(cols, vals);
-            }
-            next = end + 1;
-        }
-        out
-    }
-
     /// These weights by column within blocks of `block` consecutive rows ([`BlockColumns`]).
     pub fn block_columns(&self, block: usize) -> BlockColumns {
-        let mut out = BlockColumns::new(block);
-        out.rows.reserve(self.cols.len());
-        out.vals.reserve(self.cols.len());
-        let n = self.num_rows();
-        let mut count = Vec::new();
-        for first in (0..n).step_by(out.block) {
-            out.push_block(self, first, (first + out.block).min(n), &mut count);
-        }
-        out
+        WeightRows::from(self).block_columns(block)
     }
 
     /// Number of rows (query points).
@@ -156,6 +107,157 @@ impl SparseWeights {
     }
 }
 
+/// Another matrix's rows with some replaced, the others read from it in place: a missing
+/// marker set's sewing weights are the full plan's but for the rows near the missing markers,
+/// and copying the ~1 MB full plan around its replaced rows (~20,000 runs on ICT) cost more
+/// than the rest of such a plan's assembly.
+#[derive(Debug)]
+pub struct PatchedWeights {
+    base: Arc<SparseWeights>,
+    /// Per row: its index in `rows`, or `u32::MAX` for the base's row.
+    slot: Vec<u32>,
+    rows: SparseWeights,
+}
+
+/// Empty buffers of a [`PatchedWeights`] no longer used, for the next one to fill.
+#[derive(Debug, Default)]
+pub struct PatchBuffers {
+    slot: Vec<u32>,
+    rows: Option<SparseWeights>,
+}
+
+impl PatchedWeights {
+    /// `base`'s rows with row r replaced by `rows.row(i)` wherever `replaced` gives `(r, i)`
+    /// (a later pair for the same r wins), written into `buffers` (from [`into_buffers`](Self::into_buffers)
+    /// of a patch no longer used, or the default). `fill(&mut rows)` appends the new rows to
+    /// the (emptied) row buffer first; pairs naming a row of `base` or of `rows` that does not
+    /// exist are ignored.
+    pub fn new(
+        base: Arc<SparseWeights>,
+        buffers: PatchBuffers,
+        fill: impl FnOnce(&mut SparseWeights),
+        replaced: impl IntoIterator<Item = (usize, u32)>,
+    ) -> PatchedWeights {
+        let PatchBuffers { mut slot, rows } = buffers;
+        let mut rows = rows.unwrap_or_else(|| SparseWeights::empty(base.num_cols));
+        rows.row_start.clear();
+        rows.row_start.push(0);
+        rows.cols.clear();
+        rows.vals.clear();
+        rows.num_cols = base.num_cols;
+        fill(&mut rows);
+        slot.clear();
+        slot.resize(base.num_rows(), u32::MAX);
+        let num_new = rows.num_rows();
+        for (r, i) in replaced {
+            if let Some(s) = slot.get_mut(r).filter(|_| (i as usize) < num_new) {
+                *s = i;
+            }
+        }
+        PatchedWeights { base, slot, rows }
+    }
+
+    /// Its buffers, for a later [`new`](Self::new) to clear and fill.
+    pub fn into_buffers(self) -> PatchBuffers {
+        PatchBuffers {
+            slot: self.slot,
+            rows: Some(self.rows),
+        }
+    }
+
+    /// Columns and weights of row `r`.
+    ///
+    /// # Panics
+    /// If `r` is not a row, like slice indexing.
+    #[inline]
+    pub fn row(&self, r: usize) -> Row<'_> {
+        match self.slot[r] {
+            u32::MAX => self.base.row(r),
+            i => self.rows.row(i as usize),
+        }
+    }
+}
+
+/// The rows of a weight matrix, whole or patched: what the sewing reads.
+#[derive(Debug, Clone, Copy)]
+pub enum WeightRows<'a> {
+    /// A matrix of its own.
+    Whole(&'a SparseWeights),
+    /// Another's with some rows replaced.
+    Patched(&'a PatchedWeights),
+}
+
+impl<'a> From<&'a SparseWeights> for WeightRows<'a> {
+    fn from(w: &'a SparseWeights) -> Self {
+        WeightRows::Whole(w)
+    }
+}
+
+impl<'a> WeightRows<'a> {
+    /// Columns and weights of row `r`.
+    ///
+    /// # Panics
+    /// If `r >= self.num_rows()`, like slice indexing.
+    #[inline]
+    pub fn row(self, r: usize) -> Row<'a> {
+        match self {
+            WeightRows::Whole(w) => w.row(r),
+            WeightRows::Patched(p) => p.row(r),
+        }
+    }
+
+    /// Number of rows.
+    pub fn num_rows(self) -> usize {
+        match self {
+            WeightRows::Whole(w) => w.num_rows(),
+            WeightRows::Patched(p) => p.slot.len(),
+        }
+    }
+
+    /// Number of columns (sites).
+    pub fn num_cols(self) -> usize {
+        match self {
+            WeightRows::Whole(w) => w.num_cols,
+            WeightRows::Patched(p) => p.base.num_cols,
+        }
+    }
+
+    /// Number of entries (weights) over all rows.
+    pub fn num_entries(self) -> usize {
+        match self {
+            WeightRows::Whole(w) => w.cols.len(),
+            WeightRows::Patched(_) => (0..self.num_rows()).map(|r| self.row(r).0.len()).sum(),
+        }
+    }
+
+    /// The same rows as one matrix of their own.
+    pub fn to_sparse(self) -> SparseWeights {
+        if let WeightRows::Whole(w) = self {
+            return w.clone();
+        }
+        let mut out = SparseWeights::empty(self.num_cols());
+        for r in 0..self.num_rows() {
+            let (cols, vals) = self.row(r);
+            out.push_row(cols, vals);
+        }
+        out
+    }
+
+    /// These weights by column within blocks of `block` consecutive rows ([`BlockColumns`]).
+    pub fn block_columns(self, block: usize) -> BlockColumns {
+        let mut out = BlockColumns::new(block);
+        let entries = self.num_entries();
+        out.rows.reserve(entries);
+        out.vals.reserve(entries);
+        let n = self.num_rows();
+        let mut count = Vec::new();
+        for first in (0..n).step_by(out.block) {
+            out.push_block(self, first, (first + out.block).min(n), &mut count);
+        }
+        out
+    }
+}
+
 /// Sparse weights by column within blocks of consecutive rows: block `c` covers rows
 /// `c * block..` and lists its columns ascending, each with its entries' rows (offsets in the
 /// block, ascending) and weights. Reading a row's entries column by column in this order
@@ -186,13 +288,17 @@ impl BlockColumns {
 
     /// Appends rows `first..last` of `w` (at most `block` of them) as the next block: a
     /// counting sort of their entries by column (`count`: scratch), rows staying ascending.
-    fn push_block(&mut self, w: &SparseWeights, first: usize, last: usize, count: &mut Vec<u32>) {
+    fn push_block(&mut self, w: WeightRows<'_>, first: usize, last: usize, count: &mut Vec<u32>) {
         let last = last.min(first + self.block);
-        let (a, b) = (w.row_start[first] as usize, w.row_start[last] as usize);
         count.clear();
-        count.resize(w.num_cols, 0);
-        for &c in &w.cols[a..b] {
-            count[c as usize] += 1;
+        count.resize(w.num_cols(), 0);
+        let mut entries = 0;
+        for r in first..last {
+            let cols = w.row(r).0;
+            entries += cols.len();
+            for &c in cols {
+                count[c as usize] += 1;
+            }
         }
         // `count` becomes each column's next slot.
         let base = self.rows.len();
@@ -206,11 +312,11 @@ impl BlockColumns {
                 *k = start;
             }
         }
-        self.rows.resize(base + (b - a), 0);
-        self.vals.resize(base + (b - a), 0.0);
+        self.rows.resize(base + entries, 0);
+        self.vals.resize(base + entries, 0.0);
         for r in first..last {
-            let (s, e) = (w.row_start[r] as usize, w.row_start[r + 1] as usize);
-            for (&c, &v) in w.cols[s..e].iter().zip(&w.vals[s..e]) {
+            let (cols, vals) = w.row(r);
+            for (&c, &v) in cols.iter().zip(vals) {
                 let slot = &mut count[c as usize];
                 self.rows[*slot as usize] = (r - first) as u16;
                 self.vals[*slot as usize] = v;
@@ -262,13 +368,14 @@ mod tests {
     }
 
     proptest::proptest! {
-        /// Replacing any ascending subset of rows (first, last, neighbours, empty rows) gives
-        /// the matrix rebuilt row by row with those rows swapped in.
+        /// Replacing any subset of rows (first, last, neighbours, empty rows; several rows by
+        /// one new row) reads as the matrix rebuilt row by row with those rows swapped in,
+        /// whole and by block columns, also when written into a used patch's buffers.
         #[test]
-        fn rows_replaced_equal_the_matrix_rebuilt_row_by_row(
+        fn patched_rows_equal_the_matrix_rebuilt_row_by_row(
             lens in proptest::collection::vec(0usize..4, 1..12),
-            pick in proptest::collection::vec(proptest::bool::ANY, 12),
-            new_len in 0usize..4,
+            pick in proptest::collection::vec(0usize..3, 12),
+            block in 1usize..5,
         ) {
             let mut w = SparseWeights::empty(4);
             for (r, &n) in lens.iter().enumerate() {
@@ -276,21 +383,41 @@ mod tests {
                 let vals: Vec<f64> = (0..n).map(|j| (r * 10 + j) as f64).collect();
                 w.push_row(&cols, &vals);
             }
-            let cols: Vec<u32> = (0..new_len as u32).collect();
-            let vals: Vec<f64> = (0..new_len).map(|j| -1.0 - j as f64).collect();
-            let rows = |r: usize| pick[r].then_some((&cols[..], &vals[..]));
-            let got = w.with_rows_replaced(rows, SparseWeights::empty(4));
+            // Pick 0 keeps a row; 1 and 2 take new row 0 (two entries) or 1 (empty).
+            let new_rows = [(vec![1u32, 3], vec![-1.0, -2.0]), (vec![], vec![])];
+            let fill = |rows: &mut SparseWeights| {
+                for (c, v) in &new_rows {
+                    rows.push_row(c, v);
+                }
+            };
+            let replaced: Vec<(usize, u32)> = (0..lens.len())
+                .filter(|&r| pick[r] > 0)
+                .map(|r| (r, pick[r] as u32 - 1))
+                .collect();
+            let base = Arc::new(w.clone());
+            let used = PatchedWeights::new(
+                base.clone(),
+                PatchBuffers::default(),
+                |rows| rows.push_row(&[0, 1, 2], &[0.2, 0.3, 0.5]),
+                [(0, 0)],
+            );
+            let fresh = PatchedWeights::new(base.clone(), PatchBuffers::default(), fill, replaced.clone());
+            let reused = PatchedWeights::new(base, used.into_buffers(), fill, replaced);
             let mut want = SparseWeights::empty(4);
-            for (r, &swap) in pick.iter().enumerate().take(lens.len()) {
-                let (c, v) = if swap { (&cols[..], &vals[..]) } else { w.row(r) };
+            for (r, &p) in pick.iter().enumerate().take(lens.len()) {
+                let (c, v) = match p {
+                    0 => w.row(r),
+                    k => (&new_rows[k - 1].0[..], &new_rows[k - 1].1[..]),
+                };
                 want.push_row(c, v);
             }
-            // Written into another matrix's buffers: that matrix's contents are gone.
-            let mut used = SparseWeights::empty(7);
-            used.push_row(&[5, 6], &[0.5, 0.5]);
-            let into = w.with_rows_replaced(rows, used);
-            proptest::prop_assert_eq!(&got, &want);
-            proptest::prop_assert_eq!(into, want);
+            for patched in [&fresh, &reused] {
+                let rows = WeightRows::Patched(patched);
+                proptest::prop_assert_eq!(rows.num_rows(), want.num_rows());
+                proptest::prop_assert_eq!(rows.num_entries(), want.cols.len());
+                proptest::prop_assert_eq!(&rows.to_sparse(), &want);
+                proptest::prop_assert_eq!(rows.block_columns(block), want.block_columns(block));
+            }
         }
     }
 

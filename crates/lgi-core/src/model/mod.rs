@@ -150,7 +150,7 @@ impl Model {
     }
     /// Full sewing weights (V × B, every bundle present).
     pub fn sew_weights(&self) -> &SparseWeights {
-        &self.sewing.full().weights
+        self.sewing.full_weights()
     }
     /// The sewing space (chart UVs, proxies, barriers).
     pub fn sewing_space(&self) -> &SewingSpace {

@@ -109,8 +109,8 @@ fn plan_for_missing_bundles_equals_the_plan_built_from_scratch() {
             .plan_without(&present, model.sewing.full(), model.sewing.support())
             .unwrap();
         assert_weights_match(
-            &fresh.weights.clone(),
-            &derived.weights.clone(),
+            &fresh.weights().to_sparse(),
+            &derived.weights().to_sparse(),
             1e-12,
             &missing,
         );
@@ -177,10 +177,10 @@ fn plans_from_kept_rows_match_plans_derived_from_the_full_plan_on_fresh_missing_
                 .plan_without(&present, model.sewing.full(), model.sewing.support())
                 .unwrap();
             let what = format!("{name}, frame {frame}, missing {missing:?}");
-            let (kept, derived) = (kept.weights.clone(), derived.weights.clone());
+            let (kept, derived) = (kept.weights().to_sparse(), derived.weights().to_sparse());
             assert_eq!(kept.row_start, derived.row_start, "{what}");
             assert_weights_match(&kept, &derived, 1e-12, &missing);
-            let fresh = ctx.plan(&present).unwrap().weights.clone();
+            let fresh = ctx.plan(&present).unwrap().weights().to_sparse();
             assert_weights_match(&kept, &fresh, 1e-12, &missing);
             for (a, b) in kept.vals.iter().zip(&derived.vals) {
                 worst = worst.max((a - b).abs());
@@ -209,7 +209,7 @@ fn plans_from_cached_distance_fields_equal_plans_from_fresh_fields() {
     let model = Model::build(&data, &markers, &config).unwrap();
     let loose = Model::build(&data, &markers, &BuildConfig::default()).unwrap();
     assert!(
-        model.sewing.full().weights.cols.len() < loose.sewing.full().weights.cols.len(),
+        model.sewing.full().weights().num_entries() < loose.sewing.full().weights().num_entries(),
         "the tight ratio drops weights"
     );
     assert!(
@@ -240,7 +240,12 @@ fn plans_from_cached_distance_fields_equal_plans_from_fresh_fields() {
         }
         .plan_without(&present, model.sewing.full(), model.sewing.support())
         .unwrap();
-        assert_weights_match(&warm.weights.clone(), &cold.weights.clone(), 0.0, &missing);
+        assert_weights_match(
+            &warm.weights().to_sparse(),
+            &cold.weights().to_sparse(),
+            0.0,
+            &missing,
+        );
     }
 }
 
@@ -351,7 +356,7 @@ fn staged_sewing(model: &Model, prep: &Prepared, pieces: &Pieces) -> Vec<DVec3> 
     crate::sew::blend(
         &lk.data.neutral().positions,
         lk.data.displacements(),
-        &plan.weights,
+        &plan.weights().to_sparse(),
         pieces,
         &mut v,
     );
@@ -368,7 +373,7 @@ fn staged_sewing(model: &Model, prep: &Prepared, pieces: &Pieces) -> Vec<DVec3> 
     plan.residual().apply(
         &mesh.triangles,
         &model.bundles,
-        &plan.weights,
+        &plan.weights().to_sparse(),
         &prep.targets,
         RESIDUAL_TOLERANCE * model.diagonal,
         &mut v,
@@ -999,13 +1004,13 @@ fn on_the_ict_face_plans_from_kept_rows_match_plans_derived_from_the_full_plan()
             .sewing
             .plan_for(&model.dataset, &model.bundles, &present)
             .unwrap()
-            .weights
-            .clone();
+            .weights()
+            .to_sparse();
         let derived = ctx
             .plan_without(&present, model.sewing.full(), model.sewing.support())
             .unwrap()
-            .weights
-            .clone();
+            .weights()
+            .to_sparse();
         assert_weights_match(&kept, &derived, 1e-12, &missing);
         for (a, b) in kept.vals.iter().zip(&derived.vals) {
             worst = worst.max((a - b).abs());

@@ -9,7 +9,7 @@ use crate::error::Result;
 use crate::geom::interpolate3;
 use crate::linalg::Lu;
 use crate::mesh::SurfacePoint;
-use crate::sparse::{BlockColumns, SparseWeights};
+use crate::sparse::{BlockColumns, SparseWeights, WeightRows};
 use glam::DVec3;
 use rayon::prelude::*;
 
@@ -149,7 +149,7 @@ fn blend_with(input: &BlendInput<'_>, columns: Option<&BlockColumns>, out: &mut 
 pub struct BlendInput<'a> {
     x0: &'a [DVec3],
     displacements: &'a [f32],
-    weights: &'a SparseWeights,
+    weights: WeightRows<'a>,
     start: Vec<u32>,
     terms: Vec<(usize, f64)>,
     /// Per bundle: its piece is `fit_terms` (empty when no bundle's is).
@@ -163,9 +163,10 @@ impl<'a> BlendInput<'a> {
     pub fn new(
         x0: &'a [DVec3],
         displacements: &'a [f32],
-        weights: &'a SparseWeights,
+        weights: impl Into<WeightRows<'a>>,
         pieces: &Pieces,
     ) -> Self {
+        let weights = weights.into();
         let nv = x0.len();
         let flatten = |shapes: &[u32], alphas: &[f64], terms: &mut Vec<(usize, f64)>| {
             for (&k, &a) in shapes.iter().zip(alphas) {
@@ -429,7 +430,7 @@ impl ResidualPass {
     pub fn new(
         triangles: &[[u32; 3]],
         bundles: &[SurfacePoint],
-        weights: &SparseWeights,
+        weights: WeightRows<'_>,
         present: &[u32],
     ) -> Result<Self> {
         let n = present.len();

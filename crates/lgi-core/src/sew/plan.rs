@@ -16,7 +16,7 @@ use crate::jaw::VertexMap;
 use crate::mesh::Mesh;
 use crate::mesh::SurfacePoint;
 use crate::sibson::SibsonWeights;
-use crate::sparse::{BlockColumns, Row, SparseWeights};
+use crate::sparse::{BlockColumns, PatchBuffers, PatchedWeights, Row, SparseWeights, WeightRows};
 use crate::uvspace::{self, SewingSpace};
 use glam::DVec3;
 use rayon::prelude::*;
@@ -28,7 +28,7 @@ use std::sync::{Arc, Mutex, OnceLock};
 #[derive(Debug)]
 pub struct SewPlan {
     /// V × B weights (columns of missing bundles are empty).
-    pub weights: SparseWeights,
+    weights: PlanWeights,
     residual: ResidualPass,
     /// `weights` by column within the blend's blocks, made on the plan's second sewing: the
     /// full plan's every clean frame, a missing set's once it lasts a frame more (a fresh set
@@ -37,8 +37,25 @@ pub struct SewPlan {
     sewings: AtomicU32,
 }
 
+/// A plan's weights: its own (the full plan's, or a plan built from scratch), or the full
+/// plan's with the rows near the missing bundles replaced (a missing set's).
+#[derive(Debug)]
+enum PlanWeights {
+    Whole(Arc<SparseWeights>),
+    Patched(PatchedWeights),
+}
+
+impl PlanWeights {
+    fn rows(&self) -> WeightRows<'_> {
+        match self {
+            PlanWeights::Whole(w) => WeightRows::Whole(w),
+            PlanWeights::Patched(p) => WeightRows::Patched(p),
+        }
+    }
+}
+
 impl SewPlan {
-    fn new(weights: SparseWeights, residual: ResidualPass) -> SewPlan {
+    fn new(weights: PlanWeights, residual: ResidualPass) -> SewPlan {
         SewPlan {
             weights,
             residual,
@@ -57,8 +74,13 @@ impl SewPlan {
         }
         Some(
             self.columns
-                .get_or_init(|| self.weights.block_columns(super::BLEND_BLOCK)),
+                .get_or_init(|| self.weights().block_columns(super::BLEND_BLOCK)),
         )
+    }
+
+    /// The V × B weights (columns of missing bundles are empty).
+    pub fn weights(&self) -> WeightRows<'_> {
+        self.weights.rows()
     }
 
     /// The residual pass of the plan's present bundles.
@@ -81,7 +103,7 @@ impl SewPlan {
         at: &BundleTargets<'_>,
         out: &mut [DVec3],
     ) -> Option<usize> {
-        let input = BlendInput::new(x0, displacements, &self.weights, pieces);
+        let input = BlendInput::new(x0, displacements, self.weights(), pieces);
         let columns = self.columns();
         match jaw {
             Some(m) => self
@@ -101,7 +123,7 @@ const PLAN_CACHE: usize = 64;
 struct PlanCache {
     plans: HashMap<Vec<u32>, Arc<SewPlan>>,
     order: VecDeque<Vec<u32>>,
-    spare: Option<SparseWeights>,
+    spare: PatchBuffers,
 }
 
 /// Zig-zag allowance of mesh-edge paths at short range (relative to the diagonal).
@@ -179,6 +201,8 @@ impl SewGeometry {
 pub struct SewPlans {
     geometry: SewGeometry,
     full: Arc<SewPlan>,
+    /// The full plan's weights, which missing sets' plans patch.
+    full_weights: Arc<SparseWeights>,
     /// Every sewn vertex's natural neighbours among all bundles, before barriers and detours
     /// (rows of the sewn vertices in order), for the tests' reference derivation.
     #[cfg(test)]
@@ -205,12 +229,13 @@ impl SewPlans {
     ) -> Result<SewPlans> {
         let sew = geometry.context(dataset, bundles);
         let all: Vec<u32> = (0..bundles.len() as u32).collect();
-        let full = Arc::new(sew.plan(&all)?);
+        let full_weights = Arc::new(sew.weights_for(&all)?);
+        let full = Arc::new(sew.with_residual(&all, PlanWeights::Whole(full_weights.clone()))?);
         let support = sew.support()?;
         let sewn: Vec<u32> = geometry.space.sewn().map(|v| v as u32).collect();
         let mut touching = vec![Vec::new(); bundles.len()];
         for (r, &v) in sewn.iter().enumerate() {
-            let (a, b) = (support.row(r).0, full.weights.row(v as usize).0);
+            let (a, b) = (support.row(r).0, full_weights.row(v as usize).0);
             for &c in a.iter().chain(b.iter().filter(|c| !a.contains(c))) {
                 touching[c as usize].push(r as u32);
             }
@@ -219,6 +244,7 @@ impl SewPlans {
         Ok(SewPlans {
             geometry,
             full,
+            full_weights,
             #[cfg(test)]
             support,
             sewn,
@@ -252,8 +278,12 @@ impl SewPlans {
             if cache.plans.len() >= PLAN_CACHE {
                 // The oldest set goes; its weights' memory is the next plan's.
                 if let Some(old) = cache.order.pop_front().and_then(|k| cache.plans.remove(&k)) {
-                    if let Ok(old) = Arc::try_unwrap(old) {
-                        cache.spare = Some(old.weights);
+                    if let Ok(SewPlan {
+                        weights: PlanWeights::Patched(old),
+                        ..
+                    }) = Arc::try_unwrap(old)
+                    {
+                        cache.spare = old.into_buffers();
                     }
                 }
             }
@@ -362,13 +392,21 @@ impl SewPlans {
                 changed.push((self.sewn[*r as usize], rows.get().weights.row(*i as usize)));
             }
         }
-        let spare = self.cache.lock().ok().and_then(|mut c| c.spare.take());
-        ctx.plan_patched(present, &self.full.weights, &self.by_proxy, changed, spare)
+        let spare = match self.cache.lock() {
+            Ok(mut c) => std::mem::take(&mut c.spare),
+            Err(_) => PatchBuffers::default(),
+        };
+        ctx.plan_patched(present, &self.full_weights, &self.by_proxy, changed, spare)
     }
 
     /// The plan with every bundle present.
-    pub fn full(&self) -> &SewPlan {
+    #[cfg(test)]
+    pub(crate) fn full(&self) -> &SewPlan {
         &self.full
+    }
+    /// The full plan's weights.
+    pub fn full_weights(&self) -> &SparseWeights {
+        &self.full_weights
     }
     /// The sewing space (chart UVs, proxies, barriers).
     pub fn space(&self) -> &SewingSpace {
@@ -453,7 +491,14 @@ pub(crate) struct SewContext<'a> {
 impl SewContext<'_> {
     /// Sewing weights for the present bundles: Sibson weights in UV for sewn vertices (minus
     /// detours around holes), copied from the proxy for the others; plus the residual pass.
+    #[cfg(test)]
     pub(crate) fn plan(&self, present: &[u32]) -> Result<SewPlan> {
+        let weights = self.weights_for(present)?;
+        self.with_residual(present, PlanWeights::Whole(Arc::new(weights)))
+    }
+
+    /// The sewing weights of [`plan`](Self::plan).
+    fn weights_for(&self, present: &[u32]) -> Result<SparseWeights> {
         let nv = self.dataset.num_vertices();
         let sewn: Vec<usize> = self.space.sewn().collect();
         let w = self.rows_for(present, &sewn)?;
@@ -461,7 +506,7 @@ impl SewContext<'_> {
         for (r, &v) in sewn.iter().enumerate() {
             row_of[v] = r;
         }
-        self.plan_from(present, |v| w.row(row_of[v]))
+        Ok(self.weights_from(|v| w.row(row_of[v])))
     }
 
     /// Sibson rows (minus detours) of `vertices` for the present bundles; columns are bundle
@@ -506,13 +551,12 @@ impl SewContext<'_> {
         Ok((w, support))
     }
 
-    /// The plan whose row for vertex v is `sewn_row(proxy[v])` (a sewn vertex is its own
-    /// proxy), with the residual pass for the present bundles.
-    fn plan_from<'w>(
+    /// The weights whose row for vertex v is `sewn_row(proxy[v])` (a sewn vertex is its own
+    /// proxy).
+    fn weights_from<'w>(
         &self,
-        present: &[u32],
         sewn_row: impl Fn(usize) -> (&'w [u32], &'w [f64]),
-    ) -> Result<SewPlan> {
+    ) -> SparseWeights {
         let nv = self.dataset.num_vertices();
         let mut weights = SparseWeights {
             row_start: Vec::with_capacity(nv + 1),
@@ -527,39 +571,38 @@ impl SewContext<'_> {
             weights.vals.extend_from_slice(vals);
             weights.row_start.push(weights.cols.len() as u32);
         }
-        self.with_residual(present, weights)
+        weights
     }
 
     /// The plan of `weights` with the residual pass for the `present` bundles.
-    fn with_residual(&self, present: &[u32], weights: SparseWeights) -> Result<SewPlan> {
+    fn with_residual(&self, present: &[u32], weights: PlanWeights) -> Result<SewPlan> {
         let tris = &self.dataset.neutral().triangles;
-        let residual = ResidualPass::new(tris, self.bundles, &weights, present)?;
+        let residual = ResidualPass::new(tris, self.bundles, weights.rows(), present)?;
         Ok(SewPlan::new(weights, residual))
     }
 
     /// The plan whose rows are `full`'s with those of `changed` (sewn vertex, its row)
     /// replaced, for them and the vertices they are the proxy of, with the residual pass for
-    /// the present bundles.
+    /// the present bundles; the new rows are written into `buffers`.
     fn plan_patched<'w>(
         &self,
         present: &[u32],
-        full: &SparseWeights,
+        full: &Arc<SparseWeights>,
         by_proxy: &Proxied,
         changed: Vec<(u32, Row<'w>)>,
-        spare: Option<SparseWeights>,
+        buffers: PatchBuffers,
     ) -> Result<SewPlan> {
-        // Each vertex's new row, if any, by a table over the vertices: sorting the list of
-        // ~10k (vertex, row) pairs instead cost ~0.5 ms a plan on ICT.
-        let mut slot = vec![u32::MAX; full.num_rows()];
-        for (i, &(v, _)) in changed.iter().enumerate() {
-            for &u in by_proxy.of(v) {
-                slot[u as usize] = i as u32;
+        let fill = |rows: &mut SparseWeights| {
+            for &(_, (cols, vals)) in &changed {
+                rows.push_row(cols, vals);
             }
-        }
-        let rows = |u: usize| changed.get(slot[u] as usize).map(|&(_, row)| row);
-        let into = spare.unwrap_or_else(|| SparseWeights::empty(full.num_cols));
-        let weights = full.with_rows_replaced(rows, into);
-        self.with_residual(present, weights)
+        };
+        let replaced = changed
+            .iter()
+            .enumerate()
+            .flat_map(|(i, &(v, _))| by_proxy.of(v).iter().map(move |&u| (u as usize, i as u32)));
+        let weights = PatchedWeights::new(full.clone(), buffers, fill, replaced);
+        self.with_residual(present, PlanWeights::Patched(weights))
     }
 
     /// Natural neighbours of every sewn vertex among all bundles, with no barrier or detour.
@@ -592,7 +635,7 @@ impl SewContext<'_> {
         let affected: Vec<usize> = sewn
             .iter()
             .enumerate()
-            .filter(|&(r, &v)| touches(support.row(r).0) || touches(full.weights.row(v).0))
+            .filter(|&(r, &v)| touches(support.row(r).0) || touches(full.weights().row(v).0))
             .map(|(_, &v)| v)
             .collect();
         let mut new_row = vec![usize::MAX; nv];
@@ -601,10 +644,11 @@ impl SewContext<'_> {
         }
         let recomputed = self.rows_for(present, &affected)?;
         // A proxy has the same row as its own vertex in the full plan.
-        self.plan_from(present, |v| match new_row[v] {
-            usize::MAX => full.weights.row(v),
+        let weights = self.weights_from(|v| match new_row[v] {
+            usize::MAX => full.weights().row(v),
             r => recomputed.row(r),
-        })
+        });
+        self.with_residual(present, PlanWeights::Whole(Arc::new(weights)))
     }
 
     /// Removes the weights whose surface path detours around a hole; rows renormalised (a
