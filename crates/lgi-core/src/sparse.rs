@@ -157,6 +157,11 @@ impl PatchedWeights {
         PatchedWeights { base, slot, rows }
     }
 
+    /// The matrix whose rows are read where none was replaced.
+    pub fn base(&self) -> &Arc<SparseWeights> {
+        &self.base
+    }
+
     /// Its buffers, for a later [`new`](Self::new) to clear and fill.
     pub fn into_buffers(self) -> PatchBuffers {
         PatchBuffers {

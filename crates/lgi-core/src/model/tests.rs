@@ -350,13 +350,14 @@ fn staged_sewing(model: &Model, prep: &Prepared, pieces: &Pieces) -> Vec<DVec3> 
         .sewing
         .plan_for(&model.dataset, &model.bundles, &prep.present)
         .unwrap();
+    let weights = plan.weights().to_sparse();
     let lk = &model.lookups[prep.bin];
     let mesh = model.dataset.neutral();
     let mut v = vec![DVec3::ZERO; mesh.num_vertices()];
     crate::sew::blend(
         &lk.data.neutral().positions,
         lk.data.displacements(),
-        &plan.weights().to_sparse(),
+        &weights,
         pieces,
         &mut v,
     );
@@ -373,7 +374,7 @@ fn staged_sewing(model: &Model, prep: &Prepared, pieces: &Pieces) -> Vec<DVec3> 
     plan.residual().apply(
         &mesh.triangles,
         &model.bundles,
-        &plan.weights().to_sparse(),
+        &weights,
         &prep.targets,
         RESIDUAL_TOLERANCE * model.diagonal,
         &mut v,

@@ -52,6 +52,14 @@ impl PlanWeights {
             PlanWeights::Patched(p) => WeightRows::Patched(p),
         }
     }
+
+    /// The full plan's weights: these (a whole matrix), or the ones this patch reads.
+    fn base(&self) -> &Arc<SparseWeights> {
+        match self {
+            PlanWeights::Whole(w) => w,
+            PlanWeights::Patched(p) => p.base(),
+        }
+    }
 }
 
 impl SewPlan {
@@ -201,8 +209,6 @@ impl SewGeometry {
 pub struct SewPlans {
     geometry: SewGeometry,
     full: Arc<SewPlan>,
-    /// The full plan's weights, which missing sets' plans patch.
-    full_weights: Arc<SparseWeights>,
     /// Every sewn vertex's natural neighbours among all bundles, before barriers and detours
     /// (rows of the sewn vertices in order), for the tests' reference derivation.
     #[cfg(test)]
@@ -244,7 +250,6 @@ impl SewPlans {
         Ok(SewPlans {
             geometry,
             full,
-            full_weights,
             #[cfg(test)]
             support,
             sewn,
@@ -396,7 +401,13 @@ impl SewPlans {
             Ok(mut c) => std::mem::take(&mut c.spare),
             Err(_) => PatchBuffers::default(),
         };
-        ctx.plan_patched(present, &self.full_weights, &self.by_proxy, changed, spare)
+        ctx.plan_patched(
+            present,
+            self.full.weights.base(),
+            &self.by_proxy,
+            changed,
+            spare,
+        )
     }
 
     /// The plan with every bundle present.
@@ -406,7 +417,7 @@ impl SewPlans {
     }
     /// The full plan's weights.
     pub fn full_weights(&self) -> &SparseWeights {
-        &self.full_weights
+        self.full.weights.base()
     }
     /// The sewing space (chart UVs, proxies, barriers).
     pub fn space(&self) -> &SewingSpace {
