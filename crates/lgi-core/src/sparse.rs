@@ -331,6 +331,12 @@ impl BlockColumns {
         self.block_start.push(self.col.len() as u32);
     }
 
+    /// True when `base..base + len` are the rows of block `c` (its whole rows, or the first
+    /// `len` of a partial last block).
+    pub fn covers(&self, c: usize, base: usize, len: usize) -> bool {
+        base == c * self.block && len <= self.block && c + 1 < self.block_start.len()
+    }
+
     /// Block `c`'s columns in ascending order, each with its (row offset, weight) entries.
     pub fn columns(&self, c: usize) -> impl Iterator<Item = (u32, &[u16], &[f64])> + '_ {
         let (s, e) = (
