@@ -72,20 +72,22 @@ impl FrameErrors {
     /// The tables for one frame's `targets` (NaN rows are missing).
     pub fn new(shape_positions: &[DVec3], num_bundles: usize, targets: &[DVec3]) -> Self {
         let b = num_bundles.max(1);
-        let distances: Vec<f64> = shape_positions
+        // Plain loops into a zeroed table: as a flat_map it took ~35 instructions an entry.
+        // Missing targets' entries stay 0, so a row's sum is over the present bundles.
+        let mut distances = vec![0.0; shape_positions.len()];
+        let mut pure = vec![0.0; distances.len().div_ceil(b)];
+        for ((row, out), pure) in shape_positions
             .chunks(b)
-            .flat_map(|row| {
-                row.iter().zip(targets).map(|(p, t)| {
-                    if t.is_nan() {
-                        0.0
-                    } else {
-                        p.distance_squared(*t)
-                    }
-                })
-            })
-            .collect();
-        // Missing targets' entries are 0, so a row's sum is over the present bundles.
-        let pure = distances.chunks(b).map(|row| row.iter().sum()).collect();
+            .zip(distances.chunks_mut(b))
+            .zip(&mut pure)
+        {
+            for ((p, t), d) in row.iter().zip(targets).zip(out.iter_mut()) {
+                if !t.is_nan() {
+                    *d = p.distance_squared(*t);
+                }
+            }
+            *pure = out.iter().sum();
+        }
         FrameErrors { distances, pure }
     }
 }
@@ -224,6 +226,8 @@ pub struct Scratch {
     nearest: Vec<(u32, [f64; 4], f64)>,
     bounds: Vec<(f64, u32)>,
     scored: Vec<Scored>,
+    /// Squared distance of every cloud point to the target.
+    point_d2: Vec<f64>,
 }
 
 /// The `k` lowest scores seen so far (k is small: `alias_refine`), for pruning candidates
@@ -259,6 +263,12 @@ impl BestScores {
         self.scores[..self.len].sort_unstable_by(f64::total_cmp);
     }
 
+    /// False when `s` is above the k lowest seen so far, which only fall: a candidate
+    /// scoring `s` can then never be among the final k (ties and NaN are admitted).
+    fn admits(&self, s: f64) -> bool {
+        s <= self.worst() || s.is_nan()
+    }
+
     /// The k-th lowest score (infinity until k scores were added).
     fn worst(&self) -> f64 {
         if self.len < self.k {
@@ -292,6 +302,16 @@ pub fn choose(
 ) -> Choice {
     let reps = |tet: &[u32; 4]| tet.map(|p| cloud.aliases[p as usize][0]);
     scratch.scored.clear();
+    // Every cloud point's squared distance, once: the nearest point, the hits and the
+    // points as candidates all read them (`d` below is `q.distance(target)` bit for bit).
+    scratch.point_d2.clear();
+    scratch
+        .point_d2
+        .extend(cloud.points.iter().map(|&q| (q - target).length_squared()));
+    // A point with d² beyond `limit · (1 + 1e-12)` certainly has d > limit^½ and d·d > limit
+    // (the rounding of d = √d² and of d·d is ~1e-16 relative): it is skipped without d.
+    let beyond = |d2: f64, limit: f64| d2 > limit * (1.0 + 1e-12);
+    let hit2 = params.hit_distance * params.hit_distance;
     scratch.inside.clear();
     index.query(target, params.eps, &mut scratch.inside);
     let projected = scratch.inside.is_empty();
@@ -305,8 +325,11 @@ pub fn choose(
         }
         // A target on a cloud point is that shape exactly, even where every tet at the point
         // was too thin to keep and the target only lies inside other tets.
-        for (p, &q) in cloud.points.iter().enumerate() {
-            let d = q.distance(target);
+        for (p, &d2) in scratch.point_d2.iter().enumerate() {
+            if beyond(d2, hit2) {
+                continue;
+            }
+            let d = d2.sqrt();
             if d <= params.hit_distance {
                 let tet = [p as u32; 4];
                 let w = [1.0, 0.0, 0.0, 0.0];
@@ -320,26 +343,50 @@ pub fn choose(
         // the exact n-nearest search must enumerate every tet tied at a shared vertex and
         // costs ~10x more for the same choices in practice (docs/performance.md). A closest
         // point at a tet's vertex is that cloud point, scored below on its own.
-        index.project_around(
-            target,
-            params.projection_candidates,
-            &mut scratch.bounds,
-            &mut scratch.nearest,
-        );
+        // The nearest point, ties to the lowest index (d² ≥ 0 and not NaN for a finite
+        // target, so `<` orders as `project_around`'s total order does).
+        let mut nearest = 0;
+        for (p, &d2) in scratch.point_d2.iter().enumerate() {
+            if d2 < scratch.point_d2[nearest] {
+                nearest = p;
+            }
+        }
+        // The index is over the cloud's points; another index finds its own nearest point.
+        match index.points().len() == cloud.points.len() {
+            true => index.project_around_point(
+                target,
+                nearest,
+                params.projection_candidates,
+                &mut scratch.bounds,
+                &mut scratch.nearest,
+            ),
+            false => index.project_around(
+                target,
+                params.projection_candidates,
+                &mut scratch.bounds,
+                &mut scratch.nearest,
+            ),
+        }
         let mut best = BestScores::new(params.alias_refine.max(1));
         for &(t, l, d) in &scratch.nearest {
             let tet = index.tets()[t as usize];
             let w = clean_weights(l);
             let s = scoring.score(&reps(&tet), &w, d);
             best.add(s);
-            scratch.scored.push((s, t, tet, w, d));
+            // Beyond the best few so far it can never enter them (nor is it a hit): dropped.
+            if best.admits(s) {
+                scratch.scored.push((s, t, tet, w, d));
+            }
         }
         // Cloud points themselves: a point whose every tet was too thin to keep is still
         // real geometry, and a target on it must find it exactly. A score is at least the
         // squared distance, so a point farther than the current best few cannot enter them
         // (hits are always kept: their aliases are refined).
-        for (p, &q) in cloud.points.iter().enumerate() {
-            let d = q.distance(target);
+        for (p, &d2) in scratch.point_d2.iter().enumerate() {
+            if beyond(d2, hit2.max(best.worst())) {
+                continue;
+            }
+            let d = d2.sqrt();
             if d > params.hit_distance && d * d > best.worst() {
                 continue;
             }
@@ -347,7 +394,9 @@ pub fn choose(
             let w = [1.0, 0.0, 0.0, 0.0];
             let s = scoring.point_score(cloud.aliases[p][0], d);
             best.add(s);
-            scratch.scored.push((s, NO_TET, tet, w, d));
+            if best.admits(s) || d <= params.hit_distance {
+                scratch.scored.push((s, NO_TET, tet, w, d));
+            }
         }
     } else {
         lower_simplices(cloud, target, scoring, &mut scratch.scored);
@@ -361,16 +410,21 @@ pub fn choose(
     }
     let head = refine.min(scratch.scored.len());
     scratch.scored[..head].sort_unstable_by(order);
-    let mut best: Option<(f64, Choice)> = None;
     // Refine the best few, and every exact hit on a cloud point: a hit's representative may
     // score badly (the neutral standing for every shape that does not move this bundle) while
-    // one of its aliases is exactly right.
-    let candidates = scratch
-        .scored
-        .iter()
-        .enumerate()
-        .filter(|(r, c)| *r < refine || (c.1 == NO_TET && c.4 <= params.hit_distance));
-    for (_, &(_, t, tet, w, d)) in candidates {
+    // one of its aliases is exactly right. The hits beyond the best few follow them in the
+    // same order (an exact tie of refined scores goes to the first).
+    let hit = |c: &Scored| c.1 == NO_TET && c.4 <= params.hit_distance;
+    let mut kept = head;
+    for i in head..scratch.scored.len() {
+        if hit(&scratch.scored[i]) {
+            scratch.scored.swap(kept, i);
+            kept += 1;
+        }
+    }
+    scratch.scored[head..kept].sort_unstable_by(order);
+    let mut best: Option<(f64, Choice)> = None;
+    for &(_, t, tet, w, d) in &scratch.scored[..kept] {
         let shapes = refine_aliases(cloud, groups, &tet, &w, scoring);
         let s = scoring.score(&shapes, &w, d);
         let choice = Choice {

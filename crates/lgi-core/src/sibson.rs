@@ -607,12 +607,10 @@ impl BarrierGrid {
     /// Cells (i0, j0, i1, j1) overlapped by the box [lo, hi]; monotone in the coordinates, so a
     /// barrier and a sight segment whose boxes overlap share a cell.
     fn cell_range(&self, lo: DVec2, hi: DVec2) -> (usize, usize, usize, usize) {
-        let cx = |x: f64| {
-            (((x - self.lo.x) * self.inv_cell.x).floor().max(0.0) as usize).min(self.nx - 1)
-        };
-        let cy = |y: f64| {
-            (((y - self.lo.y) * self.inv_cell.y).floor().max(0.0) as usize).min(self.ny - 1)
-        };
+        // The casts truncate and saturate (negative and NaN to 0): `floor().max(0)` without
+        // the libm call.
+        let cx = |x: f64| (((x - self.lo.x) * self.inv_cell.x) as usize).min(self.nx - 1);
+        let cy = |y: f64| (((y - self.lo.y) * self.inv_cell.y) as usize).min(self.ny - 1);
         (cx(lo.x), cy(lo.y), cx(hi.x), cy(hi.y))
     }
 

@@ -309,10 +309,10 @@ impl TetIndex {
     }
 
     fn cell_coord(&self, x: f64, axis: usize) -> u32 {
-        let f = ((x - self.lo[axis]) * self.inv_cell[axis]).floor();
-        // Saturating cast then clamp: monotone in x, so a tet's box and any point inside it
-        // always agree on the cells (this is what makes the grid exact).
-        (f.max(0.0) as u32).min(self.dims[axis] - 1)
+        // The cast truncates toward zero and saturates (negative and NaN to 0): `floor`
+        // then `max(0)` without the libm call. Then a clamp: monotone in x, so a tet's box
+        // and any point inside it always agree on the cells (this makes the grid exact).
+        (((x - self.lo[axis]) * self.inv_cell[axis]) as u32).min(self.dims[axis] - 1)
     }
 
     fn cell_of(&self, p: DVec3) -> [u32; 3] {

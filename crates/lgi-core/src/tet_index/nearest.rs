@@ -97,11 +97,25 @@ impl TetIndex {
         bounds: &mut Vec<(f64, u32)>,
         out: &mut Vec<(u32, [f64; 4], f64)>,
     ) {
+        if !self.points.is_empty() {
+            self.project_around_point(p, self.nearest_point(p), n, bounds, out);
+        }
+    }
+
+    /// [`project_around`](Self::project_around) given the cloud point nearest to `p`
+    /// (`v`, ties: lowest index), for a caller that has the point distances already.
+    pub(crate) fn project_around_point(
+        &self,
+        p: DVec3,
+        v: usize,
+        n: usize,
+        bounds: &mut Vec<(f64, u32)>,
+        out: &mut Vec<(u32, [f64; 4], f64)>,
+    ) {
         let base = out.len();
-        if n == 0 || self.points.is_empty() || !p.is_finite() {
+        if n == 0 || v >= self.points.len() || !p.is_finite() {
             return;
         }
-        let v = self.nearest_point(p);
         let (s, e) = (self.incident_start[v], self.incident_start[v + 1]);
         let o = self.points[v];
         let pv = p - o;
