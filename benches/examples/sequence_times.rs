@@ -7,7 +7,8 @@
 //! handed to the pool and waited for): alternate runs measured no difference (ICT-300, 1 and
 //! 2 threads).
 //! `cargo run --release -p lgi-benches --example sequence_times [fraction]`; `LGI_PASSES=n`;
-//! `LGI_STAGE=clean|messy` times only those frames (for profiling one alone).
+//! `LGI_STAGE=clean|messy` times only those frames (for profiling one alone); `LGI_NOISE=σ`
+//! solves noise-aware (`marker_noise = σ`, data units, with the fit candidate).
 
 use glam::DVec3;
 use lgi_benches::{
@@ -23,6 +24,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let (fraction, passes) = dropout_settings(PASSES);
     let stage = std::env::var("LGI_STAGE").unwrap_or_default();
     let outside = std::env::var("LGI_OUTSIDE").is_ok_and(|s| s == "1");
+    let noise = std::env::var("LGI_NOISE")
+        .ok()
+        .and_then(|s| s.parse::<f64>().ok());
+    let options = lgi_core::SolveOptions::new(true, 1, None, noise);
     let workload = load_workload()?;
     let model = build_model(&workload)?;
     let clean = make_frames(&model, FRAMES, 1)?;
@@ -32,7 +37,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let mut messy = || with_dropouts(&clean, fraction, &mut rng);
     let mut solve = |frames: &[Vec<DVec3>]| -> Result<(f64, f64), lgi_core::LgiError> {
         let (t, c) = (Instant::now(), cpu_seconds());
-        let mut run = || model.solve_sequence_into(frames, None, true, 1, &mut out, |_| {});
+        let mut run = || model.solve_sequence_with(frames, None, &options, &mut out, |_| {});
         match outside {
             true => run()?,
             false => rayon::scope(|_| run())?,

@@ -146,7 +146,17 @@ impl Scoring<'_> {
                 .fold(0.0, |e, &n| e + row[n as usize]),
             None => self.neighbour_error(&shapes, &weights),
         };
-        neighbour_error + own_distance * own_distance + self.temporal_penalty(&shapes, &weights)
+        neighbour_error + own_distance * own_distance + self.point_penalty(shape)
+    }
+
+    /// [`temporal_penalty`](Self::temporal_penalty) of `[shape; 4]` with weights
+    /// `[1, 0, 0, 0]`, bit for bit: one fresh shape unless the previous choice used it.
+    fn point_penalty(&self, shape: u32) -> f64 {
+        let Some(prev) = self.previous else {
+            return 0.0;
+        };
+        let used = (0..4).any(|j| prev.weights[j] != 0.0 && prev.shapes[j] == shape);
+        self.temporal_weight * if used { 0.0 } else { 1.0 }
     }
 
     fn temporal_penalty(&self, shapes: &[u32; 4], weights: &[f64; 4]) -> f64 {
