@@ -8,10 +8,8 @@ from __future__ import annotations
 
 import os
 import pickle
-import signal
 import subprocess
 import sys
-import threading
 
 import numpy as np
 import pytest
@@ -19,6 +17,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import lgi
+from interrupts import sigint_at
 from pipeline_files import write_actor
 
 
@@ -185,14 +184,8 @@ def test_on_lgi_own_pool_ctrl_c_and_a_failing_callback_still_stop_a_solve_early(
     lgi.set_num_threads(2)
     frames = np.repeat(sample.markers_rest[None], 4000, axis=0)
     calls: list[int] = []
-
-    def interrupt_at_10(f: int) -> None:
-        calls.append(f)
-        if f == 10:  # a real SIGINT, delivered to the main thread's handler
-            threading.Thread(target=os.kill, args=(os.getpid(), signal.SIGINT)).start()
-
     with pytest.raises(KeyboardInterrupt):
-        sample_model.core.solve(frames, progress=interrupt_at_10, temporal=True)
+        sample_model.core.solve(frames, progress=sigint_at(10, calls), temporal=True)
     assert 10 < len(calls) < 4000
 
     def fail_at_4(f: int) -> None:

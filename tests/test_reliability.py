@@ -4,16 +4,14 @@ proves. The fuzz campaign that keeps them fixed is test_fuzz.py (docs/reliabilit
 from __future__ import annotations
 
 import json
-import os
-import signal
 import struct
-import threading
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 import lgi
+from interrupts import sigint_at
 from lgi import _lgi
 from lgi.baselines import BlendshapeFit, DisplacementInterpolation, LgiRbf
 from lgi.dataset import sample_dataset as dataset_of
@@ -247,14 +245,8 @@ def test_ctrl_c_during_a_long_solve_raises_keyboard_interrupt_before_the_end(sma
     s, _, model = small
     frames = np.repeat(s.markers_rest[None], 4000, axis=0)
     calls: list[int] = []
-
-    def progress(f: int) -> None:
-        calls.append(f)
-        if f == 10:  # a real SIGINT, delivered to this (main) thread's handler
-            threading.Thread(target=os.kill, args=(os.getpid(), signal.SIGINT)).start()
-
     with pytest.raises(KeyboardInterrupt):
-        model.core.solve(frames, progress=progress, temporal=True)
+        model.core.solve(frames, progress=sigint_at(10, calls), temporal=True)
     assert 10 < len(calls) < 4000
 
 
