@@ -1,8 +1,9 @@
 """Bit-identity check for refactors: solves the 300-frame ICT-300 temporal take (bench.py's
 workload and frames) and prints SHA-256 digests of the vertices, choices and residuals, so two
 builds can be compared by their output. Also hashes the same take with a fresh random 10 % of
-the markers missing on every frame (seeded: a new sewing plan per frame), and a sample solve
-(with jaw and dropouts) so the check says something where the ICT data is absent.
+the markers missing on every frame (seeded: a new sewing plan per frame), the take solved
+noise-aware (`marker_noise`, with the fit candidate), and a sample solve (with jaw and
+dropouts) so the check says something where the ICT data is absent.
 
 Usage: python scripts/identity_check.py [--frames 300] [--out digests.json]
 """
@@ -54,6 +55,7 @@ def main() -> None:
     rng = np.random.default_rng(bench.SEED + 2)
     messy = bench.with_dropouts(frames, round(0.1 * frames.shape[1]), rng)
     out["dropouts_10pct"] = digests(model.solve(messy, quiet=True, fit=False))
+    out["noise_aware"] = digests(model.solve(frames, quiet=True, marker_noise=bench.NOISE))
 
     from lgi.dataset import sample_dataset
     from lgi.sample import make_sample
