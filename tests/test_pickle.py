@@ -162,6 +162,29 @@ def test_set_num_threads_sets_the_count_and_leaves_results_bit_identical(  # typ
     assert lgi.get_num_threads() == default
 
 
+def test_noise_aware_ict300_is_bit_identical_at_1_and_2_threads_basis_included(  # type: ignore[no-untyped-def]
+    ict_dataset, ict_markers, default_threads
+):
+    """ICT-300's fit is sewn over a basis of its shapes, found on a model's first noise-aware
+    solve from a Gram matrix summed in parallel: each thread count gets a fresh model, so
+    the basis is found under that count (a parallel reduce once made them differ)."""
+    data = ict_dataset.augmented(300)
+    rng = np.random.default_rng(4)
+    meshes = np.repeat(data.neutral[None], 12, axis=0)
+    for m in meshes:
+        ids = rng.integers(0, data.num_shapes, size=3)
+        for k, w in zip(ids, rng.dirichlet(np.ones(3)), strict=True):
+            m += w * data.shapes[k]
+    noise = rng.normal(0.0, 0.05, (len(meshes), len(ict_markers), 3))
+    results = []
+    for n in (1, 2):
+        lgi.set_num_threads(n)
+        model = lgi.Model.build(data, ict_markers, jaw=None)
+        frames = model.bundle_positions(meshes) + noise
+        results.append(model.solve(frames, quiet=True, marker_noise=0.05))
+    assert_same_solve(results[1], results[0])
+
+
 def test_without_set_num_threads_the_count_is_rayons_default_from_rayon_num_threads() -> None:
     code = (
         "import lgi; print(lgi.get_num_threads()); "
