@@ -5,7 +5,8 @@ from __future__ import annotations
 import os
 import signal
 import threading
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 
 # Longest a later frame waits for the signal to have been sent (seconds).
 SEND_WAIT = 10.0
@@ -30,3 +31,15 @@ def sigint_at(frame: int, calls: list[int]) -> Callable[[int], None]:
             sent.wait(SEND_WAIT)
 
     return progress
+
+
+@contextmanager
+def python_sigint_handler() -> Iterator[None]:
+    """Python's own SIGINT handler for the duration: a process started in the background by
+    a non-interactive shell (`cmd &`) inherits SIGINT ignored, and Python then installs no
+    handler, so a real Ctrl-C would raise nothing there."""
+    before = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, before)

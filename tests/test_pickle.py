@@ -17,7 +17,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import lgi
-from interrupts import sigint_at
+from interrupts import python_sigint_handler, sigint_at
 from pipeline_files import write_actor
 
 
@@ -207,7 +207,7 @@ def test_on_lgi_own_pool_ctrl_c_and_a_failing_callback_still_stop_a_solve_early(
     lgi.set_num_threads(2)
     frames = np.repeat(sample.markers_rest[None], 4000, axis=0)
     calls: list[int] = []
-    with pytest.raises(KeyboardInterrupt):
+    with python_sigint_handler(), pytest.raises(KeyboardInterrupt):
         sample_model.core.solve(frames, progress=sigint_at(10, calls), temporal=True)
     assert 10 < len(calls) < 4000
 

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 import lgi
-from interrupts import sigint_at
+from interrupts import python_sigint_handler, sigint_at
 from lgi import _lgi
 from lgi.baselines import BlendshapeFit, DisplacementInterpolation, LgiRbf
 from lgi.dataset import sample_dataset as dataset_of
@@ -245,7 +245,7 @@ def test_ctrl_c_during_a_long_solve_raises_keyboard_interrupt_before_the_end(sma
     s, _, model = small
     frames = np.repeat(s.markers_rest[None], 4000, axis=0)
     calls: list[int] = []
-    with pytest.raises(KeyboardInterrupt):
+    with python_sigint_handler(), pytest.raises(KeyboardInterrupt):
         model.core.solve(frames, progress=sigint_at(10, calls), temporal=True)
     assert 10 < len(calls) < 4000
 
