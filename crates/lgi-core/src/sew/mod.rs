@@ -613,6 +613,29 @@ mod tests {
     use super::*;
     use proptest::prelude::*;
 
+    /// A seeded uniform [0, 1) generator, with `nv` random neutral positions and `ns` random
+    /// shapes drawn from it (the generator is returned to draw the rest of a case).
+    fn random_shapes(
+        seed: u64,
+        nv: usize,
+        ns: usize,
+    ) -> (impl FnMut() -> f64, Vec<DVec3>, Vec<f32>) {
+        let mut state = seed
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        let mut next = move || {
+            state = state
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            ((state >> 11) as f64) / ((1u64 << 53) as f64)
+        };
+        let x0: Vec<DVec3> = (0..nv)
+            .map(|_| DVec3::new(next(), next(), next()))
+            .collect();
+        let displacements: Vec<f32> = (0..ns * nv * 3).map(|_| (next() - 0.5) as f32).collect();
+        (next, x0, displacements)
+    }
+
     proptest! {
         /// The blend read column by column within blocks equals the blend vertex by vertex bit
         /// for bit: partial last blocks, empty rows, bundles without a piece and bundles on
@@ -626,14 +649,7 @@ mod tests {
             neutral_fit in proptest::bool::ANY,
         ) {
             let (nb, ns) = (7usize, 5usize);
-            let mut state = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
-            let mut next = move || {
-                state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
-                ((state >> 11) as f64) / ((1u64 << 53) as f64)
-            };
-            let x0: Vec<DVec3> = (0..nv).map(|_| DVec3::new(next(), next(), next())).collect();
-            let displacements: Vec<f32> =
-                (0..ns * nv * 3).map(|_| (next() - 0.5) as f32).collect();
+            let (mut next, x0, displacements) = random_shapes(seed, nv, ns);
             let mut weights = SparseWeights::empty(nb);
             for _ in 0..nv {
                 let cols: Vec<u32> = (0..nb as u32).filter(|_| next() < 0.4).collect();
@@ -678,14 +694,7 @@ mod tests {
             seed in 0u64..1000,
         ) {
             let (nb, ns, missing) = (7usize, 5usize, 4u32);
-            let mut state = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
-            let mut next = move || {
-                state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
-                ((state >> 11) as f64) / ((1u64 << 53) as f64)
-            };
-            let x0: Vec<DVec3> = (0..nv).map(|_| DVec3::new(next(), next(), next())).collect();
-            let displacements: Vec<f32> =
-                (0..ns * nv * 3).map(|_| (next() - 0.5) as f32).collect();
+            let (mut next, x0, displacements) = random_shapes(seed, nv, ns);
             let present: Vec<u32> = (0..nb as u32).filter(|&b| b != missing).collect();
             let mut weights = SparseWeights::empty(nb);
             for _ in 0..nv {
