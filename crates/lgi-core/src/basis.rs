@@ -207,7 +207,8 @@ mod tests {
 
     #[test]
     fn the_basis_is_the_same_bits_with_any_thread_count_and_dot_matches_a_plain_sum() {
-        // Three blocks of coordinates: 4 independent shapes, then combinations of them.
+        // 71 blocks of coordinates (more than GROUPS, so a group sums several): 4 independent
+        // shapes, then combinations of them.
         let n = 70 * BLOCK + 123;
         let base: Vec<Vec<f32>> = (0..4)
             .map(|k| {

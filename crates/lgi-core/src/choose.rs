@@ -8,7 +8,7 @@
 //! candidates also pick their aliases by the neighbour score.
 
 use crate::cloud::BundleCloud;
-use crate::tet_index::TetIndex;
+use crate::tet_index::{first_nearest, TetIndex};
 use glam::DVec3;
 
 /// Marks "no tet" in [`Choice::tet`] (the cloud had no tets, or a point/segment/triangle was used).
@@ -155,17 +155,15 @@ impl Scoring<'_> {
         let Some(prev) = self.previous else {
             return 0.0;
         };
-        let used = (0..4).any(|j| prev.weights[j] != 0.0 && prev.shapes[j] == shape);
-        self.temporal_weight * if used { 0.0 } else { 1.0 }
+        self.temporal_weight * if uses(prev, shape) { 0.0 } else { 1.0 }
     }
 
     fn temporal_penalty(&self, shapes: &[u32; 4], weights: &[f64; 4]) -> f64 {
         let Some(prev) = self.previous else {
             return 0.0;
         };
-        let used = |s: u32| (0..4).any(|j| prev.weights[j] != 0.0 && prev.shapes[j] == s);
         let fresh = (0..4)
-            .filter(|&j| weights[j] != 0.0 && !used(shapes[j]))
+            .filter(|&j| weights[j] != 0.0 && !uses(prev, shapes[j]))
             .count();
         self.temporal_weight * fresh as f64
     }
@@ -200,6 +198,11 @@ impl Scoring<'_> {
             + own_distance * own_distance
             + self.temporal_penalty(shapes, weights)
     }
+}
+
+/// True when `choice` gives shape `s` a weight.
+fn uses(choice: &Choice, s: u32) -> bool {
+    (0..4).any(|j| choice.weights[j] != 0.0 && choice.shapes[j] == s)
 }
 
 /// Tuning of the choice.
@@ -300,7 +303,9 @@ fn clean_weights(l: [f64; 4]) -> [f64; 4] {
     w
 }
 
-/// Chooses the local geometry of one bundle for `target`.
+/// Chooses the local geometry of one bundle for `target`. `index` is the tet index over
+/// `cloud`'s points (its tets' corners are cloud points; the nearest one is found from the
+/// cloud's distances).
 pub fn choose(
     index: &TetIndex,
     cloud: &BundleCloud,
@@ -353,30 +358,13 @@ pub fn choose(
         // the exact n-nearest search must enumerate every tet tied at a shared vertex and
         // costs ~10x more for the same choices in practice (docs/performance.md). A closest
         // point at a tet's vertex is that cloud point, scored below on its own.
-        // The nearest point, ties to the lowest index (d² ≥ 0 and not NaN for a finite
-        // target, so `<` orders as `project_around`'s total order does).
-        let mut nearest = 0;
-        for (p, &d2) in scratch.point_d2.iter().enumerate() {
-            if d2 < scratch.point_d2[nearest] {
-                nearest = p;
-            }
-        }
-        // The index is over the cloud's points; another index finds its own nearest point.
-        match index.points().len() == cloud.points.len() {
-            true => index.project_around_point(
-                target,
-                nearest,
-                params.projection_candidates,
-                &mut scratch.bounds,
-                &mut scratch.nearest,
-            ),
-            false => index.project_around(
-                target,
-                params.projection_candidates,
-                &mut scratch.bounds,
-                &mut scratch.nearest,
-            ),
-        }
+        index.project_around_point(
+            target,
+            first_nearest(scratch.point_d2.iter().copied()),
+            params.projection_candidates,
+            &mut scratch.bounds,
+            &mut scratch.nearest,
+        );
         let mut best = BestScores::new(params.alias_refine.max(1));
         for &(t, l, d) in &scratch.nearest {
             let tet = index.tets()[t as usize];

@@ -10,6 +10,8 @@ use crate::tets::{tet_inverse, Tet};
 
 mod nearest;
 
+pub(crate) use nearest::first_nearest;
+
 use nearest::Node;
 
 /// Queries with `eps` up to this use the grid; larger ones scan every tet (exact, O(#tets)).

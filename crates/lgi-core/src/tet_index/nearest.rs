@@ -185,15 +185,7 @@ impl TetIndex {
 
     /// The cloud point nearest to `p` (ties: lowest index); 0 for an empty cloud.
     fn nearest_point(&self, p: DVec3) -> usize {
-        (0..self.points.len())
-            .min_by(|&a, &b| {
-                let (da, db) = (
-                    self.points[a].distance_squared(p),
-                    self.points[b].distance_squared(p),
-                );
-                da.total_cmp(&db).then(a.cmp(&b))
-            })
-            .unwrap_or(0)
+        first_nearest(self.points.iter().map(|q| q.distance_squared(p)))
     }
 
     /// Appends to `out` the `n` tets nearest to `p` — by distance from `p` to the tet solid — as
@@ -350,6 +342,20 @@ impl TetIndex {
         self.nodes = nodes;
         self.bvh_items = items;
     }
+}
+
+/// The position of the first smallest of the squared distances `d2`, 0 when there are none:
+/// the cloud point nearest to a query, ties to the lowest index. Squared distances are ≥ 0
+/// (never −0), so `<` orders them as a total order would; a non-finite query, whose
+/// distances are NaN or infinite, gets 0 (and is not projected).
+pub(crate) fn first_nearest(d2: impl IntoIterator<Item = f64>) -> usize {
+    let mut best = (0, f64::INFINITY);
+    for (i, d) in d2.into_iter().enumerate() {
+        if d < best.1 {
+            best = (i, d);
+        }
+    }
+    best.0
 }
 
 /// A lower bound of the distance from `p` to the non-flat tet with corners `c`: the largest
