@@ -74,13 +74,16 @@ pub struct TetIndex {
     points: Vec<DVec3>,
     tets: Vec<Tet>,
     frames: Vec<BaryMap>,
-    /// Grid box and shape; `dims == [0; 3]` when no tet is usable.
-    lo: DVec3,
+    /// The grid (`dims == [0; 3]` when no tet is usable) and the top corner of its box.
+    grid: Grid,
     hi: DVec3,
-    dims: [u32; 3],
-    inv_cell: DVec3,
     cell_start: Vec<u32>,
     cell_items: Vec<u32>,
+    /// The cells listing more than [`DENSE`] tets (ascending), each split into
+    /// [`SPLIT`]³ sub-cells with lists of their own (CSR, [`SPLIT`]³ per dense cell).
+    dense: Vec<u32>,
+    sub_start: Vec<u32>,
+    sub_items: Vec<u32>,
     nodes: Vec<Node>,
     bvh_items: Vec<u32>,
     /// Scale of the cloud, for the rounding slack of nearest-tet pruning.
@@ -98,6 +101,82 @@ pub struct TetIndex {
 /// Fixed directions of the slab test (a Fibonacci sphere; opposite directions are redundant).
 const SLAB_DIRECTIONS: usize = 48;
 
+/// A cell listing more tets than this is split into sub-cells: near the neutral many small
+/// tets crowd into a few cells, and a query there tested ~200 tets to find one.
+const DENSE: usize = 48;
+/// Sub-cells per axis of a dense cell.
+const SPLIT: u32 = 4;
+/// The split cells' registrations stay within the grid's own divided by this.
+const SPLIT_BUDGET: usize = 2;
+
+/// A uniform grid over a box: `dims` cells of size `1 / inv_cell` from `lo`.
+#[derive(Debug, Clone, Copy)]
+struct Grid {
+    lo: DVec3,
+    dims: [u32; 3],
+    inv_cell: DVec3,
+}
+
+impl Grid {
+    const EMPTY: Grid = Grid {
+        lo: DVec3::ZERO,
+        dims: [0; 3],
+        inv_cell: DVec3::ZERO,
+    };
+
+    fn cell_coord(&self, x: f64, axis: usize) -> u32 {
+        // The cast truncates toward zero and saturates (negative and NaN to 0): `floor`
+        // then `max(0)` without the libm call. Then a clamp: monotone in x, so a tet's box
+        // and any point inside it always agree on the cells (this makes the grid exact).
+        (((x - self.lo[axis]) * self.inv_cell[axis]) as u32).min(self.dims[axis] - 1)
+    }
+
+    fn cell_of(&self, p: DVec3) -> [u32; 3] {
+        [
+            self.cell_coord(p.x, 0),
+            self.cell_coord(p.y, 1),
+            self.cell_coord(p.z, 2),
+        ]
+    }
+
+    fn linear(&self, c: [u32; 3]) -> usize {
+        (c[2] as usize * self.dims[1] as usize + c[1] as usize) * self.dims[0] as usize
+            + c[0] as usize
+    }
+
+    /// The cell of linear index `i`.
+    fn coords(&self, i: usize) -> [u32; 3] {
+        let (nx, ny) = (self.dims[0] as usize, self.dims[1] as usize);
+        [
+            (i % nx) as u32,
+            ((i / nx) % ny) as u32,
+            (i / (nx * ny)) as u32,
+        ]
+    }
+
+    fn num_cells(&self) -> usize {
+        self.dims.iter().map(|&d| d as usize).product()
+    }
+
+    fn cell_size(&self) -> DVec3 {
+        DVec3::new(
+            1.0 / self.inv_cell.x,
+            1.0 / self.inv_cell.y,
+            1.0 / self.inv_cell.z,
+        )
+    }
+
+    /// The grid of [`SPLIT`]³ sub-cells over cell `c`. A point the coarse grid puts in `c`
+    /// lies within rounding of the sub-grid's box, and the clamp puts it in a sub-cell.
+    fn split(&self, c: [u32; 3]) -> Grid {
+        Grid {
+            lo: self.lo + DVec3::new(c[0] as f64, c[1] as f64, c[2] as f64) * self.cell_size(),
+            dims: [SPLIT; 3],
+            inv_cell: self.inv_cell * SPLIT as f64,
+        }
+    }
+}
+
 impl TetIndex {
     /// Builds the index of `tets` over `points`.
     ///
@@ -105,12 +184,15 @@ impl TetIndex {
     /// in each cell of its box that is not wholly beyond one of its face planes. The (near-cubic)
     /// cell size is the finest of a geometric sequence that keeps at most 2¹⁸ cells and about 32
     /// registrations per tet (estimated on a sample of 512 tets); finer cells mean fewer tets
-    /// tested per query but more memory. Flat tets (singular barycentric matrix) are kept in
-    /// [`tets`](Self::tets) and in [`nearest`](Self::nearest), but never contain a point.
+    /// tested per query but more memory. The most crowded cells (over 48 tets) are then split
+    /// into 4³ sub-cells each, within half the grid's registrations again. Flat tets (singular
+    /// barycentric matrix) are kept in [`tets`](Self::tets) and in
+    /// [`nearest`](Self::nearest), but never contain a point.
     ///
     /// Cost: O(#tets × cells per tet box) time; memory ≈ 96 bytes per tet for the barycentric
     /// frames, 16 for the tet, 4 × 16 for the incidence lists (corners inline), ~60 for the
-    /// hierarchy and ~4 × 32 for the grid (about 7 MiB for 20,000 tets).
+    /// hierarchy and up to 1.5 × 4 × 32 for the grid and its split cells (about 8 MiB for
+    /// 20,000 tets).
     ///
     /// Errors: [`LgiError::Input`] when a tet refers to a missing point, a point is not finite,
     /// or there are 2²⁹ tets or more.
@@ -187,12 +269,13 @@ impl TetIndex {
             frames,
             incident_start,
             incident,
-            lo: DVec3::ZERO,
+            grid: Grid::EMPTY,
             hi: DVec3::ZERO,
-            dims: [0; 3],
-            inv_cell: DVec3::ZERO,
             cell_start: vec![0],
             cell_items: Vec::new(),
+            dense: Vec::new(),
+            sub_start: vec![0],
+            sub_items: Vec::new(),
             nodes: Vec::new(),
             bvh_items: Vec::new(),
             scale,
@@ -241,7 +324,7 @@ impl TetIndex {
     /// `eps = 1e-6`; the slack covers rounding for all but near-flat tets, quality ≲ 1e-8). A
     /// larger `eps` falls back to testing every tet (same answer, O(#tets)).
     pub fn query(&self, p: DVec3, eps: f64, out: &mut Vec<(u32, [f64; 4])>) {
-        if !p.is_finite() || self.dims[0] == 0 {
+        if !p.is_finite() || self.grid.dims[0] == 0 {
             return;
         }
         let test = |t: u32, out: &mut Vec<(u32, [f64; 4])>| {
@@ -257,7 +340,7 @@ impl TetIndex {
             (0..self.tets.len() as u32).for_each(|t| test(t, out));
             return;
         }
-        if p.cmplt(self.lo).any() || p.cmpgt(self.hi).any() {
+        if p.cmplt(self.grid.lo).any() || p.cmpgt(self.hi).any() {
             return;
         }
         // Outside the hull (with a margin beyond the reach of any `eps` the grid answers):
@@ -270,13 +353,21 @@ impl TetIndex {
         {
             return;
         }
-        let c = self.cell_of(p);
-        let cell = self.linear(c);
+        let c = self.grid.cell_of(p);
+        let cell = self.grid.linear(c);
         let (start, end) = (
             self.cell_start[cell] as usize,
             self.cell_start[cell + 1] as usize,
         );
-        let items = &self.cell_items[start..end];
+        let mut items = &self.cell_items[start..end];
+        if items.len() > DENSE {
+            if let Ok(k) = self.dense.binary_search(&(cell as u32)) {
+                let sub = self.grid.split(c);
+                let i = k * sub.num_cells() + sub.linear(sub.cell_of(p));
+                let (start, end) = (self.sub_start[i] as usize, self.sub_start[i + 1] as usize);
+                items = &self.sub_items[start..end];
+            }
+        }
         // The frames are scattered: ask for all of them before testing the first.
         for &t in items {
             prefetch(&self.frames[t as usize]);
@@ -294,6 +385,8 @@ impl TetIndex {
             + self.frames.capacity() * size_of::<BaryMap>()
             + self.cell_start.capacity() * size_of::<u32>()
             + self.cell_items.capacity() * size_of::<u32>()
+            + (self.dense.capacity() + self.sub_start.capacity() + self.sub_items.capacity())
+                * size_of::<u32>()
             + self.nodes.capacity() * size_of::<Node>()
             + self.bvh_items.capacity() * size_of::<u32>()
             + self.incident_start.capacity() * size_of::<u32>()
@@ -302,7 +395,7 @@ impl TetIndex {
 
     /// Grid shape `[nx, ny, nz]` (all 0 when no tet is usable): for diagnostics and benchmarks.
     pub fn grid_dims(&self) -> [u32; 3] {
-        self.dims
+        self.grid.dims
     }
 
     /// Total (cell, tet) registrations in the grid: for diagnostics and benchmarks.
@@ -310,24 +403,10 @@ impl TetIndex {
         self.cell_items.len()
     }
 
-    fn cell_coord(&self, x: f64, axis: usize) -> u32 {
-        // The cast truncates toward zero and saturates (negative and NaN to 0): `floor`
-        // then `max(0)` without the libm call. Then a clamp: monotone in x, so a tet's box
-        // and any point inside it always agree on the cells (this makes the grid exact).
-        (((x - self.lo[axis]) * self.inv_cell[axis]) as u32).min(self.dims[axis] - 1)
-    }
-
-    fn cell_of(&self, p: DVec3) -> [u32; 3] {
-        [
-            self.cell_coord(p.x, 0),
-            self.cell_coord(p.y, 1),
-            self.cell_coord(p.z, 2),
-        ]
-    }
-
-    fn linear(&self, c: [u32; 3]) -> usize {
-        (c[2] as usize * self.dims[1] as usize + c[1] as usize) * self.dims[0] as usize
-            + c[0] as usize
+    /// Dense cells split into sub-cells, and the (sub-cell, tet) registrations there: for
+    /// diagnostics and benchmarks.
+    pub fn grid_split(&self) -> (usize, usize) {
+        (self.dense.len(), self.sub_items.len())
     }
 
     fn build_grid(&mut self, boxes: &[(DVec3, DVec3)]) {
@@ -349,7 +428,7 @@ impl TetIndex {
         else {
             return;
         };
-        self.lo = lo;
+        self.grid.lo = lo;
         self.hi = hi;
         let extent = hi - lo;
         let valid: Vec<usize> = (0..grown.len()).filter(|&t| grown[t].is_some()).collect();
@@ -372,7 +451,9 @@ impl TetIndex {
             }
             self.set_dims(candidate);
             let mut registrations = 0usize;
-            self.for_each_registration(&grown, sample(), |_, _| registrations += 1);
+            for_each_registration(&self.grid, &self.frames, &grown, sample(), |_, _| {
+                registrations += 1
+            });
             if registrations as f64 > budget {
                 break;
             }
@@ -381,89 +462,137 @@ impl TetIndex {
         }
         self.set_dims(dims);
         let mut pairs = Vec::new();
-        self.for_each_registration(&grown, 0..grown.len(), |t, cell| pairs.push((cell, t)));
+        let all = 0..grown.len();
+        for_each_registration(&self.grid, &self.frames, &grown, all.clone(), |t, cell| {
+            pairs.push((cell, t))
+        });
         if u32::try_from(pairs.len()).is_err() {
             // Only for billions of tets: one cell keeps the offsets within u32.
             self.set_dims([1, 1, 1]);
             pairs.clear();
-            self.for_each_registration(&grown, 0..grown.len(), |t, cell| pairs.push((cell, t)));
+            for_each_registration(&self.grid, &self.frames, &grown, all, |t, cell| {
+                pairs.push((cell, t))
+            });
         }
-        // Counting sort by cell; pairs come in ascending tet order, so every cell's list is
-        // sorted and queries need no sort.
-        let cells = self.dims.iter().map(|&d| d as usize).product::<usize>();
-        let mut start = vec![0u32; cells + 1];
-        for &(cell, _) in &pairs {
-            start[cell + 1] += 1;
+        (self.cell_start, self.cell_items) = by_cell(self.grid.num_cells(), &pairs);
+        self.split_dense_cells(&grown);
+    }
+
+    /// Splits the cells listing more than [`DENSE`] tets into [`SPLIT`]³ sub-cells, each
+    /// listing the tets of its cell registered there as in [`build_grid`](Self::build_grid)
+    /// (the same exactness argument on the finer grid). The most crowded cells go first, until
+    /// the sub-cell lists would outgrow half the cells' own (the memory budget: ICT-300's
+    /// inside-tet queries then test half the tets they did, for 20 % more index memory).
+    fn split_dense_cells(&mut self, grown: &[Option<(DVec3, DVec3)>]) {
+        let grid = self.grid;
+        // (Never for usable tets, which have volume: a cell of no size has nothing to split.)
+        if !grid.inv_cell.cmpgt(DVec3::ZERO).all() || !grid.inv_cell.is_finite() {
+            return;
         }
-        for c in 0..cells {
-            start[c + 1] += start[c];
+        let count = |c: usize| (self.cell_start[c + 1] - self.cell_start[c]) as usize;
+        let mut crowded: Vec<usize> = (0..grid.num_cells())
+            .filter(|&c| count(c) > DENSE)
+            .collect();
+        crowded.sort_by_key(|&c| (std::cmp::Reverse(count(c)), c));
+        let mut budget = self.cell_items.len() / SPLIT_BUDGET;
+        let mut split = Vec::new();
+        let mut pairs = Vec::new();
+        for cell in crowded {
+            let sub = grid.split(grid.coords(cell));
+            let (start, end) = (self.cell_start[cell], self.cell_start[cell + 1]);
+            let tets = self.cell_items[start as usize..end as usize]
+                .iter()
+                .map(|&t| t as usize);
+            pairs.clear();
+            for_each_registration(&sub, &self.frames, grown, tets, |t, c| pairs.push((c, t)));
+            if pairs.len() > budget {
+                break;
+            }
+            budget -= pairs.len();
+            split.push((cell as u32, by_cell(sub.num_cells(), &pairs)));
         }
-        let mut fill = start.clone();
-        let mut items = vec![0u32; pairs.len()];
-        for &(cell, t) in &pairs {
-            items[fill[cell] as usize] = t;
-            fill[cell] += 1;
+        split.sort_unstable_by_key(|s| s.0);
+        for (cell, (sub_start, sub_items)) in split {
+            let base = self.sub_items.len() as u32;
+            self.sub_start
+                .extend(sub_start[1..].iter().map(|&s| base + s));
+            self.sub_items.extend_from_slice(&sub_items);
+            self.dense.push(cell);
         }
-        self.cell_start = start;
-        self.cell_items = items;
     }
 
     fn set_dims(&mut self, dims: [u32; 3]) {
-        let extent = self.hi - self.lo;
-        self.dims = dims;
-        self.inv_cell = DVec3::new(
+        let extent = self.hi - self.grid.lo;
+        self.grid.dims = dims;
+        self.grid.inv_cell = DVec3::new(
             cell_inverse(dims[0], extent.x),
             cell_inverse(dims[1], extent.y),
             cell_inverse(dims[2], extent.z),
         );
     }
+}
 
-    /// Calls `f(tet, cell)` for every cell a tet's eps-region may reach: the cells of its grown
-    /// box, minus those lying wholly beyond one of its face planes (by more than `BUILD_EPS`).
-    /// The plane test is what keeps thin tets out of most cells of their box.
-    fn for_each_registration(
-        &self,
-        grown: &[Option<(DVec3, DVec3)>],
-        tets: impl Iterator<Item = usize>,
-        mut f: impl FnMut(u32, usize),
-    ) {
-        let cell = DVec3::new(
-            1.0 / self.inv_cell.x,
-            1.0 / self.inv_cell.y,
-            1.0 / self.inv_cell.z,
-        );
-        // Half a cell, grown so rounding in `cell_of` never puts a point outside its cell's box.
-        let half = cell * (0.5 + 1e-9);
-        for t in tets {
-            let Some((lo, hi)) = grown[t] else { continue };
-            let frame = &self.frames[t];
-            let rows = [frame.inv.row(0), frame.inv.row(1), frame.inv.row(2)];
-            // |grad λ_i| · half: how much λ_i can rise from a cell's centre to its corners.
-            let reach = [
-                (rows[0] + rows[1] + rows[2]).abs().dot(half),
-                rows[0].abs().dot(half),
-                rows[1].abs().dot(half),
-                rows[2].abs().dot(half),
-            ];
-            let a = self.cell_of(lo);
-            let b = self.cell_of(hi);
-            // λ is affine: step it along x from each row's first centre instead of recomputing
-            // it per cell (the drift is ~1e-15, far inside the BUILD_EPS − FAST_EPS slack).
-            let dx = frame.inv * DVec3::new(cell.x, 0.0, 0.0);
-            let step = [-(dx.x + dx.y + dx.z), dx.x, dx.y, dx.z];
-            for z in a[2]..=b[2] {
-                for y in a[1]..=b[1] {
-                    let centre = self.lo
-                        + DVec3::new(a[0] as f64 + 0.5, y as f64 + 0.5, z as f64 + 0.5) * cell;
-                    let mut l = bary(frame, centre);
-                    let row = self.linear([a[0], y, z]);
-                    for x in a[0]..=b[0] {
-                        if (0..4).all(|i| l[i] + reach[i] >= -BUILD_EPS) {
-                            f(t as u32, row + (x - a[0]) as usize);
-                        }
-                        for i in 0..4 {
-                            l[i] += step[i];
-                        }
+/// CSR lists per cell of `(cell, tet)` pairs, by a counting sort: pairs come in ascending tet
+/// order, so every cell's list is sorted and queries need no sort.
+fn by_cell(cells: usize, pairs: &[(usize, u32)]) -> (Vec<u32>, Vec<u32>) {
+    let mut start = vec![0u32; cells + 1];
+    for &(cell, _) in pairs {
+        start[cell + 1] += 1;
+    }
+    for c in 0..cells {
+        start[c + 1] += start[c];
+    }
+    let mut fill = start.clone();
+    let mut items = vec![0u32; pairs.len()];
+    for &(cell, t) in pairs {
+        items[fill[cell] as usize] = t;
+        fill[cell] += 1;
+    }
+    (start, items)
+}
+
+/// Calls `f(tet, cell)` for every cell a tet's eps-region may reach: the cells of its grown
+/// box, minus those lying wholly beyond one of its face planes (by more than `BUILD_EPS`).
+/// The plane test is what keeps thin tets out of most cells of their box.
+fn for_each_registration(
+    grid: &Grid,
+    frames: &[BaryMap],
+    grown: &[Option<(DVec3, DVec3)>],
+    tets: impl Iterator<Item = usize>,
+    mut f: impl FnMut(u32, usize),
+) {
+    let cell = grid.cell_size();
+    // Half a cell, grown so rounding in `cell_of` never puts a point outside its cell's box.
+    let half = cell * (0.5 + 1e-9);
+    for t in tets {
+        let Some((lo, hi)) = grown[t] else { continue };
+        let frame = &frames[t];
+        let rows = [frame.inv.row(0), frame.inv.row(1), frame.inv.row(2)];
+        // |grad λ_i| · half: how much λ_i can rise from a cell's centre to its corners.
+        let reach = [
+            (rows[0] + rows[1] + rows[2]).abs().dot(half),
+            rows[0].abs().dot(half),
+            rows[1].abs().dot(half),
+            rows[2].abs().dot(half),
+        ];
+        let a = grid.cell_of(lo);
+        let b = grid.cell_of(hi);
+        // λ is affine: step it along x from each row's first centre instead of recomputing
+        // it per cell (the drift is ~1e-15, far inside the BUILD_EPS − FAST_EPS slack).
+        let dx = frame.inv * DVec3::new(cell.x, 0.0, 0.0);
+        let step = [-(dx.x + dx.y + dx.z), dx.x, dx.y, dx.z];
+        for z in a[2]..=b[2] {
+            for y in a[1]..=b[1] {
+                let centre =
+                    grid.lo + DVec3::new(a[0] as f64 + 0.5, y as f64 + 0.5, z as f64 + 0.5) * cell;
+                let mut l = bary(frame, centre);
+                let row = grid.linear([a[0], y, z]);
+                for x in a[0]..=b[0] {
+                    if (0..4).all(|i| l[i] + reach[i] >= -BUILD_EPS) {
+                        f(t as u32, row + (x - a[0]) as usize);
+                    }
+                    for i in 0..4 {
+                        l[i] += step[i];
                     }
                 }
             }

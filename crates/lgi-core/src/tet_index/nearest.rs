@@ -4,7 +4,7 @@
 
 use glam::DVec3;
 
-use super::{TetIndex, FLAT};
+use super::{Incident, TetIndex, FLAT};
 use crate::prefetch::prefetch;
 use crate::tets::closest_point_in_tet_with;
 
@@ -119,31 +119,8 @@ impl TetIndex {
         let (s, e) = (self.incident_start[v], self.incident_start[v + 1]);
         let o = self.points[v];
         let pv = p - o;
-        // The corner test's margin, squared: pv·e < −1e-9 |pv| |e| without square roots.
-        let margin2 = 1e-18 * pv.length_squared();
         let incident = &self.incident[s as usize..e as usize];
-        bounds.clear();
-        // Filter and bound from the inline corners, without loading the tets or their frames.
-        bounds.extend(incident.iter().enumerate().filter_map(|(i, inc)| {
-            let c = inc.others.map(|w| self.points[w as usize]);
-            // The closest point is certainly the corner itself when pv makes an obtuse angle,
-            // with margin, with every edge leaving it (pv lies in the tet's normal cone there);
-            // such tets are dropped (the corner is scored on its own), borderline ones kept.
-            let corner = (0..3).all(|j| {
-                let e = c[j] - o;
-                let d = pv.dot(e);
-                inc.others[j] as usize == v || (d < 0.0 && d * d > margin2 * e.length_squared())
-            });
-            if corner {
-                return None;
-            }
-            let lb = if inc.tag & FLAT != 0 {
-                0.0
-            } else {
-                plane_lower_bound([o, c[0], c[1], c[2]], p)
-            };
-            Some((lb, i as u32))
-        }));
+        self.bound_incident(incident, v, pv, bounds);
         // The n lowest bounds first (a tight n-th distance early), the rest in any order: a
         // tet is skipped only when its bound exceeds the n-th distance, which only shrinks.
         if bounds.len() > n {
@@ -180,6 +157,42 @@ impl TetIndex {
                 prefetch(&self.tets[t as usize]);
                 insert_nearest(out, base, n, (t, b, p.distance(q)));
             }
+        }
+    }
+
+    /// The tets of `incident` (those at cloud point `v`) whose closest point to `v + pv` may
+    /// not be `v` itself, each with a lower bound of its distance, into `bounds`: filtered and
+    /// bounded from the inline corners, without loading the tets or their frames.
+    fn bound_incident(
+        &self,
+        incident: &[Incident],
+        v: usize,
+        pv: DVec3,
+        bounds: &mut Vec<(f64, u32)>,
+    ) {
+        let o = self.points[v];
+        // The corner test's margin, squared: pv·e < −1e-9 |pv| |e| without square roots.
+        let margin2 = 1e-18 * pv.length_squared();
+        bounds.clear();
+        for (i, inc) in incident.iter().enumerate() {
+            let edge = |k: usize| self.points[inc.others[k] as usize] - o;
+            let e = [edge(0), edge(1), edge(2)];
+            // The closest point is certainly the corner itself when pv makes an obtuse angle,
+            // with margin, with every edge leaving it (pv lies in the tet's normal cone there);
+            // such tets are dropped (the corner is scored on its own), borderline ones kept.
+            let corner = (0..3).all(|j| {
+                let d = pv.dot(e[j]);
+                inc.others[j] as usize == v || (d < 0.0 && d * d > margin2 * e[j].length_squared())
+            });
+            if corner {
+                continue;
+            }
+            let lb = if inc.tag & FLAT != 0 {
+                0.0
+            } else {
+                plane_lower_bound(e, pv)
+            };
+            bounds.push((lb, i as u32));
         }
     }
 
@@ -358,22 +371,33 @@ pub(crate) fn first_nearest(d2: impl IntoIterator<Item = f64>) -> usize {
     best.0
 }
 
-/// A lower bound of the distance from `p` to the non-flat tet with corners `c`: the largest
-/// distance of `p` beyond one of its face planes (on the side away from the opposite corner).
-/// 0 for a point inside.
-fn plane_lower_bound(c: [DVec3; 4], p: DVec3) -> f64 {
-    const FACES: [[usize; 3]; 4] = [[1, 2, 3], [0, 2, 3], [0, 1, 3], [0, 1, 2]];
+/// A lower bound of the distance from `o + pv` to the non-flat tet with corners `o` and
+/// `o + e[j]`: the largest distance beyond one of its face planes (on the side away from the
+/// opposite corner); 0 for a point inside. Everything is relative to `o`: the three faces at
+/// `o` have normals `e[j] × e[j+1]`, the fourth their sum, and every face's normal meets its
+/// opposite corner with the same triple product `det` (the far face's at `−det`).
+pub(super) fn plane_lower_bound(e: [DVec3; 3], pv: DVec3) -> f64 {
+    let n = [e[0].cross(e[1]), e[1].cross(e[2]), e[2].cross(e[0])];
+    let det = e[2].dot(n[0]);
+    let far = n[0] + n[1] + n[2];
+    // Each face's offset along its normal, signed so that the opposite corner is at `det`:
+    // beyond the face (away from that corner) is the opposite sign.
+    let side = -det.signum();
+    let faces = [
+        (n[0], n[0].dot(pv)),
+        (n[1], n[1].dot(pv)),
+        (n[2], n[2].dot(pv)),
+        (far, det - far.dot(pv)),
+    ];
     // The largest squared distance beyond a face plane, with one square root at the end.
     let mut lb2 = 0.0f64;
-    for (opposite, [i, j, k]) in FACES.into_iter().enumerate() {
-        let n = (c[j] - c[i]).cross(c[k] - c[i]);
-        let beyond = n.dot(p - c[i]);
-        if beyond * n.dot(c[opposite] - c[i]) < 0.0 {
+    for (n, beyond) in faces {
+        if beyond * side > 0.0 {
             lb2 = lb2.max(beyond * beyond / n.length_squared());
         }
     }
     let lb = lb2.sqrt();
-    if lb.is_finite() {
+    if lb.is_finite() && det != 0.0 {
         lb
     } else {
         0.0

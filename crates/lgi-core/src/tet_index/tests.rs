@@ -348,3 +348,77 @@ proptest! {
         }
     }
 }
+
+proptest! {
+    #![proptest_config(config(256, 0x9e1d_0008))]
+
+    /// The face-plane bound of a tet seen from a corner never exceeds the exact distance to
+    /// the tet, and is that distance for a point straight out from a face's interior.
+    #[test]
+    fn plane_lower_bound_is_below_the_exact_distance_and_exact_off_a_face(
+        corners in prop::array::uniform4((-1.0f64..1.0, -1.0f64..1.0, -1.0f64..1.0)),
+        point in (-2.0f64..2.0, -2.0f64..2.0, -2.0f64..2.0),
+        corner in 0usize..4,
+        face in 0usize..4,
+        w in (0.05f64..1.0, 0.05f64..1.0, 0.05f64..1.0),
+        out in 0.01f64..1.0,
+    ) {
+        let c = corners.map(|(x, y, z)| DVec3::new(x, y, z));
+        prop_assume!(crate::tets::tet_quality(c) > 0.02);
+        // Seen from `corner`, the others in cyclic order (as the projection passes them).
+        let o = c[corner];
+        let e = [1, 2, 3].map(|k| c[(corner + k) % 4] - o);
+        let bound = |p: DVec3| nearest::plane_lower_bound(e, p - o);
+        let p = DVec3::new(point.0, point.1, point.2);
+        let (q, _) = closest_point_in_tet(p, c);
+        prop_assert!(bound(p) <= p.distance(q) * (1.0 + 1e-12) + 1e-15);
+        // A point `out` along the outward normal of a face, from inside that face.
+        let f: Vec<DVec3> = (0..4).filter(|&k| k != face).map(|k| c[k]).collect();
+        let s = w.0 + w.1 + w.2;
+        let inside = (f[0] * w.0 + f[1] * w.1 + f[2] * w.2) / s;
+        let mut n = (f[1] - f[0]).cross(f[2] - f[0]).normalize();
+        if n.dot(c[face] - f[0]) > 0.0 {
+            n = -n;
+        }
+        let away = inside + n * out;
+        prop_assert!((bound(away) - out).abs() <= 1e-9, "{} against {}", bound(away), out);
+    }
+}
+
+proptest! {
+    #![proptest_config(config(24, 0x9e1d_0009))]
+
+    /// A cloud crowded around one point (as bundle clouds are around the neutral) has cells
+    /// listing many tets; those are split, and the sub-cells answer exactly as a scan does.
+    #[test]
+    fn query_in_split_dense_cells_matches_brute_force(
+        seed in any::<u64>(),
+        crowd in 150usize..400,
+        k in 6usize..12,
+        samples in prop::collection::vec(
+            (any::<prop::sample::Index>(), 0u8..6, [0.01..1.0f64, 0.01..1.0, 0.01..1.0, 0.01..1.0],
+             (-0.02..0.02f64, -0.02..0.02f64, -0.02..0.02f64)),
+            20..60),
+    ) {
+        // A few points over the unit box, the crowd within 0.01 of its centre.
+        let centre = DVec3::splat(0.5);
+        let mut pts = lcg_points(40, seed);
+        pts.extend(lcg_points(crowd, seed ^ 0x5a5a).iter().map(|p| centre + (*p - centre) * 0.02));
+        let tets = generate_tets(&pts, &TetConfig { neighbours: k, ..TetConfig::default() });
+        let ix = TetIndex::new(pts, tets).unwrap();
+        prop_assert!(ix.grid_split().0 > 0, "no cell was split");
+        let mut out = Vec::new();
+        for (t, kind, w, (x, y, z)) in samples {
+            let p = if kind == 4 {
+                centre + DVec3::new(x, y, z)
+            } else {
+                special_point(&ix, t.index(ix.num_tets()), kind, w)
+            };
+            for eps in [0.0, 1e-9, 1e-7] {
+                out.clear();
+                ix.query(p, eps, &mut out);
+                prop_assert_eq!(&out, &brute_query(&ix, p, eps));
+            }
+        }
+    }
+}
