@@ -169,17 +169,22 @@ impl ShapeBasis {
 mod tests {
     use super::*;
 
+    /// `count` linearly independent shapes of `n` values: shape k is sin((k + k0) · i · step).
+    fn independent_shapes(count: usize, n: usize, k0: usize, step: f32) -> Vec<Vec<f32>> {
+        (0..count)
+            .map(|k| {
+                (0..n)
+                    .map(|i| ((i * (k + k0)) as f32 * step).sin())
+                    .collect()
+            })
+            .collect()
+    }
+
     #[test]
     fn combinations_are_found_and_mapped_weights_give_the_same_displacement() {
         // 3 independent shapes over 40 values, then an in-between and two pair sums.
         let n = 40;
-        let base: Vec<Vec<f32>> = (0..3)
-            .map(|k| {
-                (0..n)
-                    .map(|i| ((i * (k + 2)) as f32 * 0.37).sin())
-                    .collect()
-            })
-            .collect();
+        let base = independent_shapes(3, n, 2, 0.37);
         let mut shapes = base.clone();
         shapes.push(base[1].iter().map(|x| 0.5 * x).collect());
         shapes.push(base[0].iter().zip(&base[2]).map(|(a, b)| a + b).collect());
@@ -210,13 +215,7 @@ mod tests {
         // 71 blocks of coordinates (more than GROUPS, so a group sums several): 4 independent
         // shapes, then combinations of them.
         let n = 70 * BLOCK + 123;
-        let base: Vec<Vec<f32>> = (0..4)
-            .map(|k| {
-                (0..n)
-                    .map(|i| ((i * (k + 3)) as f32 * 0.011).sin())
-                    .collect()
-            })
-            .collect();
+        let base = independent_shapes(4, n, 3, 0.011);
         let mut shapes = base.clone();
         shapes.push(
             base[0]
