@@ -76,7 +76,7 @@ pub use choose::{
 pub use cloud::{build_cloud, BundleCloud};
 pub use correspond::{correspond, SurfaceIndex};
 pub use geom::{closest_point_on_triangle, interpolate3};
-pub use sew::{blend, blend_by_columns, BundleTargets, Pieces, SewPlan, BLEND_BLOCK};
+pub use sew::{blend, blend_by_columns, BundleTargets, Pieces, SewPlan, ShapeSpans, BLEND_BLOCK};
 pub use sibson::{Barrier, SibsonWeights};
 pub use sparse::{BlockColumns, PatchBuffers, PatchedWeights, SparseWeights, WeightRows};
 pub use tet_index::TetIndex;

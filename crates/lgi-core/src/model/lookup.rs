@@ -31,6 +31,7 @@ use crate::jaw::{JawParams, JawRig};
 use crate::magnitude::Extent;
 use crate::mesh::Mesh;
 use crate::prior::FitPrior;
+use crate::sew::{ShapeSpans, BLEND_BLOCK};
 use crate::tet_index::TetIndex;
 use crate::tets::Tet;
 use glam::DVec3;
@@ -79,6 +80,9 @@ pub struct Lookup {
     pub(super) prior: Option<FitPrior>,
     /// The basis the fit is sewn over (derived on first use, see [`Lookup::fit_basis`]).
     pub(super) basis: OnceLock<Option<ShapeBasis>>,
+    /// Where each of `data`'s shapes moves per blend block (derived on first use, see
+    /// [`Lookup::shape_spans`]).
+    pub(super) spans: OnceLock<ShapeSpans>,
 }
 
 impl Lookup {
@@ -93,6 +97,18 @@ impl Lookup {
                     .flatten()
             })
             .as_ref()
+    }
+
+    /// Where each of the bin's shapes moves, per block of the blend: what the global fit's
+    /// sewing reads ([`ShapeSpans`]); found on first use (one pass over the shapes).
+    pub(super) fn shape_spans(&self) -> &ShapeSpans {
+        self.spans.get_or_init(|| {
+            ShapeSpans::new(
+                self.data.displacements(),
+                self.data.num_vertices(),
+                BLEND_BLOCK,
+            )
+        })
     }
 
     /// The bin's reference pose (`None` when the model is unbinned).
@@ -233,6 +249,7 @@ impl Lookup {
         Ok(Lookup {
             prior,
             basis: OnceLock::new(),
+            spans: OnceLock::new(),
             reference: src.reference,
             members: src.members,
             local_of,

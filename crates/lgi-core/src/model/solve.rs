@@ -625,9 +625,12 @@ impl Model {
             )?),
             _ => None,
         };
+        // Spans only pay where a fit sums dozens of shapes over every block.
+        let spans = (!pieces.fit_shapes.is_empty()).then(|| lk.shape_spans());
         let bad = plan.sew_into(
             &lk.data.neutral().positions,
             lk.data.displacements(),
+            spans,
             pieces,
             jaw_map.as_ref(),
             &at,

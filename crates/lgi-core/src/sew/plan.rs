@@ -8,7 +8,7 @@
 //! natural neighbour of the row, and recomputes only rows that two missing bundles share.
 
 use super::memo::{Gone, GoneMap, RowMemo, Rows};
-use super::{BlendInput, BundleTargets, Pieces, ResidualPass};
+use super::{BlendInput, BundleTargets, Pieces, ResidualPass, ShapeSpans};
 use crate::dataset::Dataset;
 use crate::error::{LgiError, Result};
 use crate::geodesic::{is_detour, EdgeGraph, FieldCache};
@@ -101,17 +101,20 @@ impl SewPlan {
     /// blends `pieces` of the space whose neutral is `x0` with shapes `displacements` using
     /// this plan's weights, maps every vertex with `jaw` (from the pieces' pose to the frame's;
     /// `None`: no jaw motion) and corrects the bundles onto their targets `at`. Returns the
-    /// first vertex that is not finite, if any.
+    /// first vertex that is not finite, if any. `spans`, when given, are those of
+    /// `displacements`: the fit is then summed only where its shapes move (the same bits).
+    #[allow(clippy::too_many_arguments)]
     pub fn sew_into(
         &self,
         x0: &[DVec3],
         displacements: &[f32],
+        spans: Option<&ShapeSpans>,
         pieces: &Pieces,
         jaw: Option<&VertexMap<'_>>,
         at: &BundleTargets<'_>,
         out: &mut [DVec3],
     ) -> Option<usize> {
-        let input = BlendInput::new(x0, displacements, self.weights(), pieces);
+        let input = BlendInput::new(x0, displacements, self.weights(), pieces).with_spans(spans);
         let columns = self.columns();
         match jaw {
             Some(m) => self
