@@ -1,6 +1,6 @@
 //! Where each shape moves, per block of the blend: the first and last vertex of the block
 //! whose displacement is not zero. A dataset's shapes are mostly local (ICT-FaceKit's: 56 %
-//! of the vertex rows are exactly zero, 23 % of them outside every shape's span in its block),
+//! of a shape's vertex rows are exactly zero, and 23 % lie outside its span in their block),
 //! so the global fit's displacement, which sums dozens of shapes over every block, reads only
 //! the spans. Adding a zero changes no sum (the sums start at +0.0 and x + ±0.0 = x for every
 //! other x), so skipping them keeps the bits.
