@@ -152,13 +152,9 @@ impl LowRank {
                 k[i * r + i] = 1.0;
             }
             for &rho in &missing {
-                let x = &self.xt[rho * r..(rho + 1) * r];
-                for i in 0..r {
-                    for j in 0..r {
-                        k[i * r + j] -= x[i] * x[j];
-                    }
-                }
+                add_outer_upper(&mut k, r, -1.0, &self.xt[rho * r..(rho + 1) * r]);
             }
+            mirror_upper(&mut k, r);
             k
         });
         let atr = self.w_times(&c);
@@ -191,6 +187,28 @@ impl LowRank {
             }
         }
         out
+    }
+}
+
+/// `m += sign x xᵀ` on and above the diagonal of the row-major `r × r` matrix `m`, each entry
+/// as `(sign x_a) x_b` (sign ±1). The entry below, `(sign x_b) x_a`, has the same bits (± and
+/// the product commute exactly), so [`mirror_upper`] completes the full update at half the
+/// cost: a frame's fit makes ~250 such updates of rank 55 on ICT-300.
+fn add_outer_upper(m: &mut [f64], r: usize, sign: f64, x: &[f64]) {
+    for a in 0..r {
+        let s = sign * x[a];
+        for (e, xb) in m[a * r + a..(a + 1) * r].iter_mut().zip(&x[a..r]) {
+            *e += s * xb;
+        }
+    }
+}
+
+/// Copies the entries above the diagonal of the row-major `r × r` matrix `m` below it.
+fn mirror_upper(m: &mut [f64], r: usize) {
+    for a in 0..r {
+        for b in a + 1..r {
+            m[b * r + a] = m[a * r + b];
+        }
     }
 }
 
@@ -246,17 +264,17 @@ impl Frame<'_> {
         penalty: f64,
     ) -> Result<Vec<f64>> {
         let (r, lr) = (self.f.rank, self.f);
+        let mut changed = false;
         for (i, &c) in clamped.iter().enumerate() {
             if c != self.clamped[i] {
                 let sign = if c { 1.0 } else { -1.0 };
-                let wi = &lr.w[i * r..(i + 1) * r];
-                for a in 0..r {
-                    for b in 0..r {
-                        self.sum_clamped[a * r + b] += sign * wi[a] * wi[b];
-                    }
-                }
+                add_outer_upper(&mut self.sum_clamped, r, sign, &lr.w[i * r..(i + 1) * r]);
                 self.clamped[i] = c;
+                changed = true;
             }
+        }
+        if changed {
+            mirror_upper(&mut self.sum_clamped, r);
         }
         let (free, held) = (1.0 / l2, 1.0 / (l2 + penalty));
         let dinv = |i: usize| if self.clamped[i] { held } else { free };
@@ -317,5 +335,40 @@ impl Frame<'_> {
         let vkv: f64 = v.iter().zip(&kv).map(|(a, b)| a * b).sum();
         let wa: f64 = w.iter().zip(atr).map(|(a, b)| a * b).sum();
         (vkv - 2.0 * wa + self.tt).max(0.0)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+
+    proptest! {
+        /// Rank-one updates made on and above the diagonal and then mirrored equal the same
+        /// updates made on every entry, bit for bit (what the frame's K and clamped sum rely on).
+        #[test]
+        fn upper_updates_mirrored_equal_full_updates_bit_for_bit(
+            r in 1usize..40,
+            updates in proptest::collection::vec((proptest::bool::ANY, proptest::collection::vec(-3.0f64..3.0, 40)), 1..12),
+        ) {
+            let mut full = vec![0.0f64; r * r];
+            for i in 0..r {
+                full[i * r + i] = 1.0;
+            }
+            let mut upper = full.clone();
+            for (plus, x) in &updates {
+                let sign = if *plus { 1.0 } else { -1.0 };
+                let x = &x[..r];
+                for a in 0..r {
+                    for b in 0..r {
+                        full[a * r + b] += sign * x[a] * x[b];
+                    }
+                }
+                add_outer_upper(&mut upper, r, sign, x);
+            }
+            mirror_upper(&mut upper, r);
+            let bits = |m: &[f64]| m.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+            prop_assert_eq!(bits(&upper), bits(&full));
+        }
     }
 }
