@@ -702,6 +702,23 @@ mod tests {
         (next, x0, displacements)
     }
 
+    /// `nv` rows of random weights over `nb` bundles, each bundle in a row with probability
+    /// `density`.
+    fn random_weights(
+        next: &mut impl FnMut() -> f64,
+        nv: usize,
+        nb: usize,
+        density: f64,
+    ) -> SparseWeights {
+        let mut weights = SparseWeights::empty(nb);
+        for _ in 0..nv {
+            let cols: Vec<u32> = (0..nb as u32).filter(|_| next() < density).collect();
+            let vals: Vec<f64> = cols.iter().map(|_| next() + 0.01).collect();
+            weights.push_row(&cols, &vals);
+        }
+        weights
+    }
+
     proptest! {
         /// The blend read column by column within blocks equals the blend vertex by vertex bit
         /// for bit: partial last blocks, empty rows, bundles without a piece and bundles on
@@ -716,12 +733,7 @@ mod tests {
         ) {
             let (nb, ns) = (7usize, 5usize);
             let (mut next, x0, displacements) = random_shapes(seed, nv, ns);
-            let mut weights = SparseWeights::empty(nb);
-            for _ in 0..nv {
-                let cols: Vec<u32> = (0..nb as u32).filter(|_| next() < 0.4).collect();
-                let vals: Vec<f64> = cols.iter().map(|_| next() + 0.01).collect();
-                weights.push_row(&cols, &vals);
-            }
+            let weights = random_weights(&mut next, nv, nb, 0.4);
             let mut pieces = Pieces { start: vec![0], ..Pieces::default() };
             for b in 0..nb {
                 if b % 3 != 1 {
@@ -778,12 +790,7 @@ mod tests {
                     }
                 }
             }
-            let mut weights = SparseWeights::empty(nb);
-            for _ in 0..nv {
-                let cols: Vec<u32> = (0..nb as u32).filter(|_| next() < 0.5).collect();
-                let vals: Vec<f64> = cols.iter().map(|_| next() + 0.01).collect();
-                weights.push_row(&cols, &vals);
-            }
+            let weights = random_weights(&mut next, nv, nb, 0.5);
             let mut pieces = Pieces { start: vec![0], ..Pieces::default() };
             for b in 0..nb {
                 if b % 2 == 0 {
