@@ -202,6 +202,12 @@ mod tests {
             .collect()
     }
 
+    /// `Σ a_i b_i` summed plainly in f64, and `Σ |a_i b_i|` (the scale of its round-off).
+    fn plain_dot(a: &[f32], b: &[f32]) -> (f64, f64) {
+        let products = a.iter().zip(b).map(|(x, y)| *x as f64 * *y as f64);
+        (products.clone().sum(), products.map(f64::abs).sum())
+    }
+
     #[test]
     fn gram_matches_plain_sums_over_several_tiles_and_a_partial_block() {
         // 2.5 tiles of shapes, 3 blocks of coordinates and a partial one.
@@ -211,13 +217,7 @@ mod tests {
         let g = gram(&flat, s, n);
         for i in 0..s {
             for j in 0..s {
-                let (a, b) = (&shapes[i], &shapes[j]);
-                let plain: f64 = a.iter().zip(b).map(|(x, y)| *x as f64 * *y as f64).sum();
-                let scale: f64 = a
-                    .iter()
-                    .zip(b)
-                    .map(|(x, y)| (*x as f64 * *y as f64).abs())
-                    .sum();
+                let (plain, scale) = plain_dot(&shapes[i], &shapes[j]);
                 let expect = if j <= i { plain } else { 0.0 };
                 assert!(
                     (g[i * s + j] - expect).abs() <= 1e-12 * scale.max(1.0),
@@ -296,12 +296,7 @@ mod tests {
         }
         for len in [0, 5, 8, 13, 4096] {
             let (a, b) = (&shapes[0][..len], &shapes[4][..len]);
-            let plain: f64 = a.iter().zip(b).map(|(x, y)| *x as f64 * *y as f64).sum();
-            let scale: f64 = a
-                .iter()
-                .zip(b)
-                .map(|(x, y)| (*x as f64 * *y as f64).abs())
-                .sum();
+            let (plain, scale) = plain_dot(a, b);
             let wide = |r: &[f32]| r.iter().map(|&x| x as f64).collect::<Vec<_>>();
             assert!(
                 (dot(&wide(a), &wide(b)) - plain).abs() <= 1e-14 * scale.max(1.0),
