@@ -492,6 +492,11 @@ fn segment_blocks(p: DVec2, s: DVec2, a: DVec2, b: DVec2) -> bool {
     (d1 == 0.0 && strictly_between(p, s, a)) || (d2 == 0.0 && strictly_between(p, s, b))
 }
 
+/// Whether the closed boxes `(lo, hi)` `a` and `b` share no point (apart on some axis).
+fn boxes_apart(a: (DVec2, DVec2), b: (DVec2, DVec2)) -> bool {
+    a.1.cmplt(b.0).any() || a.0.cmpgt(b.1).any()
+}
+
 /// Per-worker "already tested" marks, so that a barrier spanning several grid cells is tested
 /// once per sight segment.
 struct VisitStamps {
@@ -620,7 +625,7 @@ impl BarrierGrid {
             return false;
         }
         let (lo, hi) = (p.min(s), p.max(s));
-        if hi.x < self.lo.x || hi.y < self.lo.y || lo.x > self.hi.x || lo.y > self.hi.y {
+        if boxes_apart((lo, hi), (self.lo, self.hi)) {
             return false;
         }
         visit.next_epoch();
@@ -638,8 +643,7 @@ impl BarrierGrid {
                     let [a, b] = self.segs[k];
                     // Segments whose boxes are apart cannot meet: skips the exact predicates
                     // for most of the barriers a long sight segment's cells list.
-                    let apart = a.max(b).cmplt(lo).any() || a.min(b).cmpgt(hi).any();
-                    if !apart && segment_blocks(p, s, a, b) {
+                    if !boxes_apart((lo, hi), (a.min(b), a.max(b))) && segment_blocks(p, s, a, b) {
                         return true;
                     }
                 }
