@@ -62,6 +62,14 @@ def load_workload(shapes: int = ICT_SHAPES) -> tuple[str, Any, np.ndarray]:
     return name, data, np.asarray(s.markers_rest)
 
 
+def load_base_dataset() -> Any | None:
+    """ICT-FaceKit's own shapes (57, with jawOpen), or None where the data is absent."""
+    from lgi import ict
+
+    folder = ict.find(os.environ.get(ict.ENV), start=ROOT)
+    return None if folder is None else ict.load_dataset(folder)
+
+
 def make_frames(model: Any, data: Any, n: int, seed: int = SEED) -> np.ndarray:
     """Bundle positions of random convex combinations of 1-4 shapes, plus marker noise."""
     rng = np.random.default_rng(seed)
