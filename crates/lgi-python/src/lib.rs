@@ -9,6 +9,8 @@ mod dataset;
 mod error;
 mod jaw;
 mod model;
+mod result;
+mod solve_args;
 mod threads;
 
 use pyo3::prelude::*;
@@ -25,8 +27,9 @@ fn _lgi(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<config::BuildConfig>()?;
     m.add_class::<jaw::JawRig>()?;
     m.add_class::<model::Model>()?;
-    m.add_class::<model::SolveOutput>()?;
-    m.add_class::<model::SolveState>()?;
+    m.add_class::<result::SolveResult>()?;
+    m.add_class::<result::Choices>()?;
+    m.add_class::<result::SolveState>()?;
     m.add_class::<baselines::RbfInterpolator>()?;
     m.add_class::<baselines::BlendshapeSolver>()?;
     m.add_function(wrap_pyfunction!(baselines::check_marker_frames, m)?)?;
