@@ -281,9 +281,10 @@ class Model:
         weights) and refine it to the pose whose jaw-unskinned markers the dataset explains
         best (Gauss-Newton in the core); `"track"` fits the markers the jaw carries rigidly
         (a Huber-robust fit per frame from the previous frame's pose, averaged over 5 frames;
-        biased where lips and chin move with other shapes); an (F, 3) array gives the poses; None solves at the rest pose. Without a rig, `"auto"` is None.
-        The poses used are in `result.jaw_theta`; with jaw bins (`Model.build(jaw_bins=...)`)
-        the bin each frame used is in `result.jaw_bin`.
+        biased where lips and chin move with other shapes); an (F, 3) array gives the poses;
+        None solves at the rest pose. Without a rig, `"auto"` is None. The poses used are in
+        `result.jaw_theta`; with jaw bins (`Model.build(jaw_bins=...)`) the bin each frame
+        used is in `result.jaw_bin`.
 
         `smooth_window` > 1 averages each marker's shape weights over that many frames
         (centred) before sewing, in the jaw-unskinned space so jaw motion is kept; markers are

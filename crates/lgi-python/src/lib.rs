@@ -19,8 +19,8 @@ use pyo3::prelude::*;
 #[pymodule]
 fn _lgi(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
-    // The global fit's ridge and box penalty (relative to the mean squared column norm), for
-    // the Python side's fits of the same kind (jaw poses, the blendshape baseline's defaults).
+    // The global fit's ridge and box penalty (relative to the mean squared column norm): the
+    // blendshape baseline's defaults on the Python side.
     m.add("FIT_L2", lgi_core::FIT_L2)?;
     m.add("FIT_PENALTY", lgi_core::FIT_PENALTY)?;
     m.add_class::<dataset::Dataset>()?;
