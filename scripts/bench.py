@@ -165,7 +165,7 @@ def worker(args: argparse.Namespace) -> dict[str, Any]:
     out["solve_out_ms_median"] = float(np.median(per_warm))
     out["solve_out_ms_p95"] = float(np.percentile(per_warm, 95))
     out["frames"] = len(frames)
-    out["projected_fraction"] = float(np.asarray(res.choice_projected).mean())
+    out["projected_fraction"] = float(np.asarray(res.choices.projected).mean())
     out["peak_rss_mib"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
     # Messy capture, after the RSS reading (its result would add to the peak): 2 % and 10 %
     # of the markers missing, a fresh set on every one of DROPOUT_FRAMES frames (the take's
@@ -248,8 +248,8 @@ def worker(args: argparse.Namespace) -> dict[str, Any]:
     }
     x0 = data.neutral
     shapes0 = np.concatenate([np.zeros((1, *x0.shape), np.float32), data.shapes])
-    ch_s = np.asarray(res.choice_shapes, dtype=np.int64)
-    ch_w = np.asarray(res.choice_weights, dtype=np.float64)
+    ch_s = np.asarray(res.choices.shapes, dtype=np.int64)
+    ch_w = np.asarray(res.choices.weights, dtype=np.float64)
     nref = min(len(frames), 20 if args.quick else 50)
     times = []
     touched = []

@@ -131,7 +131,7 @@ def test_exact_solve_with_the_fit_candidate_interpolates_every_marker(sample_mod
     assert paper.fit_weights is not None
     assert model.solve(s.performance[:5], jaw=None, quiet=True).fit_weights is None
     # The compiled model's own default is the same rule (bench.py and pipelines call it).
-    assert not model.core.solve(s.performance[:5]).choice_fit.any()
+    assert not model.core.solve(s.performance[:5]).choices.fit.any()
     assert res.fit_weights is not None and np.isfinite(res.fit_weights).all()
     assert res.bundle_residuals.max() <= 1e-6 * model.diagonal
     assert res.marker_corrections is not None and not res.marker_corrections.any()

@@ -1,6 +1,7 @@
 """Jaw rig tooling (lgi.jaw): the core's skinning against the numpy oracle, exact unskinning,
-rig and theta estimation from synthetic and sample shapes, tracking on the sample performance,
-and the ICT-FaceKit jaw (skipped when the shared data is absent)."""
+the core's pose fit (`JawRig.fit_pose`), rig and theta estimation from synthetic and sample
+shapes, the model's tracked pose on the sample performance, and the ICT-FaceKit jaw (skipped
+when the shared data is absent)."""
 
 from __future__ import annotations
 
@@ -189,12 +190,30 @@ def test_estimate_rig_with_given_rigid_vertices_and_tilted_axes_recovers_the_fra
     assert np.abs(theta - truth).max() <= 1e-6
 
 
-def test_fit_theta_recovers_theta_from_partially_weighted_points() -> None:
+def test_fit_pose_recovers_theta_from_partially_weighted_points() -> None:
+    for frame in (None, _rodrigues([0.3, -0.5, 1.0], 0.15)):
+        rig, x0, *_ = _synthetic(frame=frame)
+        th = np.array([0.3, 0.08, -0.4])
+        target = rig.skin(x0, th)
+        got = rig.fit_pose(x0[150:300], target[150:300], rig.weights[150:300])
+        np.testing.assert_allclose(got, th, atol=1e-10)
+        # From a start near the answer, robustly: the same pose.
+        near = rig.fit_pose(
+            x0[150:300], target[150:300], rig.weights[150:300], theta0=th + 0.01, huber=1.345
+        )
+        np.testing.assert_allclose(near, th, atol=1e-10)
+
+
+def test_fit_pose_checks_its_arguments() -> None:
     rig, x0, *_ = _synthetic()
-    th = np.array([0.3, 0.08, -0.4])
-    target = rig.skin(x0, th)
-    got = jaw.fit_theta(rig, x0[150:300], target[150:300], rig.weights[150:300])
-    np.testing.assert_allclose(got, th, atol=1e-10)
+    with pytest.raises(InputError, match="targets"):
+        rig.fit_pose(x0[:10], x0[:9])
+    with pytest.raises(InputError, match="weights"):
+        rig.fit_pose(x0[:10], x0[:10], np.ones(3))
+    with pytest.raises(InputError, match="theta"):
+        rig.fit_pose(x0[:10], x0[:10], theta0=[4.0, 0.0, 0.0])
+    with pytest.raises(InputError, match="points"):
+        rig.fit_pose(x0[:10, :2], x0[:10, :2])
 
 
 @pytest.fixture(scope="module")
@@ -229,44 +248,28 @@ def test_estimate_rig_on_the_sample_matches_its_true_jaw(sample) -> None:
     assert np.all(rep.explained[jaw_shapes] > 0.999999)
 
 
-def test_track_jaw_follows_the_sample_performance(sample) -> None:
+def test_tracked_pose_follows_the_sample_performance(sample) -> None:
+    # The tracking itself (exactness on pure jaw frames, gaps, the moving average) is tested
+    # in the core (model/pose.rs); here the whole model on the sample's performance.
+    import lgi
+    from lgi.dataset import sample_dataset
+
     s = sample
-    rig, _ = jaw.estimate_rig(s.neutral, s.shapes, s.names, triangles=s.triangles)
-    bw = rig.bundle_weights(s.triangles, s.marker_triangles, s.marker_barycentrics)
-    errs = {}
-    for window in (1, 5):
-        theta = jaw.track_jaw(rig, s.markers_rest, bw, s.performance, smooth_window=window)
-        e = np.abs(theta - s.jaw_theta)
-        errs[window] = e
-        print(
-            f"\nsample tracking (window {window}, {int((bw > 0.5).sum())} jaw bundles): "
-            f"open mean {_deg(e[:, 0]).mean():.3f} max {_deg(e[:, 0]).max():.3f} deg, "
-            f"lateral mean {_deg(e[:, 1]).mean():.3f} max {_deg(e[:, 1]).max():.3f} deg, "
-            f"forward mean {e[:, 2].mean():.4f} max {e[:, 2].max():.4f} cm"
-        )
-    for e in errs.values():
-        assert _deg(e[:, :2]).mean() < 0.5
-        assert _deg(e[:, :2]).max() < 3.0
-        assert e[:, 2].max() < 0.2
-
-
-def test_track_jaw_is_exact_on_clean_pure_jaw_frames_with_dropouts() -> None:
-    rig, x0, *_ = _synthetic()
-    rest = x0[100:250]
-    bw = rig.weights[100:250]
-    t = np.linspace(0, 1, 30)
-    truth = np.stack([0.4 * np.sin(3 * t), 0.1 * np.cos(2 * t), 0.3 * t], axis=1)
-    frames = np.stack([rig.skin(rest, th, bw) for th in truth])
-    frames[3, :, :] = np.nan  # a frame with every bundle lost
-    frames[5:9, ::3] = np.nan
-    theta = jaw.track_jaw(rig, rest, bw, frames, smooth_window=1)
-    ok = np.ones(30, dtype=bool)
-    ok[3] = False
-    np.testing.assert_allclose(theta[ok], truth[ok], atol=1e-9)
-    np.testing.assert_allclose(theta[3], 0.5 * (truth[2] + truth[4]), atol=1e-9)
-    smoothed = jaw.track_jaw(rig, rest, bw, frames, smooth_window=5)
-    np.testing.assert_allclose(smoothed[0], theta[0], atol=1e-12)  # the window shrinks at ends
-    np.testing.assert_allclose(smoothed[10], theta[8:13].mean(axis=0), atol=1e-12)
+    rig, theta = jaw.estimate_rig(s.neutral, s.shapes, s.names, triangles=s.triangles)
+    model = lgi.Model.build(sample_dataset(s), s.markers_rest, jaw=rig, shape_theta=theta)
+    res = model.solve(s.performance, jaw="track", quiet=True)
+    assert res.jaw_theta is not None
+    e = np.abs(res.jaw_theta - s.jaw_theta)
+    bw = model.core.jaw()["bundle_weights"]  # type: ignore[index]
+    print(
+        f"\nsample tracking ({int((bw > 0.5).sum())} jaw bundles): "
+        f"open mean {_deg(e[:, 0]).mean():.3f} max {_deg(e[:, 0]).max():.3f} deg, "
+        f"lateral mean {_deg(e[:, 1]).mean():.3f} max {_deg(e[:, 1]).max():.3f} deg, "
+        f"forward mean {e[:, 2].mean():.4f} max {e[:, 2].max():.4f} cm"
+    )
+    assert _deg(e[:, :2]).mean() < 0.5
+    assert _deg(e[:, :2]).max() < 3.0
+    assert e[:, 2].max() < 0.2
 
 
 # --------------------------------------------------------------------------------------------

@@ -37,7 +37,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let mut messy = || with_dropouts(&clean, fraction, &mut rng);
     let mut solve = |frames: &[Vec<DVec3>]| -> Result<(f64, f64), lgi_core::LgiError> {
         let (t, c) = (Instant::now(), cpu_seconds());
-        let mut run = || model.solve_sequence_with(frames, None, &options, &mut out, |_| {});
+        let mut run = || model.solve(frames, &options, None, &mut out, |_| {});
         match outside {
             true => run()?,
             false => rayon::scope(|_| run())?,

@@ -3,7 +3,7 @@
 //! compare two builds side by side: `cargo run --release -p lgi-benches --example stage_times`.
 
 use glam::DVec3;
-use lgi_benches::{build_model, load_workload, make_frames};
+use lgi_benches::{build_model, load_workload, make_frames, solve_frame};
 use lgi_core::{blend, blend_by_columns, FrameState, Pieces, Scratch, BLEND_BLOCK};
 use std::hint::black_box;
 use std::time::Instant;
@@ -40,14 +40,14 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         let t = Instant::now();
         let mut state: Option<FrameState> = None;
         for targets in &frames {
-            let frame = model.solve_frame(targets, state.as_ref(), None)?;
+            let info = solve_frame(&model, targets, state.as_ref(), &mut verts)?;
             if pieces.len() < FRAMES {
-                pieces.push(Pieces::from_choices(&frame.info.choices));
+                pieces.push(Pieces::from_choices(&info.choices));
             }
-            let frame = black_box(frame);
+            let info = black_box(info);
             state = Some(FrameState {
-                choices: frame.info.choices,
-                bin: Some(frame.info.bin),
+                choices: info.choices,
+                bin: Some(info.bin),
             });
         }
         solve_best = solve_best.min(t.elapsed().as_secs_f64() / FRAMES as f64);

@@ -3,7 +3,9 @@
 //! present; otherwise a procedural face-like surface so `cargo bench` runs on a fresh clone.
 
 use glam::{DVec2, DVec3};
-use lgi_core::{BuildConfig, Dataset, LgiError, Mesh, Model, Result};
+use lgi_core::{
+    BuildConfig, Dataset, FrameInfo, FrameState, LgiError, Mesh, Model, Result, SolveOptions,
+};
 use std::path::{Path, PathBuf};
 
 /// Frames in the default workload.
@@ -220,6 +222,22 @@ pub fn procedural() -> Result<Workload> {
 /// Builds the model with the default configuration.
 pub fn build_model(w: &Workload) -> Result<Model> {
     Model::build(&w.dataset, &w.markers, &BuildConfig::default())
+}
+
+/// One frame solved the paper's way ([`SolveOptions::default`]) after `previous` (a temporal
+/// solve's state), its vertices into `out` (V): what a frame-by-frame caller of
+/// [`Model::solve`] does.
+pub fn solve_frame(
+    model: &Model,
+    targets: &[DVec3],
+    previous: Option<&FrameState>,
+    out: &mut [DVec3],
+) -> Result<FrameInfo> {
+    let frames = [targets.to_vec()];
+    let mut infos = model.solve(&frames, &SolveOptions::default(), previous, out, |_| {})?;
+    infos
+        .pop()
+        .ok_or_else(|| LgiError::Input("a one-frame solve returned no frame".into()))
 }
 
 /// `n` frames: bundle positions of seeded random convex combinations of 1–4 dataset shapes,

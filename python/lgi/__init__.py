@@ -5,7 +5,14 @@ shapes; the pieces are sewn so that the surface passes exactly through every mar
 """
 
 from lgi import camera, export, jaw, rig, rig_export, stabilize, takes
-from lgi._lgi import Dataset, __version__, get_num_threads, set_num_threads
+from lgi._lgi import (
+    Choices,
+    Dataset,
+    SolveResult,
+    __version__,
+    get_num_threads,
+    set_num_threads,
+)
 from lgi.errors import (
     DatasetError,
     DatasetFileError,
@@ -16,7 +23,7 @@ from lgi.errors import (
     MarkerError,
     ModelFormatError,
 )
-from lgi.model import BuildConfig, Choices, Model, SolveResult, estimate_marker_noise
+from lgi.model import BuildConfig, Model, estimate_marker_noise
 
 __all__ = [
     "BuildConfig",

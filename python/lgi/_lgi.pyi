@@ -15,11 +15,12 @@ __all__ = [
     "MAX_THREADS",
     "BlendshapeSolver",
     "BuildConfig",
+    "Choices",
     "Dataset",
     "JawRig",
     "Model",
     "RbfInterpolator",
-    "SolveOutput",
+    "SolveResult",
     "SolveState",
     "__version__",
     "check_count",
@@ -191,39 +192,114 @@ class JawRig:
         self, points: ArrayLike, theta: ArrayLike, weights: ArrayLike | None = None
     ) -> NDArray[np.float64]:
         """The exact inverse of ``skin``."""
+    def fit_pose(
+        self,
+        points: ArrayLike,
+        targets: ArrayLike,
+        weights: ArrayLike | None = None,
+        theta0: ArrayLike | None = None,
+        huber: float | None = None,
+        iterations: int = 50,
+    ) -> NDArray[np.float64]:
+        """The pose (3,) whose skinning carries ``points`` (N, 3) onto ``targets`` (N, 3), by
+        Gauss-Newton from ``theta0`` (None: rest); ``weights`` (N,) are the points' jaw weights
+        (None: 1, a rigid fit); ``huber`` (e.g. 1.345) reweighs outliers (IRLS)."""
 
 @final
-class SolveOutput:
-    """What ``Model.solve`` returns (``lgi.Model.solve`` turns it into ``lgi.SolveResult``)."""
+class Choices:
+    """Per frame and bundle: the local geometry each bundle chose."""
 
+    def __new__(
+        cls,
+        shapes: NDArray[np.int64],
+        weights: NDArray[np.float64],
+        tets: NDArray[np.int64],
+        projected: NDArray[np.bool_],
+        fit: NDArray[np.bool_] | None = None,
+    ) -> Choices: ...
     @property
-    def vertices(self) -> NDArray[np.float64]: ...
+    def shapes(self) -> NDArray[np.int64]:
+        """(F, B, 4) dataset shape indices; -1 is the neutral (or an unused slot)."""
     @property
-    def bundle_residuals(self) -> NDArray[np.float64]: ...
+    def weights(self) -> NDArray[np.float64]:
+        """(F, B, 4) convex weights of `shapes` (all 0 for a missing bundle)."""
     @property
-    def bundle_positions(self) -> NDArray[np.float64]: ...
+    def tets(self) -> NDArray[np.int64]:
+        """(F, B) tet index in the bundle's index, -1 when none was used."""
     @property
-    def choice_shapes(self) -> NDArray[np.int64]: ...
+    def projected(self) -> NDArray[np.bool_]:
+        """(F, B) True when the marker was outside every tet and was projected."""
     @property
-    def choice_weights(self) -> NDArray[np.float64]: ...
+    def fit(self) -> NDArray[np.bool_] | None:
+        """(F, B) True where the bundle took the frame's global blendshape fit instead of a tet
+        (its `shapes`/`weights` are then unused; the fit is `SolveResult.fit_weights`)."""
     @property
-    def choice_tets(self) -> NDArray[np.int64]: ...
+    def inside(self) -> NDArray[np.bool_]:
+        """(F, B) True when the marker was inside a tet (interpolated exactly)."""
+    def __reduce__(
+        self,
+    ) -> tuple[
+        type[Choices],
+        tuple[
+            NDArray[np.int64],
+            NDArray[np.float64],
+            NDArray[np.int64],
+            NDArray[np.bool_],
+            NDArray[np.bool_] | None,
+        ],
+    ]: ...
+
+@final
+class SolveResult:
+    """Output of `Model.solve`."""
+
+    def __new__(
+        cls,
+        vertices: NDArray[np.float64],
+        bundle_residuals: NDArray[np.float64],
+        bundle_positions: NDArray[np.float64],
+        missing: NDArray[np.bool_],
+        choices: Choices,
+        jaw_theta: NDArray[np.float64] | None = None,
+        jaw_bin: NDArray[np.int64] | None = None,
+        marker_corrections: NDArray[np.float64] | None = None,
+        fit_weights: NDArray[np.float64] | None = None,
+        state: SolveState | None = None,
+    ) -> SolveResult: ...
     @property
-    def choice_projected(self) -> NDArray[np.bool_]: ...
+    def vertices(self) -> NDArray[np.float64]:
+        """(F, V, 3) reconstructed meshes."""
     @property
-    def missing(self) -> NDArray[np.bool_]: ...
+    def bundle_residuals(self) -> NDArray[np.float64]:
+        """(F, B) distance from each marker to the reconstructed surface (0 where missing)."""
     @property
-    def jaw_bin(self) -> NDArray[np.int64]: ...
+    def bundle_positions(self) -> NDArray[np.float64]:
+        """(F, B, 3) the markers' surface positions on the result (estimates where missing)."""
     @property
-    def choice_fit(self) -> NDArray[np.bool_]: ...
+    def missing(self) -> NDArray[np.bool_]:
+        """(F, B) markers that were NaN in the input."""
     @property
-    def marker_corrections(self) -> NDArray[np.float64]: ...
+    def choices(self) -> Choices: ...
     @property
-    def fit_weights(self) -> NDArray[np.float64] | None: ...
+    def jaw_theta(self) -> NDArray[np.float64] | None:
+        """(F, 3) jaw poses used (open, lateral, forward), None when solved without a jaw."""
     @property
-    def jaw_theta(self) -> NDArray[np.float64] | None: ...
+    def jaw_bin(self) -> NDArray[np.int64] | None:
+        """(F,) jaw-opening bin each frame was looked up in (0 for an unbinned jaw model), None
+        when solved without a jaw."""
     @property
-    def state(self) -> SolveState | None: ...
+    def marker_corrections(self) -> NDArray[np.float64] | None:
+        """(F, B) how far noise-aware solving (`marker_noise=`) moved each marker before the
+        surface interpolated it (data units; 0 when exact)."""
+    @property
+    def fit_weights(self) -> NDArray[np.float64] | None:
+        """(F, S) each frame's global blendshape fit; None when no fit was made (`fit` off, or a
+        dataset without shapes)."""
+    @property
+    def state(self) -> SolveState | None:
+        """What the chunk after a temporal solve needs to continue it (`solve_iter` passes it
+        on); None for no frames, and after unpickling (a pickled result keeps its arrays)."""
+    def __reduce__(self) -> tuple[type[SolveResult], tuple[object, ...]]: ...
 
 @final
 class SolveState:
@@ -310,18 +386,17 @@ class Model:
         frames: ArrayLike,
         progress: Callable[[int], object] | None = None,
         temporal: bool = True,
-        jaw_theta: ArrayLike | None = None,
+        jaw: str | ArrayLike | None = None,
         smooth_window: int = 0,
         out: NDArray[np.float64] | None = None,
         fit: bool | None = None,
         marker_noise: float | None = None,
-        refine_jaw: bool = False,
         previous: SolveState | None = None,
-    ) -> SolveOutput:
-        """Solves (F, B, 3) frames (vertices into `out` if given); ``fit`` offers the global
-        fit as a candidate (None: exactly when ``marker_noise`` is given), ``marker_noise``
-        (data units) solves noise-aware, ``refine_jaw`` refines ``jaw_theta`` per frame,
-        ``previous`` (a temporal solve's ``state``) continues that solve."""
+    ) -> SolveResult:
+        """Solves (F, B, 3) frames (vertices into `out` if given); ``jaw`` is ``"auto"``,
+        ``"fit"``, ``"track"``, (F, 3) poses or None (rest); ``fit`` offers the global fit as a
+        candidate (None: exactly when ``marker_noise`` is given), ``marker_noise`` (data units)
+        solves noise-aware, ``previous`` (a temporal solve's ``state``) continues that solve."""
     def bundle_positions(self, meshes: ArrayLike) -> NDArray[np.float64]:
         """(F, V, 3) meshes -> (F, B, 3) bundle surface positions."""
     def bundle_stats(self) -> _BundleStats:

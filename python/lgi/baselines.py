@@ -27,9 +27,9 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from lgi import _lgi
-from lgi._lgi import Dataset
+from lgi._lgi import Choices, Dataset
 from lgi.errors import InputError
-from lgi.model import BuildConfig, Choices, Model, SolveResult
+from lgi.model import BuildConfig, Model, SolveResult
 
 F64 = NDArray[np.float64]
 

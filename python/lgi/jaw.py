@@ -1,6 +1,7 @@
-"""Jaw rig tooling: rig estimation from a dataset's jaw shapes, jaw pose (theta) fitting and
-per-frame jaw tracking from bundles. The skinning itself (two bones: skull fixed, jaw rigid about
-a pivot) is the Rust core's, through `lgi._lgi.JawRig`, which `JawRig` extends.
+"""Jaw rig tooling: the rig's estimation from a dataset's jaw shapes (offline, at build). The
+skinning itself (two bones: skull fixed, jaw rigid about a pivot) and the pose fit are the Rust
+core's, through `lgi._lgi.JawRig` (which `JawRig` extends); each frame's pose in a solve is a
+core stage too (`Model.solve(jaw=...)`).
 
 The conventions are the core's (`lgi_core::jaw`): theta = (open angle rad, lateral angle rad,
 forward translation) maps p to
@@ -10,7 +11,7 @@ forward translation) maps p to
 
 with F the rig's `frame` (identity by default). A vertex with jaw weight w is skinned to
 p + w (T(theta)(p) - p) (linear blend skinning, Eq. 2 of the paper); `unskin` inverts that
-blended affine map exactly. `fit_theta` differentiates R(theta) here, for its Jacobian.
+blended affine map exactly, and `fit_pose` fits theta to points by Gauss-Newton.
 """
 
 from __future__ import annotations
@@ -32,40 +33,8 @@ __all__ = [
     "RigReport",
     "estimate_rig",
     "fit_rigid",
-    "fit_theta",
     "rotation_axis_angle",
-    "track_jaw",
 ]
-
-
-# R_x, R_y and their derivatives: the Jacobian of the core's rotation R_y(lateral) R_x(open).
-def _rx(a: float) -> F64:
-    c, s = np.cos(a), np.sin(a)
-    return np.array([[1.0, 0.0, 0.0], [0.0, c, -s], [0.0, s, c]])
-
-
-def _ry(b: float) -> F64:
-    c, s = np.cos(b), np.sin(b)
-    return np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
-
-
-def _drx(a: float) -> F64:
-    c, s = np.cos(a), np.sin(a)
-    return np.array([[0.0, 0.0, 0.0], [0.0, -s, -c], [0.0, c, -s]])
-
-
-def _dry(b: float) -> F64:
-    c, s = np.cos(b), np.sin(b)
-    return np.array([[-s, 0.0, c], [0.0, 0.0, 0.0], [-c, 0.0, -s]])
-
-
-def _theta(theta: ArrayLike) -> F64:
-    th = np.asarray(theta, dtype=np.float64)
-    if th.shape != (3,):
-        raise InputError(f"theta must have shape (3,), got {th.shape}")
-    if not np.all(np.isfinite(th)) or abs(th[0]) >= np.pi or abs(th[1]) >= np.pi:
-        raise InputError(f"theta must be finite with |open|, |lateral| < pi, got {th}")
-    return th
 
 
 def _points(points: ArrayLike, what: str = "points") -> F64:
@@ -161,66 +130,6 @@ def rotation_axis_angle(r: ArrayLike) -> tuple[F64, float]:
     sym = 0.5 * (m + np.eye(3))
     col = sym[:, int(np.argmax(np.diag(sym)))]
     return col / np.linalg.norm(col), angle
-
-
-def _robust_weights(norms: F64, huber: float | None) -> F64:
-    """Huber IRLS weights on per-point residual norms, scale from the median absolute residual."""
-    if huber is None or norms.size == 0:
-        return np.ones_like(norms)
-    sigma = 1.4826 * float(np.median(norms))
-    delta = huber * sigma
-    if delta <= 0 or not np.isfinite(delta):
-        return np.ones_like(norms)
-    return np.where(norms <= delta, 1.0, delta / np.maximum(norms, 1e-300))
-
-
-def fit_theta(
-    rig: JawRig,
-    rest: ArrayLike,
-    target: ArrayLike,
-    weights: ArrayLike | None = None,
-    theta0: ArrayLike | None = None,
-    huber: float | None = None,
-    iterations: int = 50,
-) -> F64:
-    """theta minimising sum_i rho(|skin(rest_i, theta, w_i) - target_i|) by Gauss-Newton.
-
-    `weights` are the points' jaw weights (default 1: a rigid fit); `huber` (in units of the
-    robust residual scale, e.g. 1.345) turns on iteratively reweighted least squares.
-    """
-    p = _points(rest, "rest")
-    y = _points(target, "target")
-    if y.shape != p.shape:
-        raise InputError(f"target {y.shape} does not match rest {p.shape}")
-    w = np.ones(p.shape[0]) if weights is None else np.asarray(weights, dtype=np.float64)
-    if w.shape != (p.shape[0],):
-        raise InputError(f"weights must have shape ({p.shape[0]},), got {w.shape}")
-    th = np.zeros(3) if theta0 is None else _theta(theta0).copy()
-    f = rig.frame
-    local = (p - rig.pivot) @ f  # points in the jaw frame, relative to the pivot
-    scale = 1.0 + float(np.max(np.abs(local))) if local.size else 1.0
-    for _ in range(max(1, iterations)):
-        rx, ry = _rx(th[0]), _ry(th[1])
-        pred = rig.skin(p, th, w)
-        res = (pred - y).ravel()
-        # d skin / d theta = w * F dR F^T (p - pivot), and w * F e_z for the translation.
-        j_open = (local @ (ry @ _drx(th[0])).T) @ f.T
-        j_lat = (local @ (_dry(th[1]) @ rx).T) @ f.T
-        j_fwd = np.broadcast_to(f[:, 2], p.shape)
-        jac = np.stack([j_open, j_lat, j_fwd], axis=2) * w[:, None, None]
-        jac = jac.reshape(-1, 3)
-        rw = np.repeat(_robust_weights(np.linalg.norm((pred - y), axis=1), huber), 3)
-        jtj = jac.T @ (jac * rw[:, None])
-        jtr = jac.T @ (rw * res)
-        try:
-            step = np.linalg.solve(jtj + 1e-12 * np.trace(jtj) * np.eye(3), -jtr)
-        except np.linalg.LinAlgError:
-            break
-        th = th + step
-        th[:2] = np.clip(th[:2], -0.5 * np.pi, 0.5 * np.pi)
-        if np.abs(step[:2]).max() * scale + abs(step[2]) <= 1e-13 * scale:
-            break
-    return th
 
 
 # --------------------------------------------------------------------------------------------
@@ -335,7 +244,8 @@ def estimate_rig(
     rigid part's centroid when there are none) and per-vertex weights
     (projection of each vertex's displacement onto the rigid displacement field, clipped to
     [0, 1] and smoothed `smooth_iterations` times over the mesh edges when `triangles` is
-    given). Each shape's theta is a robust Gauss-Newton fit of the rigid vertices, kept only when
+    given). Each shape's theta is a robust Gauss-Newton fit of the rigid vertices
+    (`JawRig.fit_pose`), kept only when
     the fitted rigid motion explains at least `min_explained` of the squared displacement of the
     rigid vertices (otherwise the shape deforms them non-rigidly and gets theta = 0).
 
@@ -421,7 +331,7 @@ def estimate_rig(
         total = float(np.sum(d * d))
         if total == 0.0:
             continue
-        th = fit_theta(rig, x0[rigid], x0[rigid] + d, huber=huber)
+        th = rig.fit_pose(x0[rigid], x0[rigid] + d, huber=huber)
         miss = rig.skin(x0[rigid], th, ones) - x0[rigid] - d
         # A shape that deforms the rigid part non-rigidly (an expression pulling the chin skin)
         # has no jaw motion of its own; a rigid motion that explains little of it is spurious.
@@ -436,66 +346,3 @@ def estimate_rig(
         }
         return rig, shape_theta, RigReport(rigid, axis, float(angle), rms, named, explained)
     return rig, shape_theta
-
-
-# --------------------------------------------------------------------------------------------
-# Tracking.
-
-
-def _moving_average(x: F64, window: int) -> F64:
-    """Centered moving average along axis 0; near the ends the window shrinks symmetrically."""
-    half = max(0, int(window) // 2)
-    if half == 0 or x.shape[0] < 2:
-        return x.copy()
-    c = np.concatenate([np.zeros((1, *x.shape[1:])), np.cumsum(x, axis=0)])
-    n = x.shape[0]
-    i = np.arange(n)
-    h = np.minimum(half, np.minimum(i, n - 1 - i))
-    return (c[i + h + 1] - c[i - h]) / (2 * h + 1)[:, None]
-
-
-def track_jaw(
-    rig: JawRig,
-    bundle_rest: ArrayLike,
-    bundle_weights: ArrayLike,
-    frames: ArrayLike,
-    smooth_window: int = 5,
-    min_weight: float = 0.5,
-    huber: float | None = 1.345,
-) -> F64:
-    """Per-frame jaw theta (F, 3) from bundle positions (F, B, 3).
-
-    Bundles with jaw weight > `min_weight` are fitted (skin(rest, theta) ~ frame) by robust
-    Gauss-Newton (Huber IRLS), NaN bundles ignored, each frame started from the previous one;
-    frames with fewer than 3 usable bundles are interpolated from their neighbours. Then a
-    centered moving average over `smooth_window` frames.
-    """
-    rest = _points(bundle_rest, "bundle_rest")
-    bw = np.asarray(bundle_weights, dtype=np.float64)
-    fr = np.asarray(frames, dtype=np.float64)
-    b = rest.shape[0]
-    if bw.shape != (b,):
-        raise InputError(f"bundle_weights must have shape ({b},), got {bw.shape}")
-    if fr.ndim != 3 or fr.shape[1:] != (b, 3):
-        raise InputError(f"frames must have shape (F, {b}, 3), got {fr.shape}")
-    use = bw > min_weight
-    if int(use.sum()) < 3:
-        raise InputError(
-            f"only {int(use.sum())} bundles have a jaw weight above {min_weight}; need 3"
-        )
-    theta = np.full((fr.shape[0], 3), np.nan)
-    prev = np.zeros(3)
-    for i in range(fr.shape[0]):
-        ok = use & np.all(np.isfinite(fr[i]), axis=1)
-        if int(ok.sum()) < 3:
-            continue
-        prev = fit_theta(rig, rest[ok], fr[i, ok], bw[ok], theta0=prev, huber=huber)
-        theta[i] = prev
-    valid = np.all(np.isfinite(theta), axis=1)
-    if not valid.any():
-        raise InputError("no frame has 3 usable jaw bundles")
-    if not valid.all():
-        t = np.arange(fr.shape[0])
-        for c in range(3):
-            theta[:, c] = np.interp(t, t[valid], theta[valid, c])
-    return _moving_average(theta, smooth_window)

@@ -1,73 +1,24 @@
 """`lgi.Model`: build a Local Geometric Indexing model from a dataset and a marker layout, and
 solve frames of markers into dense meshes. The heavy lifting is in the Rust core (GIL
-released); this layer adds progress bars, jaw tracking and a typed result. `BuildConfig` is
-the binding's (`lgi._lgi.BuildConfig`: fields, the core's defaults and their documentation are
-defined there once)."""
+released), each frame's jaw pose included; this layer adds progress bars and the jaw rig's
+estimation at build. `BuildConfig` is the binding's (`lgi._lgi.BuildConfig`: fields, the
+core's defaults and their documentation are defined there once), and so is the result
+(`lgi._lgi.SolveResult`, `lgi._lgi.Choices`)."""
 
 from __future__ import annotations
 
 import os
 import warnings
 from collections.abc import Iterator, Sequence
-from dataclasses import dataclass
-from functools import cached_property
 from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from lgi import _lgi
-from lgi._lgi import BuildConfig, Dataset
+from lgi._lgi import BuildConfig, Dataset, SolveResult
 from lgi.errors import InputError
-from lgi.jaw import JawRig, estimate_rig, track_jaw
-
-
-@dataclass(frozen=True)
-class Choices:
-    """Per frame and bundle: the local geometry each bundle chose."""
-
-    shapes: NDArray[np.int64]
-    """(F, B, 4) dataset shape indices; -1 is the neutral (or an unused slot)."""
-    weights: NDArray[np.float64]
-    """(F, B, 4) convex weights of `shapes` (all 0 for a missing bundle)."""
-    tets: NDArray[np.int64]
-    """(F, B) tet index in the bundle's index, -1 when none was used."""
-    projected: NDArray[np.bool_]
-    """(F, B) True when the marker was outside every tet and was projected."""
-    fit: NDArray[np.bool_] | None = None
-    """(F, B) True where the bundle took the frame's global blendshape fit instead of a tet
-    (its `shapes`/`weights` are then unused; the fit is `SolveResult.fit_weights`)."""
-
-    @property
-    def inside(self) -> NDArray[np.bool_]:
-        """(F, B) True when the marker was inside a tet (interpolated exactly)."""
-        return ~self.projected
-
-
-@dataclass(frozen=True)
-class SolveResult:
-    """Output of `Model.solve`."""
-
-    vertices: NDArray[np.float64]
-    """(F, V, 3) reconstructed meshes."""
-    bundle_residuals: NDArray[np.float64]
-    """(F, B) distance from each marker to the reconstructed surface (0 where missing)."""
-    bundle_positions: NDArray[np.float64]
-    """(F, B, 3) the markers' surface positions on the result (estimates where missing)."""
-    missing: NDArray[np.bool_]
-    """(F, B) markers that were NaN in the input."""
-    choices: Choices
-    jaw_theta: NDArray[np.float64] | None = None
-    """(F, 3) jaw poses used (open, lateral, forward), None when solved without a jaw."""
-    jaw_bin: NDArray[np.int64] | None = None
-    """(F,) jaw-opening bin each frame was looked up in (0 for an unbinned jaw model), None
-    when solved without a jaw."""
-    marker_corrections: NDArray[np.float64] | None = None
-    """(F, B) how far noise-aware solving (`marker_noise=`) moved each marker before the
-    surface interpolated it (data units; 0 when exact)."""
-    fit_weights: NDArray[np.float64] | None = None
-    """(F, S) each frame's global blendshape fit; None when no fit was made (`fit` off, or a
-    dataset without shapes)."""
+from lgi.jaw import JawRig, estimate_rig
 
 
 def _bin_edges(jaw_bins: int | ArrayLike, shape_theta: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -103,14 +54,6 @@ def _bin_edges(jaw_bins: int | ArrayLike, shape_theta: NDArray[np.float64]) -> N
             f"jaw_bins: expected an int or a 1-D sequence of edges (radians), got {jaw_bins!r}"
         )
     return edges.astype(np.float64)
-
-
-def _noise(marker_noise: float) -> float:
-    """`marker_noise` as a float for the core, which checks its range."""
-    try:
-        return float(marker_noise)
-    except (TypeError, ValueError):
-        raise InputError(f"marker_noise must be a number or None, got {marker_noise!r}") from None
 
 
 def estimate_marker_noise(frames: ArrayLike) -> float:
@@ -337,10 +280,11 @@ class Model:
         jaw pose from its global blendshape fit (the shapes' poses weighted by their fitted
         weights) and refine it to the pose whose jaw-unskinned markers the dataset explains
         best (Gauss-Newton in the core); `"track"` fits the markers the jaw carries rigidly
-        (`lgi.jaw.track_jaw`; biased where lips and chin move with other shapes); an (F, 3)
-        array gives the poses; None solves at the rest pose. Without a rig, `"auto"` is None.
-        The poses used are in `result.jaw_theta`; with jaw bins (`Model.build(jaw_bins=...)`)
-        the bin each frame used is in `result.jaw_bin`.
+        (a Huber-robust fit per frame from the previous frame's pose, averaged over 5 frames;
+        biased where lips and chin move with other shapes); an (F, 3) array gives the poses;
+        None solves at the rest pose. Without a rig, `"auto"` is None. The poses used are in
+        `result.jaw_theta`; with jaw bins (`Model.build(jaw_bins=...)`) the bin each frame
+        used is in `result.jaw_bin`.
 
         `smooth_window` > 1 averages each marker's shape weights over that many frames
         (centred) before sewing, in the jaw-unskinned space so jaw motion is kept; markers are
@@ -363,16 +307,21 @@ class Model:
         is given (`marker_noise=0` for noise-free markers), so the recommended call on real
         capture is `solve(frames, marker_noise=sigma)`. Not offered with `smooth_window`. The
         fit costs time with many shapes (docs/performance.md)."""
-        smooth_window = _lgi.check_count(smooth_window, "smooth_window")
         arr = np.asarray(frames)
         if arr.ndim == 2:
             arr = arr[None]
         total = int(arr.shape[0]) if arr.ndim == 3 else 0
         with _progress_bar(total, "lgi solve", quiet) as bar:
-            res = self._solve_core(
-                arr, bar, None, temporal, jaw, smooth_window, out, marker_noise, fit
+            return self._core.solve(
+                arr,
+                progress=lambda _f: bar.update(1),
+                temporal=temporal,
+                jaw=jaw,
+                smooth_window=smooth_window,
+                out=out,
+                fit=fit,
+                marker_noise=marker_noise,
             )
-        return _result(res)
 
     def solve_iter(
         self,
@@ -408,93 +357,18 @@ class Model:
             for a in range(0, int(arr.shape[0]), n):
                 part = np.asarray(arr[a : a + n])
                 buf = None if out is None else out[: part.shape[0]]
-                res = self._solve_core(part, bar, state, temporal, jaw, 0, buf, marker_noise, fit)
-                state = res.state if temporal else None
-                yield _result(res)
-
-    def _solve_core(
-        self,
-        arr: NDArray[Any],
-        bar: Any,
-        previous: _lgi.SolveState | None,
-        temporal: bool,
-        jaw: str | ArrayLike | None,
-        smooth_window: int,
-        out: NDArray[np.float64] | None,
-        marker_noise: float | None,
-        fit: bool | None,
-    ) -> _lgi.SolveOutput:
-        theta = self._jaw_theta(arr, jaw)
-        # A pose from the fit is refined in the core, in the jaw's unskinned space.
-        refine = theta is not None and isinstance(jaw, str) and jaw in ("auto", "fit")
-        return self._core.solve(
-            arr,
-            progress=lambda _f: bar.update(1),
-            temporal=temporal,
-            jaw_theta=theta,
-            smooth_window=smooth_window,
-            out=out,
-            fit=None if fit is None else bool(fit),
-            marker_noise=None if marker_noise is None else _noise(marker_noise),
-            refine_jaw=refine,
-            previous=previous,
-        )
-
-    def _jaw_theta(
-        self, frames: NDArray[Any], jaw: str | ArrayLike | None
-    ) -> NDArray[np.float64] | None:
-        if isinstance(jaw, str) and jaw == "auto":
-            jaw = None if self._core.jaw() is None else "fit"
-        if jaw is None:
-            return None
-        j, rig = self._core.jaw(), self.jaw_rig
-        if j is None or rig is None:
-            raise InputError("jaw: this model was built without a jaw rig")
-        if isinstance(jaw, str):
-            if jaw == "fit":
-                return self._fit_theta(frames, j["shape_theta"])
-            if jaw != "track":
-                raise InputError(
-                    f"jaw must be 'auto', 'fit', 'track', an (F, 3) array or None, got {jaw!r}"
+                res = self._core.solve(
+                    part,
+                    progress=lambda _f: bar.update(1),
+                    temporal=temporal,
+                    jaw=jaw,
+                    out=buf,
+                    fit=fit,
+                    marker_noise=marker_noise,
+                    previous=state,
                 )
-            rest = self.bundle_positions(self.dataset.neutral)
-            return track_jaw(rig, rest, j["bundle_weights"], frames)
-        theta = np.asarray(jaw, dtype=np.float64)
-        if theta.shape != (frames.shape[0], 3):
-            raise InputError(f"jaw: expected shape ({frames.shape[0]}, 3), got {theta.shape}")
-        return theta
-
-    @cached_property
-    def _rest_fit(self) -> tuple[_lgi.BlendshapeSolver, NDArray[np.float64]]:
-        """The global blendshape fit of the dataset as given (jaw not unskinned) at the
-        bundles, with the constants of the core's fit (`lgi._lgi.FIT_L2`, `FIT_PENALTY`), and
-        the bundles' rest positions."""
-        data = self.dataset
-        rest = self.bundle_positions(data.neutral)
-        shapes = self.bundle_positions(data.neutral[None] + data.shapes) - rest[None]
-        a = shapes.reshape(shapes.shape[0], -1).T.copy()
-        scale = float(np.mean(np.sum(a**2, axis=0))) or 1.0
-        return _lgi.BlendshapeSolver(a, _lgi.FIT_L2 * scale, _lgi.FIT_PENALTY * scale), rest
-
-    def _fit_theta(
-        self, frames: NDArray[Any], shape_theta: NDArray[np.float64]
-    ) -> NDArray[np.float64]:
-        """Each frame's jaw pose from its global blendshape fit: the shapes' poses weighted by
-        their fitted weights (in [0, 1]). The fit explains the markers with every shape at
-        once, so the jaw markers' non-rigid motion (lips, chin) does not bend the pose, as it
-        does a rigid fit of the jaw markers alone (`jaw="track"`)."""
-        solver, rest = self._rest_fit
-        fr = np.asarray(frames, dtype=np.float64)
-        if fr.ndim != 3 or fr.shape[1:] != rest.shape:
-            raise InputError(f"frames: expected shape (F, {rest.shape[0]}, 3), got {fr.shape}")
-        # Infinite rows are left out here; the core's solve rejects them, naming frame and
-        # bundle.
-        fr = np.where(np.isinf(fr).any(axis=2, keepdims=True), np.nan, fr)
-        w, _ = solver.solve((fr - rest[None]).reshape(fr.shape[0], -1))
-        # Summed per frame in a fixed order (not a matrix product, whose blocking depends on
-        # the number of frames): a take solved in chunks gets the same poses.
-        weighted = np.clip(w, 0.0, 1.0)[:, :, None] * np.asarray(shape_theta)[None]
-        return np.asarray(weighted.sum(axis=1), dtype=np.float64)
+                state = res.state if temporal else None
+                yield res
 
     def bundle_positions(self, meshes: ArrayLike) -> NDArray[np.float64]:
         """Marker surface positions (F, B, 3) on meshes (F, V, 3) or (V, 3) -> (B, 3)."""
@@ -518,24 +392,3 @@ def _auto_rig(dataset: Dataset) -> tuple[JawRig | None, NDArray[np.float64] | No
         warnings.warn(f"jaw='auto': no jaw rig ({e}); building without one", stacklevel=3)
         return None, None
     return rig, np.asarray(theta, dtype=np.float64)
-
-
-def _result(res: _lgi.SolveOutput) -> SolveResult:
-    """The typed result of the core's output."""
-    return SolveResult(
-        vertices=res.vertices,
-        bundle_residuals=res.bundle_residuals,
-        bundle_positions=res.bundle_positions,
-        missing=res.missing,
-        jaw_theta=res.jaw_theta,
-        jaw_bin=None if res.jaw_theta is None else res.jaw_bin,
-        marker_corrections=res.marker_corrections,
-        fit_weights=res.fit_weights,
-        choices=Choices(
-            shapes=res.choice_shapes,
-            weights=res.choice_weights,
-            tets=res.choice_tets,
-            projected=res.choice_projected,
-            fit=res.choice_fit,
-        ),
-    )

@@ -48,8 +48,8 @@ pub use error::{LgiError, Result};
 pub use magnitude::{check_dataset, Extent, MAGNITUDE_LIMIT, MAX_COORDINATE, MIN_PRESENT_MARKERS};
 pub use mesh::{Mesh, SurfacePoint};
 pub use model::{
-    default_marker_names, BinParts, BinPartsRef, BuildConfig, BundleStats, Frame, FrameInfo,
-    FrameState, JawInput, JawSetup, LocalShapeId, Lookup, Model, ModelParts, ModelPartsRef,
+    default_marker_names, BinParts, BinPartsRef, BuildConfig, BundleStats, FrameInfo, FrameState,
+    JawInput, JawPose, JawSetup, LocalShapeId, Lookup, Model, ModelParts, ModelPartsRef,
     PartsError, ShapeId, SolveOptions, MAX_UNIT_LEN,
 };
 pub use polygons::Polygons;

@@ -8,7 +8,7 @@
 
 use lgi_core::{
     load_model, parse_obj, read_gltf, save_model, save_model_parts, BuildConfig, DVec2, DVec3,
-    Dataset, LgiError, Mesh, Model,
+    Dataset, LgiError, Mesh, Model, SolveOptions,
 };
 use proptest::prelude::*;
 use std::path::{Path, PathBuf};
@@ -481,9 +481,16 @@ fn check_model_bytes(target: &str, dir: &Path, bytes: &[u8]) -> Result<(), TestC
     match load_model(&p) {
         Ok(m) => {
             prop_assert!(m.sanity_check().is_ok(), "{:?}", m.sanity_check());
-            let frame = m.markers_rest().to_vec();
-            match m.solve_frame(&frame, None, None) {
-                Ok(f) => prop_assert!(f.vertices.iter().all(|v| v.is_finite())),
+            let frames = [m.markers_rest().to_vec()];
+            let mut vertices = vec![DVec3::ZERO; m.dataset().num_vertices()];
+            match m.solve(
+                &frames,
+                &SolveOptions::default(),
+                None,
+                &mut vertices,
+                |_| {},
+            ) {
+                Ok(_) => prop_assert!(vertices.iter().all(|v| v.is_finite())),
                 Err(e) => prop_assert!(matches!(e, LgiError::Input(_)), "{e:?}"),
             }
             tally(target, "loaded");

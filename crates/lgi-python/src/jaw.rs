@@ -209,6 +209,44 @@ impl JawRig {
         self.apply(py, points, theta, weights, true)
     }
 
+    /// The pose (3,) whose skinning carries `points` (N, 3) onto `targets` (N, 3), by
+    /// Gauss–Newton from `theta0` (3,; None: rest): `weights` (N,) are the points' jaw weights
+    /// (None: 1, a rigid fit); `huber` (in robust standard deviations of the residuals, e.g.
+    /// 1.345) reweighs outliers (None: plain least squares); at most `iterations` steps.
+    #[pyo3(signature = (points, targets, weights=None, theta0=None, huber=None, iterations=50))]
+    #[allow(clippy::too_many_arguments)]
+    fn fit_pose<'py>(
+        &self,
+        py: Python<'py>,
+        points: &Bound<'py, PyAny>,
+        targets: &Bound<'py, PyAny>,
+        weights: Option<&Bound<'py, PyAny>>,
+        theta0: Option<&Bound<'py, PyAny>>,
+        huber: Option<f64>,
+        iterations: usize,
+    ) -> PyResult<Array<'py>> {
+        let p = crate::convert::points(points, "points", None, false)?;
+        let t = crate::convert::points(targets, "targets", Some(p.len()), false)?;
+        let w: Option<Vec<f64>> = match weights {
+            None => None,
+            Some(w) => Some(
+                float_array(w, "weights", &[Some(p.len())])?
+                    .iter()
+                    .copied()
+                    .collect(),
+            ),
+        };
+        let start = match theta0 {
+            None => JawParams::ZERO,
+            Some(t) => poses(t, 1, false)?[0],
+        };
+        let rig = &self.inner;
+        let pose = py
+            .detach(|| rig.fit_pose(&p, &t, w.as_deref(), start, huber, iterations))
+            .map_err(PyLgiError)?;
+        flat_to_array(py, pose.to_array().to_vec(), &[3])
+    }
+
     fn __repr__(&self) -> String {
         let p = self.inner.pivot;
         format!(

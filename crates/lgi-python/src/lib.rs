@@ -9,6 +9,8 @@ mod dataset;
 mod error;
 mod jaw;
 mod model;
+mod result;
+mod solve_args;
 mod threads;
 
 use pyo3::prelude::*;
@@ -17,16 +19,17 @@ use pyo3::prelude::*;
 #[pymodule]
 fn _lgi(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
-    // The global fit's ridge and box penalty (relative to the mean squared column norm), for
-    // the Python side's fits of the same kind (jaw poses, the blendshape baseline's defaults).
+    // The global fit's ridge and box penalty (relative to the mean squared column norm): the
+    // blendshape baseline's defaults on the Python side.
     m.add("FIT_L2", lgi_core::FIT_L2)?;
     m.add("FIT_PENALTY", lgi_core::FIT_PENALTY)?;
     m.add_class::<dataset::Dataset>()?;
     m.add_class::<config::BuildConfig>()?;
     m.add_class::<jaw::JawRig>()?;
     m.add_class::<model::Model>()?;
-    m.add_class::<model::SolveOutput>()?;
-    m.add_class::<model::SolveState>()?;
+    m.add_class::<result::SolveResult>()?;
+    m.add_class::<result::Choices>()?;
+    m.add_class::<result::SolveState>()?;
     m.add_class::<baselines::RbfInterpolator>()?;
     m.add_class::<baselines::BlendshapeSolver>()?;
     m.add_function(wrap_pyfunction!(baselines::check_marker_frames, m)?)?;

@@ -1,15 +1,18 @@
 //! `lgi._lgi.Model`: build and solve with the GIL released; the Python class `lgi.Model`
-//! (python/lgi/model.py) wraps it with progress bars and a typed result.
+//! (python/lgi/model.py) wraps it with progress bars. A solve's arguments are converted in
+//! `solve_args.rs` and its result packed in `result.rs`.
 
 use crate::config::BuildConfig;
 use crate::convert::{flat_to_array, float_array, point_sets, points, points_to_array};
 use crate::dataset::Dataset;
 use crate::error::{input_error, PyLgiError};
 use crate::jaw::{frame_from_array, JawRig};
+use crate::result::{self, SolveResult, SolveState};
+use crate::solve_args;
 use crate::threads;
 use glam::{DMat3, DVec3};
 use lgi_core::{JawBins, JawInput, JawParams, JawRig as CoreRig, Model as CoreModel, SolveOptions};
-use numpy::{PyArray3, PyArrayDyn, PyArrayMethods, PyUntypedArrayMethods};
+use numpy::{PyArray3, PyArrayDyn, PyArrayMethods};
 use pyo3::prelude::*;
 use pyo3::types::{PyByteArray, PyBytes, PyDict};
 use std::sync::Arc;
@@ -180,17 +183,17 @@ impl Model {
         }
     }
 
-    /// Solves frames (F, B, 3) into a `SolveOutput`. `progress(f)` is called after each
+    /// Solves frames (F, B, 3) into a `SolveResult`. `progress(f)` is called after each
     /// frame with the GIL held. `temporal=False` solves frames independently (in parallel).
-    /// `out`: a C-contiguous, writeable float64 (F, V, 3) array that receives the vertices
-    /// (and is returned as `vertices`) instead of a new one. `fit` offers every bundle the
-    /// frame's global blendshape fit beside its tets (None: exactly when `marker_noise` is
-    /// given); `marker_noise` (data units) solves noise-aware (None: every marker
-    /// interpolated as given); `refine_jaw` refines each frame's `jaw_theta` to the pose the
-    /// dataset's fit explains best (the poses used are `jaw_theta` of the output);
-    /// `previous` (a temporal solve's `state`) continues that solve: the first frame prefers
-    /// its choices and keeps its jaw bin, so chunks solved in turn equal one call.
-    #[pyo3(signature = (frames, progress=None, temporal=true, jaw_theta=None, smooth_window=0, out=None, fit=None, marker_noise=None, refine_jaw=false, previous=None))]
+    /// `jaw`: `"auto"` (the fit's pose with a jaw rig, none without), `"fit"`, `"track"`, an
+    /// (F, 3) array of poses, or None (the rest pose). `out`: a C-contiguous, writeable
+    /// float64 (F, V, 3) array that receives the vertices (and is returned as `vertices`)
+    /// instead of a new one. `fit` offers every bundle the frame's global blendshape fit
+    /// beside its tets (None: exactly when `marker_noise` is given); `marker_noise` (data
+    /// units) solves noise-aware (None: every marker interpolated as given); `previous` (a
+    /// temporal solve's `state`) continues that solve: the first frame prefers its choices
+    /// and keeps its jaw bin, so chunks solved in turn equal one call.
+    #[pyo3(signature = (frames, progress=None, temporal=true, jaw=None, smooth_window=0, out=None, fit=None, marker_noise=None, previous=None))]
     #[allow(clippy::too_many_arguments)]
     fn solve<'py>(
         &self,
@@ -198,36 +201,26 @@ impl Model {
         frames: &Bound<'py, PyAny>,
         progress: Option<Py<PyAny>>,
         temporal: bool,
-        jaw_theta: Option<&Bound<'py, PyAny>>,
-        smooth_window: usize,
+        jaw: Option<&Bound<'py, PyAny>>,
+        #[pyo3(from_py_with = solve_args::smooth_window)] smooth_window: usize,
         out: Option<&Bound<'py, PyAny>>,
-        fit: Option<bool>,
-        marker_noise: Option<f64>,
-        refine_jaw: bool,
+        #[pyo3(from_py_with = solve_args::fit)] fit: Option<bool>,
+        #[pyo3(from_py_with = solve_args::marker_noise)] marker_noise: Option<f64>,
         previous: Option<PyRef<'py, SolveState>>,
-    ) -> PyResult<SolveOutput> {
-        let previous = previous.map(|p| p.inner.clone());
-        let mut options = SolveOptions::new(temporal, smooth_window, fit, marker_noise);
-        options.refine_jaw = refine_jaw;
+    ) -> PyResult<SolveResult> {
         let b = self.inner.num_bundles();
         let frames = point_sets(frames, "frames", ("frame", "bundle"), Some(b), true)?;
-        let thetas: Option<Vec<JawParams>> = match jaw_theta {
-            None => None,
-            Some(t) => Some(
-                float_array(t, "jaw", &[Some(frames.len()), Some(3)])?
-                    .outer_iter()
-                    .map(|r| JawParams::from_array([r[0], r[1], r[2]]))
-                    .collect(),
-            ),
+        let options = SolveOptions {
+            jaw: solve_args::jaw_pose(jaw, &self.inner, frames.len())?,
+            ..SolveOptions::new(temporal, smooth_window, fit, marker_noise)
         };
-        let model = self.inner.clone();
-        let nf = frames.len();
-        let nv = self.inner.dataset().num_vertices();
+        let previous = previous.map(|p| p.inner.clone());
+        let (nf, nv) = (frames.len(), self.inner.dataset().num_vertices());
         // The vertices go straight into the numpy array the caller gets (no copy, no second
         // F × V × 3 buffer).
         let vertices = match out {
             None => PyArray3::<f64>::zeros(py, [nf, nv, 3], false),
-            Some(o) => output_array(o, [nf, nv, 3])?,
+            Some(o) => solve_args::output_array(o, [nf, nv, 3])?,
         };
         let solved = {
             let mut rw = vertices.try_readwrite().map_err(|e| {
@@ -243,118 +236,13 @@ impl Model {
                     "out: the array's memory must be aligned to 8 bytes (a fresh np.empty is): {e}"
                 ))
             })?;
-            let mut stopped: Option<PyErr> = None;
-            let interrupt = std::sync::Mutex::new(None);
-            let solved = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
-                threads::detach_watching(py, &interrupt, || {
-                    let (th, prev) = (thetas.as_deref(), previous.as_ref());
-                    model.solve_sequence_after(&frames, th, &options, prev, out, |f| {
-                        // Ctrl-C and a failing callback stop the solve after this frame.
-                        let called = Python::attach(|py| {
-                            let caught = interrupt.lock().map(|mut i| i.take());
-                            if let Ok(Some(e)) = caught {
-                                return Err(e);
-                            }
-                            py.check_signals()?;
-                            match &progress {
-                                Some(cb) => cb.call1(py, (f,)).map(drop),
-                                None => Ok(()),
-                            }
-                        });
-                        if let Err(e) = called {
-                            stopped = Some(e);
-                            // The core's progress hook cannot fail: unwind out of the solve
-                            // with a private payload (resume_unwind runs no panic hook, so
-                            // nothing is printed) and raise the Python error below.
-                            std::panic::resume_unwind(Box::new(SolveStopped));
-                        }
-                    })
-                })
-            }));
-            match (solved, stopped) {
-                (_, Some(e)) => return Err(e),
-                (Ok(r), None) => r.map_err(PyLgiError)?,
-                (Err(panic), None) => std::panic::resume_unwind(panic),
-            }
+            let model = self.inner.clone();
+            solve_watching(py, progress.as_ref(), |on_frame| {
+                model.solve(&frames, &options, previous.as_ref(), out, on_frame)
+            })?
         };
-        let mut res = Vec::with_capacity(nf * b);
-        let mut pos = Vec::with_capacity(nf * b * 3);
-        let mut shapes = Vec::with_capacity(nf * b * 4);
-        let mut weights = Vec::with_capacity(nf * b * 4);
-        let mut tets = Vec::with_capacity(nf * b);
-        let mut projected = Vec::with_capacity(nf * b);
-        let mut missing = Vec::with_capacity(nf * b);
-        let mut took_fit = Vec::with_capacity(nf * b);
-        let mut corrections = Vec::with_capacity(nf * b);
         let ns = self.inner.dataset().num_shapes();
-        // Every frame has a fit or none has (no fit asked for, or a dataset without shapes).
-        let mut fit_weights = Some(Vec::with_capacity(nf * ns));
-        let bins: Vec<i64> = solved.iter().map(|fr| fr.bin as i64).collect();
-        let poses: Option<Vec<f64>> = solved
-            .iter()
-            .map(|fr| fr.theta.map(|t| t.to_array()))
-            .collect::<Option<Vec<_>>>()
-            .map(|t| t.into_iter().flatten().collect());
-        for fr in &solved {
-            res.extend_from_slice(&fr.residuals);
-            match fr.corrections.len() {
-                0 => corrections.extend(std::iter::repeat_n(0.0, b)),
-                _ => corrections.extend_from_slice(&fr.corrections),
-            }
-            match (fr.fit_weights.get(1..), &mut fit_weights) {
-                (Some(w), Some(all)) if w.len() == ns => all.extend_from_slice(w),
-                _ => fit_weights = None,
-            }
-            pos.extend(fr.bundle_positions.iter().flat_map(|p| [p.x, p.y, p.z]));
-            for c in &fr.choices {
-                match c {
-                    Some(c) => {
-                        // Shape ids: 0 neutral, k >= 1 dataset shape k - 1 → Python: -1 neutral.
-                        shapes.extend(c.shapes.iter().map(|&s| s as i64 - 1));
-                        weights.extend_from_slice(&c.weights);
-                        tets.push(if c.tet == u32::MAX { -1 } else { c.tet as i64 });
-                        projected.push(c.projected);
-                        missing.push(false);
-                        took_fit.push(c.fit);
-                    }
-                    None => {
-                        shapes.extend([-1i64; 4]);
-                        weights.extend([0.0; 4]);
-                        tets.push(-1);
-                        projected.push(false);
-                        missing.push(true);
-                        took_fit.push(false);
-                    }
-                }
-            }
-        }
-        Ok(SolveOutput {
-            vertices: vertices.into_any().unbind(),
-            bundle_residuals: flat_to_array(py, res, &[nf, b])?.into_any().unbind(),
-            bundle_positions: flat_to_array(py, pos, &[nf, b, 3])?.into_any().unbind(),
-            choice_shapes: flat_to_array(py, shapes, &[nf, b, 4])?.into_any().unbind(),
-            choice_weights: flat_to_array(py, weights, &[nf, b, 4])?.into_any().unbind(),
-            choice_tets: flat_to_array(py, tets, &[nf, b])?.into_any().unbind(),
-            choice_projected: flat_to_array(py, projected, &[nf, b])?.into_any().unbind(),
-            missing: flat_to_array(py, missing, &[nf, b])?.into_any().unbind(),
-            jaw_bin: flat_to_array(py, bins, &[nf])?.into_any().unbind(),
-            choice_fit: flat_to_array(py, took_fit, &[nf, b])?.into_any().unbind(),
-            marker_corrections: flat_to_array(py, corrections, &[nf, b])?
-                .into_any()
-                .unbind(),
-            fit_weights: match fit_weights {
-                Some(w) => Some(flat_to_array(py, w, &[nf, ns])?.into_any().unbind()),
-                None => None,
-            },
-            state: solved
-                .last()
-                .map(|fr| Py::new(py, SolveState { inner: fr.state() }))
-                .transpose()?,
-            jaw_theta: match poses.filter(|_| nf > 0) {
-                Some(t) => Some(flat_to_array(py, t, &[nf, 3])?.into_any().unbind()),
-                None => None,
-            },
-        })
+        result::pack(py, &solved, vertices, b, ns)
     }
 
     /// Bundle surface positions (F, B, 3) of meshes (F, V, 3) with the neutral's topology.
@@ -511,61 +399,6 @@ impl Model {
     }
 }
 
-/// What `Model.solve` returns: per-frame arrays (F frames, B bundles, V vertices). Shape ids in
-/// `choice_shapes` are dataset shape indices with -1 for the neutral (the core's 0).
-#[pyclass(frozen, module = "lgi._lgi")]
-pub struct SolveOutput {
-    /// (F, V, 3) float64 vertices (the `out` array when one was given).
-    #[pyo3(get)]
-    vertices: Py<PyAny>,
-    /// (F, B) float64 distance of each marker to the surface (0 where missing).
-    #[pyo3(get)]
-    bundle_residuals: Py<PyAny>,
-    /// (F, B, 3) float64 the markers' surface positions on the result.
-    #[pyo3(get)]
-    bundle_positions: Py<PyAny>,
-    /// (F, B, 4) int64 shapes of each bundle's chosen tet (-1: neutral or unused).
-    #[pyo3(get)]
-    choice_shapes: Py<PyAny>,
-    /// (F, B, 4) float64 convex weights of `choice_shapes`.
-    #[pyo3(get)]
-    choice_weights: Py<PyAny>,
-    /// (F, B) int64 chosen tet, -1 when none was used.
-    #[pyo3(get)]
-    choice_tets: Py<PyAny>,
-    /// (F, B) bool: the marker was outside every tet and projected.
-    #[pyo3(get)]
-    choice_projected: Py<PyAny>,
-    /// (F, B) bool: the marker was missing (NaN).
-    #[pyo3(get)]
-    missing: Py<PyAny>,
-    /// (F,) int64 jaw-opening bin of each frame (0 without bins).
-    #[pyo3(get)]
-    jaw_bin: Py<PyAny>,
-    /// (F, B) bool: the bundle took the frame's global fit instead of a tet.
-    #[pyo3(get)]
-    choice_fit: Py<PyAny>,
-    /// (F, B) float64: how far noise-aware solving moved each marker (0 when exact).
-    #[pyo3(get)]
-    marker_corrections: Py<PyAny>,
-    /// (F, S) float64: each frame's global fit weights per dataset shape; None without a fit.
-    #[pyo3(get)]
-    fit_weights: Option<Py<PyAny>>,
-    /// (F, 3) float64: the jaw pose each frame was solved at; None without poses.
-    #[pyo3(get)]
-    jaw_theta: Option<Py<PyAny>>,
-    /// What the frame after the last one needs (`solve(previous=...)`); None for no frames.
-    #[pyo3(get)]
-    state: Option<Py<SolveState>>,
-}
-
-/// The last frame's choices and jaw bin of a temporal solve: pass it as the next chunk's
-/// `previous` to continue the solve (opaque).
-#[pyclass(frozen, module = "lgi._lgi")]
-pub struct SolveState {
-    inner: lgi_core::FrameState,
-}
-
 /// Warns (`lgi.LgiWarning`) when the build left more than half of the markers whose clouds
 /// could hold a tet (4+ points) without any: a config like `min_quality=2` that makes a model
 /// which only projects should not pass without a word. (Refusing it in the core would also
@@ -615,29 +448,45 @@ pub fn with_bytes<T>(
 /// The payload that unwinds a solve stopped by Ctrl-C or a failing progress callback.
 struct SolveStopped;
 
-/// A caller's output array for `solve(out=...)`: float64, C-contiguous, writeable, of `shape`.
-fn output_array<'py>(
-    o: &Bound<'py, PyAny>,
-    shape: [usize; 3],
-) -> PyResult<Bound<'py, PyArray3<f64>>> {
-    let arr = o.cast::<PyArray3<f64>>().map_err(|_| {
-        let dtype = o
-            .getattr("dtype")
-            .map(|d| d.to_string())
-            .unwrap_or_else(|_| "not a numpy array".into());
-        input_error(format!(
-            "out: expected a float64 numpy array of shape {shape:?}, got {dtype}"
-        ))
-    })?;
-    if arr.shape() != shape {
-        return Err(input_error(format!(
-            "out: expected shape {shape:?}, got {:?}",
-            arr.shape()
-        )));
+/// Runs `solve` with the GIL released ([`threads::detach_watching`]), handing it the hook it
+/// calls after each frame: the hook takes the GIL, stops on Ctrl-C (or an interrupt the
+/// watching thread caught) and calls `progress(f)`; a raised exception stops the solve and is
+/// raised here.
+fn solve_watching<T: Send>(
+    py: Python<'_>,
+    progress: Option<&Py<PyAny>>,
+    solve: impl FnOnce(&mut dyn FnMut(usize)) -> lgi_core::Result<T> + Send,
+) -> PyResult<T> {
+    let mut stopped: Option<PyErr> = None;
+    let interrupt = std::sync::Mutex::new(None);
+    let solved = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+        threads::detach_watching(py, &interrupt, || {
+            solve(&mut |f| {
+                // Ctrl-C and a failing callback stop the solve after this frame.
+                let called = Python::attach(|py| {
+                    let caught = interrupt.lock().map(|mut i| i.take());
+                    if let Ok(Some(e)) = caught {
+                        return Err(e);
+                    }
+                    py.check_signals()?;
+                    match progress {
+                        Some(cb) => cb.call1(py, (f,)).map(drop),
+                        None => Ok(()),
+                    }
+                });
+                if let Err(e) = called {
+                    stopped = Some(e);
+                    // The core's progress hook cannot fail: unwind out of the solve with a
+                    // private payload (resume_unwind runs no panic hook, so nothing is
+                    // printed) and raise the Python error below.
+                    std::panic::resume_unwind(Box::new(SolveStopped));
+                }
+            })
+        })
+    }));
+    match (solved, stopped) {
+        (_, Some(e)) => Err(e),
+        (Ok(r), None) => Ok(r.map_err(PyLgiError)?),
+        (Err(panic), None) => std::panic::resume_unwind(panic),
     }
-    if !arr.is_c_contiguous() {
-        return Err(input_error("out: the array must be C-contiguous"));
-    }
-    // Writeability is checked where the solve borrows it.
-    Ok(arr.clone())
 }

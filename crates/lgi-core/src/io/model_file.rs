@@ -842,12 +842,11 @@ mod tests {
                 model.bundle_positions(&mesh).unwrap()
             })
             .collect();
-        let a = model
-            .solve_sequence(&frames, None, true, 0, |_| {})
-            .unwrap();
-        let b = back.solve_sequence(&frames, None, true, 0, |_| {}).unwrap();
+        let exact = crate::model::SolveOptions::default();
+        let a = crate::model::tests::solve_with(&model, &frames, &exact, None).unwrap();
+        let b = crate::model::tests::solve_with(&back, &frames, &exact, None).unwrap();
         for (fa, fb) in a.iter().zip(&b) {
-            let bits = |f: &crate::model::Frame| {
+            let bits = |f: &crate::model::tests::Solved| {
                 f.vertices
                     .iter()
                     .flat_map(|p| [p.x.to_bits(), p.y.to_bits(), p.z.to_bits()])

@@ -14,7 +14,7 @@ use crate::sew::{SewGeometry, SewPlans};
 use crate::tets::{generate_tets, Tet, TetConfig};
 use glam::DVec3;
 use rayon::prelude::*;
-use std::sync::Arc;
+use std::sync::{Arc, OnceLock};
 
 impl Model {
     /// Builds the model for `dataset` and marker rest positions `markers_rest` (B).
@@ -118,6 +118,7 @@ impl Model {
             neighbours,
             sewing,
             labels: labels::Labels::unnamed(markers_rest.len()),
+            rest_fit: OnceLock::new(),
         })
     }
 }

@@ -1,23 +1,12 @@
-//! What a solve returns and what the next frame needs from it: the solved [`Frame`], the same
-//! without its vertices ([`FrameInfo`], when the caller owns the vertex buffer) and the
-//! [`FrameState`] a temporal solve carries from frame to frame.
+//! What a solve returns besides the vertices it writes into the caller's buffer
+//! ([`FrameInfo`]) and the [`FrameState`] a temporal solve carries from frame to frame.
 
 use crate::choose::Choice;
 use crate::jaw::JawParams;
 use glam::DVec3;
 
-/// One solved frame: its vertices and the rest of what the solve says about it.
-#[derive(Debug, Clone)]
-pub struct Frame {
-    /// Reconstructed vertices (V).
-    pub vertices: Vec<DVec3>,
-    /// Choices, residuals, bundle positions, bin, corrections and fit of the frame.
-    pub info: FrameInfo,
-}
-
-/// What a solve says about a frame besides its vertices (alone when the vertices went to the
-/// caller's buffer, see
-/// [`Model::solve_sequence_into`](super::Model::solve_sequence_into)).
+/// What a solve says about a frame besides its vertices (which [`Model::solve`](super::Model::solve)
+/// writes into the caller's buffer).
 #[derive(Debug, Clone)]
 pub struct FrameInfo {
     /// Per bundle: the chosen geometry (`None` for a missing bundle), in dataset shape ids
@@ -35,14 +24,14 @@ pub struct FrameInfo {
     /// The frame's global fit, a weight per dataset shape id (index 0, the neutral, is 0;
     /// empty when no fit was made).
     pub fit_weights: Vec<f64>,
-    /// The jaw pose the frame was solved at (`None` without one): the given pose, or the
-    /// refined one ([`SolveOptions::refine_jaw`](super::SolveOptions::refine_jaw)).
+    /// The jaw pose the frame was solved at (`None` without one): the given or tracked pose,
+    /// or the fit's refined one ([`JawPose`](super::JawPose)).
     pub theta: Option<JawParams>,
 }
 
 impl FrameInfo {
     /// What the next frame needs from this one (to continue a temporal solve,
-    /// [`Model::solve_sequence_after`](super::Model::solve_sequence_after)).
+    /// [`Model::solve`](super::Model::solve)'s `previous`).
     pub fn state(&self) -> FrameState {
         FrameState {
             choices: self.choices.clone(),
@@ -55,9 +44,9 @@ impl FrameInfo {
 #[derive(Debug, Clone, Default)]
 pub struct FrameState {
     /// Previous choices per bundle (dataset shape ids, [`ShapeId`](super::ShapeId), as in
-    /// [`Frame::choices`]).
+    /// [`FrameInfo::choices`]).
     pub choices: Vec<Option<Choice>>,
-    /// The previous frame's jaw bin ([`Frame::bin`]): kept while the opening allows, and the
+    /// The previous frame's jaw bin ([`FrameInfo::bin`]): kept while the opening allows, and the
     /// choices are only preferred within the same bin. `None`: no bin hysteresis.
     pub bin: Option<usize>,
 }

@@ -3,11 +3,12 @@
 //! so frames are solved with `&self` in parallel (rayon over bundles, then over vertices).
 //!
 //! The rooms: `config` (build parameters), [`lookup`] (jaw-bin lookups and the shape-id
-//! spaces), `build` (build and assembly), `parts` (what a saved model is made of), `solve`
-//! (per-frame and sequence solves), `sanity` (the invariants of a model's parts) and `frame` (what a solve returns). A solve goes down the
-//! layers once: `solve` checks the targets and maps them into the jaw bin, the choice is
-//! [`choose`](crate::choose)'s over the bin's tet indices, then one call into
-//! [`sew`](crate::sew) (plan and sewing pass, the jaw map applied inside it) writes the
+//! spaces), `build` (build and assembly), `parts` (what a saved model is made of), `pose`
+//! (each frame's jaw pose), `solve` (the solve and its pipelines), `sanity` (the invariants
+//! of a model's parts) and `frame` (what a solve returns). A solve goes down the layers once:
+//! `pose` gives each frame's jaw pose, `solve` checks the targets and maps them into the jaw
+//! bin, the choice is [`choose`](crate::choose)'s over the bin's tet indices, then one call
+//! into [`sew`](crate::sew) (plan and sewing pass, the jaw map applied inside it) writes the
 //! vertices.
 
 use crate::choose::AliasGroups;
@@ -21,7 +22,7 @@ use crate::sparse::SparseWeights;
 use crate::tet_index::TetIndex;
 use crate::uvspace::SewingSpace;
 use glam::DVec3;
-use std::sync::Arc;
+use std::sync::{Arc, OnceLock};
 
 mod build;
 mod config;
@@ -29,16 +30,18 @@ mod frame;
 mod labels;
 pub mod lookup;
 mod parts;
+mod pose;
 mod sanity;
 mod solve;
 #[cfg(test)]
 pub(crate) mod tests;
 
 pub use config::BuildConfig;
-pub use frame::{Frame, FrameInfo, FrameState};
+pub use frame::{FrameInfo, FrameState};
 pub use labels::{default_marker_names, MAX_UNIT_LEN};
 pub use lookup::{LocalShapeId, Lookup, ShapeId};
 pub use parts::{BinParts, BinPartsRef, ModelParts, ModelPartsRef, PartsError};
+pub use pose::JawPose;
 pub use solve::SolveOptions;
 
 /// Jaw articulation of a model (paper Eq. 2): the rig, each dataset shape's jaw parameters
@@ -92,6 +95,9 @@ pub struct Model {
     sewing: SewPlans,
     /// Each marker's label (B) and the length unit of the coordinates (`labels.rs`).
     labels: labels::Labels,
+    /// The dataset's blendshape fit at the bundles that starts [`JawPose::Fit`], made on
+    /// first use.
+    rest_fit: OnceLock<pose::RestFit>,
 }
 
 impl Model {

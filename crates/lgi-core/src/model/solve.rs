@@ -4,13 +4,13 @@
 //! the next frame's choice beside this frame's sewing), independent (frames in parallel) or
 //! smoothed (all choices, then temporal smoothing of the shape weights, then sewing).
 
-use super::{Frame, FrameInfo, FrameState, LocalShapeId, Model};
+use super::pose::JawPose;
+use super::{FrameInfo, FrameState, LocalShapeId, Model};
 use crate::choose::{choose, Choice, ChoiceParams, FrameErrors, Scoring, Scratch, NO_TET};
 use crate::error::{LgiError, Result};
 use crate::jaw::JawParams;
-use crate::linalg::Lu;
 use crate::magnitude::Extent;
-use crate::prior::{FitPrior, FrameFit};
+use crate::prior::FrameFit;
 use crate::sew::{BundleTargets, Pieces};
 use crate::smooth::smooth_choices_in_bins;
 use glam::DVec3;
@@ -20,18 +20,8 @@ use rayon::prelude::*;
 /// (relative to the diagonal; the promise to users is 1e-6).
 pub(super) const RESIDUAL_TOLERANCE: f64 = 1e-12;
 
-/// Gauss–Newton iterations of [`Model::refine_jaw`] at most.
-const JAW_ITERATIONS: usize = 6;
-/// Its largest step per iteration: open and lateral in radians, forward in diagonals.
-const JAW_STEP: [f64; 3] = [0.1, 0.05, 0.01];
-/// Its finite-difference step (the same units).
-const JAW_DIFFERENCE: f64 = 1e-6;
-/// A step below this (the same units: 1e-6 rad moves a point 5 cm from the hinge by 5e-6 cm)
-/// ends it.
-const JAW_TOLERANCE: f64 = 1e-6;
-
 /// How a sequence is solved.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct SolveOptions {
     /// Frames in order, each preferring the previous frame's choices (a performance); false:
     /// independent frames, solved in parallel.
@@ -46,10 +36,9 @@ pub struct SolveOptions {
     /// targets of [`FitPrior::denoise`](crate::prior::FitPrior::denoise) before the
     /// solve, which then interpolates those. `None`: every marker is interpolated as given.
     pub marker_noise: Option<f64>,
-    /// With a jaw rig and a pose per frame: refine each frame's pose to the one whose
-    /// unskinned markers the dataset's fit explains best ([`Model::refine_jaw`]), starting
-    /// from the given pose.
-    pub refine_jaw: bool,
+    /// Each frame's jaw pose (a model built with a jaw rig): none, given, from the fit or
+    /// tracked ([`JawPose`]).
+    pub jaw: JawPose,
 }
 
 impl Default for SolveOptions {
@@ -60,20 +49,21 @@ impl Default for SolveOptions {
 }
 
 impl SolveOptions {
-    /// The paper's exact interpolation of every marker with tets only.
+    /// The paper's exact interpolation of every marker with tets only, at the rest pose.
     pub fn exact(temporal: bool, smooth_window: usize) -> Self {
         SolveOptions {
             temporal,
             smooth_window,
             fit: false,
             marker_noise: None,
-            refine_jaw: false,
+            jaw: JawPose::Rest,
         }
     }
 
     /// Options with the fit candidate on when asked (`fit`) or, left open (`None`), exactly
     /// when a marker noise is given: noise-aware solving is meant with the fit, whose
-    /// residuals it measures markers against.
+    /// residuals it measures markers against. At the rest pose; set [`jaw`](Self::jaw) for
+    /// another.
     pub fn new(
         temporal: bool,
         smooth_window: usize,
@@ -85,7 +75,7 @@ impl SolveOptions {
             smooth_window,
             fit: fit.unwrap_or(marker_noise.is_some()),
             marker_noise,
-            refine_jaw: false,
+            jaw: JawPose::Rest,
         }
     }
 
@@ -133,58 +123,8 @@ impl Prepared {
 }
 
 impl Model {
-    /// Solves one frame. `targets` (B) are bundle positions; a row with a NaN is missing.
-    /// `jaw` is the frame's jaw pose for a model built with a jaw rig (`None` = rest).
-    /// With jaw bins, `previous.bin` is kept while the opening allows (hysteresis), and the
-    /// previous choices are preferred only when the frame stays in that bin.
-    pub fn solve_frame(
-        &self,
-        targets: &[DVec3],
-        previous: Option<&FrameState>,
-        jaw: Option<JawParams>,
-    ) -> Result<Frame> {
-        let prep = self.prepare(targets, jaw, previous.and_then(|p| p.bin))?;
-        let lookup = &self.lookups[prep.bin];
-        let previous = previous
-            .filter(|p| p.bin.is_none_or(|b| b == prep.bin))
-            .map(|p| lookup.localize(&p.choices));
-        self.solve_prepared(&prep, previous.as_deref())
-    }
-
-    /// As [`Model::solve_frame`] in a given jaw bin (no previous frame): what a frame would
-    /// give if hysteresis had kept it in `bin`.
-    pub fn solve_frame_in_bin(
-        &self,
-        targets: &[DVec3],
-        jaw: Option<JawParams>,
-        bin: usize,
-    ) -> Result<Frame> {
-        if bin >= self.lookups.len() {
-            return Err(LgiError::Input(format!(
-                "jaw bin {bin} out of range: the model has {}",
-                self.lookups.len()
-            )));
-        }
-        let mut prep = self.prepare(targets, jaw, None)?;
-        if prep.bin != bin {
-            prep.bin = bin;
-            prep.lookup = self.lookup_targets(&prep.targets, prep.theta, bin)?;
-        }
-        self.solve_prepared(&prep, None)
-    }
-
-    /// Choice, then sewing of the unsmoothed choices, for a checked frame.
-    fn solve_prepared(
-        &self,
-        prep: &Prepared,
-        previous: Option<&[Option<Choice>]>,
-    ) -> Result<Frame> {
-        let mut vertices = vec![DVec3::ZERO; self.dataset.num_vertices()];
-        let info = self.solve_prepared_into(prep, previous, &mut vertices)?;
-        Ok(Frame { vertices, info })
-    }
-
-    /// [`solve_prepared`](Self::solve_prepared) writing the vertices into `out` (V).
+    /// Choice, then sewing of the unsmoothed choices, for a checked frame, writing the
+    /// vertices into `out` (V).
     fn solve_prepared_into(
         &self,
         prep: &Prepared,
@@ -196,6 +136,18 @@ impl Model {
         self.sew_frame_into(prep, choices, &pieces, out)
     }
 
+    /// Checks a frame's targets: one per bundle, and the magnitude policy ([`Extent`]).
+    pub(super) fn check_targets(&self, extent: &Extent, targets: &[DVec3]) -> Result<()> {
+        let b = self.bundles.len();
+        if targets.len() != b {
+            return Err(LgiError::Input(format!(
+                "frame has {} bundles, the model has {b}",
+                targets.len()
+            )));
+        }
+        extent.check_frame(targets)
+    }
+
     /// Checks a frame's targets, picks its jaw bin and, with a jaw, maps them into the bin's
     /// space for the lookup.
     pub(super) fn prepare(
@@ -205,14 +157,8 @@ impl Model {
         previous_bin: Option<usize>,
     ) -> Result<Prepared> {
         let b = self.bundles.len();
-        if targets.len() != b {
-            return Err(LgiError::Input(format!(
-                "frame has {} bundles, the model has {b}",
-                targets.len()
-            )));
-        }
         let extent = Extent::new(&self.markers_rest, self.diagonal);
-        extent.check_frame(targets)?;
+        self.check_targets(&extent, targets)?;
         if let Some(t) = &jaw {
             extent.check_jaw(t)?;
         }
@@ -227,17 +173,13 @@ impl Model {
             }
         }
         // With a jaw, bundles are indexed in the unskinned space of the dataset's pieces.
-        let theta = match (&self.jaw, jaw) {
-            (None, Some(_)) => {
-                return Err(LgiError::Input(
-                    "a jaw pose was given but the model was built without a jaw rig".into(),
-                ))
-            }
-            (Some(_), Some(t)) => {
+        let theta = match jaw {
+            Some(t) => {
+                self.jaw_setup()?;
                 t.validate()?;
                 Some(t)
             }
-            _ => None,
+            None => None,
         };
         let bin = match self.jaw.as_ref().and_then(|j| j.input.bins.as_ref()) {
             Some(bins) => bins.select(theta.unwrap_or(JawParams::ZERO).open, previous_bin),
@@ -307,116 +249,6 @@ impl Model {
         Ok(())
     }
 
-    /// Moves a prepared frame's jaw pose to the one whose unskinned markers `u(θ)` the
-    /// dataset's fit explains best: Gauss–Newton on `‖u(θ) − fit(u(θ))‖²` over the pose
-    /// components some dataset shape has, from the frame's pose, the fit's derivative taken
-    /// on its piece (so each step costs one fit). A linear fit of the skinned markers (the
-    /// usual start) reads a partly open jaw as a mix of jawOpen and other shapes; in the
-    /// unskinned space the jaw's rotation is gone and the rest is what the shapes span.
-    /// Steps are bounded, the best pose evaluated is kept (and its fit returned, the one the
-    /// frame is solved with), and a frame without a pose or rig is left as it is.
-    fn refine_jaw(&self, prep: &mut Prepared, prior: &FitPrior) -> Result<Option<FrameFit>> {
-        let (Some(jaw), Some(start)) = (&self.jaw, prep.theta) else {
-            return Ok(None);
-        };
-        let scale = [1.0, 1.0, self.diagonal];
-        let dims: Vec<usize> = (0..3)
-            .filter(|&d| {
-                jaw.input
-                    .shape_thetas
-                    .iter()
-                    .any(|t| t.to_array()[d] != 0.0)
-            })
-            .collect();
-        if dims.is_empty() {
-            return Ok(None);
-        }
-        let at = |t: [f64; 3]| {
-            self.lookup_targets(&prep.targets, Some(JawParams::from_array(t)), prep.bin)
-        };
-        let mut theta = start.to_array();
-        // The best pose evaluated, its residual and its fit (what the frame is solved with).
-        let mut best: Option<(f64, [f64; 3], FrameFit)> = None;
-        let mut last: Option<FrameFit> = None;
-        for _ in 0..JAW_ITERATIONS {
-            let u = at(theta)?;
-            let mut dirs = Vec::with_capacity(dims.len());
-            for &d in &dims {
-                let h = JAW_DIFFERENCE * scale[d];
-                let mut t = theta;
-                t[d] += h;
-                let moved = at(t)?;
-                dirs.push(
-                    moved
-                        .iter()
-                        .zip(&u)
-                        .map(|(a, b)| {
-                            if b.is_nan() {
-                                DVec3::ZERO
-                            } else {
-                                (*a - *b) / h
-                            }
-                        })
-                        .collect::<Vec<_>>(),
-                );
-            }
-            let fit = prior.fit_from(&u, last.as_ref())?;
-            // The residual of the fit's active shapes without its ridge: zero at a dataset
-            // shape's own pose, so the refinement is not pulled off it by the ridge.
-            let active: Vec<usize> = (1..fit.weights.len())
-                .filter(|&j| fit.weights[j] > 0.0)
-                .map(|j| j - 1)
-                .collect();
-            let (res, pjs) = prior.active_residuals(&u, &dirs, &active)?;
-            let n = dims.len();
-            let (mut m, mut g, mut e) = (vec![0.0; n * n], vec![[0.0; 3]; n], 0.0);
-            for &i in &prep.present {
-                let i = i as usize;
-                let r = res[i];
-                e += r.length_squared();
-                let pj: Vec<DVec3> = (0..n).map(|a| pjs[a][i]).collect();
-                for a in 0..n {
-                    g[a][0] -= pj[a].dot(r);
-                    for b in 0..n {
-                        m[a * n + b] += pj[a].dot(pj[b]);
-                    }
-                }
-            }
-            if best.as_ref().is_some_and(|b| e >= b.0) {
-                break;
-            }
-            best = Some((e, theta, fit.clone()));
-            let trace: f64 = (0..n).map(|a| m[a * n + a]).sum();
-            for a in 0..n {
-                m[a * n + a] += 1e-9 * trace + f64::MIN_POSITIVE;
-            }
-            last = Some(fit);
-            let Ok(lu) = Lu::factor(n, m) else { break };
-            let step = lu.solve3(&g);
-            let mut largest = 0.0f64;
-            for (a, &d) in dims.iter().enumerate() {
-                let limit = JAW_STEP[d] * scale[d];
-                let x = step[a][0].clamp(-limit, limit);
-                theta[d] += x;
-                largest = largest.max(x.abs() / scale[d]);
-            }
-            if largest < JAW_TOLERANCE {
-                // The pose has settled: the last one evaluated stands.
-                break;
-            }
-        }
-        let Some((_, pose, fit)) = best else {
-            return Ok(None);
-        };
-        let pose = JawParams::from_array(pose);
-        if pose.validate().is_err() {
-            return Ok(None);
-        }
-        prep.lookup = at(pose.to_array())?;
-        prep.theta = Some(pose);
-        Ok(Some(fit))
-    }
-
     /// The inverse of [`lookup_targets`](Self::lookup_targets): points of bin `bin`'s space
     /// in the frame's (skinned) space.
     fn frame_targets(
@@ -430,7 +262,7 @@ impl Model {
 
     /// Targets in bin `bin`'s space: unskinned with the frame's pose, then skinned to the
     /// bin's reference pose, `T(θ_b) T(θ)⁻¹` with each bundle's jaw weight.
-    fn lookup_targets(
+    pub(super) fn lookup_targets(
         &self,
         targets: &[DVec3],
         theta: Option<JawParams>,
@@ -687,80 +519,26 @@ impl Model {
         })
     }
 
-    /// Solves a sequence. With `temporal`, frames are solved in order, each preferring tets
-    /// that share shapes with the previous frame's choice; without, frames are independent and
-    /// solved in parallel. `smooth_window` > 1 averages each bundle's shape weights over that
-    /// many frames (centred) before sewing, in the jaw-unskinned space so jaw motion is not
-    /// smoothed; the residual pass still interpolates every marker. `jaw` gives each frame's
-    /// jaw pose for a model with a jaw rig. `on_frame` is called as frames finish (progress).
-    pub fn solve_sequence(
+    /// Solves `frames` (each B bundle positions; a row with a NaN is a missing marker) with
+    /// `options`, writing frame f's vertices into `vertices[f * V..(f + 1) * V]` (a caller's
+    /// buffer, e.g. a numpy array: no per-frame allocation), and returns the rest of each
+    /// frame. With [`temporal`](SolveOptions::temporal), frames are solved in order, each
+    /// preferring tets that share shapes with the previous frame's choice; without, frames
+    /// are independent and solved in parallel. A [`smooth_window`](SolveOptions::smooth_window)
+    /// above 1 averages each bundle's shape weights over that many frames (centred) before
+    /// sewing, in the jaw-unskinned space so jaw motion is not smoothed; the residual pass
+    /// still interpolates every marker. [`jaw`](SolveOptions::jaw) gives each frame's jaw
+    /// pose ([`JawPose`]); with jaw bins a frame keeps the previous frame's bin while its
+    /// opening allows (hysteresis), and the previous choices are preferred only within a bin.
+    ///
+    /// `previous` continues a temporal solve: the first frame prefers its choices and keeps
+    /// its jaw bin as the frame after it would in one call, so a take solved chunk by chunk,
+    /// each chunk given the last frame's state of the one before ([`FrameInfo::state`]), is
+    /// the take solved at once (frames are independent otherwise; smoothing and a tracked
+    /// pose see only their own chunk). `on_frame` is called as frames finish (progress).
+    pub fn solve(
         &self,
         frames: &[Vec<DVec3>],
-        jaw: Option<&[JawParams]>,
-        temporal: bool,
-        smooth_window: usize,
-        on_frame: impl FnMut(usize),
-    ) -> Result<Vec<Frame>> {
-        let nv = self.dataset.num_vertices();
-        let mut vertices = vec![DVec3::ZERO; frames.len() * nv];
-        let infos = self.solve_sequence_into(
-            frames,
-            jaw,
-            temporal,
-            smooth_window,
-            &mut vertices,
-            on_frame,
-        )?;
-        Ok(infos
-            .into_iter()
-            .zip(vertices.chunks(nv.max(1)))
-            .map(|(info, v)| Frame {
-                vertices: v.to_vec(),
-                info,
-            })
-            .collect())
-    }
-
-    /// As [`Model::solve_sequence`], writing frame f's vertices into
-    /// `vertices[f * V..(f + 1) * V]` (a caller's buffer, e.g. a numpy array: no per-frame
-    /// allocation) and returning the rest of each frame. The paper's exact mode
-    /// ([`SolveOptions::exact`]); [`solve_sequence_with`](Self::solve_sequence_with) takes
-    /// every option.
-    pub fn solve_sequence_into(
-        &self,
-        frames: &[Vec<DVec3>],
-        jaw: Option<&[JawParams]>,
-        temporal: bool,
-        smooth_window: usize,
-        vertices: &mut [DVec3],
-        on_frame: impl FnMut(usize),
-    ) -> Result<Vec<FrameInfo>> {
-        let options = SolveOptions::exact(temporal, smooth_window);
-        self.solve_sequence_with(frames, jaw, &options, vertices, on_frame)
-    }
-
-    /// Solves a sequence with `options` into `vertices` (as
-    /// [`solve_sequence_into`](Self::solve_sequence_into)).
-    pub fn solve_sequence_with(
-        &self,
-        frames: &[Vec<DVec3>],
-        jaw: Option<&[JawParams]>,
-        options: &SolveOptions,
-        vertices: &mut [DVec3],
-        on_frame: impl FnMut(usize),
-    ) -> Result<Vec<FrameInfo>> {
-        self.solve_sequence_after(frames, jaw, options, None, vertices, on_frame)
-    }
-
-    /// [`solve_sequence_with`](Self::solve_sequence_with) continuing a temporal solve: the
-    /// first frame prefers `previous`'s choices and keeps its jaw bin as the frame after
-    /// `previous` would in one call, so a take solved chunk by chunk, each chunk given the
-    /// last frame's state of the one before ([`FrameInfo::state`]), is the take solved at
-    /// once (frames are independent otherwise; smoothing sees only its own chunk).
-    pub fn solve_sequence_after(
-        &self,
-        frames: &[Vec<DVec3>],
-        jaw: Option<&[JawParams]>,
         options: &SolveOptions,
         previous: Option<&FrameState>,
         vertices: &mut [DVec3],
@@ -778,16 +556,8 @@ impl Model {
                 frames.len() * nv
             )));
         }
-        if let Some(j) = jaw {
-            if j.len() != frames.len() {
-                return Err(LgiError::Input(format!(
-                    "{} jaw poses for {} frames",
-                    j.len(),
-                    frames.len()
-                )));
-            }
-        }
-        let theta = |f: usize| jaw.map(|j| j[f]);
+        let poses = self.jaw_poses(frames, &options.jaw)?;
+        let theta = |f: usize| poses.as_ref().map(|p| p[f]);
         // Bins are picked in order: in a temporal solve a frame keeps the previous frame's bin
         // while its opening allows (hysteresis).
         let mut prepared: Vec<Prepared> = Vec::with_capacity(frames.len());
@@ -802,7 +572,8 @@ impl Model {
                 .map_err(|e| frame_context(e, f))?;
             prepared.push(prep);
         }
-        let refine = options.refine_jaw && self.jaw.is_some() && jaw.is_some();
+        // A pose from the fit is refined against the bin's fit, in the jaw's unskinned space.
+        let refine = options.jaw == JawPose::Fit;
         if options.fit || options.marker_noise.is_some() || refine {
             // Frames' fits are independent of each other: in parallel.
             let offer = options.fit && smooth_window <= 1;
@@ -942,7 +713,8 @@ impl Model {
     }
 }
 
-fn frame_context(e: LgiError, frame: usize) -> LgiError {
+/// `e` naming the frame it is about (input errors).
+pub(super) fn frame_context(e: LgiError, frame: usize) -> LgiError {
     match e {
         LgiError::Input(m) => LgiError::Input(format!("frame {frame}: {m}")),
         other => other,

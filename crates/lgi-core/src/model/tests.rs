@@ -343,6 +343,47 @@ fn shape_mesh(data: &Dataset, k: usize) -> Vec<DVec3> {
         .collect()
 }
 
+/// A solved frame: its vertices and what the solve says about it.
+pub(crate) struct Solved {
+    pub(crate) vertices: Vec<DVec3>,
+    pub(crate) info: FrameInfo,
+}
+
+/// [`Model::solve`] into a buffer of its own, frame by frame.
+pub(crate) fn solve_with(
+    model: &Model,
+    frames: &[Vec<DVec3>],
+    options: &SolveOptions,
+    previous: Option<&FrameState>,
+) -> Result<Vec<Solved>> {
+    let nv = model.dataset().num_vertices();
+    let mut vertices = vec![DVec3::ZERO; frames.len() * nv];
+    let infos = model.solve(frames, options, previous, &mut vertices, |_| {})?;
+    Ok(infos
+        .into_iter()
+        .zip(vertices.chunks(nv.max(1)))
+        .map(|(info, v)| Solved {
+            vertices: v.to_vec(),
+            info,
+        })
+        .collect())
+}
+
+/// The paper's exact temporal solve (smoothed over `window` frames), at the given `poses`.
+fn given(poses: &[JawParams], window: usize) -> SolveOptions {
+    SolveOptions {
+        jaw: JawPose::Given(poses.to_vec()),
+        ..SolveOptions::exact(true, window)
+    }
+}
+
+/// One frame solved at pose `theta` (no previous frame).
+fn solve_one(model: &Model, targets: &[DVec3], theta: JawParams) -> Solved {
+    let frames = [targets.to_vec()];
+    let mut out = solve_with(model, &frames, &given(&[theta], 0), None).unwrap();
+    out.remove(0)
+}
+
 /// The old sewing, one stage after another over every vertex: blend, jaw maps, residual
 /// pass (the reference of the fused one-pass sewing).
 fn staged_sewing(model: &Model, prep: &Prepared, pieces: &Pieces) -> Vec<DVec3> {
@@ -434,9 +475,15 @@ fn every_member_shape_of_every_bin_is_reproduced_at_its_own_jaw_pose() {
             let k = k as usize;
             let mesh = shape_mesh(&data, k);
             let targets = model.bundle_positions(&mesh).unwrap();
-            let frame = model
-                .solve_frame_in_bin(&targets, Some(thetas[k]), bin)
-                .unwrap();
+            // The frame after one in `bin` stays there (hysteresis: its opening is a member's).
+            let kept = FrameState {
+                choices: vec![None; model.num_bundles()],
+                bin: Some(bin),
+            };
+            let frames = [targets];
+            let frame = solve_with(&model, &frames, &given(&[thetas[k]], 0), Some(&kept))
+                .unwrap()
+                .remove(0);
             assert_eq!(frame.info.bin, bin);
             for (i, c) in frame.info.choices.iter().enumerate() {
                 let c = c.unwrap();
@@ -474,8 +521,8 @@ fn one_bin_holding_every_shape_matches_the_unbinned_model_to_f32_round_off() {
             open: (1.0 - t) * thetas[a].open + t * thetas[b].open,
             ..JawParams::ZERO
         };
-        let f0 = plain.solve_frame(&targets, None, Some(theta)).unwrap();
-        let f1 = binned.solve_frame(&targets, None, Some(theta)).unwrap();
+        let f0 = solve_one(&plain, &targets, theta);
+        let f1 = solve_one(&binned, &targets, theta);
         let err = f0
             .vertices
             .iter()
@@ -544,9 +591,7 @@ fn a_temporal_solve_picks_bins_by_hysteresis_and_reports_dataset_shape_ids() {
     let want = [0, 0, 0, 1, 1, 0, 1];
     let (frames, poses) = hysteresis_take(&model, &data);
     for window in [0, 3] {
-        let out = model
-            .solve_sequence(&frames, Some(&poses), true, window, |_| {})
-            .unwrap();
+        let out = solve_with(&model, &frames, &given(&poses, window), None).unwrap();
         let bins: Vec<usize> = out.iter().map(|f| f.info.bin).collect();
         assert_eq!(bins, want, "window {window}");
         for (f, fr) in out.iter().enumerate() {
@@ -567,9 +612,7 @@ fn a_temporal_solve_picks_bins_by_hysteresis_and_reports_dataset_shape_ids() {
         }
     }
     // Frame 1 is shape 3 at its own pose (0.2): it chooses that shape (id 4), purely.
-    let out = model
-        .solve_sequence(&frames[..2], Some(&poses[..2]), true, 0, |_| {})
-        .unwrap();
+    let out = solve_with(&model, &frames[..2], &given(&poses[..2], 0), None).unwrap();
     for c in out[1].info.choices.iter().flatten() {
         let w: f64 = (0..4)
             .filter(|&j| c.shapes[j] == 4)
@@ -577,15 +620,13 @@ fn a_temporal_solve_picks_bins_by_hysteresis_and_reports_dataset_shape_ids() {
             .sum();
         assert!(w > 1.0 - 1e-6, "{c:?}");
     }
-    // solve_frame with a FrameState applies the same rule.
+    // A solve continuing from a FrameState applies the same rule.
     let state = FrameState {
         choices: out[1].info.choices.clone(),
         bin: Some(out[1].info.bin),
     };
-    let fr = model
-        .solve_frame(&frames[2], Some(&state), Some(poses[2]))
-        .unwrap();
-    assert_eq!(fr.info.bin, 0);
+    let fr = solve_with(&model, &frames[2..3], &given(&poses[2..3], 0), Some(&state)).unwrap();
+    assert_eq!(fr[0].info.bin, 0);
 }
 
 /// The owned copy of a model's borrowed parts (what a reader of the file produces).
@@ -596,27 +637,26 @@ fn a_take_solved_in_chunks_each_given_the_last_state_equals_the_take_solved_at_o
     // range): a chunk boundary after frame 3 must carry the bin and the choices.
     let (frames, poses) = hysteresis_take(&model, &data);
     let nv = data.num_vertices();
-    let options = SolveOptions::exact(true, 0);
     let mut whole = vec![DVec3::ZERO; frames.len() * nv];
     let want = model
-        .solve_sequence_with(&frames, Some(&poses), &options, &mut whole, |_| {})
+        .solve(&frames, &given(&poses, 0), None, &mut whole, |_| {})
         .unwrap();
     for split in [1, 4, 6] {
         let mut parts = vec![DVec3::ZERO; frames.len() * nv];
         let (a, b) = parts.split_at_mut(split * nv);
         let first = model
-            .solve_sequence_with(&frames[..split], Some(&poses[..split]), &options, a, |_| {})
-            .unwrap();
-        let state = first.last().map(FrameInfo::state);
-        let second = model
-            .solve_sequence_after(
-                &frames[split..],
-                Some(&poses[split..]),
-                &options,
-                state.as_ref(),
-                b,
+            .solve(
+                &frames[..split],
+                &given(&poses[..split], 0),
+                None,
+                a,
                 |_| {},
             )
+            .unwrap();
+        let state = first.last().map(FrameInfo::state);
+        let options = given(&poses[split..], 0);
+        let second = model
+            .solve(&frames[split..], &options, state.as_ref(), b, |_| {})
             .unwrap();
         assert_eq!(parts, whole, "split after {split}");
         for (got, want) in first.iter().chain(&second).zip(&want) {
@@ -627,10 +667,9 @@ fn a_take_solved_in_chunks_each_given_the_last_state_equals_the_take_solved_at_o
     // Without the state the chunk after frame 3 starts afresh: frame 4 leaves bin 1.
     let mut rest = vec![DVec3::ZERO; 3 * nv];
     let fresh = model
-        .solve_sequence_after(
+        .solve(
             &frames[4..],
-            Some(&poses[4..]),
-            &options,
+            &given(&poses[4..], 0),
             None,
             &mut rest,
             |_| {},
@@ -667,12 +706,8 @@ fn a_binned_model_rebuilt_from_its_parts_gives_identical_frames_and_bad_parts_ar
         .map(|&k| model.bundle_positions(&shape_mesh(&data, k)).unwrap())
         .collect();
     let poses: Vec<JawParams> = ks.iter().map(|&k| thetas[k]).collect();
-    let a = model
-        .solve_sequence(&frames, Some(&poses), true, 0, |_| {})
-        .unwrap();
-    let b = rebuilt
-        .solve_sequence(&frames, Some(&poses), true, 0, |_| {})
-        .unwrap();
+    let a = solve_with(&model, &frames, &given(&poses, 0), None).unwrap();
+    let b = solve_with(&rebuilt, &frames, &given(&poses, 0), None).unwrap();
     for (fa, fb) in a.iter().zip(&b) {
         assert_eq!(fa.vertices, fb.vertices);
         assert_eq!(fa.info.choices, fb.info.choices);
@@ -714,12 +749,8 @@ fn binned_model_save_load_round_trip_gives_identical_frames() {
         .map(|&k| model.bundle_positions(&shape_mesh(&data, k)).unwrap())
         .collect();
     let poses: Vec<JawParams> = [0, 3, 5, 7, 9].iter().map(|&k| thetas[k]).collect();
-    let a = model
-        .solve_sequence(&frames, Some(&poses), true, 3, |_| {})
-        .unwrap();
-    let b = loaded
-        .solve_sequence(&frames, Some(&poses), true, 3, |_| {})
-        .unwrap();
+    let a = solve_with(&model, &frames, &given(&poses, 3), None).unwrap();
+    let b = solve_with(&loaded, &frames, &given(&poses, 3), None).unwrap();
     for (fa, fb) in a.iter().zip(&b) {
         assert_eq!(fa.vertices, fb.vertices);
         assert_eq!(fa.info.choices, fb.info.choices);
@@ -746,7 +777,7 @@ fn a_tilted_frame_jaw_model_reproduces_its_shapes_and_its_frame_survives_save_lo
     for k in [0usize, 3, 5, 7, 9] {
         let mesh = shape_mesh(&data, k);
         let targets = model.bundle_positions(&mesh).unwrap();
-        let fr = model.solve_frame(&targets, None, Some(thetas[k])).unwrap();
+        let fr = solve_one(&model, &targets, thetas[k]);
         let err = model
             .sewing_space()
             .sewn()
@@ -789,12 +820,8 @@ fn a_tilted_frame_jaw_model_reproduces_its_shapes_and_its_frame_survives_save_lo
         .map(|&k| model.bundle_positions(&shape_mesh(&data, k)).unwrap())
         .collect();
     let poses: Vec<JawParams> = [0, 4, 8].iter().map(|&k| thetas[k]).collect();
-    let a = model
-        .solve_sequence(&frames, Some(&poses), true, 0, |_| {})
-        .unwrap();
-    let b = loaded
-        .solve_sequence(&frames, Some(&poses), true, 0, |_| {})
-        .unwrap();
+    let a = solve_with(&model, &frames, &given(&poses, 0), None).unwrap();
+    let b = solve_with(&loaded, &frames, &given(&poses, 0), None).unwrap();
     for (fa, fb) in a.iter().zip(&b) {
         assert_eq!(fa.vertices, fb.vertices);
     }
@@ -832,8 +859,8 @@ fn a_version_2_file_still_loads_as_an_unbinned_model() {
     let t = model
         .bundle_positions(&shape_mesh(model.dataset(), 5))
         .unwrap();
-    let a = model.solve_frame(&t, None, Some(thetas[5])).unwrap();
-    let b = loaded.solve_frame(&t, None, Some(thetas[5])).unwrap();
+    let a = solve_one(&model, &t, thetas[5]);
+    let b = solve_one(&loaded, &t, thetas[5]);
     assert_eq!(a.vertices, b.vertices);
 }
 
@@ -937,6 +964,94 @@ fn a_shared_fit_piece_blends_as_the_fit_copied_into_every_bundle_that_took_it() 
     for (p, q) in a.iter().zip(&b) {
         assert!(p.distance(*q) <= 1e-14, "{p} vs {q}");
     }
+}
+
+#[test]
+fn the_fits_pose_recovers_each_jaw_shapes_own_pose() {
+    let (data, rig, thetas, markers) = jaw_patch();
+    let model = jaw_model(&data, &markers, rig, &thetas, None).unwrap();
+    let ks = [0usize, 3, 5, 7, 8];
+    let frames: Vec<Vec<DVec3>> = ks
+        .iter()
+        .map(|&k| model.bundle_positions(&shape_mesh(&data, k)).unwrap())
+        .collect();
+    let options = SolveOptions {
+        jaw: JawPose::Fit,
+        ..SolveOptions::exact(false, 0)
+    };
+    let out = solve_with(&model, &frames, &options, None).unwrap();
+    for (fr, &k) in out.iter().zip(&ks) {
+        let got = fr.info.theta.unwrap();
+        // Measured: 2.3e-7 rad at most (the refinement stops on steps below 1e-6).
+        let err = (got.open - thetas[k].open).abs();
+        assert!(err <= 1e-6, "shape {k}: {got:?} vs {:?}", thetas[k]);
+        assert!(fr
+            .info
+            .residuals
+            .iter()
+            .all(|&r| r <= 1e-9 * model.diagonal()));
+    }
+}
+
+#[test]
+fn the_tracked_pose_of_pure_jaw_frames_is_their_pose() {
+    let (data, rig, thetas, markers) = jaw_patch();
+    let model = jaw_model(&data, &markers, rig.clone(), &thetas, None).unwrap();
+    let x0 = &data.neutral().positions;
+    // A steady opening: the centred moving average of a ramp is the ramp.
+    let poses: Vec<JawParams> = (0..6)
+        .map(|f| JawParams::from_array([0.06 * f as f64, 0.0, 0.0]))
+        .collect();
+    let frames: Vec<Vec<DVec3>> = poses
+        .iter()
+        .map(|&t| {
+            let mut mesh = x0.clone();
+            rig.skin(x0, t, &mut mesh).unwrap();
+            model.bundle_positions(&mesh).unwrap()
+        })
+        .collect();
+    let options = SolveOptions {
+        jaw: JawPose::Track,
+        ..SolveOptions::exact(true, 0)
+    };
+    let out = solve_with(&model, &frames, &options, None).unwrap();
+    for (f, (fr, want)) in out.iter().zip(&poses).enumerate() {
+        let got = fr.info.theta.unwrap().to_array();
+        let want = want.to_array();
+        assert!(
+            (0..3).all(|c| (got[c] - want[c]).abs() <= 1e-9),
+            "frame {f}: {got:?} vs {want:?}"
+        );
+    }
+}
+
+#[test]
+fn a_pose_needs_a_rig_and_given_poses_one_per_frame() {
+    let (data, rig, thetas, markers) = jaw_patch();
+    let jawed = jaw_model(&data, &markers, rig, &thetas, None).unwrap();
+    let plain = Model::build(&data, &markers, &BuildConfig::default()).unwrap();
+    let frames: Vec<Vec<DVec3>> = (0..3)
+        .map(|k| jawed.bundle_positions(&shape_mesh(&data, k)).unwrap())
+        .collect();
+    for jaw in [
+        JawPose::Fit,
+        JawPose::Track,
+        JawPose::Given(vec![JawParams::ZERO; 3]),
+    ] {
+        let options = SolveOptions {
+            jaw,
+            ..SolveOptions::default()
+        };
+        let e = solve_with(&plain, &frames, &options, None).err().unwrap();
+        assert!(e.to_string().contains("without a jaw rig"), "{e}");
+    }
+    let e = solve_with(&jawed, &frames, &given(&thetas[..2], 0), None)
+        .err()
+        .unwrap();
+    assert!(e.to_string().contains("2 jaw poses for 3 frames"), "{e}");
+    // The rest pose on a jaw model: no pose.
+    let rest = solve_with(&jawed, &frames, &SolveOptions::default(), None).unwrap();
+    assert!(rest.iter().all(|f| f.info.theta.is_none()));
 }
 
 #[test]

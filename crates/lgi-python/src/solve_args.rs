@@ -1,0 +1,120 @@
+//! The arguments of `_lgi.Model.solve` as the core's options, each checked with the error
+//! message the Python API has always given (the jaw mode as the user writes it: `"auto"`,
+//! `"fit"`, `"track"`, an (F, 3) array or None).
+
+use crate::convert::{any_numbers, count, float_array};
+use crate::error::input_error;
+use lgi_core::{JawParams, JawPose, Model as CoreModel};
+use numpy::{PyArray3, PyUntypedArrayMethods};
+use pyo3::prelude::*;
+use pyo3::types::{PyFloat, PyString};
+
+/// `smooth_window`: a count (an int >= 0, not a bool).
+pub fn smooth_window(obj: &Bound<'_, PyAny>) -> PyResult<usize> {
+    count(obj, "smooth_window")
+}
+
+/// `fit`: None (the core decides), else its truth value.
+pub fn fit(obj: &Bound<'_, PyAny>) -> PyResult<Option<bool>> {
+    if obj.is_none() {
+        return Ok(None);
+    }
+    obj.is_truthy().map(Some)
+}
+
+/// `marker_noise`: None (exact), else whatever Python's `float` makes of it (the core checks
+/// its range).
+pub fn marker_noise(obj: &Bound<'_, PyAny>) -> PyResult<Option<f64>> {
+    if obj.is_none() {
+        return Ok(None);
+    }
+    let shown = || obj.repr().map_or_else(|_| "?".into(), |r| r.to_string());
+    obj.py()
+        .get_type::<PyFloat>()
+        .call1((obj,))
+        .and_then(|f| f.extract::<f64>())
+        .map(Some)
+        .map_err(|_| {
+            input_error(format!(
+                "marker_noise must be a number or None, got {}",
+                shown()
+            ))
+        })
+}
+
+/// The jaw pose of `frames` frames on `model`: `"auto"` is the fit's pose with a jaw rig and
+/// the rest pose without; `"fit"` and `"track"` need a rig; an array is one pose per frame;
+/// None is the rest pose.
+pub fn jaw_pose(
+    jaw: Option<&Bound<'_, PyAny>>,
+    model: &CoreModel,
+    frames: usize,
+) -> PyResult<JawPose> {
+    let Some(jaw) = jaw.filter(|j| !j.is_none()) else {
+        return Ok(JawPose::Rest);
+    };
+    let mode = match jaw.cast::<PyString>() {
+        Ok(s) => Some(s.to_str()?.to_owned()),
+        Err(_) => None,
+    };
+    if mode.as_deref() == Some("auto") {
+        return Ok(match model.jaw() {
+            Some(_) => JawPose::Fit,
+            None => JawPose::Rest,
+        });
+    }
+    if model.jaw().is_none() {
+        return Err(input_error("jaw: this model was built without a jaw rig"));
+    }
+    match mode.as_deref() {
+        Some("fit") => return Ok(JawPose::Fit),
+        Some("track") => return Ok(JawPose::Track),
+        Some(_) => {
+            let shown = jaw.repr().map_or_else(|_| "?".into(), |r| r.to_string());
+            return Err(input_error(format!(
+                "jaw must be 'auto', 'fit', 'track', an (F, 3) array or None, got {shown}"
+            )));
+        }
+        None => {}
+    }
+    let arr = any_numbers(jaw, "jaw")?;
+    let shape: Vec<usize> = arr.getattr("shape")?.extract()?;
+    if shape != [frames, 3] {
+        let shown = arr.getattr("shape")?.repr()?.to_string();
+        return Err(input_error(format!(
+            "jaw: expected shape ({frames}, 3), got {shown}"
+        )));
+    }
+    let poses = float_array(&arr, "jaw", &[Some(frames), Some(3)])?
+        .outer_iter()
+        .map(|r| JawParams::from_array([r[0], r[1], r[2]]))
+        .collect();
+    Ok(JawPose::Given(poses))
+}
+
+/// A caller's output array for `solve(out=...)`: float64, C-contiguous, writeable, of `shape`.
+pub fn output_array<'py>(
+    o: &Bound<'py, PyAny>,
+    shape: [usize; 3],
+) -> PyResult<Bound<'py, PyArray3<f64>>> {
+    let arr = o.cast::<PyArray3<f64>>().map_err(|_| {
+        let dtype = o
+            .getattr("dtype")
+            .map(|d| d.to_string())
+            .unwrap_or_else(|_| "not a numpy array".into());
+        input_error(format!(
+            "out: expected a float64 numpy array of shape {shape:?}, got {dtype}"
+        ))
+    })?;
+    if arr.shape() != shape {
+        return Err(input_error(format!(
+            "out: expected shape {shape:?}, got {:?}",
+            arr.shape()
+        )));
+    }
+    if !arr.is_c_contiguous() {
+        return Err(input_error("out: the array must be C-contiguous"));
+    }
+    // Writeability is checked where the solve borrows it.
+    Ok(arr.clone())
+}
