@@ -5,7 +5,8 @@ shapes; the pieces are sewn so that the surface passes exactly through every mar
 """
 
 from lgi import camera, export, jaw, rig, rig_export, stabilize, takes
-from lgi._lgi import Dataset, __version__, get_num_threads, set_num_threads
+from lgi._lgi import __version__, get_num_threads, set_num_threads
+from lgi.dataset import Dataset
 from lgi.errors import (
     DatasetError,
     DatasetFileError,
