@@ -85,6 +85,24 @@ def test_from_arrays_defaults_no_shapes_no_uvs_and_numbered_names():
     assert lgi.Dataset.from_arrays(NEUTRAL, TRIS, SHAPES).names == ["shape0", "shape1"]
 
 
+def test_a_dataset_is_a_python_class_holding_the_core_dataset():
+    d = _square()
+    assert type(d) is lgi.Dataset and type(d.core) is lgi._lgi.Dataset
+    assert repr(d) == repr(d.core) == "Dataset(num_vertices=4, num_shapes=2, num_triangles=2)"
+    again = lgi.Dataset(d.core)
+    assert again.core is d.core and again.to_bytes() == d.to_bytes()
+    assert type(d.augmented(4)) is lgi.Dataset
+    assert type(d.with_polygons([3, 3], TRIS.ravel(), UV_TRIS.ravel())) is lgi.Dataset
+    with pytest.raises(lgi.InputError, match="from_arrays"):
+        lgi.Dataset(NEUTRAL)  # type: ignore[arg-type]
+
+
+def test_a_models_dataset_is_an_lgi_dataset(sample_model, sample_dataset):
+    data = sample_model.dataset
+    assert type(data) is lgi.Dataset
+    assert data.to_bytes() == sample_dataset.to_bytes()
+
+
 def test_npz_round_trip_is_exact(tmp_path):
     d = _square()
     d.to_npz(tmp_path / "face.npz")

@@ -13,8 +13,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from jaw_oracle import jaw_transform, skin_jaw
-from lgi import jaw
+from jaw_oracle import jaw_transform, skin_jaw, unskin_jaw
+from lgi import _lgi, jaw
 from lgi.errors import InputError
 from lgi.ict import ENV as ICT_ENV
 from lgi.ict import LOWER_TEETH
@@ -141,6 +141,74 @@ def test_rig_round_trips_through_npz(tmp_path: Path) -> None:
     np.testing.assert_array_equal(back.pivot, rig.pivot)
     np.testing.assert_array_equal(back.weights, rig.weights)
     np.testing.assert_array_equal(back.frame, rig.frame)
+
+
+def test_the_rig_is_the_cores_class_with_the_tooling() -> None:
+    assert jaw.JawRig is _lgi.JawRig
+    assert not hasattr(jaw.JawRig, "of")
+    with pytest.raises(TypeError):
+        type("Sub", (jaw.JawRig,), {})  # final: one JawRig
+
+
+def test_unskin_displacements_is_the_unskinned_shape_minus_the_neutral() -> None:
+    rig, x0, shapes, _, truth = _synthetic(frame=_rodrigues([1, 2, 0.5], 0.3))
+    for s, th in zip(shapes, truth, strict=True):
+        star = rig.unskin_displacements(x0, s, th)
+        np.testing.assert_array_equal(star, rig.unskin(x0 + s, th) - x0)
+        oracle = unskin_jaw(x0 + s, th, rig.pivot, rig.weights, rig.frame) - x0
+        np.testing.assert_allclose(star, oracle, atol=1e-12 * (1 + np.abs(x0).max()))
+    # The synthetic jaw shapes are pure jaw motion: unskinned, nothing is left.
+    assert np.abs(rig.unskin_displacements(x0, shapes[0], truth[0])).max() < 1e-12
+
+
+def test_bundle_weights_are_the_barycentric_blend_clipped_bit_for_bit() -> None:
+    rng = np.random.default_rng(7)
+    v, t, b = 60, 80, 50
+    tris = rng.integers(0, v, size=(t, 3))
+    w = rng.uniform(0, 1, v)
+    bt = rng.integers(0, t, size=b)
+    bc = rng.dirichlet(np.ones(3), size=b)
+    w[tris[bt[:5]]] = 1.0
+    bc[:5] *= 1.5  # outside the triangle: above 1, clipped
+    bc[5:8] *= -1.0  # below 0, clipped
+    rig = jaw.JawRig(PIVOT, w)
+    corner = w[tris[bt]]
+    # The sum in corner order, as the core (and so a model's bundles) adds it.
+    expected = np.clip(
+        bc[:, 0] * corner[:, 0] + bc[:, 1] * corner[:, 1] + bc[:, 2] * corner[:, 2], 0.0, 1.0
+    )
+    got = rig.bundle_weights(tris, bt, bc)
+    assert got.dtype == np.float64 and got.shape == (b,)
+    np.testing.assert_array_equal(got, expected)
+    # einsum (the former Python formula) sums in its own order: the same to an ulp.
+    einsum = np.clip(np.einsum("bc,bc->b", bc, corner), 0.0, 1.0)
+    np.testing.assert_allclose(got, einsum, rtol=0, atol=4e-16)
+    assert (got[:5] == 1.0).all() and (got[5:8] == 0.0).all()
+    assert rig.bundle_weights(tris, np.zeros(0, np.int64), np.zeros((0, 3))).shape == (0,)
+
+
+def test_rig_tooling_arguments_raise_input_error_naming_the_problem() -> None:
+    rig = jaw.JawRig(PIVOT, np.ones(4))
+    tris = np.array([[0, 1, 2], [1, 2, 3]])
+    with pytest.raises(InputError, match=r"triangles must have shape \(T, 3\), got \(2, 2\)"):
+        rig.bundle_weights(tris[:, :2], [0], [[1.0, 0, 0]])
+    with pytest.raises(InputError, match=r"barycentrics must have shape \(1, 3\), got \(1, 2\)"):
+        rig.bundle_weights(tris, [0], [[1.0, 0]])
+    with pytest.raises(InputError, match="bundle triangle index out of range"):
+        rig.bundle_weights(tris, [2], [[1.0, 0, 0]])
+    with pytest.raises(InputError, match="bundle triangle index out of range"):
+        rig.bundle_weights(tris, [-1], [[1.0, 0, 0]])
+    with pytest.raises(InputError, match="out of range of the rig's weights"):
+        rig.bundle_weights(np.array([[0, 1, 4]]), [0], [[1.0, 0, 0]])
+    x0 = np.zeros((4, 3))
+    with pytest.raises(InputError, match=r"neutral must have shape \(N, 3\), got \(4,\)"):
+        rig.unskin_displacements(np.zeros(4), x0, [0, 0, 0])
+    with pytest.raises(InputError, match=r"displacements \(3, 3\) do not match neutral \(4, 3\)"):
+        rig.unskin_displacements(x0, x0[:3], [0, 0, 0])
+    with pytest.raises(InputError, match="theta"):
+        rig.unskin_displacements(x0, x0, [np.nan, 0, 0])
+    with pytest.raises(InputError, match="jaw rig is missing jaw_pivot, jaw_weights"):
+        jaw.JawRig.from_dict({})
 
 
 def test_invalid_rigs_and_arguments_raise_input_error_naming_the_problem() -> None:

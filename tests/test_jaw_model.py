@@ -204,10 +204,18 @@ def test_jaw_frame_survives_save_load(tmp_path: Path, sample, framed_model):  # 
     np.testing.assert_array_equal(a.vertices, b.vertices)
 
 
+def test_a_models_rig_is_the_jaw_rig_with_its_tooling(framed_model):  # type: ignore[no-untyped-def]
+    rig = framed_model.jaw_rig
+    assert type(rig) is JawRig
+    back = JawRig.from_dict(rig.to_dict())
+    for name in ("pivot", "weights", "frame"):
+        np.testing.assert_array_equal(getattr(back, name), getattr(rig, name))
+
+
 def test_jaw_frame_argument_is_checked(sample, sample_dataset):  # type: ignore[no-untyped-def]
     def build(frame: object) -> None:
         lgi._lgi.Model.build(
-            sample_dataset,
+            sample_dataset.core,
             sample.markers_rest,
             jaw_pivot=sample.jaw_pivot,
             jaw_weights=sample.jaw_weights,
@@ -226,7 +234,7 @@ def test_jaw_frame_argument_is_checked(sample, sample_dataset):  # type: ignore[
     with pytest.raises(lgi.InputError, match="finite"):
         build(np.full((3, 3), np.nan))
     with pytest.raises(lgi.InputError, match="jaw_frame"):
-        lgi._lgi.Model.build(sample_dataset, sample.markers_rest, jaw_frame=np.eye(3))
+        lgi._lgi.Model.build(sample_dataset.core, sample.markers_rest, jaw_frame=np.eye(3))
     build(_random_frame(2))
 
 

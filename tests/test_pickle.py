@@ -114,7 +114,11 @@ def test_a_dataset_with_source_polygons_round_trips_through_pickle(sample, tmp_p
     files = write_actor(tmp_path, sample, num_shapes=4)
     data = lgi.Dataset.from_obj(files.neutral, sorted(files.shapes.glob("*.obj")))
     assert data.polygons is not None
-    back = pickle.loads(pickle.dumps(data))
+    pickled = pickle.dumps(data)
+    assert data.to_bytes() in pickled  # pickled as its bytes
+    back = pickle.loads(pickled)
+    assert type(back) is lgi.Dataset
+    assert pickle.loads(pickle.dumps(data.core)).to_bytes() == data.to_bytes()
     for name in ("neutral", "triangles", "shapes", "uvs", "uv_triangles"):
         assert np.array_equal(getattr(back, name), getattr(data, name)), name
     assert back.names == data.names

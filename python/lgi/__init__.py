@@ -7,12 +7,12 @@ shapes; the pieces are sewn so that the surface passes exactly through every mar
 from lgi import camera, export, jaw, rig, rig_export, stabilize, takes
 from lgi._lgi import (
     Choices,
-    Dataset,
     SolveResult,
     __version__,
     get_num_threads,
     set_num_threads,
 )
+from lgi.dataset import Dataset
 from lgi.errors import (
     DatasetError,
     DatasetFileError,

@@ -1,12 +1,12 @@
 """Type stubs for the compiled extension ``lgi._lgi`` (users import ``lgi``)."""
 
 import os
-from collections.abc import Callable, Sequence
-from typing import TypedDict, final
+from collections.abc import Callable, Mapping, Sequence
+from typing import Any, TypedDict, final
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from typing_extensions import NotRequired, Self, disjoint_base
+from typing_extensions import NotRequired, Self
 
 __all__ = [
     "FIT_L2",
@@ -53,7 +53,8 @@ _Path = str | os.PathLike[str]
 
 @final
 class Dataset:
-    """Neutral mesh plus S shapes (displacements). Immutable; cheap to share."""
+    """The core's dataset: neutral mesh plus S shapes (displacements). Immutable; cheap to
+    share. ``lgi.Dataset`` holds one (its ``core``)."""
 
     @staticmethod
     def from_obj(neutral: _Path, shapes: _Path | Sequence[_Path] | None = None) -> Dataset:
@@ -78,16 +79,9 @@ class Dataset:
     ) -> Dataset:
         """neutral (V, 3) float, triangles (T, 3) int, shapes (S, V, 3) float displacements,
         names (S,), uvs (U, 2) float and uv_triangles (T, 3) int (both or neither)."""
-    @staticmethod
-    def from_npz(path: _Path) -> Dataset:
-        """An archive with keys neutral, triangles[, shapes, names, uvs, uv_triangles]."""
-    def to_npz(self, path: _Path) -> None:
-        """Writes the keys read by ``from_npz`` (numpy appends ``.npz`` if missing)."""
-    def augmented(
-        self, min_shapes: int, method: str | None = None, *, quiet: bool = False
-    ) -> Dataset:
-        """Adds in-betweens (``name@0.5``) and pairwise sums, to at least ``min_shapes``;
-        ``method`` "linear" (default, sums) or "arap" (rotations interpolated)."""
+    def augmented(self, min_shapes: int) -> Dataset:
+        """Adds in-betweens (``name@0.5``) and pairwise sums of displacements, to at least
+        ``min_shapes`` (``lgi.Dataset.augmented`` adds the ARAP method)."""
     def augment_recipes(self, min_shapes: int) -> list[tuple[str, list[tuple[int, float]]]]:
         """``(name, [(shape, weight), ...])`` of each shape ``augmented(min_shapes)`` makes."""
     @property
@@ -167,7 +161,7 @@ class BuildConfig:
     def __hash__(self) -> int: ...
     def __getnewargs_ex__(self) -> tuple[tuple[()], dict[str, float | int]]: ...
 
-@disjoint_base
+@final
 class JawRig:
     """Two-bone jaw rig: pivot, per-vertex weights, axes (``frame`` columns)."""
 
@@ -204,6 +198,19 @@ class JawRig:
         """The pose (3,) whose skinning carries ``points`` (N, 3) onto ``targets`` (N, 3), by
         Gauss-Newton from ``theta0`` (None: rest); ``weights`` (N,) are the points' jaw weights
         (None: 1, a rigid fit); ``huber`` (e.g. 1.345) reweighs outliers (IRLS)."""
+    def unskin_displacements(
+        self, neutral: ArrayLike, displacements: ArrayLike, theta: ArrayLike
+    ) -> NDArray[np.float64]:
+        """s* = T_v(theta)^-1 (x0 + s) - x0 for one (V, 3) shape displacement."""
+    def bundle_weights(
+        self, triangles: ArrayLike, bundle_triangles: ArrayLike, barycentrics: ArrayLike
+    ) -> NDArray[np.float64]:
+        """(B,) jaw weight of each bundle: its triangle's vertex weights blended, clipped."""
+    def to_dict(self) -> dict[str, NDArray[np.float64]]:
+        """Arrays for ``np.savez``: ``jaw_pivot``, ``jaw_weights``, ``jaw_frame``."""
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any]) -> JawRig:
+        """Inverse of ``to_dict`` (accepts a loaded ``.npz``); ``jaw_frame`` is optional."""
 
 @final
 class Choices:

@@ -11,8 +11,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-from lgi._lgi import Dataset
-from lgi.dataset import with_shapes
+from lgi.dataset import Dataset, with_shapes
 from lgi.deform import PoissonMesh, Polar, blend
 from lgi.errors import DatasetError
 

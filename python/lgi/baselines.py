@@ -27,7 +27,8 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from lgi import _lgi
-from lgi._lgi import Choices, Dataset
+from lgi._lgi import Choices
+from lgi.dataset import Dataset
 from lgi.errors import InputError
 from lgi.model import BuildConfig, Model, SolveResult
 
@@ -67,7 +68,7 @@ class _Surface:
             raise InputError(f"markers_rest: expected a float array, got dtype {markers.dtype}")
         self.markers_rest = np.asarray(markers, dtype=np.float64)
         self.rbf = _lgi.RbfInterpolator.from_dataset(
-            dataset, markers, float(surface_tolerance) * self.diagonal
+            dataset.core, markers, float(surface_tolerance) * self.diagonal
         )
         self.sv = self.rbf.sample_vertices
         self.sw = self.rbf.sample_weights

@@ -17,8 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from lgi._lgi import Dataset
-from lgi.dataset import without_shapes
+from lgi.dataset import Dataset, without_shapes
 from lgi.errors import InputError
 from lgi.evaluate import marker_samples
 from lgi.jaw import fit_rigid, rotation_axis_angle

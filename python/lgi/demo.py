@@ -9,8 +9,7 @@ from pathlib import Path
 import numpy as np
 
 from lgi import export
-from lgi._lgi import Dataset
-from lgi.dataset import sample_dataset
+from lgi.dataset import Dataset, sample_dataset
 from lgi.model import Model, estimate_marker_noise
 from lgi.sample import describe, make_sample
 

@@ -15,8 +15,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from lgi import _lgi
-from lgi._lgi import Dataset
-from lgi.dataset import sample_dataset, without_shapes
+from lgi.dataset import Dataset, sample_dataset, without_shapes
 from lgi.model import Model, SolveResult
 
 F64 = NDArray[np.float64]
@@ -113,7 +112,7 @@ def evaluate(
 
 def _samples(dataset: Dataset, markers: ArrayLike, tolerance: float = 0.02) -> _lgi.RbfInterpolator:
     neutral = np.asarray(dataset.neutral)
-    return _lgi.RbfInterpolator.from_dataset(dataset, markers, tolerance * _diag(neutral))
+    return _lgi.RbfInterpolator.from_dataset(dataset.core, markers, tolerance * _diag(neutral))
 
 
 def _on_meshes(rbf: _lgi.RbfInterpolator, meshes: F64) -> F64:

@@ -17,7 +17,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import NDArray
 
-from lgi._lgi import Dataset
+from lgi.dataset import Dataset
 from lgi.errors import InputError
 from lgi.takes import METERS_PER_UNIT, normalize_unit
 

@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from lgi._lgi import Dataset
+from lgi.dataset import Dataset
 from lgi.takes import Layout, read_layout
 
 __all__ = [

@@ -1,7 +1,8 @@
 """Jaw rig tooling: the rig's estimation from a dataset's jaw shapes (offline, at build). The
 skinning itself (two bones: skull fixed, jaw rigid about a pivot) and the pose fit are the Rust
-core's, through `lgi._lgi.JawRig` (which `JawRig` extends); each frame's pose in a solve is a
-core stage too (`Model.solve(jaw=...)`).
+core's: `JawRig` is `lgi._lgi.JawRig`, re-exported, with the rig's dataset-side tooling
+(`unskin_displacements`, `bundle_weights`, `to_dict`/`from_dict`); each frame's pose in a solve
+is a core stage too (`Model.solve(jaw=...)`).
 
 The conventions are the core's (`lgi_core::jaw`): theta = (open angle rad, lateral angle rad,
 forward translation) maps p to
@@ -16,14 +17,14 @@ blended affine map exactly, and `fit_pose` fits theta to points by Gauss-Newton.
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from lgi import _lgi
+from lgi._lgi import JawRig
 from lgi.errors import InputError
 
 F64 = NDArray[np.float64]
@@ -42,59 +43,6 @@ def _points(points: ArrayLike, what: str = "points") -> F64:
     if p.ndim != 2 or p.shape[1] != 3:
         raise InputError(f"{what} must have shape (N, 3), got {p.shape}")
     return p
-
-
-class JawRig(_lgi.JawRig):
-    """Pivot, per-vertex jaw weights and the jaw's axes (`frame` columns: open axis, lateral
-    axis, forward direction; identity means x, y, z as in `lgi.sample`): `JawRig(pivot,
-    weights, frame=None)`. Skinning (`skin`, `unskin`, `transform`) is the core's; this class
-    adds the dataset-side tooling."""
-
-    def unskin_displacements(
-        self, neutral: ArrayLike, displacements: ArrayLike, theta: ArrayLike
-    ) -> F64:
-        """s* = T_v(theta)^-1 (x0 + s) - x0 for one (V, 3) shape displacement."""
-        x0 = _points(neutral, "neutral")
-        s = _points(displacements, "displacements")
-        if s.shape != x0.shape:
-            raise InputError(f"displacements {s.shape} do not match neutral {x0.shape}")
-        return self.unskin(x0 + s, theta) - x0
-
-    def bundle_weights(
-        self, triangles: ArrayLike, bundle_triangles: ArrayLike, barycentrics: ArrayLike
-    ) -> F64:
-        """Jaw weight of each bundle: barycentric blend of its triangle's vertex weights."""
-        tri = np.asarray(triangles, dtype=np.int64)
-        bt = np.asarray(bundle_triangles, dtype=np.int64)
-        bc = np.asarray(barycentrics, dtype=np.float64)
-        if tri.ndim != 2 or tri.shape[1] != 3:
-            raise InputError(f"triangles must have shape (T, 3), got {tri.shape}")
-        if bc.shape != (bt.shape[0], 3):
-            raise InputError(f"barycentrics must have shape ({bt.shape[0]}, 3), got {bc.shape}")
-        if bt.size and (bt.min() < 0 or bt.max() >= tri.shape[0]):
-            raise InputError("bundle triangle index out of range")
-        corners = tri[bt]
-        if corners.size and corners.max() >= self.num_vertices:
-            raise InputError("triangle vertex index out of range of the rig's weights")
-        return np.clip(np.einsum("bc,bc->b", bc, self.weights[corners]), 0.0, 1.0)
-
-    def to_dict(self) -> dict[str, F64]:
-        """Arrays for `np.savez` (keys `jaw_pivot`, `jaw_weights`, `jaw_frame`)."""
-        return {"jaw_pivot": self.pivot, "jaw_weights": self.weights, "jaw_frame": self.frame}
-
-    @classmethod
-    def from_dict(cls, d: Mapping[str, Any]) -> JawRig:
-        """Inverse of `to_dict` (accepts a loaded `.npz`); `jaw_frame` is optional."""
-        missing = [k for k in ("jaw_pivot", "jaw_weights") if k not in d]
-        if missing:
-            raise InputError(f"jaw rig is missing {', '.join(missing)}")
-        frame = d["jaw_frame"] if "jaw_frame" in d else None
-        return cls(np.array(d["jaw_pivot"]), np.array(d["jaw_weights"]), frame)
-
-    @classmethod
-    def of(cls, rig: _lgi.JawRig) -> JawRig:
-        """The tooling class around a core rig (e.g. a model's)."""
-        return rig if isinstance(rig, JawRig) else cls(rig.pivot, rig.weights, rig.frame)
 
 
 # --------------------------------------------------------------------------------------------

@@ -16,7 +16,8 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from lgi import _lgi
-from lgi._lgi import BuildConfig, Dataset, SolveResult
+from lgi._lgi import BuildConfig, SolveResult
+from lgi.dataset import Dataset
 from lgi.errors import InputError
 from lgi.jaw import JawRig, estimate_rig
 
@@ -158,7 +159,7 @@ class Model:
                 raise InputError("shape_theta was given without a jaw rig")
             if jaw_bins is not None:
                 raise InputError("jaw_bins needs a jaw rig (jaw=...) and shape_theta")
-            return cls(_lgi.Model.build(dataset, markers_rest, config, **labels))
+            return cls(_lgi.Model.build(dataset.core, markers_rest, config, **labels))
         if shape_theta is None:
             raise InputError("a jaw rig needs shape_theta: the jaw pose of every dataset shape")
         theta = np.asarray(shape_theta, dtype=np.float64)
@@ -168,7 +169,7 @@ class Model:
         except (TypeError, ValueError):
             raise InputError(f"bin_overlap must be a number, got {bin_overlap!r}") from None
         core = _lgi.Model.build(
-            dataset,
+            dataset.core,
             markers_rest,
             config,
             jaw_pivot=jaw.pivot,
@@ -220,7 +221,7 @@ class Model:
 
     @property
     def dataset(self) -> Dataset:
-        return self._core.dataset
+        return Dataset(self._core.dataset)
 
     @property
     def markers_rest(self) -> NDArray[np.float64]:
@@ -245,8 +246,7 @@ class Model:
     @property
     def jaw_rig(self) -> JawRig | None:
         """The jaw rig the model was built with (None without one)."""
-        rig = self._core.jaw_rig
-        return None if rig is None else JawRig.of(rig)
+        return self._core.jaw_rig
 
     @property
     def jaw_bins(self) -> NDArray[np.float64] | None:

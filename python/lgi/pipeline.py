@@ -19,7 +19,8 @@ from pathlib import Path
 import numpy as np
 
 from lgi import export, takes
-from lgi._lgi import BuildConfig, Dataset
+from lgi._lgi import BuildConfig
+from lgi.dataset import Dataset
 from lgi.errors import InputError, MarkerError
 from lgi.model import Model, SolveResult, estimate_marker_noise
 

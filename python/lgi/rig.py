@@ -13,8 +13,7 @@ from collections.abc import Sequence
 import numpy as np
 from numpy.typing import NDArray
 
-from lgi._lgi import Dataset
-from lgi.dataset import with_shapes
+from lgi.dataset import Dataset, with_shapes
 from lgi.deform import PoissonMesh, deformation_gradients
 from lgi.errors import DatasetError, InputError
 from lgi.model import Model

@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from lgi._lgi import Dataset
+from lgi.dataset import Dataset
 from lgi.errors import FileWriteError, InputError
 from lgi.export import _new_stage, _out_path, define_usd_mesh, topology
 from lgi.rig import CORRECTIVE_PREFIX

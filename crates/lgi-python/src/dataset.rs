@@ -1,6 +1,6 @@
-//! `lgi.Dataset`: the neutral mesh and its shapes, loaded by the core's readers (OBJ, glTF) or
-//! from numpy arrays. File reading runs with the GIL released. The `.npz` layout is numpy's
-//! and is read and written in Python (`lgi.dataset`); `from_npz`/`to_npz` only forward there.
+//! `lgi._lgi.Dataset`: the core's dataset (neutral mesh and shapes), loaded by the core's
+//! readers (OBJ, glTF, bytes) or from numpy arrays, with the GIL released. `lgi.Dataset` (a
+//! Python class) holds one and adds what is Python's: the `.npz` layout and ARAP augmentation.
 
 use crate::convert::{count, flat_to_array, float_array, index_array, points, points_to_array};
 use crate::error::{input_error, lgi_exception, PyLgiError, PyLgiResult};
@@ -93,66 +93,16 @@ impl Dataset {
         build(py, neutral, triangles, shapes, names, uvs, uv_triangles)
     }
 
-    /// Loads an `.npz` archive (read with `allow_pickle=False`) with the arrays `neutral`
-    /// (V, 3) float, `triangles` (T, 3) int, and optionally `shapes` (S, V, 3) float
-    /// displacements, `names` (S,) str, `uvs` (U, 2) float and `uv_triangles` (T, 3) int
-    /// (empty `uvs`/`uv_triangles` mean no UVs). The layout written by `to_npz`; both are
-    /// `lgi.dataset.read_npz`/`write_npz`.
-    #[staticmethod]
-    fn from_npz(py: Python<'_>, path: &Bound<'_, PyAny>) -> PyResult<Py<PyAny>> {
-        Ok(py
-            .import("lgi.dataset")?
-            .call_method1("read_npz", (path,))?
-            .unbind())
-    }
-
-    /// Writes the dataset as a compressed `.npz` archive with the keys read by `from_npz`
-    /// (numpy appends `.npz` to `path` when it has no such suffix).
-    fn to_npz(slf: &Bound<'_, Self>, path: &Bound<'_, PyAny>) -> PyResult<()> {
-        slf.py()
-            .import("lgi.dataset")?
-            .call_method1("write_npz", (slf, path))?;
-        Ok(())
-    }
-
-    /// A new dataset with in-between shapes (`name@0.5`, …) and pairwise sums added to the
-    /// shapes, at least `min_shapes` when there are enough pairs (the neutral is shared).
-    /// `method="linear"` (default) sums displacements (here, with the GIL released);
-    /// `"arap"` interpolates rotations instead (`lgi.augment.arap_augmented`, a progress bar
-    /// unless `quiet`).
-    #[pyo3(signature = (min_shapes, method = None, *, quiet = false))]
-    fn augmented(
-        slf: &Bound<'_, Self>,
-        min_shapes: &Bound<'_, PyAny>,
-        method: Option<&Bound<'_, PyAny>>,
-        quiet: bool,
-    ) -> PyResult<Py<Dataset>> {
-        let py = slf.py();
+    /// A new dataset with in-between shapes (`name@0.5`, …) and pairwise sums of
+    /// displacements added to the shapes, at least `min_shapes` when there are enough pairs
+    /// (the neutral is shared); the GIL is released.
+    fn augmented(&self, py: Python<'_>, min_shapes: &Bound<'_, PyAny>) -> PyResult<Dataset> {
         let min_shapes = count(min_shapes, "min_shapes")?;
-        let method = match method {
-            None => "linear".to_string(),
-            Some(m) => m.extract::<String>().map_err(|_| {
-                let shown = m.repr().map_or_else(|_| "?".into(), |r| r.to_string());
-                input_error(format!("method must be 'linear' or 'arap', got {shown}"))
-            })?,
-        };
-        match method.as_str() {
-            "linear" => {
-                let inner = slf.get().inner.clone();
-                let d = py
-                    .detach(|| lgi_core::augment(&inner, min_shapes))
-                    .map_err(PyLgiError)?;
-                Py::new(py, Dataset { inner: Arc::new(d) })
-            }
-            "arap" => Ok(py
-                .import("lgi.augment")?
-                .call_method1("arap_augmented", (slf, min_shapes, quiet))?
-                .cast_into::<Dataset>()?
-                .unbind()),
-            other => Err(input_error(format!(
-                "method must be 'linear' or 'arap', got {other:?}"
-            ))),
-        }
+        let inner = self.inner.clone();
+        let d = py
+            .detach(|| lgi_core::augment(&inner, min_shapes))
+            .map_err(PyLgiError)?;
+        Ok(Dataset { inner: Arc::new(d) })
     }
 
     /// The recipes of `augmented(min_shapes)`, in its order: `(name, [(shape, weight), ...])`

@@ -1,20 +1,21 @@
-//! `lgi._lgi.JawRig`: the core's two-bone jaw skinning (paper Eq. 2) for Python, vectorised
-//! over points and frames. `lgi.jaw.JawRig` and the sample generator skin through it, so the
-//! skinning formula exists once, in `lgi_core::jaw`.
+//! `lgi._lgi.JawRig` (`lgi.jaw.JawRig`): the core's two-bone jaw skinning (paper Eq. 2) for
+//! Python, vectorised over points and frames, with the rig's dataset-side tooling (shapes
+//! unskinned, bundles' weights, a dict for `.npz`), so the formulas exist once, in `lgi_core::jaw`.
 
 use crate::convert::{any_numbers, flat_to_array, float_array, point_sets, points};
-use crate::error::{input_error, PyLgiError};
+use crate::error::{input_error, internal_error, PyLgiError};
 use glam::{DMat3, DVec3};
 use lgi_core::LgiError;
 use lgi_core::{JawParams, JawRig as CoreRig};
-use numpy::PyArrayDyn;
+use numpy::{PyArrayDyn, PyArrayMethods};
 use pyo3::prelude::*;
+use pyo3::types::{PyDict, PyType};
 
 type Array<'py> = Bound<'py, PyArrayDyn<f64>>;
 
 /// Pivot, per-vertex jaw weights and the jaw's axes (`frame` columns: open axis, lateral axis,
-/// forward direction). Immutable; `lgi.jaw.JawRig` subclasses it with the rig tooling.
-#[pyclass(frozen, subclass, module = "lgi._lgi")]
+/// forward direction; identity means x, y, z as in `lgi.sample`). Immutable.
+#[pyclass(frozen, module = "lgi._lgi")]
 pub struct JawRig {
     pub inner: CoreRig,
 }
@@ -51,6 +52,29 @@ fn poses(theta: &Bound<'_, PyAny>, sets: usize, per_set: bool) -> PyResult<Vec<J
         })?;
     }
     Ok(if per_set { poses } else { vec![poses[0]; sets] })
+}
+
+/// `np.asarray(obj, float64)` of shape (N, 3): its values (row-major) and its shape as
+/// Python shows it, for messages.
+fn point_rows(obj: &Bound<'_, PyAny>, name: &str) -> PyResult<(Vec<f64>, String)> {
+    let arr = any_numbers(obj, name)?;
+    let shape = arr.getattr("shape")?;
+    let dims: Vec<usize> = shape.extract()?;
+    let shown = shape.repr()?.to_string();
+    if dims.len() != 2 || dims[1] != 3 {
+        return Err(input_error(format!(
+            "{name} must have shape (N, 3), got {shown}"
+        )));
+    }
+    Ok((values(&arr)?, shown))
+}
+
+/// An array's values in row-major order.
+fn values<T: numpy::Element + Copy>(arr: &Bound<'_, PyAny>) -> PyResult<Vec<T>> {
+    let a = arr
+        .cast::<PyArrayDyn<T>>()
+        .map_err(|e| internal_error(format!("array of unexpected dtype: {e}")))?;
+    Ok(a.readonly().as_array().iter().copied().collect())
 }
 
 impl JawRig {
@@ -245,6 +269,140 @@ impl JawRig {
             .detach(|| rig.fit_pose(&p, &t, w.as_deref(), start, huber, iterations))
             .map_err(PyLgiError)?;
         flat_to_array(py, pose.to_array().to_vec(), &[3])
+    }
+
+    /// `s* = T_v(theta)^-1 (x0 + s) - x0` for one shape: `neutral` and `displacements`
+    /// (V, 3), each vertex unskinned with its own weight (f64 throughout).
+    fn unskin_displacements<'py>(
+        &self,
+        py: Python<'py>,
+        neutral: &Bound<'py, PyAny>,
+        displacements: &Bound<'py, PyAny>,
+        theta: &Bound<'py, PyAny>,
+    ) -> PyResult<Array<'py>> {
+        let (x0, x0_shape) = point_rows(neutral, "neutral")?;
+        let (s, s_shape) = point_rows(displacements, "displacements")?;
+        if x0.len() != s.len() {
+            return Err(input_error(format!(
+                "displacements {s_shape} do not match neutral {x0_shape}"
+            )));
+        }
+        let moved: Vec<f64> = x0.iter().zip(&s).map(|(a, b)| a + b).collect();
+        let moved = flat_to_array(py, moved, &[x0.len() / 3, 3])?;
+        let out = self.apply(py, moved.as_any(), theta, None, true)?;
+        {
+            let mut rw = out.readwrite();
+            let flat = rw
+                .as_slice_mut()
+                .map_err(|e| internal_error(format!("unskinned points: {e}")))?;
+            for (o, a) in flat.iter_mut().zip(&x0) {
+                *o -= a;
+            }
+        }
+        Ok(out)
+    }
+
+    /// Jaw weight (B,) of each bundle on the rig's mesh: the barycentric blend of its
+    /// triangle's vertex weights, clipped to [0, 1] (`triangles` (T, 3), `bundle_triangles`
+    /// (B,), `barycentrics` (B, 3)); the weight a model gives each marker.
+    fn bundle_weights<'py>(
+        &self,
+        py: Python<'py>,
+        triangles: &Bound<'py, PyAny>,
+        bundle_triangles: &Bound<'py, PyAny>,
+        barycentrics: &Bound<'py, PyAny>,
+    ) -> PyResult<Array<'py>> {
+        let np = py.import("numpy")?;
+        let tri = np.call_method1("asarray", (triangles, "int64"))?;
+        let bt = np.call_method1("asarray", (bundle_triangles, "int64"))?;
+        let bc = np.call_method1("asarray", (barycentrics, "float64"))?;
+        let shape = |a: &Bound<'py, PyAny>| -> PyResult<(Vec<usize>, String)> {
+            let s = a.getattr("shape")?;
+            Ok((s.extract()?, s.repr()?.to_string()))
+        };
+        let (tri_shape, tri_shown) = shape(&tri)?;
+        if tri_shape.len() != 2 || tri_shape[1] != 3 {
+            return Err(input_error(format!(
+                "triangles must have shape (T, 3), got {tri_shown}"
+            )));
+        }
+        let (bt_shape, bt_shown) = shape(&bt)?;
+        if bt_shape.len() != 1 {
+            return Err(input_error(format!(
+                "bundle_triangles must have shape (B,), got {bt_shown}"
+            )));
+        }
+        let b = bt_shape[0];
+        let (bc_shape, bc_shown) = shape(&bc)?;
+        if bc_shape != [b, 3] {
+            return Err(input_error(format!(
+                "barycentrics must have shape ({b}, 3), got {bc_shown}"
+            )));
+        }
+        let tri: Vec<i64> = values(&tri)?;
+        let bt: Vec<i64> = values(&bt)?;
+        let bc: Vec<f64> = values(&bc)?;
+        let t = tri_shape[0] as i64;
+        if bt.iter().any(|&i| i < 0 || i >= t) {
+            return Err(input_error("bundle triangle index out of range"));
+        }
+        let nv = self.inner.num_vertices() as i64;
+        let corners: Vec<[u32; 3]> = bt
+            .iter()
+            .map(|&i| {
+                let c = &tri[3 * i as usize..3 * i as usize + 3];
+                match c.iter().all(|&v| (0..nv).contains(&v)) {
+                    true => Ok([c[0] as u32, c[1] as u32, c[2] as u32]),
+                    false => Err(input_error(
+                        "triangle vertex index out of range of the rig's weights",
+                    )),
+                }
+            })
+            .collect::<PyResult<_>>()?;
+        let weights = corners
+            .iter()
+            .zip(bc.chunks_exact(3))
+            .map(|(&c, w)| self.inner.interpolate_weight(c, [w[0], w[1], w[2]]))
+            .collect::<Result<Vec<f64>, LgiError>>()
+            .map_err(PyLgiError)?;
+        flat_to_array(py, weights, &[b])
+    }
+
+    /// Arrays for `np.savez`: `jaw_pivot`, `jaw_weights` and `jaw_frame` (`from_dict` reads
+    /// them back).
+    fn to_dict<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        let d = PyDict::new(py);
+        d.set_item("jaw_pivot", self.pivot(py)?)?;
+        d.set_item("jaw_weights", self.weights(py)?)?;
+        d.set_item("jaw_frame", self.frame(py)?)?;
+        Ok(d)
+    }
+
+    /// The rig of `to_dict`'s arrays (any mapping, e.g. a loaded `.npz`); `jaw_frame` is
+    /// optional (identity).
+    #[classmethod]
+    fn from_dict(_cls: &Bound<'_, PyType>, d: &Bound<'_, PyAny>) -> PyResult<Self> {
+        let mut missing = Vec::new();
+        for key in ["jaw_pivot", "jaw_weights"] {
+            if !d.contains(key)? {
+                missing.push(key);
+            }
+        }
+        if !missing.is_empty() {
+            return Err(input_error(format!(
+                "jaw rig is missing {}",
+                missing.join(", ")
+            )));
+        }
+        let frame = match d.contains("jaw_frame")? {
+            true => Some(d.get_item("jaw_frame")?),
+            false => None,
+        };
+        JawRig::new(
+            &d.get_item("jaw_pivot")?,
+            &d.get_item("jaw_weights")?,
+            frame.as_ref(),
+        )
     }
 
     fn __repr__(&self) -> String {

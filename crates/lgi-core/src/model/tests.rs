@@ -8,7 +8,7 @@ use crate::choose::{Choice, NO_TET};
 use crate::geodesic::FieldCache;
 use crate::jaw::{JawBins, JawParams, JawRig};
 use crate::mesh::Mesh;
-use crate::sew::plan::SewContext;
+use crate::sew::context::SewContext;
 use crate::sew::Pieces;
 use glam::DVec2;
 

@@ -4,7 +4,7 @@
 //! take goes on however many distinct missing sets it has: only rows that more missing
 //! bundles share, or that no earlier frame needed, are computed for it.
 
-use super::plan::SewContext;
+use super::context::SewContext;
 use crate::error::Result;
 use crate::hash::FastMap;
 use crate::sparse::SparseWeights;
