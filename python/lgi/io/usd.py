@@ -1,110 +1,29 @@
-"""Results out: point caches a DCC opens. A USD point cache (`UsdCache`, `write_usd`: one
-`UsdGeom.Mesh` with the neutral's source polygons, UVs as the `st` primvar, time-sampled
-points), an OBJ sequence with the same polygons (`write_obj_sequence`), a solved take as
-`.npz` (`write_result_npz` / `read_result_npz`, which `lgi export` converts), and single OBJs.
-
-Faces are the neutral's own (quads and n-gons as its OBJ had them, `Dataset.polygons`); a
-dataset without them (arrays, glTF, `.npz`) exports its triangles.
-"""
+"""USD point caches out: `UsdCache` (chunk by chunk) and `write_usd` write one `UsdGeom.Mesh`
+with the neutral's source polygons, UVs as the `st` primvar and time-sampled points, so a DCC
+opens the solved take. `new_stage` and `define_usd_mesh` are shared with the USD rig writer
+(`lgi.io.rig`)."""
 
 from __future__ import annotations
 
 import os
-from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
-from numpy.typing import NDArray
 
 from lgi._lgi import Dataset
 from lgi.errors import InputError
-from lgi.takes import METERS_PER_UNIT, normalize_unit
+from lgi.io.paths import output_file
+from lgi.io.topology import Topology, topology, vertex_frames
+from lgi.io.units import METERS_PER_UNIT, normalize_unit
 
 if TYPE_CHECKING:
     from lgi.model import Model
 
-I64 = NDArray[np.int64]
-F64 = NDArray[np.float64]
-
-__all__ = [
-    "RESULT_NPZ_KEYS",
-    "Result",
-    "Topology",
-    "UsdCache",
-    "read_result_npz",
-    "topology",
-    "write_obj",
-    "write_obj_sequence",
-    "write_result_npz",
-    "write_sequence_npz",
-    "write_usd",
-]
+__all__ = ["UsdCache", "define_usd_mesh", "new_stage", "write_usd"]
 
 
-@dataclass(frozen=True)
-class Topology:
-    """Faces of the exported mesh: `counts` (P,) corners per face, `indices` (sum counts,)
-    vertex per corner, and optionally `uvs` (U, 2) with `uv_indices` (one per corner)."""
-
-    num_vertices: int
-    counts: I64
-    indices: I64
-    uvs: F64 | None = None
-    uv_indices: I64 | None = None
-
-    @property
-    def num_faces(self) -> int:
-        return int(self.counts.shape[0])
-
-
-def topology(dataset: Dataset) -> Topology:
-    """The dataset neutral's source polygons (or its triangles when it has none) and UVs."""
-    polys = dataset.polygons
-    has_uv = np.asarray(dataset.uv_triangles).size > 0
-    if polys is not None:
-        counts, indices, uv_idx = polys
-        return Topology(
-            dataset.num_vertices,
-            counts,
-            indices,
-            dataset.uvs if has_uv else None,
-            uv_idx if has_uv else None,
-        )
-    tris = np.asarray(dataset.triangles, dtype=np.int64)
-    return Topology(
-        dataset.num_vertices,
-        np.full(tris.shape[0], 3, dtype=np.int64),
-        tris.ravel(),
-        dataset.uvs if has_uv else None,
-        np.asarray(dataset.uv_triangles, dtype=np.int64).ravel() if has_uv else None,
-    )
-
-
-def _frames(vertices: Any, num_vertices: int, what: str) -> NDArray[np.floating[Any]]:
-    """`vertices` as (F, V, 3) floats (a (V, 3) mesh gives F = 1), checked finite."""
-    v = np.asarray(vertices)
-    if v.ndim == 2:
-        v = v[None]
-    if v.ndim != 3 or v.shape[1:] != (num_vertices, 3) or v.dtype.kind != "f":
-        raise InputError(
-            f"{what}: expected float vertices (F, {num_vertices}, 3), got {v.dtype} {v.shape}"
-        )
-    if not np.isfinite(v).all():
-        raise InputError(f"{what}: vertices are not all finite")
-    return v
-
-
-def _out_path(path: str | os.PathLike[str], what: str) -> Path:
-    p = Path(path)
-    if p.is_dir():
-        raise InputError(f"{what} {p}: is a folder, expected a file path")
-    if not p.parent.is_dir():
-        raise InputError(f"{what} {p}: the folder {p.parent} does not exist")
-    return p
-
-
-def _new_stage(usd: Any, sdf: Any, path: Path) -> Any:
+def new_stage(usd: Any, sdf: Any, path: Path) -> Any:
     """A new stage whose root layer will be saved to `path` (Save is ~2.5x faster than
     exporting an in-memory layer). A layer of that path already open in this process (an
     earlier cache, a stage a caller holds) is emptied and reused: USD keeps one per path."""
@@ -147,7 +66,7 @@ class UsdCache:
     attributes on the mesh: `lgi:jawTheta` (float3: open, lateral, forward),
     `lgi:markerResidual` (float[] per marker), and the head transform when known
     (`lgi:headRotation`, matrix3d with the rotation's rows as its rows, and
-    `lgi:headTranslation`, double3: capture = R rest + t, `lgi.stabilize.align`)."""
+    `lgi:headTranslation`, double3: capture = R rest + t, `lgi.capture.stabilize.align`)."""
 
     def __init__(
         self,
@@ -166,14 +85,14 @@ class UsdCache:
             ) from None
         if not np.isfinite(fps) or fps <= 0:
             raise InputError(f"fps must be a positive number, got {fps}")
-        self._path = _out_path(path, "USD output")
+        self._path = output_file(path, "USD output")
         if self._path.suffix.lower() not in (".usd", ".usdc", ".usda"):
             raise InputError(f"USD output {self._path}: the suffix must be .usd, .usdc or .usda")
         self._Usd, self._Vt, self._Gf = Usd, Vt, Gf
         self._topo = topo
         self._next = int(start)
         self._start = int(start)
-        stage = _new_stage(Usd, Sdf, self._path)
+        stage = new_stage(Usd, Sdf, self._path)
         UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.y)
         if units is not None:
             UsdGeom.SetStageMetersPerUnit(stage, METERS_PER_UNIT[normalize_unit(units, "units")])
@@ -205,7 +124,7 @@ class UsdCache:
     ) -> None:
         """Appends frames (F, V, 3) (or one (V, 3) mesh), with optional (F, 3) jaw poses,
         (F, B) marker residuals and the head's (F, 3, 3) rotations and (F, 3) translations."""
-        v = _frames(vertices, self._topo.num_vertices, "UsdCache.add")
+        v = vertex_frames(vertices, self._topo.num_vertices, "UsdCache.add")
         n = v.shape[0]
         jaw = None if jaw_theta is None else np.asarray(jaw_theta, dtype=np.float64)
         if jaw is not None and jaw.shape != (n, 3):
@@ -311,198 +230,3 @@ def write_usd(
         for chunk in frames:
             cache.add(chunk)
     return cache.close()
-
-
-def _face_lines(topo: Topology) -> str:
-    """The `vt` and `f` lines of `topo` (1-based), the same for every frame."""
-    ends = np.cumsum(topo.counts)
-    starts = ends - topo.counts
-    idx = (topo.indices + 1).astype(str)
-    lines: list[str] = []
-    if topo.uvs is not None and topo.uv_indices is not None:
-        lines += [f"vt {a:.9g} {b:.9g}" for a, b in np.asarray(topo.uvs)]
-        uvi = (topo.uv_indices + 1).astype(str)
-        corners = np.char.add(np.char.add(idx, "/"), uvi)
-    else:
-        corners = idx
-    lines += ["f " + " ".join(corners[s:e]) for s, e in zip(starts, ends, strict=True)]
-    return "\n".join(lines) + "\n"
-
-
-def write_obj_sequence(
-    folder: str | os.PathLike[str],
-    topo: Topology | Dataset,
-    vertices: Any,
-    *,
-    name: str = "frame",
-    start: int = 0,
-    digits: int = 4,
-) -> list[Path]:
-    """Writes one OBJ per frame into `folder` (created), `{name}.{frame:0{digits}d}.obj` from
-    frame `start`, each with the source polygons and UVs; returns the paths."""
-    t = topo if isinstance(topo, Topology) else topology(topo)
-    v = _frames(vertices, t.num_vertices, "write_obj_sequence")
-    out = Path(folder)
-    if out.exists() and not out.is_dir():
-        raise InputError(f"OBJ sequence output {out}: is a file, expected a folder")
-    out.mkdir(parents=True, exist_ok=True)
-    faces = _face_lines(t)
-    template = "v %.9g %.9g %.9g\n" * t.num_vertices
-    paths = []
-    for i in range(v.shape[0]):
-        p = out / f"{name}.{start + i:0{digits}d}.obj"
-        p.write_text("# written by lgi\n" + template % tuple(v[i].ravel().tolist()) + faces)
-        paths.append(p)
-    return paths
-
-
-def write_obj(
-    path: str | os.PathLike[str],
-    vertices: NDArray[np.float64],
-    triangles: NDArray[np.int64],
-    uvs: NDArray[np.float64] | None = None,
-    uv_triangles: NDArray[np.int64] | None = None,
-) -> None:
-    """Writes one triangle mesh as OBJ (`v`, optional `vt`, `f v/vt`), 1-based indices."""
-    v = np.asarray(vertices, dtype=np.float64)
-    t = np.asarray(triangles, dtype=np.int64) + 1
-    lines = ["# written by lgi", *(f"v {x:.9g} {y:.9g} {z:.9g}" for x, y, z in v)]
-    if uvs is not None and uv_triangles is not None and len(uv_triangles) == len(t):
-        lines += (f"vt {a:.9g} {b:.9g}" for a, b in np.asarray(uvs))
-        ut = np.asarray(uv_triangles, dtype=np.int64) + 1
-        lines += (f"f {a}/{d} {b}/{e} {c}/{f}" for (a, b, c), (d, e, f) in zip(t, ut, strict=True))
-    else:
-        lines += (f"f {a} {b} {c}" for a, b, c in t)
-    Path(path).write_text("\n".join(lines) + "\n")
-
-
-def write_sequence_npz(path: str | os.PathLike[str], **arrays: NDArray[np.generic]) -> None:
-    """Writes named arrays (e.g. `vertices` (F, V, 3), `bundle_residuals` (F, B)) to `.npz`."""
-    named: dict[str, Any] = dict(arrays)
-    np.savez_compressed(Path(path), **named)
-
-
-RESULT_NPZ_KEYS = (
-    "vertices",
-    "bundle_residuals",
-    "missing",
-    "marker_names",
-    "fps",
-    "start",
-    "units",
-    "face_counts",
-    "face_indices",
-    "uvs",
-    "uv_indices",
-    "jaw_theta",
-)
-"""Arrays of a solved take `.npz` (`write_result_npz`): `vertices` (F, V, 3) float32,
-`bundle_residuals` (F, B) float, `missing` (F, B) bool, `marker_names` (B,) str, `fps` (NaN
-when unknown), `start` (time code of the first frame), `units` ('' when unknown), the faces
-(`face_counts`, `face_indices`, and `uvs`/`uv_indices`, empty without UVs), and `jaw_theta`
-(F, 3; absent without a jaw)."""
-
-
-@dataclass(frozen=True)
-class Result:
-    """A solved take read back (`read_result_npz`)."""
-
-    vertices: NDArray[np.float32]
-    bundle_residuals: F64
-    missing: NDArray[np.bool_]
-    marker_names: list[str]
-    fps: float | None
-    start: int
-    units: str | None
-    topology: Topology
-    jaw_theta: F64 | None = None
-
-
-def write_result_npz(
-    path: str | os.PathLike[str],
-    topo: Topology,
-    vertices: Any,
-    bundle_residuals: Any,
-    missing: Any,
-    marker_names: list[str],
-    *,
-    fps: float | None,
-    start: int = 0,
-    units: str | None = None,
-    jaw_theta: Any | None = None,
-) -> Path:
-    """Writes a solved take (`RESULT_NPZ_KEYS`) that `read_result_npz` and `lgi export` read."""
-    p = _out_path(path, "npz output")
-    v = _frames(vertices, topo.num_vertices, "write_result_npz")
-    arrays: dict[str, Any] = {
-        "vertices": v.astype(np.float32),
-        "bundle_residuals": np.asarray(bundle_residuals, dtype=np.float64),
-        "missing": np.asarray(missing, dtype=bool),
-        "marker_names": np.array(marker_names, dtype=str),
-        "fps": np.float64(np.nan if fps is None else fps),
-        "start": np.int64(start),
-        "units": np.str_(units or ""),
-        "face_counts": topo.counts,
-        "face_indices": topo.indices,
-        "uvs": np.zeros((0, 2)) if topo.uvs is None else np.asarray(topo.uvs),
-        "uv_indices": np.zeros(0, np.int64) if topo.uv_indices is None else topo.uv_indices,
-    }
-    if jaw_theta is not None:
-        arrays["jaw_theta"] = np.asarray(jaw_theta, dtype=np.float64)
-    with open(p, "wb") as fh:  # a file object: numpy would append '.npz' to another suffix
-        np.savez_compressed(fh, **arrays)
-    return p
-
-
-def read_result_npz(path: str | os.PathLike[str]) -> Result:
-    """Reads a solved take written by `write_result_npz`; `InputError` naming the file and
-    the array for anything else."""
-    p = os.fspath(path)
-    if not os.path.isfile(p):
-        raise InputError(f"{p}: no such result file")
-    try:
-        with np.load(p, allow_pickle=False) as z:
-            if not isinstance(z, np.lib.npyio.NpzFile):  # pragma: no cover - .npy given
-                raise InputError(f"{p}: not an .npz archive")
-            absent = [k for k in RESULT_NPZ_KEYS[:-1] if k not in z.files]
-            if absent:
-                raise InputError(
-                    f"{p}: not a solved take (written by lgi solve -o *.npz): missing {absent}"
-                )
-            a = {k: z[k] for k in z.files}
-    except InputError:
-        raise
-    except Exception as e:
-        raise InputError(f"{p}: not a readable .npz archive: {e}") from None
-    v = a["vertices"]
-    counts, indices = a["face_counts"].astype(np.int64), a["face_indices"].astype(np.int64)
-    if v.ndim != 3 or v.shape[2] != 3:
-        raise InputError(f"{p}: 'vertices' must be (F, V, 3), got {v.shape}")
-    nv = v.shape[1]
-    if counts.sum() != indices.size or (
-        indices.size and (indices.min() < 0 or indices.max() >= nv)
-    ):
-        raise InputError(
-            f"{p}: 'face_counts'/'face_indices' do not describe faces of {nv} vertices"
-        )
-    has_uv = a["uv_indices"].size > 0
-    topo = Topology(
-        nv,
-        counts,
-        indices,
-        a["uvs"].astype(np.float64) if has_uv else None,
-        a["uv_indices"].astype(np.int64) if has_uv else None,
-    )
-    fps = float(a["fps"])
-    units = str(a["units"]) or None
-    return Result(
-        vertices=v,
-        bundle_residuals=a["bundle_residuals"],
-        missing=a["missing"],
-        marker_names=[str(x) for x in a["marker_names"]],
-        fps=fps if np.isfinite(fps) else None,
-        start=int(a["start"]),
-        units=units,
-        topology=topo,
-        jaw_theta=a.get("jaw_theta"),
-    )
