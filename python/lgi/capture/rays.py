@@ -13,10 +13,10 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from lgi.camera import Rays
+from lgi.capture.camera import Rays
+from lgi.capture.stabilize import Alignment
 from lgi.errors import InputError
 from lgi.model import Model, SolveResult
-from lgi.stabilize import Alignment
 
 F64 = NDArray[np.float64]
 
