@@ -12,7 +12,7 @@
   interpolated: isolates what LGI's sewing contributes.
 
 Each baseline has one name: the class name here, with `label` the name in result tables (and
-`lgi.evaluate`'s method keys). The Rust kernels behind them are named for what they compute
+`lgi.lab.evaluate`'s method keys). The Rust kernels behind them are named for what they compute
 (`RbfInterpolator`, `BlendshapeSolver`, in `lgi_core::baselines` and `lgi._lgi` alike).
 
 Every result's `Choices` holds -1 shapes and 0 weights where the method has no choice

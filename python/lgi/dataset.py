@@ -6,16 +6,12 @@ from __future__ import annotations
 
 import os
 from collections.abc import Iterable, Sequence
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
 from lgi._lgi import Dataset
 from lgi.errors import DatasetError, DatasetFileError, InputError
-
-if TYPE_CHECKING:
-    from lgi.sample import Sample
-
 
 NPZ_KEYS = (
     "neutral",
@@ -105,18 +101,6 @@ def write_npz(dataset: Dataset, path: str | os.PathLike[str]) -> None:
         )
     except OSError as e:
         raise DatasetFileError(f"cannot read {name}: {e}") from e
-
-
-def sample_dataset(sample: Sample) -> Dataset:
-    """The dataset of a generated sample (`lgi.sample.make_sample`): neutral, UVs and shapes."""
-    return Dataset.from_arrays(
-        sample.neutral,
-        sample.triangles,
-        sample.shapes,
-        names=sample.names,
-        uvs=sample.uvs,
-        uv_triangles=sample.uv_triangles,
-    )
 
 
 def with_shapes(dataset: Dataset, shapes: Any, names: Sequence[str]) -> Dataset:
