@@ -6,8 +6,8 @@ from pathlib import Path
 
 import numpy as np
 
-from lgi import evaluate as ev
 from lgi.baselines import DisplacementInterpolation
+from lgi.lab import evaluate as ev
 from lgi.model import SolveResult
 
 

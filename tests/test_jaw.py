@@ -15,10 +15,10 @@ from hypothesis import strategies as st
 from jaw_oracle import jaw_transform, skin_jaw
 from lgi import jaw
 from lgi.errors import InputError
-from lgi.ict import ENV as ICT_ENV
-from lgi.ict import LOWER_TEETH
-from lgi.ict import find as find_ict
-from lgi.sample import make_sample
+from lgi.lab.ict import ENV as ICT_ENV
+from lgi.lab.ict import LOWER_TEETH
+from lgi.lab.ict import find as find_ict
+from lgi.lab.sample import make_sample
 
 PIVOT = np.array([0.3, -1.2, 2.5])
 
