@@ -21,10 +21,10 @@ from pathlib import Path
 import numpy as np
 
 import lgi
-from lgi import batch, export
-from lgi.dataset import sample_dataset
+from lgi import batch
+from lgi.io.topology import topology
+from lgi.lab.sample import make_sample, sample_dataset
 from lgi.pipeline import write_output
-from lgi.sample import make_sample
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))
 from pipeline_files import write_c3d  # the tests' ezc3d writer
@@ -52,7 +52,8 @@ def make_ict_takes(folder: Path, shots: int) -> tuple[lgi.Model, dict[str, Path]
     own extra 0.005 cm of noise."""
     import subprocess
 
-    from lgi import ict, pipeline
+    from lgi import pipeline
+    from lgi.lab import ict
 
     data = ict.find(os.environ.get(ict.ENV), start=Path(__file__).resolve().parents[1])
     if data is None:
@@ -69,7 +70,7 @@ def make_ict_takes(folder: Path, shots: int) -> tuple[lgi.Model, dict[str, Path]
     base = folder / "base.c3d"
     script = Path(__file__).resolve().parent / "ict_take.py"
     subprocess.run([sys.executable, os.fspath(script), os.fspath(base)], check=True)
-    raw = lgi.takes.read_raw(base)
+    raw = lgi.io.takes.read_raw(base)
     takes = {}
     for k in range(shots):
         noise = np.random.default_rng(k).normal(scale=0.05, size=raw.points.shape)  # mm
@@ -83,9 +84,9 @@ def plain_loop(model: lgi.Model, takes: dict[str, Path], out: Path) -> float:
     """What one process does without an engine: read, solve, write, shot after shot."""
     lgi.set_num_threads(os.cpu_count() or 1)
     t0 = time.perf_counter()
-    topo = export.topology(model.dataset)
+    topo = topology(model.dataset)
     for name, path in takes.items():
-        t = lgi.takes.read(path, model.marker_names, units=model.units)
+        t = lgi.io.takes.read(path, model.marker_names, units=model.units)
         res = model.solve(t.frames, quiet=True, marker_noise=lgi.estimate_marker_noise(t.frames))
         write_output(
             "npz",

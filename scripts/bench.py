@@ -38,7 +38,7 @@ SEED = 1
 
 
 def load_workload(shapes: int = ICT_SHAPES) -> tuple[str, Any, np.ndarray]:
-    from lgi import ict
+    from lgi.lab import ict
 
     folder = ict.find(os.environ.get(ict.ENV), start=ROOT)
     if folder is not None:
@@ -50,8 +50,7 @@ def load_workload(shapes: int = ICT_SHAPES) -> tuple[str, Any, np.ndarray]:
             f"{base.num_shapes} shapes augmented to {data.num_shapes}, {len(markers)} markers"
         )
         return name, data, markers
-    from lgi.dataset import sample_dataset
-    from lgi.sample import make_sample
+    from lgi.lab.sample import make_sample, sample_dataset
 
     s = make_sample(0)
     data = sample_dataset(s)
@@ -64,7 +63,7 @@ def load_workload(shapes: int = ICT_SHAPES) -> tuple[str, Any, np.ndarray]:
 
 def load_base_dataset() -> Any | None:
     """ICT-FaceKit's own shapes (57, with jawOpen), or None where the data is absent."""
-    from lgi import ict
+    from lgi.lab import ict
 
     folder = ict.find(os.environ.get(ict.ENV), start=ROOT)
     return None if folder is None else ict.load_dataset(folder)
@@ -315,13 +314,15 @@ def streamed(args: argparse.Namespace) -> dict[str, Any]:
 def writing(data: Any, vertices: np.ndarray) -> dict[str, Any]:
     """Time to write a `USD_FRAMES`-frame USD point cache chunk by chunk as `lgi solve` does
     (100 frames a chunk, file included); and OBJ frames of the same mesh."""
-    from lgi import export
+    from lgi.io.obj import write_obj_sequence
+    from lgi.io.topology import topology
+    from lgi.io.usd import UsdCache
 
-    topo = export.topology(data)
+    topo = topology(data)
     out: dict[str, Any] = {"usd_frames": USD_FRAMES, "faces": topo.num_faces}
     with tempfile.TemporaryDirectory() as d:
         t = time.perf_counter()
-        cache = export.UsdCache(Path(d) / "take.usd", topo, fps=60.0, units="cm")
+        cache = UsdCache(Path(d) / "take.usd", topo, fps=60.0, units="cm")
         for a in range(0, USD_FRAMES, 100):
             f = np.arange(a, min(USD_FRAMES, a + 100))
             # Distinct frames (the solved ones, cycled and offset): USD's crate files store
@@ -332,7 +333,7 @@ def writing(data: Any, vertices: np.ndarray) -> dict[str, Any]:
         out["usd_mib"] = path.stat().st_size / (1 << 20)
         n_obj = 10
         t = time.perf_counter()
-        export.write_obj_sequence(Path(d) / "obj", topo, vertices[:n_obj])
+        write_obj_sequence(Path(d) / "obj", topo, vertices[:n_obj])
         out["obj_ms"] = (time.perf_counter() - t) / n_obj * 1e3
     return out
 

@@ -14,9 +14,9 @@ from pathlib import Path
 
 import numpy as np
 
-from lgi import evaluate, ict
-from lgi.capture import HingeJaw, make_capture, random_layout
-from lgi.takes import read_livelinkface
+from lgi.io.livelink import read_livelinkface
+from lgi.lab import evaluate, ict
+from lgi.lab.capture import HingeJaw, make_capture, random_layout
 
 SIGMAS = (0.0, 0.05, 0.1)
 HOLDOUTS = (0.0, 0.25)

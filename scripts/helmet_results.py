@@ -21,13 +21,13 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 import lgi
-from lgi import ict
-from lgi.camera import triangulate
-from lgi.capture import HingeJaw, make_capture
-from lgi.helmet import head_motion, helmet_cameras, make_helmet_take
-from lgi.rays import solve_with_rays, to_rest_space
-from lgi.stabilize import align, despike, stable_weights
-from lgi.takes import read_livelinkface
+from lgi.capture.rays import solve_with_rays, to_rest_space
+from lgi.capture.stabilize import align, despike, stable_weights
+from lgi.capture.triangulation import triangulate
+from lgi.io.livelink import read_livelinkface
+from lgi.lab import ict
+from lgi.lab.capture import HingeJaw, make_capture
+from lgi.lab.helmet import head_motion, helmet_cameras, make_helmet_take
 
 MM = 10.0  # the ICT data is in centimetres
 
@@ -185,7 +185,7 @@ def main() -> None:
         f"full chain, default build (jaw rig, jaw='auto'), {noise}": face(
             chain, jaw=True, marker_noise=sigma
         ),
-        f"full chain + single-camera rays (lgi.rays), {noise}": ray_face(),
+        f"full chain + single-camera rays (lgi.capture.rays), {noise}": ray_face(),
         f"full chain without despike, {noise}": face(stab.frames, marker_noise=sigma),
         f"triangulated + true head transforms, {noise}": face(truly_stabilised, marker_noise=sigma),
         f"triangulated, no stabilisation, {noise}": face(tri.points, marker_noise=sigma),

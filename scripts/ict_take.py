@@ -1,6 +1,6 @@
 #!/usr/bin/env python3
 """Writes a C3D marker take of the ICT-FaceKit face performing a Live Link Face recording: the
-recording's ARKit curves drive the ICT shapes (`lgi.capture.make_capture`, real hinge jaw),
+recording's ARKit curves drive the ICT shapes (`lgi.lab.capture.make_capture`, real hinge jaw),
 the 120 markers of `markers_120.csv` are sampled on the result with Gaussian noise and
 dropouts, and the take is written through ezc3d in millimetres with the layout's labels: the
 input of the CLI walkthrough in docs/cli.md.
@@ -31,7 +31,8 @@ def main() -> int:
 
     import ezc3d
 
-    from lgi import capture, ict, takes
+    from lgi.io.livelink import read_livelinkface
+    from lgi.lab import capture, ict
 
     folder = ict.find(os.environ.get(ict.ENV), start=ROOT)
     if folder is None:
@@ -40,7 +41,7 @@ def main() -> int:
     data = ict.load_dataset(folder)
     layout = ict.load_layout(folder)
     rec = folder.parent / "livelinkface" / f"{args.recording}.csv"
-    curves = takes.read_livelinkface(rec)
+    curves = read_livelinkface(rec)
     jaw = capture.HingeJaw.fit(data, ict.lower_teeth())
     take = capture.make_capture(
         data,

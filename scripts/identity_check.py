@@ -63,8 +63,7 @@ def main() -> None:
     out["dropouts_10pct"] = digests(model.solve(messy, quiet=True, fit=False))
     out["noise_aware"] = digests(model.solve(frames, quiet=True, marker_noise=bench.NOISE))
 
-    from lgi.dataset import sample_dataset
-    from lgi.sample import make_sample
+    from lgi.lab.sample import make_sample, sample_dataset
 
     s = make_sample(0)
     sdata = sample_dataset(s)

@@ -13,9 +13,8 @@ import time
 import numpy as np
 
 import lgi
-from lgi.dataset import sample_dataset
 from lgi.jaw import JawRig, estimate_rig
-from lgi.sample import make_sample
+from lgi.lab.sample import make_sample, sample_dataset
 
 
 def jitter(v: np.ndarray) -> float:

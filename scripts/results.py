@@ -14,10 +14,9 @@ import time
 from pathlib import Path
 
 import lgi
-from lgi import evaluate as ev
-from lgi import ict as ict_data
-from lgi.dataset import sample_dataset
-from lgi.sample import make_sample
+from lgi.lab import evaluate as ev
+from lgi.lab import ict as ict_data
+from lgi.lab.sample import make_sample, sample_dataset
 
 ICT_SKIN = ict_data.skin()
 

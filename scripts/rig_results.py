@@ -5,7 +5,7 @@
    deformation-transferred to the actor (`lgi.rig.on_actor`). For combinations of template
    shapes: the template rig's linear combination on the actor against LGI's reconstruction
    (`lgi.rig.actor_rig`, i.e. the rig's shapes plus the corrective), with mesh-quality figures
-   (`lgi.quality`) on the face skin; a Fig. 8-like picture for identity 0.
+   (`lgi.lab.quality`) on the face skin; a Fig. 8-like picture for identity 0.
 2. `volume`: volume of rotating parts (lower teeth in jawOpen, eyeballs in eyeLookUp) at the
    halfway in-between, linear vs ARAP (`Dataset.augmented(method=...)`).
 3. `capture`: the capture protocol's LGI cells with the dataset as is, augmented with linear
@@ -28,9 +28,10 @@ from pathlib import Path
 import numpy as np
 
 import lgi
-from lgi import evaluate, ict, quality, rig
-from lgi.capture import HingeJaw, make_capture
-from lgi.takes import read_livelinkface
+from lgi import rig
+from lgi.io.livelink import read_livelinkface
+from lgi.lab import evaluate, ict, quality
+from lgi.lab.capture import HingeJaw, make_capture
 
 COMBINATIONS = [
     ["noseSneer_L", "mouthUpperUp_L", "cheekSquint_L"],  # Fig. 8: sneer + snarl + lip raiser
@@ -213,7 +214,7 @@ def part_rig(folder: Path, out_dir: Path, quiet: bool) -> list[str]:
         + f"{sum(neutral_x)} in all: the self-intersection column's baseline.",
     ]
     if picture is not None:
-        from lgi.render import panel
+        from lgi.lab.render import panel
 
         neutral, linear, recon = picture
         face = np.asarray(generic.triangles)

@@ -23,9 +23,8 @@ from pathlib import Path
 import numpy as np
 
 import lgi
-from lgi import ict as ict_data
-from lgi.dataset import sample_dataset
-from lgi.sample import make_sample
+from lgi.lab import ict as ict_data
+from lgi.lab.sample import make_sample, sample_dataset
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench import make_frames

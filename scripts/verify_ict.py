@@ -16,8 +16,8 @@ from pathlib import Path
 import numpy as np
 
 import lgi
-from lgi import ict as ict_data
 from lgi.dataset import without_shapes
+from lgi.lab import ict as ict_data
 
 SKIN = ict_data.SKIN_VERTICES
 MOVED = 1e-3  # cm

@@ -16,7 +16,7 @@ settings.load_profile("ci" if os.environ.get("CI") else "dev")
 
 
 def ict_dir() -> Path:
-    from lgi import ict
+    from lgi.lab import ict
 
     d = ict.find(os.environ.get(ict.ENV), start=Path(__file__).parent)
     if d is None:
@@ -31,14 +31,14 @@ def ict_path() -> Path:
 
 @pytest.fixture(scope="session")
 def ict_dataset(ict_path: Path):  # type: ignore[no-untyped-def]
-    from lgi import ict
+    from lgi.lab import ict
 
     return ict.load_dataset(ict_path)
 
 
 @pytest.fixture(scope="session")
 def ict_markers(ict_path: Path) -> np.ndarray:
-    from lgi import ict
+    from lgi.lab import ict
 
     return ict.load_markers(ict_path)
 
@@ -53,14 +53,14 @@ def ict_model(ict_dataset, ict_markers):  # type: ignore[no-untyped-def]
 
 @pytest.fixture(scope="session")
 def sample():  # type: ignore[no-untyped-def]
-    from lgi.sample import make_sample
+    from lgi.lab.sample import make_sample
 
     return make_sample(0)
 
 
 @pytest.fixture(scope="session")
 def sample_dataset(sample):  # type: ignore[no-untyped-def]
-    from lgi.dataset import sample_dataset as of_sample
+    from lgi.lab.sample import sample_dataset as of_sample
 
     return of_sample(sample)
 

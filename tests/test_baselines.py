@@ -176,7 +176,7 @@ def test_ict_displacement_interpolation_is_exact_and_blendshape_fit_explains_sha
     ict_dataset,  # type: ignore[no-untyped-def]
     ict_markers,  # type: ignore[no-untyped-def]
 ) -> None:
-    from lgi.evaluate import verification
+    from lgi.lab.evaluate import verification
 
     frames, _truth = verification(ict_dataset, ict_markers)
     diag = np.linalg.norm(np.ptp(np.asarray(ict_dataset.neutral), axis=0))

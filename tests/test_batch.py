@@ -72,7 +72,7 @@ def direct(model: lgi.Model, take: Path | np.ndarray) -> lgi.SolveResult:
     x = (
         take
         if isinstance(take, np.ndarray)
-        else lgi.takes.read(take, model.marker_names, units="cm").frames
+        else lgi.io.takes.read(take, model.marker_names, units="cm").frames
     )
     return model.solve(x, quiet=True, marker_noise=0.01)
 
@@ -91,7 +91,7 @@ def test_every_good_take_written_by_the_workers_equals_model_solve(first_run, na
     for name in ("sh010", "sh020", "sh040"):
         shot = result.shots[name]
         assert shot.status == "done", shot.error
-        written = lgi.export.read_result_npz(shot.output)
+        written = lgi.io.result.read_result_npz(shot.output)
         ref = direct(named_model, shots[name])
         # The npz stores float32 vertices: the worker's solve, cast, equals ours bit for bit.
         assert np.array_equal(written.vertices, ref.vertices.astype(np.float32)), name
@@ -99,7 +99,7 @@ def test_every_good_take_written_by_the_workers_equals_model_solve(first_run, na
         assert np.array_equal(written.missing, ref.missing), name
         assert shot.frames == ref.vertices.shape[0]
         assert Path(shot.output) == (out / f"{name}.npz").resolve()
-    assert lgi.export.read_result_npz(result.shots["sh010"].output).fps == FPS
+    assert lgi.io.result.read_result_npz(result.shots["sh010"].output).fps == FPS
 
 
 def test_a_corrupt_take_and_an_infinite_marker_fail_alone_and_are_in_the_manifest(  # type: ignore[no-untyped-def]
@@ -154,7 +154,7 @@ def test_a_rerun_skips_done_shots_and_retries_failed_and_changed_ones(  # type: 
     assert result.shots["sh040"].frames == 9 and not result.shots["sh040"].skipped
     assert result.failed == ["sh050"]
     ref = direct(named_model, fixed["sh040"])
-    written = lgi.export.read_result_npz(out / "sh040.npz")
+    written = lgi.io.result.read_result_npz(out / "sh040.npz")
     assert np.array_equal(written.vertices, ref.vertices.astype(np.float32))
     # Other solve options are other settings: nothing is skipped.
     again = batch.solve_shots(
@@ -175,7 +175,7 @@ def test_a_model_on_a_shared_path_is_loaded_once_per_worker(client, named_model,
     loaded = client.run(lambda: len(batch._LOADED))
     assert sorted(loaded.values()) == [1, 1]  # nine shots, two workers, one load each
     for name, take in many.items():
-        written = lgi.export.read_result_npz(result.shots[name].output)
+        written = lgi.io.result.read_result_npz(result.shots[name].output)
         assert np.array_equal(
             written.vertices, direct(named_model, take).vertices.astype(np.float32)
         )
@@ -295,7 +295,7 @@ def test_a_scheduler_address_runs_the_batch_on_that_cluster(client, named_model,
     # The task ran on this module's cluster (no cluster of its own was started).
     assert any(str(t["key"]).startswith("lgi-shot-sh040-") for t in stream.data)
     assert result.failed == []
-    written = lgi.export.read_result_npz(result.shots["sh040"].output)
+    written = lgi.io.result.read_result_npz(result.shots["sh040"].output)
     ref = direct(named_model, shots["sh040"])
     assert np.array_equal(written.vertices, ref.vertices.astype(np.float32))
 
@@ -333,9 +333,9 @@ def test_lgi_batch_solves_takes_on_its_own_cluster_and_fails_with_exit_2_on_a_ba
     r = lgi_cli("batch", model, shots["sh010"], shots["sh020"], "-o", out, "--workers", "2", "-q")
     assert r.returncode == 0, r.stderr
     assert "2 of 2 shots done" in r.stdout
-    written = lgi.export.read_result_npz(out / "sh020.npz")
+    written = lgi.io.result.read_result_npz(out / "sh020.npz")
     ref = named_model.solve(
-        lgi.takes.read(shots["sh020"], named_model.marker_names, units="cm").frames, quiet=True
+        lgi.io.takes.read(shots["sh020"], named_model.marker_names, units="cm").frames, quiet=True
     )
     assert np.array_equal(written.vertices, ref.vertices.astype(np.float32))
     r = lgi_cli("batch", model, shots["sh010"], shots["sh030"], "-o", out, "-q", "--workers", "1")

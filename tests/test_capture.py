@@ -11,10 +11,9 @@ import pytest
 
 import lgi
 from conftest import ict_dir
-from lgi.capture import HingeJaw, capture_truth, make_capture, random_layout
-from lgi.dataset import sample_dataset
-from lgi.sample import make_sample
-from lgi.takes import arkit_to_dataset, read_livelinkface
+from lgi.io.livelink import arkit_to_dataset, read_livelinkface
+from lgi.lab.capture import HingeJaw, capture_truth, make_capture, random_layout
+from lgi.lab.sample import make_sample, sample_dataset
 
 
 def _recordings() -> list[Path]:
@@ -78,7 +77,7 @@ def test_livelinkface_reader_names_the_file_and_line_of_a_bad_csv(tmp_path: Path
 def test_hinge_fitted_to_ict_jaw_open_is_a_25_degree_turn_about_x_near_the_documented_hinge(
     ict_dataset,  # type: ignore[no-untyped-def]
 ) -> None:
-    from lgi import ict
+    from lgi.lab import ict
 
     jaw = HingeJaw.fit(ict_dataset, ict.lower_teeth())
     assert abs(jaw.axis[0]) == pytest.approx(1.0, abs=1e-6)
@@ -172,7 +171,7 @@ def test_capture_take_is_seeded_and_holds_out_shapes_but_never_jaw_open(sample_m
 def test_capture_protocol_recommended_lgi_beats_both_baselines_on_a_short_real_take(
     ict_dataset, ict_markers
 ) -> None:  # type: ignore[no-untyped-def]
-    from lgi import evaluate, ict
+    from lgi.lab import evaluate, ict
 
     rec = _recordings()[:1]
     rows = evaluate.capture_protocol(

@@ -218,9 +218,9 @@ def test_solve_names_that_do_not_match_are_listed_and_allow_missing_solves(
     )
     code, err = run(capsys, "solve", files["model"], c3d, "-o", out, "--allow-missing", "-q")
     assert code == 0, err
-    from lgi import export
+    from lgi.io.result import read_result_npz
 
-    r = export.read_result_npz(out)
+    r = read_result_npz(out)
     assert r.missing[:, 3].all() and np.isfinite(r.vertices).all()
 
 

@@ -10,11 +10,11 @@ import numpy as np
 import pytest
 
 import lgi
-import lgi.ict
+import lgi.lab.ict
 
-ICT = lgi.ict.find(os.environ.get(lgi.ict.ENV), start=Path(__file__).parent)
+ICT = lgi.lab.ict.find(os.environ.get(lgi.lab.ict.ENV), start=Path(__file__).parent)
 needs_ict = pytest.mark.skipif(
-    ICT is None, reason=f"ICT FaceKit data not found (set {lgi.ict.ENV} or ../shared/data)"
+    ICT is None, reason=f"ICT FaceKit data not found (set {lgi.lab.ict.ENV} or ../shared/data)"
 )
 
 NEUTRAL = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], dtype=np.float64)

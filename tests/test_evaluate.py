@@ -6,9 +6,9 @@ from pathlib import Path
 
 import numpy as np
 
-from lgi import evaluate as ev
+from lgi import SolveResult
 from lgi.baselines import DisplacementInterpolation
-from lgi.model import SolveResult
+from lgi.lab import evaluate as ev
 
 
 def test_score_matches_hand_computed_statistics() -> None:

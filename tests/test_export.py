@@ -1,7 +1,7 @@
-"""Results out (`lgi.export`): USD point caches read back with pxr (faces are the source
-polygons, UVs the indexed face-varying `st`, samples at frame time codes, stage metadata),
-chunked writing identical to one call, OBJ sequences read back by the core's OBJ reader, and
-solved-take `.npz` round trips."""
+"""Results out (`lgi.io.usd`, `lgi.io.obj`, `lgi.io.result`): USD point caches read back with
+pxr (faces are the source polygons, UVs the indexed face-varying `st`, samples at frame time
+codes, stage metadata), chunked writing identical to one call, OBJ sequences read back by the
+core's OBJ reader, and solved-take `.npz` round trips."""
 
 from __future__ import annotations
 
@@ -12,7 +12,9 @@ import pytest
 from pxr import Usd, UsdGeom
 
 import lgi
-from lgi import InputError, export
+from lgi import InputError
+from lgi.io import obj, result, usd
+from lgi.io.topology import topology
 
 QUAD_GRID = """v 0 0 0
 v 1 0 0
@@ -46,7 +48,7 @@ def frames(n: int, v: int) -> np.ndarray:
 
 
 def test_topology_of_an_obj_neutral_is_its_quads_and_triangle_and_uv_corners(quads) -> None:  # type: ignore[no-untyped-def]
-    t = export.topology(quads)
+    t = topology(quads)
     np.testing.assert_array_equal(t.counts, [4, 4, 3])
     np.testing.assert_array_equal(t.indices, [0, 1, 4, 3, 1, 2, 5, 4, 3, 4, 6])
     np.testing.assert_array_equal(t.uv_indices, t.indices)  # this file's vt follow its v
@@ -55,7 +57,7 @@ def test_topology_of_an_obj_neutral_is_its_quads_and_triangle_and_uv_corners(qua
 
 def test_usd_cache_reads_back_with_pxr(quads, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
     v = frames(3, 7)
-    path = export.write_usd(tmp_path / "c.usda", quads, v, fps=24.0, units="mm", start=101)
+    path = usd.write_usd(tmp_path / "c.usda", quads, v, fps=24.0, units="mm", start=101)
     stage = Usd.Stage.Open(str(path))
     assert stage.GetTimeCodesPerSecond() == 24.0
     assert stage.GetStartTimeCode() == 101 and stage.GetEndTimeCode() == 103
@@ -83,8 +85,8 @@ def test_chunked_usd_writing_equals_one_call_and_keeps_jaw_and_residual_attribut
     v = frames(5, 7)
     jaw = np.random.default_rng(1).normal(size=(5, 3))
     res = np.abs(np.random.default_rng(2).normal(size=(5, 4)))
-    one = export.write_usd(tmp_path / "one.usda", quads, v, fps=30.0)
-    cache = export.UsdCache(tmp_path / "chunks.usda", export.topology(quads), fps=30.0)
+    one = usd.write_usd(tmp_path / "one.usda", quads, v, fps=30.0)
+    cache = usd.UsdCache(tmp_path / "chunks.usda", topology(quads), fps=30.0)
     for a, b in [(0, 2), (2, 3), (3, 5)]:
         cache.add(v[a:b], jaw_theta=jaw[a:b], marker_residuals=res[a:b])
     cache.close()
@@ -113,7 +115,7 @@ def test_usd_cache_keeps_the_head_transform_per_frame_and_refuses_half_of_one(
     v = frames(4, 7)
     rot = Rotation.from_rotvec(np.random.default_rng(3).normal(0, 0.1, (4, 3))).as_matrix()
     shift = np.random.default_rng(4).normal(size=(4, 3))
-    cache = export.UsdCache(tmp_path / "head.usda", export.topology(quads), fps=24.0)
+    cache = usd.UsdCache(tmp_path / "head.usda", topology(quads), fps=24.0)
     cache.add(v, head_rotations=rot, head_translations=shift)
     cache.close()
     stage = Usd.Stage.Open(str(tmp_path / "head.usda"))
@@ -124,7 +126,7 @@ def test_usd_cache_keeps_the_head_transform_per_frame_and_refuses_half_of_one(
         np.testing.assert_allclose(
             np.array(prim.GetAttribute("lgi:headTranslation").Get(t)), shift[t], atol=1e-15
         )
-    other = export.UsdCache(tmp_path / "half.usda", export.topology(quads), fps=24.0)
+    other = usd.UsdCache(tmp_path / "half.usda", topology(quads), fps=24.0)
     with pytest.raises(lgi.InputError, match=r"rotations .* and translations .* together"):
         other.add(v, head_rotations=rot)
 
@@ -132,7 +134,7 @@ def test_usd_cache_keeps_the_head_transform_per_frame_and_refuses_half_of_one(
 def test_a_dataset_without_polygons_exports_its_triangles(tmp_path: Path) -> None:
     tri = lgi.Dataset.from_arrays(np.eye(3), np.array([[0, 1, 2]]))
     assert tri.polygons is None
-    p = export.write_usd(tmp_path / "t.usd", tri, np.eye(3)[None], fps=25.0)
+    p = usd.write_usd(tmp_path / "t.usd", tri, np.eye(3)[None], fps=25.0)
     stage = Usd.Stage.Open(str(p))  # held: a prim dies with its stage
     mesh = UsdGeom.Mesh(stage.GetPrimAtPath("/Face/Mesh"))
     assert list(mesh.GetFaceVertexCountsAttr().Get()) == [3]
@@ -143,7 +145,7 @@ def test_obj_sequence_reads_back_through_the_core_reader_with_the_same_polygons(
     quads, tmp_path: Path
 ) -> None:  # type: ignore[no-untyped-def]
     v = frames(2, 7)
-    paths = export.write_obj_sequence(tmp_path / "seq", quads, v, name="shot", start=7)
+    paths = obj.write_obj_sequence(tmp_path / "seq", quads, v, name="shot", start=7)
     assert [p.name for p in paths] == ["shot.0007.obj", "shot.0008.obj"]
     for p, want in zip(paths, v, strict=True):
         back = lgi.Dataset.from_obj(p)
@@ -155,13 +157,13 @@ def test_obj_sequence_reads_back_through_the_core_reader_with_the_same_polygons(
 
 def test_result_npz_round_trips(quads, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
     v = frames(3, 7)
-    t = export.topology(quads)
+    t = topology(quads)
     res = np.arange(6.0).reshape(3, 2)
     miss = np.array([[True, False]] * 3)
-    p = export.write_result_npz(
+    p = result.write_result_npz(
         tmp_path / "r.npz", t, v, res, miss, ["a", "b"], fps=None, start=4, units="cm"
     )
-    r = export.read_result_npz(p)
+    r = result.read_result_npz(p)
     np.testing.assert_array_equal(r.vertices, v.astype(np.float32))
     np.testing.assert_array_equal(r.bundle_residuals, res)
     np.testing.assert_array_equal(r.missing, miss)
@@ -172,21 +174,21 @@ def test_result_npz_round_trips(quads, tmp_path: Path) -> None:  # type: ignore[
 
 def test_export_inputs_are_checked(quads, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
     with pytest.raises(InputError, match=r"expected float vertices \(F, 7, 3\)"):
-        export.write_usd(tmp_path / "a.usd", quads, np.zeros((2, 6, 3)), fps=24.0)
+        usd.write_usd(tmp_path / "a.usd", quads, np.zeros((2, 6, 3)), fps=24.0)
     with pytest.raises(InputError, match="not all finite"):
-        export.write_usd(tmp_path / "a.usd", quads, np.full((1, 7, 3), np.nan), fps=24.0)
+        usd.write_usd(tmp_path / "a.usd", quads, np.full((1, 7, 3), np.nan), fps=24.0)
     with pytest.raises(InputError, match="fps must be a positive number"):
-        export.write_usd(tmp_path / "a.usd", quads, frames(1, 7), fps=0.0)
+        usd.write_usd(tmp_path / "a.usd", quads, frames(1, 7), fps=0.0)
     with pytest.raises(InputError, match=r"suffix must be \.usd"):
-        export.write_usd(tmp_path / "a.abc", quads, frames(1, 7), fps=24.0)
+        usd.write_usd(tmp_path / "a.abc", quads, frames(1, 7), fps=24.0)
     with pytest.raises(InputError, match="is a folder"):
-        export.write_usd(tmp_path, quads, frames(1, 7), fps=24.0)
+        usd.write_usd(tmp_path, quads, frames(1, 7), fps=24.0)
     with pytest.raises(InputError, match="no frames were added"):
-        export.UsdCache(tmp_path / "e.usd", export.topology(quads), fps=24.0).close()
+        usd.UsdCache(tmp_path / "e.usd", topology(quads), fps=24.0).close()
     f = tmp_path / "file"
     f.write_text("x")
     with pytest.raises(InputError, match="is a file, expected a folder"):
-        export.write_obj_sequence(f, quads, frames(1, 7))
+        obj.write_obj_sequence(f, quads, frames(1, 7))
 
 
 def test_source_polygons_survive_a_dataset_npz_and_leaving_shapes_out(
@@ -226,7 +228,7 @@ def test_write_usd_takes_a_model_and_a_solve_result_as_the_design_says(
 ) -> None:  # type: ignore[no-untyped-def]
     model = lgi.Model.build(sample_dataset, sample.markers_rest, units="cm")
     res = model.solve(sample.performance[:3], quiet=True)
-    p = export.write_usd(tmp_path / "m.usda", model, res, fps=30.0)
+    p = usd.write_usd(tmp_path / "m.usda", model, res, fps=30.0)
     stage = Usd.Stage.Open(str(p))
     assert UsdGeom.GetStageMetersPerUnit(stage) == pytest.approx(0.01)
     prim = stage.GetPrimAtPath("/Face/Mesh")

@@ -9,10 +9,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from lgi import cli, frontend
-from lgi.camera import save_cameras, triangulate
-from lgi.helmet import head_motion, helmet_cameras, make_helmet_take
-from lgi.stabilize import align, despike, stable_weights
+from lgi import cli
+from lgi.capture import frontend
+from lgi.capture.stabilize import align, despike, stable_weights
+from lgi.capture.triangulation import triangulate
+from lgi.io.calibration import save_cameras
+from lgi.lab.helmet import head_motion, helmet_cameras, make_helmet_take
 
 
 @pytest.fixture(scope="module")
@@ -55,7 +57,7 @@ def test_cli_triangulate_writes_the_stabilised_bundles(take, tmp_path: Path, cap
         np.testing.assert_array_equal(z["views"], want.triangulation.views)
         assert z["rotations"].shape == (30, 3, 3)
     # The bundles file is a take: `lgi solve` reads it by label, the head transform with it.
-    from lgi import takes
+    from lgi.io import takes
 
     read = takes.read(out, [f"m{i}" for i in range(len(rest))][::-1])
     np.testing.assert_array_equal(read.frames, want.frames[:, ::-1])

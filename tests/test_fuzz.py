@@ -27,8 +27,8 @@ from hypothesis import strategies as st
 import lgi
 from lgi import _lgi
 from lgi.baselines import BlendshapeFit, DisplacementInterpolation, LgiRbf
-from lgi.dataset import sample_dataset as dataset_of
-from lgi.sample import make_sample
+from lgi.lab.sample import make_sample
+from lgi.lab.sample import sample_dataset as dataset_of
 
 FUZZ = settings(
     max_examples=int(os.environ.get("LGI_FUZZ_EXAMPLES", "0")) or settings().max_examples,

@@ -10,15 +10,15 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 import lgi
-from lgi.camera import triangulate
-from lgi.dataset import sample_dataset
-from lgi.helmet import head_motion, helmet_cameras, make_helmet_take
-from lgi.stabilize import align, despike, stable_weights
+from lgi.capture.stabilize import align, despike, stable_weights
+from lgi.capture.triangulation import triangulate
+from lgi.lab.helmet import head_motion, helmet_cameras, make_helmet_take
+from lgi.lab.sample import sample_dataset
 
 
 @pytest.fixture(scope="module")
 def solved_sample():  # type: ignore[no-untyped-def]
-    from lgi.sample import make_sample
+    from lgi.lab.sample import make_sample
 
     s = make_sample(0)
     model = lgi.Model.build(sample_dataset(s), s.markers_rest, jaw=None)  # the front end alone

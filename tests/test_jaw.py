@@ -16,10 +16,10 @@ from hypothesis import strategies as st
 from jaw_oracle import jaw_transform, skin_jaw, unskin_jaw
 from lgi import _lgi, jaw
 from lgi.errors import InputError
-from lgi.ict import ENV as ICT_ENV
-from lgi.ict import LOWER_TEETH
-from lgi.ict import find as find_ict
-from lgi.sample import make_sample
+from lgi.lab.ict import ENV as ICT_ENV
+from lgi.lab.ict import LOWER_TEETH
+from lgi.lab.ict import find as find_ict
+from lgi.lab.sample import make_sample
 
 PIVOT = np.array([0.3, -1.2, 2.5])
 
@@ -320,7 +320,7 @@ def test_tracked_pose_follows_the_sample_performance(sample) -> None:
     # The tracking itself (exactness on pure jaw frames, gaps, the moving average) is tested
     # in the core (model/pose.rs); here the whole model on the sample's performance.
     import lgi
-    from lgi.dataset import sample_dataset
+    from lgi.lab.sample import sample_dataset
 
     s = sample
     rig, theta = jaw.estimate_rig(s.neutral, s.shapes, s.names, triangles=s.triangles)

@@ -8,7 +8,7 @@ import pytest
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
-from lgi.ict import SKIN_VERTICES as ICT_SKIN
+from lgi.lab.ict import SKIN_VERTICES as ICT_SKIN
 
 MOVED = 1e-3  # cm: a bundle "moved" by a shape (issue acceptance)
 
@@ -134,7 +134,7 @@ def test_verification_with_the_default_jaw_rig_reproduces_observed_skin_to_1e_4(
     from scipy import sparse
 
     import lgi
-    from lgi import evaluate, ict
+    from lgi.lab import evaluate, ict
 
     model = lgi.Model.build(ict_dataset, ict_markers)
     assert model.jaw_rig is not None

@@ -97,7 +97,7 @@ def test_lgi_export_turns_the_solved_npz_into_usd_and_an_obj_sequence_with_the_s
     npz = tmp_path / "take.npz"
     r = lgi_cli("solve", model_path, c3d, "-o", npz, "--frames", "5:9", "-q")
     assert r.returncode == 0, r.stderr
-    res = lgi.export.read_result_npz(npz)
+    res = lgi.io.result.read_result_npz(npz)
     assert res.vertices.shape[0] == 4 and res.start == 5 and res.fps == FPS
     usd = tmp_path / "again.usda"
     assert lgi_cli("export", npz, "-o", usd, "-q").returncode == 0
@@ -228,7 +228,7 @@ def test_build_jaw_auto_gives_a_jaw_model_and_solve_jaw_track_tracks_it(
     out = tmp_path / "jaw.npz"
     r = lgi_cli("solve", model_path, built[1], "-o", out, "--frames", "0:8", "--jaw", "track", "-q")
     assert r.returncode == 0, r.stderr
-    res = lgi.export.read_result_npz(out)
+    res = lgi.io.result.read_result_npz(out)
     ref = model.solve(reference_frames(take_frames)[:8], jaw="track", quiet=True)
     np.testing.assert_allclose(res.vertices, ref.vertices, rtol=0, atol=1e-6 * model.diagonal)
     np.testing.assert_allclose(res.jaw_theta, ref.jaw_theta, rtol=0, atol=1e-9)  # radians
@@ -243,7 +243,7 @@ def test_solve_in_chunks_equals_one_model_solve_of_the_range(built, take_frames,
     model = lgi.Model.load(model_path)
     x = reference_frames(take_frames)[3:20]
     ref = model.solve(x, quiet=True).vertices
-    got = usd_points(out) if suffix == ".usd" else lgi.export.read_result_npz(out).vertices
+    got = usd_points(out) if suffix == ".usd" else lgi.io.result.read_result_npz(out).vertices
     assert got.shape == ref.shape
     if suffix == ".npz":  # float32 vertices: those of one solve, bit for bit
         assert np.array_equal(got, ref.astype(np.float32))

@@ -1,4 +1,4 @@
-"""Mesh-quality measures (`lgi.quality`) against closed forms: scaled meshes, the ellipsoid's
+"""Mesh-quality measures (`lgi.lab.quality`) against closed forms: scaled meshes, the ellipsoid's
 volume from any apex, and triangles placed to cross or not."""
 
 from __future__ import annotations
@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from closed_mesh import ellipsoid
-from lgi import quality
+from lgi.lab import quality
 
 
 def test_scaling_by_s_scales_areas_by_s_squared_and_edges_by_s() -> None:

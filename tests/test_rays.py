@@ -8,16 +8,17 @@ import numpy as np
 import pytest
 
 import lgi
-from lgi.camera import Rays, triangulate
-from lgi.dataset import sample_dataset
-from lgi.helmet import head_motion, helmet_cameras, make_helmet_take
-from lgi.rays import solve_with_rays, to_rest_space
-from lgi.stabilize import Alignment
+from lgi.capture.camera import Rays
+from lgi.capture.rays import solve_with_rays, to_rest_space
+from lgi.capture.stabilize import Alignment
+from lgi.capture.triangulation import triangulate
+from lgi.lab.helmet import head_motion, helmet_cameras, make_helmet_take
+from lgi.lab.sample import sample_dataset
 
 
 @pytest.fixture(scope="module")
 def sample_model():  # type: ignore[no-untyped-def]
-    from lgi.sample import make_sample
+    from lgi.lab.sample import make_sample
 
     s = make_sample(0)
     model = lgi.Model.build(sample_dataset(s), s.markers_rest, jaw=None)  # the front end alone

@@ -14,9 +14,9 @@ import lgi
 from interrupts import python_sigint_handler, sigint_at
 from lgi import _lgi
 from lgi.baselines import BlendshapeFit, DisplacementInterpolation, LgiRbf
-from lgi.dataset import sample_dataset as dataset_of
 from lgi.jaw import JawRig
-from lgi.sample import make_sample
+from lgi.lab.sample import make_sample
+from lgi.lab.sample import sample_dataset as dataset_of
 
 
 @pytest.fixture(scope="module")

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
-from lgi.render import panel
+from lgi.lab.render import panel
 
 
 def test_panel_png_has_expected_size_and_nontrivial_content(sample, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
@@ -35,7 +35,7 @@ def test_panel_png_has_expected_size_and_nontrivial_content(sample, tmp_path: Pa
 
 
 def test_demo_writes_comparison_table_and_panel(tmp_path: Path) -> None:
-    from lgi import demo
+    from lgi.lab import demo
 
     assert demo.run(tmp_path, quiet=True) == 0
     text = (tmp_path / "results.md").read_text()

@@ -11,8 +11,9 @@ from scipy import sparse
 
 import lgi
 from closed_mesh import ellipsoid, rot_z
-from lgi import ict, rig
+from lgi import rig
 from lgi.dataset import with_shapes
+from lgi.lab import ict
 
 
 def observed(model: lgi.Model, meshes: np.ndarray) -> np.ndarray:

@@ -13,7 +13,7 @@ import pytest
 
 import lgi
 from lgi import rig
-from lgi.rig_export import gltf_vertices, write_gltf_rig, write_usd_rig
+from lgi.io.rig import gltf_vertices, write_gltf_rig, write_usd_rig
 
 
 @pytest.fixture(scope="module")

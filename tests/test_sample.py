@@ -14,7 +14,7 @@ from scipy.spatial.transform import Rotation
 
 from lgi.errors import DatasetError, DatasetFileError, InputError
 from lgi.jaw import JawRig
-from lgi.sample import Sample, describe, load_sample, make_sample, save_sample
+from lgi.lab.sample import Sample, describe, load_sample, make_sample, save_sample
 
 F64 = NDArray[np.float64]
 

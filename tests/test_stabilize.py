@@ -11,7 +11,7 @@ from hypothesis import strategies as st
 from scipy.spatial.transform import Rotation
 
 import lgi
-from lgi.stabilize import align, despike, kabsch, stable_weights
+from lgi.capture.stabilize import align, despike, kabsch, stable_weights
 
 CM_TO_MM = 10.0
 

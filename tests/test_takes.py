@@ -1,6 +1,7 @@
-"""Marker takes in (`lgi.takes`): C3D written by ezc3d, TRC and CSV written by hand from their
-format descriptions, npz by numpy; read back against the arrays written, labels matched by name,
-units converted, missing samples NaN, and every malformed file an `InputError` naming it."""
+"""Marker takes in (`lgi.io.takes`; units `lgi.io.units`): C3D written by ezc3d, TRC and CSV
+written by hand from their format descriptions, npz by numpy; read back against the arrays
+written, labels matched by name, units converted, missing samples NaN, and every malformed file
+an `InputError` naming it."""
 
 from __future__ import annotations
 
@@ -11,7 +12,8 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from lgi import InputError, takes
+from lgi import InputError
+from lgi.io import takes, units
 from pipeline_files import write_c3d
 
 RNG = np.random.default_rng(7)
@@ -236,12 +238,12 @@ def test_layout_reads_names_and_positions_in_file_order(tmp_path: Path) -> None:
     [("mm", "cm", 0.1), ("m", "mm", 1000.0), ("in", "cm", 2.54), ("Millimeters", "m", 0.001)],
 )
 def test_unit_scale_matches_the_definitions(a: str, b: str, factor: float) -> None:
-    assert takes.unit_scale(a, b) == pytest.approx(factor, rel=1e-15)
+    assert units.unit_scale(a, b) == pytest.approx(factor, rel=1e-15)
 
 
 def test_unknown_units_are_refused_naming_them() -> None:
     with pytest.raises(InputError, match="unknown length unit 'furlong'"):
-        takes.normalize_unit("furlong", "units")
+        units.normalize_unit("furlong", "units")
 
 
 @given(st.permutations(list(range(6))), st.integers(0, 3))
@@ -268,7 +270,7 @@ def test_match_layout_puts_every_label_in_its_layout_column_whatever_the_file_or
 
 def test_converting_to_a_whole_multiple_unit_divides_exactly_as_a_user_would() -> None:
     x = RNG.normal(size=1000) * 100.0
-    np.testing.assert_array_equal(takes.convert_units(x, "mm", "cm"), x / 10.0)
-    np.testing.assert_array_equal(takes.convert_units(x, "mm", "m"), x / 1000.0)
-    np.testing.assert_array_equal(takes.convert_units(x, "cm", "mm"), x * 10.0)
-    np.testing.assert_allclose(takes.convert_units(x, "in", "cm"), x * 2.54, rtol=1e-15)
+    np.testing.assert_array_equal(units.convert_units(x, "mm", "cm"), x / 10.0)
+    np.testing.assert_array_equal(units.convert_units(x, "mm", "m"), x / 1000.0)
+    np.testing.assert_array_equal(units.convert_units(x, "cm", "mm"), x * 10.0)
+    np.testing.assert_allclose(units.convert_units(x, "in", "cm"), x * 2.54, rtol=1e-15)

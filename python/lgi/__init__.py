@@ -2,9 +2,14 @@
 
 Every marker ("bundle") looks up local geometry that really occurred in a dataset of facial
 shapes; the pieces are sewn so that the surface passes exactly through every marker.
+
+The package re-exports the library's faces: `Model`, `Dataset` and their results, the errors,
+the thread pool, and the subpackages `io` (files in and out), `capture` (cameras to bundles),
+`jaw` and `rig`. The application (`lgi.pipeline`, `lgi.batch`, `lgi.cli`) and the lab
+(`lgi.lab`: sample, ground truth, evaluation) are imported by name.
 """
 
-from lgi import camera, export, jaw, rig, rig_export, stabilize, takes
+from lgi import capture, io, jaw, rig
 from lgi._lgi import (
     Choices,
     SolveResult,
@@ -40,14 +45,11 @@ __all__ = [
     "ModelFormatError",
     "SolveResult",
     "__version__",
-    "camera",
+    "capture",
     "estimate_marker_noise",
-    "export",
     "get_num_threads",
+    "io",
     "jaw",
     "rig",
-    "rig_export",
     "set_num_threads",
-    "stabilize",
-    "takes",
 ]

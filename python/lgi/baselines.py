@@ -12,7 +12,7 @@
   interpolated: isolates what LGI's sewing contributes.
 
 Each baseline has one name: the class name here, with `label` the name in result tables (and
-`lgi.evaluate`'s method keys). The Rust kernels behind them are named for what they compute
+`lgi.lab.evaluate`'s method keys). The Rust kernels behind them are named for what they compute
 (`RbfInterpolator`, `BlendshapeSolver`, in `lgi_core::baselines` and `lgi._lgi` alike).
 
 Every result's `Choices` holds -1 shapes and 0 weights where the method has no choice
@@ -27,10 +27,10 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from lgi import _lgi
-from lgi._lgi import Choices
+from lgi._lgi import BuildConfig, Choices, SolveResult
 from lgi.dataset import Dataset
 from lgi.errors import InputError
-from lgi.model import BuildConfig, Model, SolveResult
+from lgi.model import Model
 
 F64 = NDArray[np.float64]
 

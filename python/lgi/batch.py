@@ -22,9 +22,9 @@ from typing import Any
 
 import numpy as np
 
-from lgi import export
-from lgi import takes as take_files
 from lgi.errors import FileWriteError, InputError
+from lgi.io import takes as take_files
+from lgi.io.topology import topology
 from lgi.model import Model, estimate_marker_noise
 
 __all__ = [
@@ -271,7 +271,7 @@ def solve_shot(
         res = m.solve(x, quiet=True, **opts)
         from lgi.pipeline import write_solved
 
-        topo = export.topology(m.dataset)
+        topo = topology(m.dataset)
         written = write_solved(kind, Path(dest), topo, res, m, fps=rate, start=start, quiet=True)
         return {
             "status": "done",
@@ -357,7 +357,7 @@ def solve_shots(
     quiet: bool = False,
     **solve_options: Any,
 ) -> BatchResult:
-    """Solves every take of `takes` (shot name -> a take file `lgi.takes.read` reads, or an
+    """Solves every take of `takes` (shot name -> a take file `lgi.io.takes.read` reads, or an
     (F, B, 3) array in the model's units) with `model` into `out_dir/NAME.npz` (`output`:
     "npz", "usd" for `NAME.usdc` point caches, "obj" for `NAME.NNNN.obj` sequences), one
     `dask.distributed` task per shot, and records each shot in `out_dir/manifest.json`.
@@ -372,7 +372,7 @@ def solve_shots(
 
     `solve_options` go to `Model.solve` (`marker_noise` may also be "auto": estimated per
     take); `fps` is the output's frame rate when the take has none (arrays); `allow_missing`
-    and `take_units` are `lgi.takes.read`'s.
+    and `take_units` are `lgi.io.takes.read`'s.
 
     A shot whose take cannot be read or solved fails alone: its error is in the manifest and
     the others go on. A rerun into the same folder skips shots that are done with the same

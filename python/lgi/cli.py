@@ -1,7 +1,10 @@
 """The `lgi` command line: argument (and environment) handling only. `lgi demo` runs the whole
-pipeline on the built-in sample (`lgi.demo`); `lgi evaluate` a protocol (`lgi.evaluate`); the
-file pipeline `lgi build` / `solve` / `export` / `info` / `rig` is `lgi.pipeline`'s, `lgi batch`
-`lgi.batch`'s. Every user mistake ends as `lgi: error: ...` and exit status 2."""
+pipeline on the built-in sample (`lgi.lab.demo`); `lgi evaluate` a protocol
+(`lgi.lab.evaluate`); the file pipeline `lgi build` / `solve` / `export` / `info` / `rig` is
+`lgi.pipeline`'s, `lgi batch` `lgi.batch`'s; `lgi triangulate` the capture front end's
+(`lgi.capture.frontend`) and `lgi helmet-demo` the lab's. Only those lab commands import
+`lgi.lab`, inside the command. Every user mistake ends as `lgi: error: ...` and exit status
+2."""
 
 from __future__ import annotations
 
@@ -12,20 +15,18 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any, NoReturn
 
-import numpy as np
-
 import lgi
 from lgi import pipeline
 
 
 def _cmd_demo(args: argparse.Namespace) -> int:
-    from lgi import demo
+    from lgi.lab import demo
 
     return demo.run(Path(args.out), seed=args.seed, quiet=args.quiet)
 
 
 def _cmd_evaluate(args: argparse.Namespace) -> int:
-    from lgi import evaluate, ict
+    from lgi.lab import evaluate, ict
 
     ict_dir = args.ict_dir
     if args.data == "ict" and ict_dir is None:
@@ -434,38 +435,26 @@ def _fraction(text: str) -> float:
     return x
 
 
-def _read_rest(path: Path) -> tuple[np.ndarray, list[str]]:
-    """Marker rest positions (B, 3) and names: a layout CSV (`lgi.takes.read_layout`), or
-    `.npy` positions (names `m000`, ...)."""
-    if path.suffix.lower() != ".npy":
-        layout = lgi.takes.read_layout(path)
-        return layout.positions, list(layout.names)
-    try:
-        rest = np.asarray(np.load(path), dtype=np.float64)
-    except (OSError, ValueError) as e:
-        raise lgi.InputError(f"{path}: cannot read marker rest positions ({e})") from None
-    if rest.ndim != 2 or rest.shape[1] != 3:
-        raise lgi.InputError(f"{path}: expected (B, 3) marker positions, got {rest.shape}")
-    return rest, [f"m{i:03d}" for i in range(rest.shape[0])]
-
-
 def _cmd_triangulate(args: argparse.Namespace) -> int:
-    from lgi import camera, frontend
+    from lgi.capture import frontend
+    from lgi.io import calibration, tracks
 
-    cams = camera.load_cameras(args.cameras)
-    uv = frontend.read_tracks(args.tracks, len(cams))
-    rest, names = _read_rest(Path(args.rest))
-    front = frontend.process(cams, uv, rest, max_error=args.max_error, despike=not args.no_despike)
-    frontend.write_bundles(args.out, front, names)
+    cams = calibration.load_cameras(args.cameras)
+    uv = tracks.read_tracks(args.tracks, len(cams))
+    rest = tracks.read_rest(args.rest)
+    front = frontend.process(
+        cams, uv, rest.positions, max_error=args.max_error, despike=not args.no_despike
+    )
+    tracks.write_bundles(args.out, front, rest.names)
     print(front.summary())
     print(f"wrote {args.out}")
     return 0
 
 
 def _cmd_helmet_demo(args: argparse.Namespace) -> int:
-    from lgi import frontend
+    from lgi.lab import demo
 
-    frontend.helmet_demo(Path(args.out), seed=args.seed, quiet=args.quiet)
+    demo.helmet_demo(Path(args.out), seed=args.seed, quiet=args.quiet)
     return 0
 
 

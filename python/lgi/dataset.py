@@ -8,16 +8,13 @@ from __future__ import annotations
 
 import os
 from collections.abc import Iterable, Sequence
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from lgi import _lgi
 from lgi.errors import InputError
-
-if TYPE_CHECKING:
-    from lgi.sample import Sample
 
 _Path = str | os.PathLike[str]
 
@@ -182,18 +179,6 @@ class Dataset:
 
     def __repr__(self) -> str:
         return repr(self._core)
-
-
-def sample_dataset(sample: Sample) -> Dataset:
-    """The dataset of a generated sample (`lgi.sample.make_sample`): neutral, UVs and shapes."""
-    return Dataset.from_arrays(
-        sample.neutral,
-        sample.triangles,
-        sample.shapes,
-        names=sample.names,
-        uvs=sample.uvs,
-        uv_triangles=sample.uv_triangles,
-    )
 
 
 def with_shapes(dataset: Dataset, shapes: Any, names: Sequence[str]) -> Dataset:

@@ -83,7 +83,7 @@ def _labels(marker_names: Sequence[str] | None, units: str | None) -> dict[str, 
     """`marker_names` and `units` checked for the core: names a sequence of str (the core
     checks count, uniqueness and form), the unit one lgi knows (normalised: `Millimeters` ->
     `mm`)."""
-    from lgi.takes import normalize_unit
+    from lgi.io.units import normalize_unit
 
     out: dict[str, Any] = {}
     if marker_names is not None:

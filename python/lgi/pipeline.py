@@ -2,7 +2,7 @@
 neutral and its shapes, a named marker layout, a take, a template rig), files out (a model
 file, a USD point cache, an OBJ sequence, a solved `.npz`, a blendshape rig), and
 one-paragraph summaries of each kind of file. The readers and writers themselves are
-`lgi.takes`, `lgi.export` and `lgi.rig_export`; the CLI only parses arguments and calls
+`lgi.io`'s (takes, solved frames by kind, rigs); the CLI only parses arguments and calls
 `build_file`, `solve_file`, `export_file`, `rig_file` and `describe`. Error messages name the
 CLI's arguments and options (`--frames`, `MARKERS`), which these functions' parameters
 mirror."""
@@ -18,11 +18,15 @@ from pathlib import Path
 
 import numpy as np
 
-from lgi import export, takes
-from lgi._lgi import BuildConfig
+from lgi._lgi import BuildConfig, SolveResult
 from lgi.dataset import Dataset
 from lgi.errors import InputError, MarkerError
-from lgi.model import Model, SolveResult, estimate_marker_noise
+from lgi.io import takes
+from lgi.io.paths import output_file
+from lgi.io.result import read_result_npz
+from lgi.io.sink import FrameSink
+from lgi.io.topology import Topology, topology
+from lgi.model import Model, estimate_marker_noise
 
 __all__ = [
     "CHUNK_FRAMES",
@@ -58,16 +62,6 @@ def existing_file(path: str, what: str) -> Path:
         raise InputError(f"{what} {path}: no such file")
     if p.is_dir():
         raise InputError(f"{what} {path}: is a folder, expected a file")
-    return p
-
-
-def output_file(path: str, what: str) -> Path:
-    """An output file path: not a folder, in a folder that exists (an old file is replaced)."""
-    p = Path(path)
-    if p.is_dir():
-        raise InputError(f"{what} {path}: is a folder, expected a file path")
-    if not p.parent.is_dir():
-        raise InputError(f"{what} {path}: the folder {p.parent} does not exist")
     return p
 
 
@@ -198,79 +192,10 @@ def frame_rate(given: float | None, take_fps: float | None, kind: str) -> float 
     return take_fps
 
 
-class _Sink:
-    """Where solved frames go, chunk after chunk: a USD cache (`export.UsdCache`), OBJ files,
-    or float32 copies gathered for one solved-take `.npz` (written at `close`)."""
-
-    def __init__(
-        self,
-        kind: str,
-        out: Path,
-        topo: export.Topology,
-        *,
-        names: list[str],
-        fps: float | None,
-        start: int,
-        units: str | None,
-    ) -> None:
-        self.kind, self.out, self.topo, self.names = kind, out, topo, names
-        self.fps, self.start, self.units = fps, start, units
-        self.next = start
-        self.usd: export.UsdCache | None = None
-        if kind == "usd":
-            if fps is None:
-                raise InputError("a USD point cache needs a frame rate (--fps)")
-            self.usd = export.UsdCache(out, topo, fps=fps, units=units, start=start)
-        self.parts: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None]] = []
-
-    def add(
-        self,
-        vertices: np.ndarray,
-        residuals: np.ndarray,
-        missing: np.ndarray,
-        jaw_theta: np.ndarray | None,
-        head: takes.HeadMotion | None = None,
-    ) -> None:
-        if self.usd is not None:
-            self.usd.add(
-                vertices,
-                jaw_theta=jaw_theta,
-                marker_residuals=residuals,
-                head_rotations=None if head is None else head.rotations,
-                head_translations=None if head is None else head.translations,
-            )
-        elif self.kind == "obj":
-            export.write_obj_sequence(
-                self.out.parent, self.topo, vertices, name=self.out.stem, start=self.next
-            )
-        else:
-            self.parts.append((vertices.astype(np.float32), residuals, missing, jaw_theta))
-        self.next += int(vertices.shape[0])
-
-    def close(self) -> Path:
-        if self.usd is not None:
-            return self.usd.close()
-        if self.kind == "obj":
-            return self.out.parent / f"{self.out.stem}.NNNN.obj"
-        jaws = [p[3] for p in self.parts if p[3] is not None]
-        return export.write_result_npz(
-            self.out,
-            self.topo,
-            np.concatenate([p[0] for p in self.parts]),
-            np.concatenate([p[1] for p in self.parts]),
-            np.concatenate([p[2] for p in self.parts]),
-            self.names,
-            fps=self.fps,
-            start=self.start,
-            units=self.units,
-            jaw_theta=np.concatenate(jaws) if len(jaws) == len(self.parts) else None,
-        )
-
-
 def write_output(
     kind: str,
     out: Path,
-    topo: export.Topology,
+    topo: Topology,
     vertices: np.ndarray,
     *,
     residuals: np.ndarray,
@@ -288,7 +213,7 @@ def write_output(
     path written (`NAME.NNNN.obj` for a sequence)."""
     from tqdm import tqdm
 
-    sink = _Sink(kind, out, topo, names=names, fps=fps, start=start, units=units)
+    sink = FrameSink(kind, out, topo, names=names, fps=fps, start=start, units=units)
     n = vertices.shape[0]
     with tqdm(total=n, desc=f"lgi write {kind}", unit="frame", disable=quiet, leave=False) as bar:
         for a in range(0, n, CHUNK_FRAMES):
@@ -307,7 +232,7 @@ def write_output(
 def write_solved(
     kind: str,
     out: Path,
-    topo: export.Topology,
+    topo: Topology,
     res: SolveResult,
     m: Model,
     *,
@@ -340,8 +265,6 @@ def describe(
     """`lgi info`: a few lines summarising a model (`.lgi`), a take, a solved `.npz` or a USD
     file; for a take with `model` (`--model`), how its labels match the model's markers."""
     path = existing_file(os.fspath(path), "FILE")
-    from lgi import takes
-
     suffix = path.suffix.lower()
     if suffix == ".lgi":
         m = Model.load(path)
@@ -383,7 +306,7 @@ def describe(
                 f"  shapes: {d.num_shapes}",
             ]
         if "vertices" in files:
-            r = export.read_result_npz(path)
+            r = read_result_npz(path)
             return [
                 f"solved take {path}",
                 f"  frames: {r.vertices.shape[0]} from time code {r.start}, "
@@ -459,7 +382,7 @@ def build_file(
     say: Say = _silent,
 ) -> Path:
     """`lgi build`: a model file `out` from `neutral` and `shapes` (`read_dataset`), the
-    layout CSV `markers` (`lgi.takes.read_layout`) and a JSON `config`; `jaw` is
+    layout CSV `markers` (`lgi.io.takes.read_layout`) and a JSON `config`; `jaw` is
     `Model.build`'s: "auto" (a rig from the jaw shapes when the dataset has `jawOpen`) or
     "none". The model keeps the layout's names and
     `units`. Returns `out`."""
@@ -553,7 +476,7 @@ def solve_file(
         f"({100 * missing.mean():.1f}% samples missing)"
         + ("" if sigma is None else f", marker noise {sigma:.4g}")
     )
-    topo = export.topology(m.dataset)
+    topo = topology(m.dataset)
     start = t.first_frame + rng.start
     if chunk is None:
         res = m.solve(x, jaw=jaw_mode, marker_noise=sigma, quiet=quiet)
@@ -564,7 +487,7 @@ def solve_file(
     from tqdm import tqdm
 
     n, size = int(x.shape[0]), int(chunk)
-    sink = _Sink(kind, dest, topo, names=m.marker_names, fps=rate, start=start, units=m.units)
+    sink = FrameSink(kind, dest, topo, names=m.marker_names, fps=rate, start=start, units=m.units)
     buf = np.empty((min(size, n), m.num_vertices, 3))
     # Each chunk continues the temporal solve from the last frame of the one before
     # (`Model.solve_iter`): the chunks together are one `solve` of the range.
@@ -598,7 +521,7 @@ def export_file(
     kind = output_kind(os.fspath(out))
     src = existing_file(os.fspath(result), "RESULT")
     not_an_input(dest, src)
-    r = export.read_result_npz(src)
+    r = read_result_npz(src)
     rng = frame_range(frames, r.vertices.shape[0])
     written = write_output(
         kind,
@@ -634,10 +557,11 @@ def rig_file(
 ) -> tuple[Path, int]:
     """`lgi rig`: the actor rig of MODEL from the template NEUTRAL + SHAPES (`read_dataset`;
     `lgi.rig.actor_rig`), each `combine` entry ('A+B[+C]', template shape names) adding a
-    corrective, written by `out`'s suffix (`RIG_OUTPUTS`: `lgi.rig_export.write_usd_rig`,
+    corrective, written by `out`'s suffix (`RIG_OUTPUTS`: `lgi.io.rig.write_usd_rig`,
     `write_gltf_rig`, or `Dataset.to_npz`). `noise`: `--marker-noise` as a number or
     'none' ('auto' has no take to look at). Returns the path and the number of shapes."""
-    from lgi import rig, rig_export
+    from lgi import rig
+    from lgi.io.rig import write_gltf_rig, write_usd_rig
 
     dest = output_file(os.fspath(out), "--out")
     suffix = dest.suffix.lower()
@@ -664,9 +588,9 @@ def rig_file(
     except InputError as e:
         raise InputError(f"--combine: {e}" if str(e).startswith("combination") else str(e)) from e
     if suffix in (".gltf", ".glb"):
-        rig_export.write_gltf_rig(dest, result)
+        write_gltf_rig(dest, result)
     elif suffix == ".npz":
         result.to_npz(dest)
     else:
-        rig_export.write_usd_rig(dest, result, units=m.units)
+        write_usd_rig(dest, result, units=m.units)
     return dest, result.num_shapes

@@ -17,7 +17,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from lgi.dataset import Dataset
-from lgi.takes import Layout, read_layout
+from lgi.io.takes import Layout, read_layout
 
 __all__ = [
     "ENV",
@@ -96,7 +96,7 @@ def load_dataset(folder: str | os.PathLike[str]) -> Dataset:
 
 def load_markers(folder: str | os.PathLike[str]) -> NDArray[np.float64]:
     """The 120 markers' rest positions (120, 3); `InputError` naming the file and line when
-    `markers_120.csv` is missing or garbled (`lgi.takes.read_layout`)."""
+    `markers_120.csv` is missing or garbled (`lgi.io.takes.read_layout`)."""
     return load_layout(folder).positions
 
 

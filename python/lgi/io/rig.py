@@ -18,9 +18,11 @@ from numpy.typing import NDArray
 
 from lgi.dataset import Dataset
 from lgi.errors import FileWriteError, InputError
-from lgi.export import _new_stage, _out_path, define_usd_mesh, topology
+from lgi.io.paths import output_file
+from lgi.io.topology import topology
+from lgi.io.units import METERS_PER_UNIT, normalize_unit
+from lgi.io.usd import define_usd_mesh, new_stage
 from lgi.rig import CORRECTIVE_PREFIX
-from lgi.takes import METERS_PER_UNIT, normalize_unit
 
 __all__ = ["gltf_vertices", "write_gltf_rig", "write_usd_rig"]
 
@@ -54,7 +56,7 @@ def write_gltf_rig(path: str | os.PathLike[str], dataset: Dataset) -> Path:
     vertices split at seams: `gltf_vertices`) with every shape as a morph target (POSITION
     displacements), names in `mesh.extras.targetNames`, all weights 0. `.glb`: binary;
     `.gltf`: JSON with the buffer as a base64 data URI. `Dataset.from_gltf` reads it back."""
-    out = _out_path(path, "glTF output")
+    out = output_file(path, "glTF output")
     suffix = out.suffix.lower()
     if suffix not in (".gltf", ".glb"):
         raise InputError(f"glTF output {out}: the suffix must be .gltf or .glb")
@@ -176,14 +178,14 @@ def write_usd_rig(
     vertex, with `pointIndices`), a `Skeleton` `/Rig/Skel` without joints and its
     `SkelAnimation` `/Rig/Skel/Weights` (every weight 0), so a DCC has the channels. A
     corrective's prim carries `lgi:combination` (the shapes it corrects). `units` as in
-    `lgi.export.write_usd`."""
+    `lgi.io.usd.write_usd`."""
     from pxr import Sdf, Usd, UsdGeom, UsdSkel, Vt
 
-    out = _out_path(path, "USD output")
+    out = output_file(path, "USD output")
     if out.suffix.lower() not in (".usd", ".usdc", ".usda"):
         raise InputError(f"USD output {out}: the suffix must be .usd, .usdc or .usda")
     neutral, shapes = _checked(dataset)
-    stage = _new_stage(Usd, Sdf, out)
+    stage = new_stage(Usd, Sdf, out)
     UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.y)
     if units is not None:
         UsdGeom.SetStageMetersPerUnit(stage, METERS_PER_UNIT[normalize_unit(units, "units")])

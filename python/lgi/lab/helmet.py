@@ -17,9 +17,9 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from lgi.camera import FisheyeCamera, rodrigues
+from lgi.capture.camera import FisheyeCamera, rodrigues
 from lgi.errors import InputError
-from lgi.sample import dropout_mask
+from lgi.lab.sample import dropout_mask
 
 F64 = NDArray[np.float64]
 

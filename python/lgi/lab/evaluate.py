@@ -14,9 +14,10 @@ from typing import Any, Protocol
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from lgi import _lgi
-from lgi.dataset import Dataset, sample_dataset, without_shapes
-from lgi.model import Model, SolveResult
+from lgi._lgi import SolveResult
+from lgi.dataset import Dataset, without_shapes
+from lgi.lab.capture import HingeJaw, box_diagonal, make_capture, marker_samples
+from lgi.model import Model
 
 F64 = NDArray[np.float64]
 Row = dict[str, Any]
@@ -53,10 +54,6 @@ class Solver(Protocol):
     def solve(self, frames: ArrayLike, *, temporal: bool = ..., quiet: bool = ...) -> Any: ...
 
 
-def _diag(points: F64) -> float:
-    return float(np.linalg.norm(np.ptp(points, axis=0)))
-
-
 def score(
     name: str,
     result: SolveResult,
@@ -69,7 +66,7 @@ def score(
     verts = np.asarray(result.vertices)
     idx = slice(None) if region is None else np.asarray(region)
     err = np.linalg.norm(verts[:, idx] - truth[:, idx], axis=2)
-    diag = diagonal if diagonal is not None else _diag(truth[0])
+    diag = diagonal if diagonal is not None else box_diagonal(truth[0])
     nf = verts.shape[0]
     jitter = (
         float(np.linalg.norm(np.diff(verts[:, idx], n=2, axis=0), axis=2).mean())
@@ -98,7 +95,7 @@ def evaluate(
     quiet: bool = True,
 ) -> list[Row]:
     """Solves `frames` (F, B, 3) with every method and scores it against `truth` (F, V, 3) on
-    the vertices `region` (default all; ICT: the face skin, `lgi.ict.skin()`); a progress bar
+    the vertices `region` (default all; ICT: the face skin, `lgi.lab.ict.skin()`); a progress bar
     over the methods unless `quiet`."""
     fr = np.asarray(frames, dtype=np.float64)
     tr = np.asarray(truth, dtype=np.float64)
@@ -110,19 +107,10 @@ def evaluate(
     return rows
 
 
-def _samples(dataset: Dataset, markers: ArrayLike, tolerance: float = 0.02) -> _lgi.RbfInterpolator:
-    neutral = np.asarray(dataset.neutral)
-    return _lgi.RbfInterpolator.from_dataset(dataset.core, markers, tolerance * _diag(neutral))
-
-
-def _on_meshes(rbf: _lgi.RbfInterpolator, meshes: F64) -> F64:
-    return np.einsum("fbjd,bj->fbd", meshes[:, rbf.sample_vertices], rbf.sample_weights)
-
-
 def verification(dataset: Dataset, markers: ArrayLike) -> tuple[F64, F64]:
     """Frames (S, B, 3): the markers on each dataset shape, and the shapes (S, V, 3) as truth."""
     truth = np.asarray(dataset.neutral)[None] + np.asarray(dataset.shapes, dtype=np.float64)
-    return _on_meshes(_samples(dataset, markers), truth), truth
+    return marker_samples(dataset, markers, truth), truth
 
 
 def _without(dataset: Dataset, k: int) -> Dataset:
@@ -154,7 +142,7 @@ def leave_one_out(
             verts.setdefault(name, []).append(np.asarray(r.vertices)[0])
             res_max[name] = max(res_max.get(name, 0.0), float(np.max(r.bundle_residuals)))
     rows = []
-    diag = _diag(np.asarray(dataset.neutral))
+    diag = box_diagonal(np.asarray(dataset.neutral))
     for name, vs in verts.items():
         fake = SolveResult(
             vertices=np.stack(vs),
@@ -304,15 +292,14 @@ def capture_protocol(
     panel: str | os.PathLike[str] | None = None,
     quiet: bool = True,
 ) -> list[Row]:
-    """The capture protocol: each Live Link Face recording (`lgi.takes.read_livelinkface`,
+    """The capture protocol: each Live Link Face recording (`lgi.io.livelink.read_livelinkface`,
     subsampled to about `frames` frames) drives `dataset`, its jaw-open shape turning about the
-    hinge fitted to the `jaw_rigid` vertices (`lgi.capture.HingeJaw`); markers carry noise
+    hinge fitted to the `jaw_rigid` vertices (`lgi.lab.capture.HingeJaw`); markers carry noise
     `sigma` and `dropout`; a `holdout` fraction of the shapes is kept from the methods
-    (`lgi.capture.make_capture`). Rows per recording and method ("recording: method"). With
+    (`lgi.lab.capture.make_capture`). Rows per recording and method ("recording: method"). With
     `panel`, the first recording's most expressive frame as a heatmap panel (`error_panel`);
     a progress bar over the recordings unless `quiet`."""
-    from lgi.capture import HingeJaw, make_capture
-    from lgi.takes import read_livelinkface
+    from lgi.io.livelink import read_livelinkface
 
     hinge = HingeJaw.fit(dataset, jaw_rigid)
     rows: list[Row] = []
@@ -347,10 +334,10 @@ def error_panel(
     triangles: ArrayLike,
     region: ArrayLike | None = None,
 ) -> None:
-    """Writes the heatmap panel (`lgi.render.panel`) of one frame: the truth, then each
+    """Writes the heatmap panel (`lgi.lab.render.panel`) of one frame: the truth, then each
     method's per-vertex error (cm) on one colour scale; vertices outside `region` are drawn
     with error 0."""
-    from lgi import render
+    from lgi.lab import render
 
     fr = np.asarray(frame, dtype=np.float64)[None]
     tr = np.asarray(truth, dtype=np.float64)
@@ -385,9 +372,9 @@ def run_protocol(
     leave-one-out, the most displaced shape held out) into `out`. `sigma` and `holdout` are the
     capture protocol's (ICT with the Live Link Face recordings beside it). Progress bars on
     stderr unless `quiet`."""
-    from lgi import ict
     from lgi.errors import InputError
-    from lgi.sample import make_sample
+    from lgi.lab import ict
+    from lgi.lab.sample import make_sample, sample_dataset
 
     outp = Path(out)
     outp.mkdir(parents=True, exist_ok=True)
@@ -475,12 +462,6 @@ def run_protocol(
     return rows
 
 
-def marker_samples(dataset: Dataset, markers: ArrayLike, meshes: ArrayLike) -> F64:
-    """(F, B, 3) markers (rest positions `markers` (B, 3) on the neutral) on meshes (F, V, 3):
-    barycentric on each marker's closest neutral triangle, as the protocols sample them."""
-    return _on_meshes(_samples(dataset, markers), np.asarray(meshes, dtype=np.float64))
-
-
 CAPTURE_COLUMNS = [
     "method",
     "frames",
@@ -502,7 +483,7 @@ def capture(
     jaw_open: ArrayLike,
     region: ArrayLike | None = None,
 ) -> list[Row]:
-    """Scores each method's solve of a capture take (`lgi.capture.make_capture`): the `score`
+    """Scores each method's solve of a capture take (`lgi.lab.capture.make_capture`): the `score`
     row (mean, p95 and max per-vertex error over `region`, residual, jitter, speed) plus the
     error on the `jaw_open` frames (F,) bool (`CAPTURE_COLUMNS`)."""
     fr = np.asarray(frames, dtype=np.float64)

@@ -1,12 +1,13 @@
 """Synthetic capture with real motion: the ground truth of the capture protocol.
 
-Real ARKit curves (`lgi.takes.read_livelinkface`) drive a dataset's shapes; the jaw's rigid part
-is a true rotation about a hinge fitted from the dataset's jaw-open shape (a linear rig moves
-the chin along a chord; a real jaw turns), the non-rigid rest of that shape stays linear;
-markers are sampled on the result, with Gaussian noise and dropouts; and a fraction of the
-shapes can be held out from what the methods see (the actor performs expressions nobody
-scanned). The meshes a linear rig produces are not real scans: results on this truth say how
-methods cope with real motion curves, noise and missing shapes, not with real skin.
+Real ARKit curves (`lgi.io.livelink.read_livelinkface`) drive a dataset's shapes; the jaw's
+rigid part is a true rotation about a hinge fitted from the dataset's jaw-open shape (a linear
+rig moves the chin along a chord; a real jaw turns), the non-rigid rest of that shape stays
+linear; markers are sampled on the result (`marker_samples`, as every protocol samples them),
+with Gaussian noise and dropouts; and a fraction of the shapes can be held out from what the
+methods see (the actor performs expressions nobody scanned). The meshes a linear rig produces
+are not real scans: results on this truth say how methods cope with real motion curves, noise
+and missing shapes, not with real skin.
 """
 
 from __future__ import annotations
@@ -17,16 +18,46 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from lgi import _lgi
 from lgi.dataset import Dataset, without_shapes
 from lgi.errors import InputError
-from lgi.evaluate import marker_samples
 from lgi.jaw import fit_rigid, rotation_axis_angle
-from lgi.sample import dropout_mask
+from lgi.lab.sample import dropout_mask
 
 F64 = NDArray[np.float64]
 I64 = NDArray[np.int64]
 
-__all__ = ["CaptureTake", "HingeJaw", "capture_truth", "make_capture", "random_layout"]
+__all__ = [
+    "CaptureTake",
+    "HingeJaw",
+    "box_diagonal",
+    "capture_truth",
+    "make_capture",
+    "marker_samples",
+    "random_layout",
+]
+
+
+def box_diagonal(points: F64) -> float:
+    """The bounding-box diagonal of `points` (N, 3): the size the protocols measure against."""
+    return float(np.linalg.norm(np.ptp(points, axis=0)))
+
+
+def _samples(dataset: Dataset, markers: ArrayLike, tolerance: float = 0.02) -> _lgi.RbfInterpolator:
+    neutral = np.asarray(dataset.neutral)
+    return _lgi.RbfInterpolator.from_dataset(
+        dataset.core, markers, tolerance * box_diagonal(neutral)
+    )
+
+
+def _on_meshes(rbf: _lgi.RbfInterpolator, meshes: F64) -> F64:
+    return np.einsum("fbjd,bj->fbd", meshes[:, rbf.sample_vertices], rbf.sample_weights)
+
+
+def marker_samples(dataset: Dataset, markers: ArrayLike, meshes: ArrayLike) -> F64:
+    """(F, B, 3) markers (rest positions `markers` (B, 3) on the neutral) on meshes (F, V, 3):
+    barycentric on each marker's closest neutral triangle, as the protocols sample them."""
+    return _on_meshes(_samples(dataset, markers), np.asarray(meshes, dtype=np.float64))
 
 
 def _rotation(axis: F64, angle: float) -> F64:

@@ -13,10 +13,11 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from lgi.camera import Rays
+from lgi._lgi import SolveResult
+from lgi.capture.camera import Rays
+from lgi.capture.stabilize import Alignment
 from lgi.errors import InputError
-from lgi.model import Model, SolveResult
-from lgi.stabilize import Alignment
+from lgi.model import Model
 
 F64 = NDArray[np.float64]
 

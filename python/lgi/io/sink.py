@@ -1,0 +1,89 @@
+"""Solved frames out by kind, chunk after chunk (`FrameSink`): the one place that turns
+frames into a USD point cache, an OBJ sequence or a solved-take `.npz`, for `lgi solve`,
+`lgi export` and `lgi batch`."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from lgi.errors import InputError
+from lgi.io.obj import write_obj_sequence
+from lgi.io.result import write_result_npz
+from lgi.io.takes import HeadMotion
+from lgi.io.topology import Topology
+from lgi.io.usd import UsdCache
+
+__all__ = ["FrameSink"]
+
+
+class FrameSink:
+    """Where solved frames go, chunk after chunk: a USD cache (`UsdCache`), OBJ files, or
+    float32 copies gathered for one solved-take `.npz` (written at `close`). `kind` is
+    "usd", "obj" or "npz"; `close` returns the path written (`NAME.NNNN.obj` for a
+    sequence)."""
+
+    def __init__(
+        self,
+        kind: str,
+        out: Path,
+        topo: Topology,
+        *,
+        names: list[str],
+        fps: float | None,
+        start: int,
+        units: str | None,
+    ) -> None:
+        self.kind, self.out, self.topo, self.names = kind, out, topo, names
+        self.fps, self.start, self.units = fps, start, units
+        self.next = start
+        self.usd: UsdCache | None = None
+        if kind == "usd":
+            if fps is None:
+                raise InputError("a USD point cache needs a frame rate (--fps)")
+            self.usd = UsdCache(out, topo, fps=fps, units=units, start=start)
+        self.parts: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None]] = []
+
+    def add(
+        self,
+        vertices: np.ndarray,
+        residuals: np.ndarray,
+        missing: np.ndarray,
+        jaw_theta: np.ndarray | None,
+        head: HeadMotion | None = None,
+    ) -> None:
+        if self.usd is not None:
+            self.usd.add(
+                vertices,
+                jaw_theta=jaw_theta,
+                marker_residuals=residuals,
+                head_rotations=None if head is None else head.rotations,
+                head_translations=None if head is None else head.translations,
+            )
+        elif self.kind == "obj":
+            write_obj_sequence(
+                self.out.parent, self.topo, vertices, name=self.out.stem, start=self.next
+            )
+        else:
+            self.parts.append((vertices.astype(np.float32), residuals, missing, jaw_theta))
+        self.next += int(vertices.shape[0])
+
+    def close(self) -> Path:
+        if self.usd is not None:
+            return self.usd.close()
+        if self.kind == "obj":
+            return self.out.parent / f"{self.out.stem}.NNNN.obj"
+        jaws = [p[3] for p in self.parts if p[3] is not None]
+        return write_result_npz(
+            self.out,
+            self.topo,
+            np.concatenate([p[0] for p in self.parts]),
+            np.concatenate([p[1] for p in self.parts]),
+            np.concatenate([p[2] for p in self.parts]),
+            self.names,
+            fps=self.fps,
+            start=self.start,
+            units=self.units,
+            jaw_theta=np.concatenate(jaws) if len(jaws) == len(self.parts) else None,
+        )
