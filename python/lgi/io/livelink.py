@@ -4,7 +4,6 @@ mapping of ARKit curve names onto a dataset's shape names (`arkit_to_dataset`)."
 
 from __future__ import annotations
 
-import csv
 import os
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -13,6 +12,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from lgi.errors import InputError
+from lgi.io.csv_rows import read_csv_rows
 
 F64 = NDArray[np.float64]
 
@@ -99,12 +99,7 @@ def read_livelinkface(path: str | os.PathLike[str]) -> Curves:
     """Reads a Live Link Face CSV: `Timecode` (HH:MM:SS:FF.fff), `BlendShapeCount`, then one
     column per curve (the 52 ARKit weights, then head and eye rotations). Raises `InputError`
     naming the file and line for anything else."""
-    p = os.fspath(path)
-    try:
-        with open(p, newline="", encoding="utf-8") as fh:
-            rows = list(csv.reader(fh))
-    except (OSError, UnicodeDecodeError) as e:
-        raise InputError(f"{p}: cannot read a Live Link Face CSV: {e}") from None
+    p, rows = read_csv_rows(path, "a Live Link Face CSV")
     if not rows or len(rows[0]) < 3 or rows[0][:2] != ["Timecode", "BlendShapeCount"]:
         raise InputError(
             f"{p}: not a Live Link Face CSV: the header must start with "

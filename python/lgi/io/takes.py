@@ -7,7 +7,6 @@ matched to the model's marker names and their units converted to the model's
 
 from __future__ import annotations
 
-import csv
 import os
 import struct
 from collections.abc import Sequence
@@ -17,6 +16,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from lgi.errors import InputError
+from lgi.io.csv_rows import read_csv_rows
 from lgi.io.units import convert_units, normalize_unit
 
 F64 = NDArray[np.float64]
@@ -74,12 +74,7 @@ def read_layout(path: str | os.PathLike[str]) -> Layout:
     """Reads a marker layout CSV: a header `name,x,y,z`, then one marker per line. Raises
     `InputError` naming the file and line: missing file, bad header, wrong column count, a
     coordinate that is not a finite number, an empty or repeated name."""
-    p = os.fspath(path)
-    try:
-        with open(p, newline="", encoding="utf-8") as fh:
-            rows = list(csv.reader(fh))
-    except (OSError, UnicodeDecodeError) as e:
-        raise InputError(f"{p}: cannot read the marker layout: {e}") from None
+    p, rows = read_csv_rows(path, "the marker layout")
     header = [c.strip().lower() for c in rows[0]] if rows else []
     if header != ["name", "x", "y", "z"]:
         raise InputError(
@@ -289,12 +284,7 @@ def read_csv(path: str | os.PathLike[str], fps: float | None = None) -> RawTake:
     a `frame` and/or `time` column (seconds: gives the rate when `fps` is None). Empty or
     `nan` cells are missing samples. CSV has no units: the coordinates are taken to be in the
     target's units unless `read(take_units=...)` says otherwise."""
-    p = os.fspath(path)
-    try:
-        with open(p, newline="", encoding="utf-8") as fh:
-            rows = list(csv.reader(fh))
-    except (OSError, UnicodeDecodeError) as e:
-        raise InputError(f"{p}: cannot read a marker CSV: {e}") from None
+    p, rows = read_csv_rows(path, "a marker CSV")
     if not rows:
         raise InputError(f"{p}: empty file")
     header = [h.strip() for h in rows[0]]
