@@ -198,7 +198,7 @@ def estimate_rig(
     rigid vertices (otherwise the shape deforms them non-rigidly and gets theta = 0).
 
     With `estimate_frame`, the rig's axes follow the estimated hinge (and the jawLeft/jawRight
-    rotation axis for the lateral axis); by default they are x, y, z as in `lgi.sample`.
+    rotation axis for the lateral axis); by default they are x, y, z as in `lgi.lab.sample`.
     Returns (JawRig, shape_theta (S, 3)), plus a `RigReport` when `return_report`.
     """
     x0 = _points(neutral, "neutral")

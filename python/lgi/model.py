@@ -141,8 +141,8 @@ class Model:
         none), so `solve` turns the jaw as a rotation rather than blending it linearly
         (docs/results.md measures what it gives); `jaw=None` builds without a rig.
 
-        `marker_names` (B unique names, e.g. from `lgi.takes.read_layout`) and `units` (the
-        coordinates' length unit, a key of `lgi.takes.METERS_PER_UNIT`) are kept with the
+        `marker_names` (B unique names, e.g. from `lgi.io.takes.read_layout`) and `units` (the
+        coordinates' length unit, a key of `lgi.io.units.METERS_PER_UNIT`) are kept with the
         model (and its file): takes are matched to it by label and converted to its units.
         Default: names `m000`, `m001`, ... and no unit."""
         labels = _labels(marker_names, units)

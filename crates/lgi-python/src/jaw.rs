@@ -14,7 +14,7 @@ use pyo3::types::{PyDict, PyType};
 type Array<'py> = Bound<'py, PyArrayDyn<f64>>;
 
 /// Pivot, per-vertex jaw weights and the jaw's axes (`frame` columns: open axis, lateral axis,
-/// forward direction; identity means x, y, z as in `lgi.sample`). Immutable.
+/// forward direction; identity means x, y, z as in `lgi.lab.sample`). Immutable.
 #[pyclass(frozen, module = "lgi._lgi")]
 pub struct JawRig {
     pub inner: CoreRig,
