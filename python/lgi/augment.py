@@ -1,5 +1,5 @@
-"""Nonlinear in-betweens and combinations: `Dataset.augmented(n, method="arap")`. The recipes
-(which shapes, which weights, which names) are the core's, the same as the linear
+"""Nonlinear in-betweens and combinations: the shapes of `Dataset.augmented(n, method="arap")`.
+The recipes (which shapes, which weights, which names) are the core's, the same as the linear
 `Dataset.augmented(n)`; each augmented shape interpolates its shapes' per-triangle rotations in
 the log and their stretches linearly (`lgi.deform.blend`), then a Poisson solve on the neutral
 turns the gradients into positions. A rotating part (an eyeball, the lower teeth, a lip
@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-from lgi.dataset import Dataset, with_shapes
+import lgi._lgi as _lgi
 from lgi.deform import PoissonMesh, Polar, blend
 from lgi.errors import DatasetError
 
@@ -20,7 +20,7 @@ STILL = 1e-6
 in place by the solve (the back of the head, the upper teeth)."""
 
 
-def still_vertices(dataset: Dataset) -> NDArray[np.bool_]:
+def still_vertices(dataset: _lgi.Dataset) -> NDArray[np.bool_]:
     """(V,) True where no shape of `dataset` moves the vertex (by more than `STILL`)."""
     neutral = np.asarray(dataset.neutral)
     diag = float(np.linalg.norm(neutral.max(axis=0) - neutral.min(axis=0)))
@@ -31,10 +31,12 @@ def still_vertices(dataset: Dataset) -> NDArray[np.bool_]:
     return np.asarray(motion <= STILL * diag)
 
 
-def arap_augmented(dataset: Dataset, min_shapes: int, quiet: bool = False) -> Dataset:
-    """`dataset.augmented(min_shapes)`'s shapes, made by rotation-aware interpolation
-    instead of sums (see the module). Originals are copied unchanged; deterministic. A
-    progress bar over the new shapes unless `quiet`."""
+def arap_shapes(
+    dataset: _lgi.Dataset, min_shapes: int, quiet: bool = False
+) -> tuple[NDArray[np.float32], list[str]]:
+    """The shapes (S', V, 3) and names of `dataset.augmented(min_shapes)`, made by
+    rotation-aware interpolation instead of sums (see the module). Originals are copied
+    unchanged; deterministic. A progress bar over the new shapes unless `quiet`."""
     from tqdm import tqdm
 
     if dataset.num_shapes == 0:
@@ -60,4 +62,4 @@ def arap_augmented(dataset: Dataset, min_shapes: int, quiet: bool = False) -> Da
         linear = neutral + sum(float(w) * shapes[k].astype(np.float64) for k, w in terms)
         grads = blend([(polar_of(k), float(w)) for k, w in terms])
         out[i] = mesh.solve(grads, linear) - neutral
-    return with_shapes(dataset, out, [n for n, _ in recipes])
+    return out, [n for n, _ in recipes]

@@ -26,7 +26,7 @@ from typing import Any, ClassVar
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from lgi import _lgi
+import lgi._lgi as _lgi
 from lgi._lgi import BuildConfig, Choices, SolveResult
 from lgi.dataset import Dataset
 from lgi.errors import InputError

@@ -13,7 +13,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from lgi import _lgi
+import lgi._lgi as _lgi
 from lgi.errors import InputError
 
 _Path = str | os.PathLike[str]
@@ -67,14 +67,14 @@ class Dataset:
         (`lgi.io.npz_dataset.NPZ_KEYS`, read with `allow_pickle=False`)."""
         from lgi.io.npz_dataset import read_npz
 
-        return read_npz(path)
+        return cls(read_npz(path))
 
     def to_npz(self, path: _Path) -> None:
         """Writes the dataset as a compressed `.npz` archive with the keys `from_npz` reads
         (numpy appends `.npz` to `path` when it has no such suffix)."""
         from lgi.io.npz_dataset import write_npz
 
-        write_npz(self, path)
+        write_npz(self._core, path)
 
     def to_bytes(self) -> bytes:
         """The dataset as bytes: the model file's dataset part (neutral, shape names,
@@ -97,15 +97,15 @@ class Dataset:
         """A new dataset with in-between shapes (`name@0.5`, ...) and pairwise combinations
         added to the shapes (`augment_recipes`), at least `min_shapes` when there are enough
         pairs (the neutral is shared). `method="linear"` (default) sums displacements (the
-        core's); `"arap"` interpolates rotations instead (`lgi.augment.arap_augmented`, a
+        core's); `"arap"` interpolates rotations instead (`lgi.augment.arap_shapes`, a
         progress bar unless `quiet`)."""
         n = _lgi.check_count(min_shapes, "min_shapes")
         if method is None or method == "linear":
             return Dataset(self._core.augmented(n))
         if method == "arap":
-            from lgi.augment import arap_augmented
+            from lgi.augment import arap_shapes
 
-            return arap_augmented(self, n, quiet)
+            return with_shapes(self, *arap_shapes(self._core, n, quiet))
         raise InputError(f"method must be 'linear' or 'arap', got {method!r}")
 
     def augment_recipes(self, min_shapes: int) -> list[tuple[str, list[tuple[int, float]]]]:

@@ -15,7 +15,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from lgi import _lgi
+import lgi._lgi as _lgi
 from lgi._lgi import BuildConfig, SolveResult
 from lgi.dataset import Dataset
 from lgi.errors import InputError

@@ -6,6 +6,7 @@ use glam::DVec3;
 use numpy::ndarray::{ArrayD, ArrayViewD, IxDyn};
 use numpy::{IntoPyArray, PyArrayDyn, PyArrayMethods, PyUntypedArrayMethods};
 use pyo3::prelude::*;
+use pyo3::types::{PyByteArray, PyBytes};
 
 /// Reads any float32/float64 array-like of exactly `shape` (`None` = any length on that
 /// axis) into a contiguous f64 `ArrayD`. `name` appears in every error message.
@@ -222,4 +223,24 @@ pub fn count(obj: &Bound<'_, PyAny>, name: &str) -> PyResult<usize> {
 #[pyfunction]
 pub fn check_count(value: &Bound<'_, PyAny>, name: &str) -> PyResult<usize> {
     count(value, name)
+}
+
+/// Runs `read` on the bytes of `data` (`bytes`, borrowed; `bytearray`, copied); anything else
+/// is an `lgi.InputError` naming `what`.
+pub fn with_bytes<T>(
+    data: &Bound<'_, PyAny>,
+    what: &str,
+    read: impl FnOnce(&[u8]) -> T,
+) -> PyResult<T> {
+    if let Ok(b) = data.cast::<PyBytes>() {
+        return Ok(read(b.as_bytes()));
+    }
+    if let Ok(b) = data.cast::<PyByteArray>() {
+        return Ok(read(&b.to_vec()));
+    }
+    let kind = data
+        .get_type()
+        .name()
+        .map_or_else(|_| "?".into(), |n| n.to_string());
+    Err(input_error(format!("{what}: expected bytes, got {kind}")))
 }

@@ -61,7 +61,7 @@ impl Dataset {
     /// corrupt bytes raise `lgi.ModelFormatError`.
     #[staticmethod]
     fn from_bytes(py: Python<'_>, data: &Bound<'_, PyAny>) -> PyResult<Dataset> {
-        let d = crate::model::with_bytes(data, "Dataset.from_bytes", |bytes| {
+        let d = crate::convert::with_bytes(data, "Dataset.from_bytes", |bytes| {
             py.detach(|| lgi_core::dataset_from_bytes(bytes))
                 .map_err(PyLgiError)
         })??;

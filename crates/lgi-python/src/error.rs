@@ -30,6 +30,14 @@ pub fn lgi_exception(class_name: &str, msg: String) -> PyErr {
     })
 }
 
+/// Issues `msg` as an `lgi.errors.LgiWarning` attributed to the caller's caller (the
+/// Python line that called the binding through `lgi`'s wrapper).
+pub fn lgi_warning(py: Python<'_>, msg: String) -> PyResult<()> {
+    let category = py.import("lgi.errors")?.getattr("LgiWarning")?;
+    let msg = std::ffi::CString::new(msg).map_err(|e| input_error(e.to_string()))?;
+    PyErr::warn(py, &category, &msg, 2)
+}
+
 impl From<PyLgiError> for PyErr {
     fn from(e: PyLgiError) -> PyErr {
         let class = match &e.0 {

@@ -3,7 +3,7 @@
 //! `solve_args.rs` and its result packed in `result.rs`.
 
 use crate::config::BuildConfig;
-use crate::convert::{flat_to_array, float_array, point_sets, points, points_to_array};
+use crate::convert::{flat_to_array, float_array, point_sets, points, points_to_array, with_bytes};
 use crate::dataset::Dataset;
 use crate::error::{input_error, PyLgiError};
 use crate::jaw::{frame_from_array, JawRig};
@@ -14,7 +14,7 @@ use glam::{DMat3, DVec3};
 use lgi_core::{JawBins, JawInput, JawParams, JawRig as CoreRig, Model as CoreModel, SolveOptions};
 use numpy::{PyArray3, PyArrayDyn, PyArrayMethods};
 use pyo3::prelude::*;
-use pyo3::types::{PyByteArray, PyBytes, PyDict};
+use pyo3::types::{PyBytes, PyDict};
 use std::sync::Arc;
 
 /// A built LGI model (immutable, thread-safe).
@@ -420,29 +420,7 @@ fn warn_if_mostly_projected(py: Python<'_>, model: &CoreModel) -> PyResult<()> {
          probably too strict (min_quality {}, max_edge {}, max_tets {}, tet_neighbours {})",
         c.min_quality, c.max_edge, c.max_tets, c.tet_neighbours
     );
-    let category = py.import("lgi.errors")?.getattr("LgiWarning")?;
-    let msg = std::ffi::CString::new(msg).map_err(|e| input_error(e.to_string()))?;
-    PyErr::warn(py, &category, &msg, 2)
-}
-
-/// Runs `read` on the bytes of `data` (`bytes`, borrowed; `bytearray`, copied); anything else
-/// is an `lgi.InputError` naming `what`.
-pub fn with_bytes<T>(
-    data: &Bound<'_, PyAny>,
-    what: &str,
-    read: impl FnOnce(&[u8]) -> T,
-) -> PyResult<T> {
-    if let Ok(b) = data.cast::<PyBytes>() {
-        return Ok(read(b.as_bytes()));
-    }
-    if let Ok(b) = data.cast::<PyByteArray>() {
-        return Ok(read(&b.to_vec()));
-    }
-    let kind = data
-        .get_type()
-        .name()
-        .map_or_else(|_| "?".into(), |n| n.to_string());
-    Err(input_error(format!("{what}: expected bytes, got {kind}")))
+    crate::error::lgi_warning(py, msg)
 }
 
 /// The payload that unwinds a solve stopped by Ctrl-C or a failing progress callback.

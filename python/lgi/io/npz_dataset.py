@@ -1,5 +1,5 @@
-"""The dataset `.npz` layout (numpy's format, so read and written here):
-`lgi.Dataset.from_npz` / `to_npz` are `read_npz` / `write_npz`."""
+"""The dataset `.npz` layout (numpy's format, so read and written here), on the core's dataset:
+`lgi.Dataset.from_npz` / `to_npz` wrap `read_npz` / `write_npz`."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ from typing import Any
 
 import numpy as np
 
-from lgi.dataset import Dataset
+import lgi._lgi as _lgi
 from lgi.errors import DatasetError, DatasetFileError, InputError
 
 __all__ = ["NPZ_KEYS", "read_npz", "write_npz"]
@@ -32,7 +32,7 @@ source faces `polygon_counts` (P,), `polygon_vertices` and `polygon_uvs` (one pe
 empty without UVs), which must fan-split into `triangles` (`Dataset.with_polygons`)."""
 
 
-def read_npz(path: str | os.PathLike[str]) -> Dataset:
+def read_npz(path: str | os.PathLike[str]) -> _lgi.Dataset:
     """Loads an `.npz` archive of the `NPZ_KEYS` layout (read with `allow_pickle=False`).
     Errors name the file: `DatasetFileError` when it cannot be read, `DatasetError` when it is
     not an archive or its content is invalid."""
@@ -60,13 +60,13 @@ def read_npz(path: str | os.PathLike[str]) -> Dataset:
     if (uvs is None or uvs.size == 0) and (uv_triangles is None or uv_triangles.size == 0):
         uvs = uv_triangles = None
     try:
-        ds = Dataset.from_arrays(
+        ds = _lgi.Dataset.from_arrays(
             arrays["neutral"],
             arrays["triangles"],
             arrays.get("shapes"),
-            names=arrays.get("names"),
-            uvs=uvs,
-            uv_triangles=uv_triangles,
+            arrays.get("names"),
+            uvs,
+            uv_triangles,
         )
         if "polygon_counts" in arrays:
             pu = arrays.get("polygon_uvs")
@@ -81,7 +81,7 @@ def read_npz(path: str | os.PathLike[str]) -> Dataset:
         raise DatasetError(f"{name}: {e}") from e
 
 
-def write_npz(dataset: Dataset, path: str | os.PathLike[str]) -> None:
+def write_npz(dataset: _lgi.Dataset, path: str | os.PathLike[str]) -> None:
     """Writes `dataset` as a compressed `.npz` archive of the `NPZ_KEYS` layout (numpy appends
     `.npz` to `path` when it has no such suffix)."""
     name = os.fspath(path)

@@ -18,7 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from lgi import _lgi
+import lgi._lgi as _lgi
 from lgi.dataset import Dataset, without_shapes
 from lgi.errors import InputError
 from lgi.jaw import fit_rigid, rotation_axis_angle

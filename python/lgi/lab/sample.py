@@ -32,7 +32,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from lgi import _lgi
+import lgi._lgi as _lgi
 from lgi.dataset import Dataset
 from lgi.errors import DatasetError, DatasetFileError, InputError
 from lgi.jaw import JawRig

@@ -31,6 +31,7 @@ mod labels;
 pub mod lookup;
 mod parts;
 mod pose;
+mod prepare;
 mod sanity;
 mod solve;
 #[cfg(test)]

@@ -2,7 +2,7 @@
 //! rest pose), given, from the dataset's blendshape fit then refined ([`JawPose::Fit`]), or
 //! tracked from the markers the jaw carries ([`JawPose::Track`]).
 
-use super::solve::Prepared;
+use super::prepare::{frame_context, Prepared};
 use super::{JawSetup, Model};
 use crate::baselines::BlendshapeSolver;
 use crate::error::{LgiError, Result};
@@ -194,7 +194,7 @@ impl Model {
         let extent = Extent::new(&self.markers_rest, self.diagonal);
         for (f, t) in frames.iter().enumerate() {
             self.check_targets(&extent, t)
-                .map_err(|e| super::solve::frame_context(e, f))?;
+                .map_err(|e| frame_context(e, f))?;
         }
         let poses = match pose {
             JawPose::Fit => {
@@ -209,10 +209,7 @@ impl Model {
                 frames
                     .par_iter()
                     .enumerate()
-                    .map(|(f, t)| {
-                        fit.pose(t, thetas)
-                            .map_err(|e| super::solve::frame_context(e, f))
-                    })
+                    .map(|(f, t)| fit.pose(t, thetas).map_err(|e| frame_context(e, f)))
                     .collect::<Result<Vec<_>>>()?
             }
             _ => {

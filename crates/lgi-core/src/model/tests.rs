@@ -2,7 +2,8 @@
 //! sewing pass against the staged one, jaw bins (members, hysteresis, reported ids) and saved
 //! models of every kind loading back to identical frames.
 
-use super::solve::{Prepared, RESIDUAL_TOLERANCE};
+use super::prepare::Prepared;
+use super::solve::RESIDUAL_TOLERANCE;
 use super::*;
 use crate::choose::{Choice, NO_TET};
 use crate::geodesic::FieldCache;
