@@ -278,7 +278,7 @@ def test_fit_pose_checks_its_arguments() -> None:
         rig.fit_pose(x0[:10], x0[:9])
     with pytest.raises(InputError, match="weights"):
         rig.fit_pose(x0[:10], x0[:10], np.ones(3))
-    with pytest.raises(InputError, match="theta"):
+    with pytest.raises(InputError, match="theta0"):
         rig.fit_pose(x0[:10], x0[:10], theta0=[4.0, 0.0, 0.0])
     with pytest.raises(InputError, match="points"):
         rig.fit_pose(x0[:10, :2], x0[:10, :2])

@@ -32,14 +32,20 @@ fn matrix_to_array<'py>(py: Python<'py>, m: DMat3) -> PyResult<Bound<'py, PyArra
     flat_to_array(py, m.transpose().to_cols_array().to_vec(), &[3, 3])
 }
 
-/// One pose per set: `theta` (3,) for every set or (F, 3), one per set; errors say "theta".
-fn poses(theta: &Bound<'_, PyAny>, sets: usize, per_set: bool) -> PyResult<Vec<JawParams>> {
+/// One pose per set: `theta` (3,) for every set or (F, 3), one per set; errors name the
+/// argument (`name`).
+fn poses(
+    theta: &Bound<'_, PyAny>,
+    name: &str,
+    sets: usize,
+    per_set: bool,
+) -> PyResult<Vec<JawParams>> {
     let shape = if per_set {
         vec![Some(sets), Some(3)]
     } else {
         vec![Some(3)]
     };
-    let t = float_array(&any_numbers(theta, "theta")?, "theta", &shape)?;
+    let t = float_array(&any_numbers(theta, name)?, name, &shape)?;
     let flat: Vec<f64> = t.iter().copied().collect();
     let poses: Vec<JawParams> = flat
         .chunks_exact(3)
@@ -47,7 +53,7 @@ fn poses(theta: &Bound<'_, PyAny>, sets: usize, per_set: bool) -> PyResult<Vec<J
         .collect();
     for p in &poses {
         p.validate().map_err(|e| match e {
-            LgiError::Input(m) => input_error(format!("theta: {m}")),
+            LgiError::Input(m) => input_error(format!("{name}: {m}")),
             other => PyLgiError(other).into(),
         })?;
     }
@@ -97,7 +103,7 @@ impl JawRig {
         };
         let n = sets.first().map_or(0, Vec::len);
         let theta_ndim: usize = theta.getattr("ndim").and_then(|n| n.extract()).unwrap_or(1);
-        let poses = poses(theta, sets.len(), batched && theta_ndim == 2)?;
+        let poses = poses(theta, "theta", sets.len(), batched && theta_ndim == 2)?;
         let w = match weights {
             None => None,
             Some(w) => Some(
@@ -196,7 +202,7 @@ impl JawRig {
         py: Python<'py>,
         theta: &Bound<'py, PyAny>,
     ) -> PyResult<(Array<'py>, Array<'py>)> {
-        let pose = poses(theta, 1, false)?[0];
+        let pose = poses(theta, "theta", 1, false)?[0];
         let a = self.inner.rigid_transform(pose);
         let r = a.matrix3;
         // The affine's translation is pivot - R pivot + t: take the pivot terms back out.
@@ -262,7 +268,7 @@ impl JawRig {
         };
         let start = match theta0 {
             None => JawParams::ZERO,
-            Some(t) => poses(t, 1, false)?[0],
+            Some(t) => poses(t, "theta0", 1, false)?[0],
         };
         let rig = &self.inner;
         let pose = py
