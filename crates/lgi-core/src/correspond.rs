@@ -112,8 +112,9 @@ impl SurfaceIndex {
             .position(|p| p.abs().max_element() > MAX_COORD)
         {
             return Err(LgiError::Dataset(format!(
-                "surface mesh: vertex {v} has a coordinate beyond {MAX_COORD:e} {:?}",
-                mesh.positions[v]
+                "surface mesh: vertex {v} has a coordinate beyond {} {}",
+                crate::text::num(MAX_COORD),
+                crate::text::point(mesh.positions[v])
             )));
         }
         let tris: Vec<[DVec3; 3]> = (0..mesh.triangles.len())
@@ -280,8 +281,8 @@ pub fn correspond(
     }
     if let Some(i) = markers.iter().position(|m| !m.is_finite()) {
         return Err(LgiError::Input(format!(
-            "marker {i} has a non-finite rest position {:?}",
-            markers[i]
+            "marker {i} has a non-finite rest position {}",
+            crate::text::point(markers[i])
         )));
     }
     let index = SurfaceIndex::new(mesh)?;

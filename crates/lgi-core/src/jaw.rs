@@ -63,7 +63,11 @@ impl JawParams {
             Ok(())
         } else {
             Err(LgiError::Input(format!(
-                "jaw parameters must be finite with |open|, |lateral| < pi, got {self:?}"
+                "jaw parameters must be finite with |open|, |lateral| < pi rad, got open {} rad, \
+                 lateral {} rad, forward {}",
+                crate::text::num(self.open),
+                crate::text::num(self.lateral),
+                crate::text::num(self.forward)
             )))
         }
     }
@@ -101,7 +105,10 @@ pub const FRAME_TOLERANCE: f64 = 1e-9;
 pub fn validate_frame(frame: &DMat3) -> Result<()> {
     if !frame.is_finite() {
         return Err(LgiError::Input(format!(
-            "jaw frame must be finite, got {frame:?}"
+            "jaw frame must be finite, got columns {} {} {}",
+            crate::text::point(frame.x_axis),
+            crate::text::point(frame.y_axis),
+            crate::text::point(frame.z_axis)
         )));
     }
     let gram = frame.transpose() * *frame - DMat3::IDENTITY;
@@ -204,7 +211,8 @@ impl JawRig {
     pub fn with_frame(pivot: DVec3, weights: Vec<f64>, frame: DMat3) -> Result<Self> {
         if !pivot.is_finite() {
             return Err(LgiError::Input(format!(
-                "jaw pivot must be finite, got {pivot:?}"
+                "jaw pivot must be finite, got {}",
+                crate::text::point(pivot)
             )));
         }
         if let Some((v, w)) = weights

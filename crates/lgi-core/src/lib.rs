@@ -39,13 +39,16 @@ mod smooth;
 mod sparse;
 mod tet_index;
 mod tets;
+mod text;
 mod uvspace;
 
 // Data in and the model: what the binding and most users need.
 pub use augment::{augment, recipes, Recipe};
 pub use dataset::Dataset;
 pub use error::{LgiError, Result};
-pub use magnitude::{check_dataset, Extent, MAGNITUDE_LIMIT, MAX_COORDINATE, MIN_PRESENT_MARKERS};
+pub use magnitude::{
+    check_dataset, Extent, Naming, MAGNITUDE_LIMIT, MAX_COORDINATE, MIN_PRESENT_MARKERS,
+};
 pub use mesh::{Mesh, SurfacePoint};
 pub use model::{
     default_marker_names, BinParts, BinPartsRef, BuildConfig, BundleStats, FrameInfo, FrameState,

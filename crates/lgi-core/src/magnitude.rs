@@ -5,6 +5,7 @@
 
 use crate::error::{LgiError, Result};
 use crate::jaw::JawParams;
+use crate::text::{length, num, point_in};
 use glam::DVec3;
 
 /// How far (in neutral diagonals) a marker may lie from the centre of the rest layout, a shape
@@ -22,6 +23,26 @@ pub const MIN_PRESENT_MARKERS: usize = 3;
 /// `x <= limit`, false for NaN (so a NaN magnitude is never accepted).
 fn within(x: f64, limit: f64) -> bool {
     x.partial_cmp(&limit).is_some_and(|o| o.is_le())
+}
+
+/// How messages name a frame's markers and lengths: the markers' labels (by index; none: by
+/// index alone) and the unit of the coordinates (empty: unknown).
+#[derive(Debug, Clone, Copy, Default)]
+pub struct Naming<'a> {
+    /// One label per marker, or empty.
+    pub names: &'a [String],
+    /// The coordinates' unit (`cm`), or empty.
+    pub units: &'a str,
+}
+
+impl Naming<'_> {
+    /// `marker m005 (5)`, or `marker 5` without labels.
+    pub fn marker(&self, i: usize) -> String {
+        match self.names.get(i) {
+            Some(n) => format!("marker {n} ({i})"),
+            None => format!("marker {i}"),
+        }
+    }
 }
 
 /// Where the face is and how large: the reference of every magnitude check.
@@ -58,19 +79,21 @@ impl Extent {
     /// Checks one frame of marker positions (B): a NaN row is a missing marker; a row with an
     /// infinite coordinate, or farther than [`limit`](Self::limit) from the centre, is an
     /// error naming the marker; fewer than [`MIN_PRESENT_MARKERS`] present is an error.
-    pub fn check_frame(&self, targets: &[DVec3]) -> Result<()> {
+    pub fn check_frame(&self, targets: &[DVec3], naming: Naming<'_>) -> Result<()> {
         let mut present = 0;
         for (i, t) in targets.iter().enumerate() {
             if t.to_array().iter().any(|x| x.is_infinite()) {
                 return Err(LgiError::Input(format!(
-                    "marker {i} has an infinite coordinate {t:?}"
+                    "{} has an infinite coordinate {}",
+                    naming.marker(i),
+                    point_in(*t, naming.units)
                 )));
             }
             if t.is_nan() {
                 continue;
             }
             present += 1;
-            self.check_point(*t, &format!("marker {i}"))?;
+            self.check_point_in(*t, &naming.marker(i), naming.units)?;
         }
         if present < MIN_PRESENT_MARKERS {
             return Err(LgiError::Input(format!(
@@ -83,21 +106,29 @@ impl Extent {
     /// Checks that point `p` (named `what` in the error) lies within [`limit`](Self::limit)
     /// of the centre.
     pub fn check_point(&self, p: DVec3, what: &str) -> Result<()> {
+        self.check_point_in(p, what, "")
+    }
+
+    /// [`check_point`](Self::check_point) with the coordinates' unit for the message.
+    pub fn check_point_in(&self, p: DVec3, what: &str, units: &str) -> Result<()> {
         let d = p.distance(self.centre);
         if !within(d, self.limit()) {
             return Err(LgiError::Input(format!(
-                "{what} at {p:?} is {d:e} from the face's centre, beyond {MAGNITUDE_LIMIT} x the \
-                 neutral's size ({:e}): wrong unit or a tracking error",
-                self.limit()
+                "{what} at {} is {} from the face's centre, beyond {MAGNITUDE_LIMIT} x the \
+                 face's size ({} x {MAGNITUDE_LIMIT} = {}): wrong unit or a tracking error",
+                point_in(p, units),
+                length(d, units),
+                length(self.diagonal, units),
+                length(self.limit(), units),
             )));
         }
         Ok(())
     }
 
     /// [`check_frame`](Self::check_frame) for every frame, the error naming the frame.
-    pub fn check_frames(&self, frames: &[Vec<DVec3>]) -> Result<()> {
+    pub fn check_frames(&self, frames: &[Vec<DVec3>], naming: Naming<'_>) -> Result<()> {
         for (f, t) in frames.iter().enumerate() {
-            self.check_frame(t).map_err(|e| match e {
+            self.check_frame(t, naming).map_err(|e| match e {
                 LgiError::Input(m) => LgiError::Input(format!("frame {f}: {m}")),
                 other => other,
             })?;
@@ -109,8 +140,9 @@ impl Extent {
     pub fn check_marker_noise(&self, sigma: Option<f64>) -> Result<()> {
         match sigma {
             Some(s) if !within(s.abs(), self.limit()) => Err(LgiError::Input(format!(
-                "marker_noise {s:e} is beyond {MAGNITUDE_LIMIT} x the neutral's size ({:e})",
-                self.limit()
+                "marker_noise {} is beyond {MAGNITUDE_LIMIT} x the face's size ({})",
+                num(s),
+                num(self.limit())
             ))),
             _ => Ok(()),
         }
@@ -121,10 +153,9 @@ impl Extent {
     pub fn check_jaw(&self, theta: &JawParams) -> Result<()> {
         if !within(theta.forward.abs(), self.limit()) {
             return Err(LgiError::Input(format!(
-                "jaw forward translation {:e} is beyond {MAGNITUDE_LIMIT} x the neutral's size \
-                 ({:e})",
-                theta.forward,
-                self.limit()
+                "jaw forward translation {} is beyond {MAGNITUDE_LIMIT} x the face's size ({})",
+                num(theta.forward),
+                num(self.limit())
             )));
         }
         Ok(())
@@ -144,8 +175,9 @@ pub fn check_dataset(
         .position(|p| !within(p.abs().max_element(), MAX_COORDINATE))
     {
         return Err(LgiError::Dataset(format!(
-            "neutral vertex {v} at {:?} is beyond {MAX_COORDINATE:e} in absolute value",
-            positions[v]
+            "neutral vertex {v} at {} is beyond {} in absolute value",
+            crate::text::point(positions[v]),
+            num(MAX_COORDINATE)
         )));
     }
     let limit = MAGNITUDE_LIMIT * diagonal;
@@ -155,10 +187,12 @@ pub fn check_dataset(
         if !within(len, limit) {
             let k = i / nv;
             return Err(LgiError::Dataset(format!(
-                "shape {k} ('{}'), vertex {}: displacement {len:e} is beyond {MAGNITUDE_LIMIT} x \
-                 the neutral's size ({limit:e})",
+                "shape {k} ('{}'), vertex {}: displacement {} is beyond {MAGNITUDE_LIMIT} x \
+                 the neutral's size ({})",
                 names.get(k).map_or("?", |s| s.as_str()),
-                i % nv
+                i % nv,
+                num(len),
+                num(limit)
             )));
         }
     }
@@ -186,12 +220,31 @@ mod tests {
         let e = square();
         let c = e.centre;
         let mut t = vec![c, c, c, c + DVec3::X * 199.999];
-        e.check_frame(&t).unwrap();
+        e.check_frame(&t, Naming::default()).unwrap();
         t[3] = c + DVec3::X * 200.001;
-        let msg = e.check_frame(&t).unwrap_err().to_string();
+        let msg = e
+            .check_frame(&t, Naming::default())
+            .unwrap_err()
+            .to_string();
         assert!(msg.contains("marker 3"), "{msg}");
+        // Labels and the unit reach the message; no Rust debug formatting does.
+        let names: Vec<String> = ["a", "b", "c", "nose"].map(String::from).to_vec();
+        let named = Naming {
+            names: &names,
+            units: "cm",
+        };
+        let msg = e.check_frame(&t, named).unwrap_err().to_string();
+        assert!(
+            msg.contains("marker nose (3) at (200.5, 0.5, 0) cm is 200 cm from"),
+            "{msg}"
+        );
+        assert!(msg.contains("(2 cm x 100 = 200 cm)"), "{msg}");
+        assert!(!msg.contains("DVec3") && !msg.contains("e2"), "{msg}");
         t[3] = DVec3::splat(1e200);
-        let msg = e.check_frames(&[t.clone(), t]).unwrap_err().to_string();
+        let msg = e
+            .check_frames(&[t.clone(), t], Naming::default())
+            .unwrap_err()
+            .to_string();
         assert!(msg.contains("frame 0: marker 3"), "{msg}");
     }
 
@@ -199,14 +252,15 @@ mod tests {
     fn missing_markers_are_skipped_but_too_few_present_is_an_error() {
         let e = square();
         let c = e.centre;
-        e.check_frame(&[c, c, c, DVec3::NAN]).unwrap();
+        e.check_frame(&[c, c, c, DVec3::NAN], Naming::default())
+            .unwrap();
         let msg = e
-            .check_frame(&[c, DVec3::NAN, c, DVec3::NAN])
+            .check_frame(&[c, DVec3::NAN, c, DVec3::NAN], Naming::default())
             .unwrap_err()
             .to_string();
         assert!(msg.contains("only 2 markers present"), "{msg}");
         let nan = DVec3::NAN;
-        assert!(e.check_frame(&[nan; 4]).is_err());
+        assert!(e.check_frame(&[nan; 4], Naming::default()).is_err());
     }
 
     #[test]

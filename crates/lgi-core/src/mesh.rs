@@ -30,8 +30,8 @@ impl Mesh {
         }
         if let Some(v) = self.positions.iter().position(|p| !p.is_finite()) {
             return Err(LgiError::Dataset(format!(
-                "{what}: vertex {v} has a non-finite coordinate {:?}",
-                self.positions[v]
+                "{what}: vertex {v} has a non-finite coordinate {}",
+                crate::text::point(self.positions[v])
             )));
         }
         if self.triangles.is_empty() {
@@ -68,8 +68,8 @@ impl Mesh {
             }
             if let Some(u) = self.uvs.iter().position(|p| !p.is_finite()) {
                 return Err(LgiError::Dataset(format!(
-                    "{what}: UV {u} is not finite {:?}",
-                    self.uvs[u]
+                    "{what}: UV {u} is not finite {}",
+                    crate::text::uv(self.uvs[u])
                 )));
             }
         }

@@ -104,8 +104,8 @@ impl SibsonWeights {
         }
         if let Some(i) = sites.iter().position(|p| !p.is_finite()) {
             return Err(LgiError::Input(format!(
-                "site {i} has a non-finite coordinate {:?}",
-                sites[i]
+                "site {i} has a non-finite coordinate {}",
+                crate::text::uv(sites[i])
             )));
         }
         if let Some(k) = barriers
@@ -113,8 +113,9 @@ impl SibsonWeights {
             .position(|b| !(b[0].is_finite() && b[1].is_finite()))
         {
             return Err(LgiError::Input(format!(
-                "barrier {k} has a non-finite coordinate {:?}",
-                barriers[k]
+                "barrier {k} has a non-finite coordinate {} - {}",
+                crate::text::uv(barriers[k][0]),
+                crate::text::uv(barriers[k][1])
             )));
         }
         let max_abs = sites
@@ -435,9 +436,9 @@ fn check_duplicates(local: &[DVec2]) -> Result<()> {
         .min();
     match dup {
         Some((i, j)) => Err(LgiError::Input(format!(
-            "sites {i} and {j} coincide (at {:?}): natural-neighbour weights need distinct \
+            "sites {i} and {j} coincide (at {}): natural-neighbour weights need distinct \
              sites; remove or merge one of them",
-            local[i as usize]
+            crate::text::uv(local[i as usize])
         ))),
         None => Ok(()),
     }

@@ -223,6 +223,6 @@ pub fn check_marker_frames(
         true,
     )?;
     lgi_core::Extent::new(&rest, diagonal)
-        .check_frames(&frames)
+        .check_frames(&frames, lgi_core::Naming::default())
         .map_err(|e| PyLgiError(e).into())
 }

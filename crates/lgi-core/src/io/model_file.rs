@@ -215,10 +215,10 @@ fn to_tris(r: &Reader<'_>, v: Vec<u32>) -> Result<Vec<[u32; 3]>> {
     Ok(v.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect())
 }
 
-/// Writes `model` to `path` (overwrites).
+/// Writes `model` to `path`, replacing it whole or leaving it as it was
+/// ([`atomic`](super::atomic)).
 pub fn save(model: &Model, path: &Path) -> Result<()> {
-    let bytes = to_bytes(model);
-    std::fs::write(path, bytes).map_err(|e| LgiError::write(path, &e))
+    super::atomic::write_bytes(path, &to_bytes(model))
 }
 
 /// The bytes [`save`] writes: the whole file, header and checksum included.
@@ -231,8 +231,7 @@ pub fn to_bytes(model: &Model) -> Vec<u8> {
 /// [`load`]'s sanity check stands in its way).
 pub fn save_parts(parts: &ModelPartsRef<'_>, path: &Path) -> Result<()> {
     let names = crate::model::default_marker_names(parts.markers_rest.len());
-    let bytes = encode(parts, &names, "");
-    std::fs::write(path, bytes).map_err(|e| LgiError::write(path, &e))
+    super::atomic::write_bytes(path, &encode(parts, &names, ""))
 }
 
 /// The header (magic, version, payload length, checksum) and the payload.

@@ -102,14 +102,10 @@ pub fn write_obj(path: &Path, positions: &[DVec3], mesh: &Mesh) -> Result<()> {
             mesh.num_vertices()
         )));
     }
-    let file = std::fs::File::create(path).map_err(|e| LgiError::write(path, &e))?;
-    let mut w = std::io::BufWriter::new(file);
-    write_obj_to(&mut w, positions, mesh)
-        .and_then(|()| w.flush())
-        .map_err(|e| LgiError::write(path, &e))
+    super::atomic::write_with(path, |w| write_obj_to(w, positions, mesh))
 }
 
-fn write_obj_to(w: &mut impl Write, positions: &[DVec3], mesh: &Mesh) -> std::io::Result<()> {
+fn write_obj_to(w: &mut dyn Write, positions: &[DVec3], mesh: &Mesh) -> std::io::Result<()> {
     for p in positions {
         writeln!(w, "v {} {} {}", p.x, p.y, p.z)?;
     }

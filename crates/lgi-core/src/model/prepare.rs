@@ -51,7 +51,11 @@ impl Model {
                 targets.len()
             )));
         }
-        extent.check_frame(targets)
+        let naming = crate::magnitude::Naming {
+            names: &self.labels.marker_names,
+            units: &self.labels.units,
+        };
+        extent.check_frame(targets, naming)
     }
 
     /// Checks a frame's targets, picks its jaw bin and, with a jaw, maps them into the bin's

@@ -73,7 +73,10 @@ impl ModelPartsRef<'_> {
         }
         for (i, m) in self.markers_rest.iter().enumerate() {
             if !m.is_finite() {
-                return Err(format!("marker {i} is not finite: {m:?}"));
+                return Err(format!(
+                    "marker {i} is not finite: {}",
+                    crate::text::point(*m)
+                ));
             }
             extent
                 .check_point(*m, &format!("marker {i}"))
