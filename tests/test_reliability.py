@@ -172,8 +172,10 @@ def test_marker_beyond_the_magnitude_limit_is_an_input_error_naming_frame_and_ma
     s = small[0]
     frames = np.repeat(s.markers_rest[None], 3, axis=0)
     frames[2, 5, 1] = value
-    with pytest.raises(lgi.InputError, match=r"frame 2: marker 5"):
+    # The model names its marker by label and index; the baselines, which have no labels, by index.
+    with pytest.raises(lgi.InputError, match=r"frame 2: marker (m005 \()?5\b") as e:
         _methods(small)[method].solve(frames, quiet=True)
+    assert "DVec3" not in str(e.value) and "inf from" not in str(e.value)
 
 
 @pytest.mark.parametrize("method", ["lgi", "displacement", "blendshape", "lgi-rbf"])

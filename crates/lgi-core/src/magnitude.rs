@@ -117,7 +117,11 @@ impl Extent {
                 "{what} at {} is {} from the face's centre, beyond {MAGNITUDE_LIMIT} x the \
                  face's size ({} x {MAGNITUDE_LIMIT} = {}): wrong unit or a tracking error",
                 point_in(p, units),
-                length(d, units),
+                if d.is_finite() {
+                    length(d, units)
+                } else {
+                    format!("more than {}", length(f64::MAX, units))
+                },
                 length(self.diagonal, units),
                 length(self.limit(), units),
             )));
