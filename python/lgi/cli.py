@@ -121,6 +121,19 @@ def _cmd_info(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_report(args: argparse.Namespace) -> int:
+    out = pipeline.report_file(
+        args.solved,
+        args.out,
+        compare=args.compare,
+        take=args.take,
+        model=args.model,
+        take_units=args.take_units,
+    )
+    print(f"wrote {out}")
+    return 0
+
+
 def _cmd_batch(args: argparse.Namespace) -> int:
     from lgi import batch
 
@@ -375,6 +388,26 @@ def _add_pipeline_commands(sub: Any) -> None:
         "--model", default=None, help="with a take: how its labels match this model's markers"
     )
     i.set_defaults(func=_cmd_info)
+
+    rp = sub.add_parser(
+        "report",
+        help="write a self-contained HTML QC page of a solved take (.npz)",
+        description="Residual heatmap, worst markers and frames, dropouts, the jaw, and the "
+        "difference to a second solve (--compare), in one HTML file readable without a server.",
+    )
+    rp.add_argument("solved", metavar="SOLVED", help="solved take (.npz from lgi solve)")
+    rp.add_argument("-o", "--out", required=True, help="report to write (.html)")
+    rp.add_argument(
+        "--compare",
+        default=None,
+        metavar="NPZ",
+        help="another solve of the same mesh and frames (another method, an older model, a "
+        "ground truth): per-frame and per-vertex differences",
+    )
+    rp.add_argument("--take", default=None, help="the take solved: its marker noise is estimated")
+    rp.add_argument("--model", default=None, help="the model (.lgi), with --take")
+    rp.add_argument("--take-units", default=None, help="as for lgi solve")
+    rp.set_defaults(func=_cmd_report)
 
 
 class _Parser(argparse.ArgumentParser):

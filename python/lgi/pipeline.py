@@ -594,3 +594,42 @@ def rig_file(
     else:
         write_usd_rig(dest, result, units=m.units)
     return dest, result.num_shapes
+
+
+def report_file(
+    solved: str | os.PathLike[str],
+    out: str | os.PathLike[str],
+    *,
+    compare: str | os.PathLike[str] | None = None,
+    take: str | os.PathLike[str] | None = None,
+    model: str | os.PathLike[str] | None = None,
+    take_units: str | None = None,
+) -> Path:
+    """`lgi report`: the QC page of a solved `.npz` (`lgi.report`), compared with `compare`
+    (another solve of the same mesh and frames) when given; `take` with `model` adds the
+    take's estimated marker noise."""
+    from lgi import report
+
+    dest = output_file(os.fspath(out), "--out")
+    not_an_input(dest, *(p for p in (solved, compare, take, model) if p is not None))
+    if dest.suffix.lower() not in (".html", ".htm"):
+        raise InputError(f"--out {out}: the report is an .html file")
+    noise = None
+    if take is not None:
+        if model is None:
+            raise InputError("--take needs --model (the take's labels and units are the model's)")
+        m = Model.load(existing_file(os.fspath(model), "--model"))
+        t = takes.read(
+            existing_file(os.fspath(take), "--take"),
+            m.marker_names,
+            units=m.units,
+            take_units=take_units,
+            allow_missing=True,
+        )
+        noise = estimate_marker_noise(t.frames)
+    return report.write_report(
+        dest,
+        existing_file(os.fspath(solved), "SOLVED"),
+        reference_path=None if compare is None else existing_file(os.fspath(compare), "--compare"),
+        take_noise=noise,
+    )

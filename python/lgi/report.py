@@ -1,0 +1,435 @@
+"""`lgi report`: one self-contained HTML page to review a solved take (an `lgi solve -o *.npz`
+file): units on every figure, missing samples, a marker x frame heatmap of residuals, the
+worst markers and frames, the jaw pose over time and, given a second solve of the same mesh (a
+reference: another method, an older model, a ground truth), per-frame and per-vertex
+differences. Plots are matplotlib PNGs embedded as data URIs, so the file opens without a
+server or a network."""
+
+from __future__ import annotations
+
+import base64
+import html
+import io
+import os
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from lgi.errors import InputError
+from lgi.io.result import Result, read_result_npz
+
+F64 = NDArray[np.float64]
+
+__all__ = ["Comparison", "MarkerStats", "compare", "marker_stats", "render_report", "write_report"]
+
+WORST_SHOWN = 10
+"""Rows of the worst-markers and worst-frames tables."""
+
+_CHI3_MEDIAN = 1.5381722
+"""Median of a chi distribution with 3 degrees of freedom: the median distance of an isotropic
+Gaussian 3D error of sigma 1 per coordinate (turns a median residual into a sigma)."""
+
+
+@dataclass(frozen=True)
+class MarkerStats:
+    """Per-marker summary of a solved take's residuals (NaN where a marker is never present)."""
+
+    names: list[str]
+    median: F64
+    p95: F64
+    max: F64
+    worst_frame: NDArray[np.int64]
+    """Index (0-based, into the solve) of each marker's largest residual; -1 if never present."""
+    missing: F64
+    """Fraction of frames each marker is missing."""
+    longest_gap: NDArray[np.int64]
+    """Longest run of consecutive missing frames."""
+
+
+def _longest_run(flags: NDArray[np.bool_]) -> int:
+    """Length of the longest run of True in a 1-D bool array."""
+    if not flags.any():
+        return 0
+    padded = np.concatenate([[False], flags, [False]]).astype(np.int8)
+    edges = np.flatnonzero(np.diff(padded))
+    return int((edges[1::2] - edges[::2]).max())
+
+
+def marker_stats(solved: Result) -> MarkerStats:
+    """Residual statistics of every marker over the frames where it is present."""
+    r = np.where(solved.missing, np.nan, solved.bundle_residuals.astype(np.float64))
+    present = ~solved.missing
+    seen = present.any(axis=0)
+    with np.errstate(all="ignore"):
+        filled = np.where(present, r, -np.inf)
+        worst = np.where(seen, np.argmax(filled, axis=0), -1)
+        median = np.full(r.shape[1], np.nan)
+        p95 = np.full(r.shape[1], np.nan)
+        mx = np.full(r.shape[1], np.nan)
+        if seen.any():
+            median[seen] = np.nanmedian(r[:, seen], axis=0)
+            p95[seen] = np.nanpercentile(r[:, seen], 95, axis=0)
+            mx[seen] = np.nanmax(r[:, seen], axis=0)
+    gaps = np.array([_longest_run(solved.missing[:, b]) for b in range(r.shape[1])], np.int64)
+    return MarkerStats(
+        names=list(solved.marker_names),
+        median=median,
+        p95=p95,
+        max=mx,
+        worst_frame=worst.astype(np.int64),
+        missing=solved.missing.mean(axis=0).astype(np.float64),
+        longest_gap=gaps,
+    )
+
+
+@dataclass(frozen=True)
+class Comparison:
+    """Vertex distances between a solve and a reference of the same mesh and frames."""
+
+    label: str
+    per_frame_mean: F64
+    """(F,) mean vertex distance per frame."""
+    per_frame_max: F64
+    per_vertex_mean: F64
+    """(V,) mean distance of each vertex over the frames."""
+
+
+def compare(solved: Result, reference: Result, label: str) -> Comparison:
+    """Per-frame and per-vertex distances between two solves of one mesh over the same frames;
+    `InputError` when the meshes or frame counts differ."""
+    a, b = solved.vertices, reference.vertices
+    if a.shape != b.shape:
+        raise InputError(
+            f"--compare {label}: {b.shape[0]} frames of {b.shape[1]} vertices, the solve has "
+            f"{a.shape[0]} frames of {a.shape[1]} vertices; compare solves of the same mesh "
+            "and frames"
+        )
+    if (solved.units or "") != (reference.units or ""):
+        raise InputError(
+            f"--compare {label}: its units are {reference.units or 'not given'}, the solve's "
+            f"{solved.units or 'not given'}"
+        )
+    per_frame_mean = np.empty(a.shape[0])
+    per_frame_max = np.empty(a.shape[0])
+    per_vertex = np.zeros(a.shape[1])
+    chunk = 64  # frames at a time: a 1,500-frame ICT take is 0.5 GB of float32 per solve
+    for s in range(0, a.shape[0], chunk):
+        d = np.linalg.norm(
+            a[s : s + chunk].astype(np.float64) - b[s : s + chunk].astype(np.float64), axis=2
+        )
+        per_frame_mean[s : s + chunk] = d.mean(axis=1)
+        per_frame_max[s : s + chunk] = d.max(axis=1)
+        per_vertex += d.sum(axis=0)
+    return Comparison(label, per_frame_mean, per_frame_max, per_vertex / max(a.shape[0], 1))
+
+
+def _png(fig: Any) -> str:
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=fig.dpi)
+    return "data:image/png;base64," + base64.b64encode(buf.getvalue()).decode("ascii")
+
+
+def _figure(width: float, height: float) -> Any:
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(width, height), dpi=100, layout="constrained")
+    FigureCanvasAgg(fig)
+    return fig
+
+
+def _unit(units: str | None) -> str:
+    return f" ({units})" if units else ""
+
+
+def _face_size(solved: Result) -> float:
+    """The first frame's bounding-box diagonal."""
+    v = solved.vertices[0].astype(np.float64)
+    return float(np.linalg.norm(v.max(axis=0) - v.min(axis=0))) or 1.0
+
+
+def _heatmap(solved: Result, frames: F64) -> str:
+    """Marker x frame residuals; missing samples in grey; the colour scale tops at the 99th
+    percentile so one spike does not hide the rest (values above are drawn at the top)."""
+    from matplotlib import colormaps
+    from matplotlib.colors import Normalize
+
+    r = np.where(solved.missing, np.nan, solved.bundle_residuals.astype(np.float64))
+    finite = r[np.isfinite(r)]
+    top = float(np.percentile(finite, 99)) if finite.size else 0.0
+    # An exact solve's residuals are round-off (1e-15 cm): a scale floored at a millionth of
+    # the face draws them black instead of as a noisy picture of nothing.
+    top = max(top, 1e-6 * _face_size(solved))
+    cmap = colormaps["magma"].with_extremes(bad="#9a9a9a")
+    n = r.shape[1]
+    fig = _figure(11, max(3.0, min(0.12 * n + 1.2, 16.0)))
+    ax = fig.add_subplot()
+    im = ax.imshow(
+        r.T,
+        aspect="auto",
+        interpolation="nearest",
+        cmap=cmap,
+        norm=Normalize(0.0, top if top > 0 else 1.0),
+        extent=(frames[0] - 0.5, frames[-1] + 0.5, n - 0.5, -0.5),
+    )
+    if n <= 150:
+        ax.set_yticks(range(n), solved.marker_names, fontsize=max(4, min(8, 600 // max(n, 1))))
+    ax.set_xlabel("time code (frame)")
+    ax.set_ylabel("marker")
+    ax.set_title("marker residual per frame (grey: missing)")
+    cb = fig.colorbar(im, ax=ax, extend="max", pad=0.01)
+    cb.set_label(f"residual{_unit(solved.units)}; top = 99th percentile")
+    return _png(fig)
+
+
+def _per_frame(solved: Result, frames: F64) -> str:
+    r = np.where(solved.missing, np.nan, solved.bundle_residuals.astype(np.float64))
+    fig = _figure(11, 3.4)
+    ax = fig.add_subplot()
+    with np.errstate(all="ignore"):
+        ax.plot(frames, np.nanmedian(r, axis=1), lw=1, label="median over markers")
+        ax.plot(frames, np.nanmax(r, axis=1), lw=1, label="largest marker")
+    ax.set_xlabel("time code (frame)")
+    ax.set_ylabel(f"residual{_unit(solved.units)}")
+    ax2 = ax.twinx()
+    ax2.plot(frames, solved.missing.sum(axis=1), lw=1, color="#888", label="missing markers")
+    ax2.set_ylabel("missing markers (count)")
+    lines = ax.get_lines() + ax2.get_lines()
+    ax.legend(lines, [ln.get_label() for ln in lines], loc="upper right", fontsize=8)
+    ax.set_title("residuals and dropouts per frame")
+    return _png(fig)
+
+
+def _jaw(solved: Result, frames: F64) -> str | None:
+    if solved.jaw_theta is None:
+        return None
+    t = np.asarray(solved.jaw_theta, dtype=np.float64)
+    fig = _figure(11, 3.0)
+    ax = fig.add_subplot()
+    ax.plot(frames, np.degrees(t[:, 0]), lw=1, label="open (degrees)")
+    ax.plot(frames, np.degrees(t[:, 1]), lw=1, label="lateral (degrees)")
+    ax.set_xlabel("time code (frame)")
+    ax.set_ylabel("rotation (degrees)")
+    ax2 = ax.twinx()
+    ax2.plot(frames, t[:, 2], lw=1, color="#2a2", label=f"forward{_unit(solved.units)}")
+    ax2.set_ylabel(f"forward translation{_unit(solved.units)}")
+    lines = ax.get_lines() + ax2.get_lines()
+    ax.legend(lines, [ln.get_label() for ln in lines], loc="upper right", fontsize=8)
+    ax.set_title("jaw pose")
+    return _png(fig)
+
+
+def _triangles(solved: Result) -> NDArray[np.int64]:
+    """The faces fan-split into triangles (for the per-vertex picture)."""
+    counts, idx = solved.topology.counts, solved.topology.indices
+    starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
+    tris = [
+        np.stack([idx[np.full(c - 2, s)], idx[s + 1 : s + c - 1], idx[s + 2 : s + c]], axis=1)
+        for s, c in zip(starts.tolist(), counts.tolist(), strict=True)
+        if c >= 3
+    ]
+    return np.concatenate(tris) if tris else np.zeros((0, 3), np.int64)
+
+
+def _comparison_figures(solved: Result, cmp: Comparison, frames: F64) -> tuple[str, str]:
+    from matplotlib import colormaps
+    from matplotlib.cm import ScalarMappable
+    from matplotlib.colors import Normalize
+
+    from lgi.lab.render import draw_mesh
+
+    fig = _figure(11, 3.0)
+    ax = fig.add_subplot()
+    ax.plot(frames, cmp.per_frame_mean, lw=1, label="mean over vertices")
+    ax.plot(frames, cmp.per_frame_max, lw=1, label="largest vertex")
+    ax.set_xlabel("time code (frame)")
+    ax.set_ylabel(f"distance{_unit(solved.units)}")
+    ax.set_title(f"difference to {cmp.label} per frame")
+    ax.legend(fontsize=8)
+    per_frame = _png(fig)
+    fig = _figure(7, 4.2)
+    axes = fig.subplots(1, 2)
+    top = float(np.percentile(cmp.per_vertex_mean, 99.5)) or 1.0
+    norm, cmap = Normalize(0.0, top), colormaps["viridis"]
+    rest = solved.vertices[0].astype(np.float64)
+    tris = _triangles(solved)
+    for ax, yaw in zip(axes, (0.0, 35.0), strict=True):
+        draw_mesh(ax, rest, tris, cmp.per_vertex_mean, norm, cmap, yaw)
+    cb = fig.colorbar(ScalarMappable(norm=norm, cmap=cmap), ax=axes, extend="max", shrink=0.8)
+    cb.set_label(f"mean distance over frames{_unit(solved.units)}")
+    fig.suptitle(f"difference to {cmp.label} per vertex (drawn on the first frame)")
+    return per_frame, _png(fig)
+
+
+def _fmt(x: float, units: str | None) -> str:
+    if not np.isfinite(x):
+        return "-"
+    return f"{x:.4g}{' ' + units if units else ''}"
+
+
+_CSS = """
+body{font-family:system-ui,sans-serif;margin:24px;max-width:1150px;color:#222}
+table{border-collapse:collapse;margin:8px 0 18px}td,th{border:1px solid #ccc;padding:3px 8px;
+text-align:right}th{background:#f2f2f2}td:first-child,th:first-child{text-align:left}
+img{max-width:100%}h2{margin-top:28px;border-bottom:1px solid #ddd}.note{color:#555}
+"""
+
+
+def render_report(
+    solved: Result,
+    *,
+    source: str,
+    reference: Result | None = None,
+    reference_label: str = "reference",
+    take_noise: float | None = None,
+    findings: Sequence[str] = (),
+) -> str:
+    """The report's HTML for `solved` (read from `source`); `reference` adds the difference
+    sections; `take_noise` is the take's estimated marker noise (sigma per coordinate, model
+    units); `findings` are lines about bad markers (label swaps, spikes) to list."""
+    nf, nb = solved.bundle_residuals.shape
+    if nf == 0:
+        raise InputError(f"{source}: the solved take has no frames")
+    u = solved.units
+    frames = solved.start + np.arange(nf, dtype=np.float64)
+    stats = marker_stats(solved)
+    r = np.where(solved.missing, np.nan, solved.bundle_residuals.astype(np.float64))
+    present = r[np.isfinite(r)]
+    med = float(np.median(present)) if present.size else float("nan")
+    esc = html.escape
+    rate = f"{solved.fps:g} frames per second" if solved.fps else "frame rate unknown"
+    dur = f", {nf / solved.fps:.2f} s" if solved.fps else ""
+    body: list[str] = [
+        f"<h1>lgi report: {esc(os.path.basename(source))}</h1>",
+        f"<p class=note>{esc(source)}</p>",
+        "<table>",
+        f"<tr><th>frames</th><td>{nf} (time codes {solved.start} to {solved.start + nf - 1}, "
+        f"{rate}{dur})</td></tr>",
+        f"<tr><th>mesh</th><td>{solved.vertices.shape[1]} vertices, "
+        f"{solved.topology.num_faces} faces</td></tr>",
+        f"<tr><th>markers</th><td>{nb}</td></tr>",
+        f"<tr><th>units</th><td>{esc(u or 'not given')}</td></tr>",
+        f"<tr><th>missing samples</th><td>{int(solved.missing.sum())} of {nf * nb} "
+        f"({100 * solved.missing.mean():.2f} %)</td></tr>",
+        f"<tr><th>residual median / 95th percentile / max</th><td>{_fmt(med, u)} / "
+        + (
+            f"{_fmt(float(np.percentile(present, 95)), u)} / {_fmt(float(present.max()), u)}"
+            if present.size
+            else "- / -"
+        )
+        + "</td></tr>",
+        "<tr><th>marker noise (sigma per coordinate)</th><td>"
+        + (
+            f"{_fmt(take_noise, u)} estimated from the take's frame-to-frame jitter"
+            if take_noise is not None
+            else "not estimated (give the take with --take)"
+        )
+        + (
+            f"; the residuals' median implies {_fmt(med / _CHI3_MEDIAN, u)} if they were "
+            "isotropic Gaussian noise"
+            if np.isfinite(med) and med > 0
+            else ""
+        )
+        + "</td></tr>",
+        "</table>",
+        "<h2>Findings</h2>",
+    ]
+    if findings:
+        body += ["<ul>", *(f"<li>{esc(f)}</li>" for f in findings), "</ul>"]
+    else:
+        body.append("<p>No markers were flagged.</p>")
+    body += [
+        "<h2>Residuals</h2>",
+        "<p class=note>A marker's residual is its distance to the solved surface (with "
+        "<code>--marker-noise</code>, the correction the solve applied to it).</p>",
+        f"<img alt='marker by frame residual heatmap' src='{_heatmap(solved, frames)}'>",
+        f"<img alt='residuals per frame' src='{_per_frame(solved, frames)}'>",
+    ]
+    order = np.argsort(np.nan_to_num(stats.max, nan=-np.inf))[::-1][:WORST_SHOWN]
+    body += [
+        "<h2>Worst markers</h2>",
+        "<p class=note>Ranked by their largest residual.</p>",
+        f"<table><tr><th>marker</th><th>median{_unit(u)}</th><th>95th pct{_unit(u)}</th>"
+        f"<th>max{_unit(u)}</th><th>at time code</th><th>missing</th>"
+        "<th>longest gap (frames)</th></tr>",
+    ]
+    for b in order.tolist():
+        wf = int(stats.worst_frame[b])
+        body.append(
+            f"<tr><td>{esc(stats.names[b])}</td><td>{_fmt(stats.median[b], None)}</td>"
+            f"<td>{_fmt(stats.p95[b], None)}</td><td>{_fmt(stats.max[b], None)}</td>"
+            f"<td>{'-' if wf < 0 else solved.start + wf}</td>"
+            f"<td>{100 * stats.missing[b]:.1f} %</td><td>{stats.longest_gap[b]}</td></tr>"
+        )
+    body.append("</table>")
+    with np.errstate(all="ignore"):
+        frame_max = np.nanmax(np.where(np.isfinite(r), r, -np.inf), axis=1)
+    worst_frames = np.argsort(frame_max)[::-1][:WORST_SHOWN]
+    body += [
+        "<h2>Worst frames</h2>",
+        f"<table><tr><th>time code</th><th>largest residual{_unit(u)}</th><th>marker</th>"
+        "<th>missing markers</th></tr>",
+    ]
+    for f in worst_frames.tolist():
+        if not np.isfinite(frame_max[f]):
+            continue
+        b = int(np.nanargmax(np.where(np.isfinite(r[f]), r[f], -np.inf)))
+        body.append(
+            f"<tr id='frame-{solved.start + f}'><td>{solved.start + f}</td>"
+            f"<td>{_fmt(float(frame_max[f]), None)}</td><td>{esc(stats.names[b])}</td>"
+            f"<td>{int(solved.missing[f].sum())}</td></tr>"
+        )
+    body.append("</table>")
+    jaw = _jaw(solved, frames)
+    if jaw is not None:
+        body += ["<h2>Jaw</h2>", f"<img alt='jaw pose over time' src='{jaw}'>"]
+    if reference is not None:
+        cmp = compare(solved, reference, reference_label)
+        per_frame, per_vertex = _comparison_figures(solved, cmp, frames)
+        body += [
+            f"<h2>Difference to {esc(reference_label)}</h2>",
+            f"<p>Mean vertex distance over all frames {_fmt(float(cmp.per_frame_mean.mean()), u)}"
+            f"; largest {_fmt(float(cmp.per_frame_max.max()), u)} at time code "
+            f"{solved.start + int(np.argmax(cmp.per_frame_max))}.</p>",
+            f"<img alt='difference per frame' src='{per_frame}'>",
+            f"<img alt='difference per vertex' src='{per_vertex}'>",
+        ]
+    return (
+        "<!DOCTYPE html><html lang=en><head><meta charset=utf-8>"
+        f"<title>lgi report: {esc(os.path.basename(source))}</title><style>{_CSS}</style>"
+        "</head><body>" + "\n".join(body) + "</body></html>\n"
+    )
+
+
+def write_report(
+    out: str | os.PathLike[str],
+    solved_path: str | os.PathLike[str],
+    *,
+    reference_path: str | os.PathLike[str] | None = None,
+    take_noise: float | None = None,
+    findings: Sequence[str] = (),
+) -> Path:
+    """Reads a solved take (and a reference to compare with) and writes the report to `out`
+    whole or not at all."""
+    solved = read_result_npz(solved_path)
+    reference = None if reference_path is None else read_result_npz(reference_path)
+    text = render_report(
+        solved,
+        source=os.fspath(solved_path),
+        reference=reference,
+        reference_label=os.path.basename(os.fspath(reference_path or "")),
+        take_noise=take_noise,
+        findings=findings,
+    )
+    target = Path(out)
+    tmp = target.with_name(f".{target.name}.{os.getpid()}.tmp")
+    try:
+        tmp.write_text(text, encoding="utf-8")
+        os.replace(tmp, target)
+    finally:
+        tmp.unlink(missing_ok=True)
+    return target

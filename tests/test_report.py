@@ -1,0 +1,154 @@
+"""`lgi report`: the statistics it prints are checked against plain loops, the differences
+against closed forms, and the page against what a solve with a planted spike must show."""
+
+from __future__ import annotations
+
+import base64
+import re
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from lgi.errors import InputError
+from lgi.io.result import Result, read_result_npz, write_result_npz
+from lgi.io.topology import Topology, topology
+from lgi.report import compare, marker_stats, render_report
+from pipeline_files import lgi_cli
+
+
+def _result(vertices, residuals, missing, names, units="cm", start=0):  # type: ignore[no-untyped-def]
+    nv = vertices.shape[1]
+    topo = Topology(nv, np.array([3]), np.array([0, 1, 2]), None, None)
+    return Result(
+        vertices=vertices.astype(np.float32),
+        bundle_residuals=residuals,
+        missing=missing,
+        marker_names=names,
+        fps=30.0,
+        start=start,
+        units=units,
+        topology=topo,
+    )
+
+
+def test_marker_stats_equal_a_plain_loop_over_present_samples() -> None:
+    rng = np.random.default_rng(3)
+    f, b = 57, 6
+    res = rng.gamma(2.0, 0.1, (f, b))
+    missing = rng.random((f, b)) < 0.2
+    missing[10:25, 2] = True  # a 15-frame gap at least
+    missing[:, 5] = True  # never seen
+    r = _result(np.zeros((f, 3, 3)), res, missing, [f"m{i}" for i in range(b)])
+    s = marker_stats(r)
+    for k in range(b):
+        vals = [res[i, k] for i in range(f) if not missing[i, k]]
+        if not vals:
+            assert np.isnan(s.median[k]) and s.worst_frame[k] == -1
+        else:
+            assert s.median[k] == pytest.approx(np.median(vals))
+            assert s.max[k] == max(vals)
+            assert res[s.worst_frame[k], k] == max(vals) and not missing[s.worst_frame[k], k]
+        run = best = 0
+        for i in range(f):
+            run = run + 1 if missing[i, k] else 0
+            best = max(best, run)
+        assert s.longest_gap[k] == best
+        assert s.missing[k] == pytest.approx(missing[:, k].mean())
+    assert s.longest_gap[2] >= 15 and s.longest_gap[5] == f
+
+
+def test_difference_to_a_uniformly_shifted_solve_is_the_shift_length_everywhere() -> None:
+    rng = np.random.default_rng(0)
+    v = rng.normal(size=(9, 40, 3))
+    a = _result(v, np.zeros((9, 3)), np.zeros((9, 3), bool), ["a", "b", "c"])
+    b = _result(
+        v + np.array([0.1, 0.2, 0.2]), np.zeros((9, 3)), np.zeros((9, 3), bool), ["a", "b", "c"]
+    )
+    c = compare(a, b, "shifted")
+    np.testing.assert_allclose(c.per_frame_mean, 0.3, rtol=1e-6)
+    np.testing.assert_allclose(c.per_frame_max, 0.3, rtol=1e-6)
+    np.testing.assert_allclose(c.per_vertex_mean, 0.3, rtol=1e-6)
+
+
+def test_comparing_solves_of_different_meshes_or_units_is_refused() -> None:
+    z = np.zeros((4, 3))
+    a = _result(np.zeros((4, 10, 3)), z, z.astype(bool), ["a", "b", "c"])
+    with pytest.raises(InputError, match="same mesh and frames"):
+        compare(a, _result(np.zeros((4, 11, 3)), z, z.astype(bool), ["a", "b", "c"]), "b")
+    with pytest.raises(InputError, match="units are mm"):
+        compare(a, _result(np.zeros((4, 10, 3)), z, z.astype(bool), ["a", "b", "c"], "mm"), "b")
+
+
+@pytest.fixture(scope="module")
+def spiked(sample, sample_model, tmp_path_factory):  # type: ignore[no-untyped-def]
+    """The sample's performance with marker m010 pushed 1.5 cm out in frames 40-42, solved
+    noise-aware (so the solve corrects the spike instead of following it) as a solved npz."""
+    frames = sample.performance.copy()
+    k = list(sample_model.marker_names).index("m010")
+    frames[40:43, k, 2] += 1.5
+    res = sample_model.solve(frames, marker_noise=0.02, quiet=True)
+    path = tmp_path_factory.mktemp("report") / "spiked.npz"
+    write_result_npz(
+        path,
+        topology(sample_model.dataset),
+        res.vertices,
+        res.bundle_residuals,
+        res.missing,
+        list(sample_model.marker_names),
+        fps=30.0,
+        start=100,
+        units="cm",
+    )
+    return path
+
+
+def test_report_names_a_planted_spike_by_marker_and_time_code_with_units(spiked: Path) -> None:
+    solved = read_result_npz(spiked)
+    page = render_report(solved, source=str(spiked))
+    worst_markers = page.split("<h2>Worst markers</h2>")[1].split("</table>")[0]
+    rows = re.findall(r"<tr><td>([^<]+)</td>", worst_markers)
+    assert rows[0] == "m010"
+    worst_frames = page.split("<h2>Worst frames</h2>")[1].split("</table>")[0]
+    codes = [int(x) for x in re.findall(r"<tr id='frame-(\d+)'>", worst_frames)][:3]
+    assert sorted(codes) == [140, 141, 142]  # frames 40-42 at time code 100 + frame
+    assert "residual (cm)" in worst_frames and "(cm)" in worst_markers
+    assert "time codes 100 to 249" in page
+
+
+def test_report_is_one_file_with_embedded_png_figures_and_no_links_out(spiked: Path) -> None:
+    page = render_report(read_result_npz(spiked), source=str(spiked))
+    srcs = re.findall(r"src='([^']+)'", page)
+    assert len(srcs) >= 2
+    for s in srcs:
+        assert s.startswith("data:image/png;base64,")
+        assert base64.b64decode(s.split(",", 1)[1])[:8] == b"\x89PNG\r\n\x1a\n"
+    assert "http://" not in page and "https://" not in page
+
+
+def test_cli_report_compares_two_solves_and_refuses_a_non_html_output(
+    spiked: Path, tmp_path: Path
+) -> None:
+    solved = read_result_npz(spiked)
+    shifted = tmp_path / "shifted.npz"
+    write_result_npz(
+        shifted,
+        solved.topology,
+        solved.vertices.astype(np.float64) + np.array([0.0, 0.0, 0.25]),
+        solved.bundle_residuals,
+        solved.missing,
+        solved.marker_names,
+        fps=solved.fps,
+        start=solved.start,
+        units=solved.units,
+    )
+    out = tmp_path / "r.html"
+    p = lgi_cli("report", spiked, "-o", out, "--compare", shifted)
+    assert p.returncode == 0, p.stderr
+    page = out.read_text()
+    assert "Difference to shifted.npz" in page
+    assert re.search(r"Mean vertex distance over all frames 0\.25 cm", page)
+    p = lgi_cli("report", spiked, "-o", tmp_path / "r.txt")
+    assert p.returncode == 2 and "lgi: error: --out" in p.stderr and ".html" in p.stderr
+    p = lgi_cli("report", spiked, "-o", tmp_path / "r2.html", "--take", spiked)
+    assert p.returncode == 2 and "--take needs --model" in p.stderr
