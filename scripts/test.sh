@@ -17,6 +17,16 @@ else
   cargo test --release --workspace --exclude lgi-python
 fi
 
+echo "== browser: Debian's chromium and chromium-driver for the viewer's tests"
+if ! { command -v chromium && command -v chromedriver; } >/dev/null 2>&1; then
+  SUDO=""
+  if [ "$(id -u)" -ne 0 ] && command -v sudo >/dev/null 2>&1; then SUDO="sudo -n"; fi
+  if ! { $SUDO apt-get update -qq && DEBIAN_FRONTEND=noninteractive \
+      $SUDO apt-get install -y -qq chromium chromium-driver; } >/dev/null 2>&1; then
+    echo "could not install chromium: the browser tests will skip, saying so"
+  fi
+fi
+
 echo "== python: fresh virtualenv $VENV"
 rm -rf "$VENV"
 python3 -m venv "$VENV"

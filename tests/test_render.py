@@ -42,3 +42,35 @@ def test_demo_writes_comparison_table_and_panel(tmp_path: Path) -> None:
     for name in ("displacement interpolation", "blendshape fit", "LGI-RBF", "| LGI |"):
         assert name in text
     assert (tmp_path / "panel.png").stat().st_size > 10_000
+    page = (tmp_path / "report.html").read_text()
+    assert "Difference to the ground truth" in page and "(cm)" in page
+
+
+def _yellow_share(rgb: np.ndarray) -> float:
+    """Share of pixels near viridis' top (yellow): r, g high, b low."""
+    return float(((rgb[..., 0] > 0.75) & (rgb[..., 1] > 0.75) & (rgb[..., 2] < 0.4)).mean())
+
+
+def test_per_column_scales_make_a_ten_times_smaller_error_readable(sample, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
+    import matplotlib.image as mpimg
+
+    truth = sample.truth[10]
+    err = np.abs(truth[:, 1] - truth[:, 1].min())  # grows from chin to forehead
+    meshes = {"small": truth, "large": truth}
+    errors = {"small": err / 10, "large": err}
+    for per_column in (False, True):
+        panel(
+            tmp_path / f"{per_column}.png",
+            meshes,
+            sample.triangles,
+            errors,
+            cell_inches=2.0,
+            dpi=50,
+            per_column=per_column,
+        )
+    shared = mpimg.imread(tmp_path / "False.png")[..., :3]
+    own = mpimg.imread(tmp_path / "True.png")[..., :3]
+    left = lambda img: img[:, : img.shape[1] // 2]  # noqa: E731 - the "small" column
+    # On the shared scale the small errors never reach the top colour; on their own they do.
+    assert _yellow_share(left(shared)) < 0.001
+    assert _yellow_share(left(own)) > 0.01

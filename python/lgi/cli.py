@@ -134,6 +134,26 @@ def _cmd_report(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_view(args: argparse.Namespace) -> int:
+    import time
+
+    from lgi import view
+
+    data = view.load(args.solved, args.compare)
+    server, url = view.serve(data, port=args.port)
+    print(f"lgi view: {url} (report: {url}report.html); Ctrl-C to stop", flush=True)
+    if args.open:
+        import webbrowser
+
+        webbrowser.open(url)
+    try:
+        while True:
+            time.sleep(3600)
+    finally:
+        server.shutdown()
+        server.server_close()
+
+
 def _cmd_batch(args: argparse.Namespace) -> int:
     from lgi import batch
 
@@ -408,6 +428,19 @@ def _add_pipeline_commands(sub: Any) -> None:
     rp.add_argument("--model", default=None, help="the model (.lgi), with --take")
     rp.add_argument("--take-units", default=None, help="as for lgi solve")
     rp.set_defaults(func=_cmd_report)
+
+    vw = sub.add_parser(
+        "view",
+        help="play a solved take in the browser (a local page on 127.0.0.1)",
+        description="Serve SOLVED to a browser page on 127.0.0.1: play, scrub and orbit the "
+        "solved mesh with its markers coloured by residual; colour vertices by displacement or "
+        "by the difference to --compare; the residual heatmap and worst frames seek.",
+    )
+    vw.add_argument("solved", metavar="SOLVED", help="solved take (.npz from lgi solve)")
+    vw.add_argument("--compare", default=None, metavar="NPZ", help="a second solve (A/B colour)")
+    vw.add_argument("--port", type=int, default=0, help="port on 127.0.0.1 (default: any free)")
+    vw.add_argument("--open", action="store_true", help="open the page in the default browser")
+    vw.set_defaults(func=_cmd_view)
 
 
 class _Parser(argparse.ArgumentParser):

@@ -265,6 +265,12 @@ def _comparison_figures(solved: Result, cmp: Comparison, frames: F64) -> tuple[s
     return per_frame, _png(fig)
 
 
+def _seek_link(viewer_url: str | None, code: int) -> str:
+    if viewer_url is None:
+        return str(code)
+    return f"<a href='{html.escape(viewer_url)}#frame={code}'>{code}</a>"
+
+
 def _fmt(x: float, units: str | None) -> str:
     if not np.isfinite(x):
         return "-"
@@ -287,10 +293,12 @@ def render_report(
     reference_label: str = "reference",
     take_noise: float | None = None,
     findings: Sequence[str] = (),
+    viewer_url: str | None = None,
 ) -> str:
     """The report's HTML for `solved` (read from `source`); `reference` adds the difference
     sections; `take_noise` is the take's estimated marker noise (sigma per coordinate, model
-    units); `findings` are lines about bad markers (label swaps, spikes) to list."""
+    units); `findings` are lines about bad markers (label swaps, spikes) to list; with `viewer_url`
+    (`lgi view`'s page), each worst frame links to the viewer at that frame."""
     nf, nb = solved.bundle_residuals.shape
     if nf == 0:
         raise InputError(f"{source}: the solved take has no frames")
@@ -379,7 +387,7 @@ def render_report(
             continue
         b = int(np.nanargmax(np.where(np.isfinite(r[f]), r[f], -np.inf)))
         body.append(
-            f"<tr id='frame-{solved.start + f}'><td>{solved.start + f}</td>"
+            f"<tr id='frame-{solved.start + f}'><td>{_seek_link(viewer_url, solved.start + f)}</td>"
             f"<td>{_fmt(float(frame_max[f]), None)}</td><td>{esc(stats.names[b])}</td>"
             f"<td>{int(solved.missing[f].sum())}</td></tr>"
         )

@@ -5,6 +5,9 @@ rate and units), and `write_sequence_npz` for plain named arrays."""
 from __future__ import annotations
 
 import os
+import threading
+import zipfile
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -46,12 +49,15 @@ RESULT_NPZ_KEYS = (
     "uvs",
     "uv_indices",
     "jaw_theta",
+    "markers",
 )
 """Arrays of a solved take `.npz` (`write_result_npz`): `vertices` (F, V, 3) float32,
 `bundle_residuals` (F, B) float, `missing` (F, B) bool, `marker_names` (B,) str, `fps` (NaN
 when unknown), `start` (time code of the first frame), `units` ('' when unknown), the faces
 (`face_counts`, `face_indices`, and `uvs`/`uv_indices`, empty without UVs), and `jaw_theta`
-(F, 3; absent without a jaw)."""
+(F, 3; absent without a jaw), and `markers` (F, B, 3) float32, the take's marker positions
+in the model's units, NaN where missing (absent in files written before it was kept; `lgi
+view` draws them)."""
 
 
 @dataclass(frozen=True)
@@ -67,6 +73,7 @@ class Result:
     units: str | None
     topology: Topology
     jaw_theta: F64 | None = None
+    markers: NDArray[np.float32] | None = None
 
 
 def write_result_npz(
@@ -81,6 +88,7 @@ def write_result_npz(
     start: int = 0,
     units: str | None = None,
     jaw_theta: Any | None = None,
+    markers: Any | None = None,
 ) -> Path:
     """Writes a solved take (`RESULT_NPZ_KEYS`) that `read_result_npz` and `lgi export` read."""
     p = output_file(path, "npz output")
@@ -100,6 +108,14 @@ def write_result_npz(
     }
     if jaw_theta is not None:
         arrays["jaw_theta"] = np.asarray(jaw_theta, dtype=np.float64)
+    if markers is not None:
+        mk = np.asarray(markers, dtype=np.float32)
+        if mk.shape != (v.shape[0], len(marker_names), 3):
+            raise InputError(
+                f"write_result_npz: markers must be (F, B, 3) = ({v.shape[0]}, "
+                f"{len(marker_names)}, 3), got {mk.shape}"
+            )
+        arrays["markers"] = mk
     with open(p, "wb") as fh:  # a file object: numpy would append '.npz' to another suffix
         np.savez_compressed(fh, **arrays)
     return p
@@ -108,24 +124,98 @@ def write_result_npz(
 def read_result_npz(path: str | os.PathLike[str]) -> Result:
     """Reads a solved take written by `write_result_npz`; `InputError` naming the file and
     the array for anything else."""
+    p = _existing(path)
+    a = _arrays(p, with_vertices=True)
+    return _assemble(p, a, a["vertices"])
+
+
+def stream_result_npz(path: str | os.PathLike[str]) -> tuple[Result, Callable[[int], None]]:
+    """A solved take whose `vertices` are still being read: the small arrays are read at once,
+    the frames are decompressed in order by a background thread into the returned array, and
+    `wait(stop)` returns once frames `0..stop-1` are in (raising `InputError` if the file
+    turns out damaged). `lgi view` shows the first frame of a 1,500-frame take this way
+    without waiting for all of it."""
+    p = _existing(path)
+    a = _arrays(p, with_vertices=False)
+    try:
+        zf = zipfile.ZipFile(p)
+        fh: Any = zf.open("vertices.npy")
+        version = np.lib.format.read_magic(fh)
+        header = (
+            np.lib.format.read_array_header_1_0
+            if version == (1, 0)
+            else np.lib.format.read_array_header_2_0
+        )
+        shape, fortran, dtype = header(fh)
+    except Exception as e:
+        raise InputError(f"{p}: not a readable .npz archive: {e}") from None
+    if fortran or dtype != np.dtype("<f4") or len(shape) != 3:
+        zf.close()
+        raise InputError(f"{p}: 'vertices' must be C-ordered float32 (F, V, 3)")
+    v = np.zeros(shape, dtype=np.float32)
+    frame_bytes = int(np.prod(shape[1:])) * 4
+    state = threading.Condition()
+    done = [0]
+    failure: list[str] = []
+
+    def fill() -> None:
+        raw = v.reshape(-1).view(np.uint8)
+        try:
+            with zf, fh:
+                step = max(frame_bytes * 8, 1 << 20)
+                for at in range(0, len(raw), step):
+                    block = raw[at : at + step]
+                    got = 0
+                    while got < len(block):
+                        n = fh.readinto(block[got:])
+                        if not n:
+                            raise EOFError("the vertices end early")
+                        got += n
+                    with state:
+                        done[0] = (at + len(block)) // frame_bytes
+                        state.notify_all()
+        except Exception as e:
+            with state:
+                failure.append(str(e))
+                state.notify_all()
+
+    threading.Thread(target=fill, daemon=True).start()
+
+    def wait(stop: int) -> None:
+        with state:
+            state.wait_for(lambda: done[0] >= min(stop, shape[0]) or bool(failure))
+            if failure:
+                raise InputError(f"{p}: cannot read 'vertices': {failure[0]}")
+
+    return _assemble(p, a, v), wait
+
+
+def _existing(path: str | os.PathLike[str]) -> str:
     p = os.fspath(path)
     if not os.path.isfile(p):
         raise InputError(f"{p}: no such result file")
+    return p
+
+
+def _arrays(p: str, *, with_vertices: bool) -> dict[str, Any]:
     try:
         with np.load(p, allow_pickle=False) as z:
             if not isinstance(z, np.lib.npyio.NpzFile):  # pragma: no cover - .npy given
                 raise InputError(f"{p}: not an .npz archive")
-            absent = [k for k in RESULT_NPZ_KEYS[:-1] if k not in z.files]
+            absent = [k for k in RESULT_NPZ_KEYS[:-2] if k not in z.files]
             if absent:
                 raise InputError(
                     f"{p}: not a solved take (written by lgi solve -o *.npz): missing {absent}"
                 )
-            a = {k: z[k] for k in z.files}
+            return {k: z[k] for k in z.files if with_vertices or k != "vertices"}
     except InputError:
         raise
     except Exception as e:
         raise InputError(f"{p}: not a readable .npz archive: {e}") from None
-    v = a["vertices"]
+
+
+def _assemble(p: str, a: dict[str, Any], v: Any) -> Result:
+    """The `Result` of the arrays `a` with vertices `v`, checked."""
     counts, indices = a["face_counts"].astype(np.int64), a["face_indices"].astype(np.int64)
     if v.ndim != 3 or v.shape[2] != 3:
         raise InputError(f"{p}: 'vertices' must be (F, V, 3), got {v.shape}")
@@ -156,4 +246,13 @@ def read_result_npz(path: str | os.PathLike[str]) -> Result:
         units=units,
         topology=topo,
         jaw_theta=a.get("jaw_theta"),
+        markers=_markers(p, a.get("markers"), v.shape[0], len(a["marker_names"])),
     )
+
+
+def _markers(p: str, m: Any, frames: int, count: int) -> NDArray[np.float32] | None:
+    if m is None:
+        return None
+    if m.shape != (frames, count, 3):
+        raise InputError(f"{p}: 'markers' must be ({frames}, {count}, 3), got {m.shape}")
+    return np.asarray(m, dtype=np.float32)

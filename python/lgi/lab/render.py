@@ -78,12 +78,15 @@ def panel(
     dpi: int = 100,
     units: str = "",
     label: str = "vertex error",
+    per_column: bool = False,
 ) -> tuple[int, int]:
     """Side-by-side panel: one column per mesh (e.g. ground truth | displacement interpolation
     | blendshape fit | LGI-RBF | LGI), one row per view (front, three-quarter). Meshes without
     an entry in `errors` are drawn grey. Every column shares one colour scale (0..`vmax`,
-    default the largest error), named `label` (in `units`) on the colour bar. Writes a PNG;
-    returns its (width, height) in pixels."""
+    default the largest error), named `label` (in `units`) on the colour bar; with
+    `per_column`, each column has its own scale (0..its largest error) and colour bar under
+    it, so a method whose errors are 10x smaller than the worst one's is still readable.
+    Writes a PNG; returns its (width, height) in pixels."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.cm import ScalarMappable
     from matplotlib.colors import Normalize
@@ -95,17 +98,44 @@ def panel(
     norm = Normalize(0.0, vmax)
     cmap = _cmap()
     ncol, nrow = len(names), len(views)
-    width_in = cell_inches * ncol + 1.0
-    fig = Figure(figsize=(width_in, cell_inches * nrow + 0.4), dpi=dpi)
+    width_in = cell_inches * ncol + (0.2 if per_column else 1.0)
+    below = 0.9 if per_column else 0.0
+    fig = Figure(figsize=(width_in, cell_inches * nrow + 0.4 + below), dpi=dpi)
     FigureCanvasAgg(fig)
     axes = fig.subplots(nrow, ncol, squeeze=False)
     centre = np.asarray(next(iter(meshes.values())), dtype=np.float64).mean(axis=0)
+    height_in = cell_inches * nrow + 0.4 + below
+    norms = {
+        name: Normalize(0.0, float(np.max(errors[name])) or 1.0) if per_column else norm
+        for name in names
+        if name in errors
+    }
     for j, name in enumerate(names):
         for i, yaw in enumerate(views):
             ax = axes[i][j]
-            draw_mesh(ax, meshes[name], triangles, errors.get(name), norm, cmap, yaw, centre)
+            col_norm = norms.get(name, norm)
+            draw_mesh(ax, meshes[name], triangles, errors.get(name), col_norm, cmap, yaw, centre)
             if i == 0:
                 ax.set_title(name, fontsize=10)
+    if per_column:
+        fig.subplots_adjust(
+            left=0.01, right=0.99, top=1 - 0.4 / height_in, bottom=below / height_in, wspace=0.02
+        )
+        for j, name in enumerate(names):
+            if name not in norms:
+                continue
+            box = axes[-1][j].get_position()
+            cax = fig.add_axes(
+                (box.x0 + 0.1 * box.width, 0.45 / height_in, 0.8 * box.width, 0.1 / height_in)
+            )
+            cb = fig.colorbar(
+                ScalarMappable(norm=norms[name], cmap=cmap), cax=cax, orientation="horizontal"
+            )
+            cb.ax.tick_params(labelsize=7)
+            cb.set_label(f"{label}{' (' + units + ')' if units else ''}", fontsize=7)
+        fig.savefig(os.fspath(path), dpi=dpi)
+        w, h = fig.canvas.get_width_height()
+        return int(w), int(h)
     fig.subplots_adjust(left=0.01, right=1 - 0.9 / width_in, top=0.92, bottom=0.01, wspace=0.02)
     cax = fig.add_axes((1 - 0.75 / width_in, 0.1, 0.15 / width_in, 0.75))
     cb = fig.colorbar(ScalarMappable(norm=norm, cmap=cmap), cax=cax)

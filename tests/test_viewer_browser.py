@@ -1,0 +1,202 @@
+"""`lgi view` in a real browser: Debian's Chromium driven headless by selenium through the
+system chromedriver (never a downloaded browser). The page must load without console errors,
+draw the face, change pixels when the frame moves or the colouring switches to A/B, and land on
+the frame a report link or a heatmap click names. Skips, saying why, where no browser is
+installed (the README's test command installs one)."""
+
+from __future__ import annotations
+
+import io
+import shutil
+import time
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+from lgi.io.result import write_result_npz
+from lgi.io.topology import topology
+
+CHROMIUM = shutil.which("chromium") or "/usr/bin/chromium"
+CHROMEDRIVER = shutil.which("chromedriver") or "/usr/bin/chromedriver"
+BACKGROUND = np.array([0xF4, 0xF4, 0xF4])
+
+
+def _browser() -> Any:
+    try:
+        from selenium import webdriver
+        from selenium.webdriver.chrome.options import Options
+        from selenium.webdriver.chrome.service import Service
+    except ImportError:
+        pytest.skip("selenium is not installed (pip install lgi[test])")
+    if not (Path(CHROMIUM).exists() and Path(CHROMEDRIVER).exists()):
+        pytest.skip("Debian's chromium and chromium-driver are not installed (scripts/test.sh)")
+    o = Options()
+    o.binary_location = CHROMIUM
+    for a in (
+        "--headless=new",
+        "--no-sandbox",
+        "--disable-dev-shm-usage",
+        "--window-size=1100,800",
+        # WebGL without a GPU: Chromium's software rasteriser.
+        "--use-angle=swiftshader",
+        "--enable-unsafe-swiftshader",
+    ):
+        o.add_argument(a)
+    o.set_capability("goog:loggingPrefs", {"browser": "ALL"})
+    return webdriver.Chrome(service=Service(CHROMEDRIVER), options=o)
+
+
+@pytest.fixture(scope="module")
+def solved_pair(sample, sample_model, tmp_path_factory):  # type: ignore[no-untyped-def]
+    """The sample solved noise-aware with marker m010 spiking in frames 40-42 (A), and the
+    same take solved exactly (B), with their markers, from time code 100."""
+    frames = sample.performance.copy()
+    k = list(sample_model.marker_names).index("m010")
+    frames[40:43, k, 2] += 1.5
+    folder = tmp_path_factory.mktemp("view")
+    paths = []
+    for name, noise in (("noise-aware.npz", 0.02), ("exact.npz", None)):
+        res = sample_model.solve(frames, marker_noise=noise, quiet=True)
+        path = folder / name
+        write_result_npz(
+            path,
+            topology(sample_model.dataset),
+            res.vertices,
+            res.bundle_residuals,
+            res.missing,
+            list(sample_model.marker_names),
+            fps=30.0,
+            start=100,
+            units="cm",
+            markers=frames,
+        )
+        paths.append(path)
+    return paths
+
+
+@pytest.fixture(scope="module")
+def page(solved_pair) -> Iterator[tuple[Any, str]]:  # type: ignore[no-untyped-def]
+    from lgi import view
+
+    driver = _browser()
+    server, url = view.serve(view.load(solved_pair[0], solved_pair[1]))
+    try:
+        yield driver, url
+    finally:
+        driver.quit()
+        server.shutdown()
+        server.server_close()
+
+
+def _wait(driver: Any, script: str, want: str, timeout: float = 30.0) -> None:
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        if driver.execute_script(script) == want:
+            return
+        time.sleep(0.05)
+    raise AssertionError(f"{script} never became {want!r}: {driver.execute_script(script)!r}")
+
+
+def _open(driver: Any, url: str) -> None:
+    driver.get(url)
+    _wait(driver, "return document.body.dataset.ready", "1")
+
+
+def _stage_pixels(driver: Any) -> np.ndarray:
+    """The 3D view's pixels (RGB) from a screenshot of the stage element."""
+    from matplotlib.image import imread
+
+    png = driver.find_element("id", "stage").screenshot_as_png
+    return (imread(io.BytesIO(png))[..., :3] * 255).round().astype(np.int16)
+
+
+def _errors(driver: Any) -> list[str]:
+    return [e["message"] for e in driver.get_log("browser") if e["level"] == "SEVERE"]
+
+
+def _frame(driver: Any, code: int) -> None:
+    driver.execute_script(
+        "const s = document.getElementById('slider'); s.value = arguments[0];"
+        "s.dispatchEvent(new Event('input'));",
+        code - 100,
+    )
+    _wait(driver, "return document.body.dataset.frame", str(code))
+
+
+def test_page_loads_without_console_errors_and_draws_the_face(page) -> None:  # type: ignore[no-untyped-def]
+    driver, url = page
+    _open(driver, url)
+    assert driver.execute_script("return document.body.dataset.frame") == "100"
+    pixels = _stage_pixels(driver)
+    face = np.abs(pixels - BACKGROUND).sum(axis=2) > 30
+    # The sample's face fills a good part of the view, and is shaded, not a flat blot.
+    assert 0.10 < face.mean() < 0.90, face.mean()
+    assert pixels[face].std() > 10
+    assert _errors(driver) == []
+
+
+def test_moving_the_frame_slider_changes_the_pixels(page) -> None:  # type: ignore[no-untyped-def]
+    driver, url = page
+    _open(driver, url)
+    _frame(driver, 100)
+    before = _stage_pixels(driver)
+    _frame(driver, 175)  # mid-performance: the jaw is open (lgi.lab.sample)
+    after = _stage_pixels(driver)
+    changed = np.abs(after - before).sum(axis=2) > 30
+    assert changed.mean() > 0.005, changed.mean()
+    _frame(driver, 100)
+    again = _stage_pixels(driver)
+    assert np.abs(again - before).sum(axis=2).max() <= 30  # the same frame draws the same
+    assert _errors(driver) == []
+
+
+def test_a_b_colouring_differs_from_the_plain_one(page) -> None:  # type: ignore[no-untyped-def]
+    from selenium.webdriver.support.ui import Select
+
+    driver, url = page
+    _open(driver, url)
+    _frame(driver, 141)
+    plain = _stage_pixels(driver)
+    Select(driver.find_element("id", "colour")).select_by_value("difference")
+    _wait(driver, "return document.body.dataset.colour", "difference")
+    _frame(driver, 141)
+    time.sleep(0.3)
+    ab = _stage_pixels(driver)
+    differs = np.abs(ab - plain).sum(axis=2) > 60
+    assert differs.mean() > 0.05, differs.mean()
+    # Viridis over grey: the A/B view has saturated pixels the plain one lacks.
+    sat = lambda p: (p.max(axis=2) - p.min(axis=2)) > 80  # noqa: E731
+    assert sat(ab).mean() > sat(plain).mean() + 0.05
+    assert _errors(driver) == []
+
+
+def test_a_worst_frame_link_in_the_report_opens_the_viewer_at_that_frame(page) -> None:  # type: ignore[no-untyped-def]
+    driver, url = page
+    driver.get(url + "report.html")
+    link = driver.find_element("css selector", "tr[id^='frame-'] a")
+    code = link.text
+    assert code in ("140", "141", "142")  # the spike's frames are the worst
+    link.click()
+    _wait(driver, "return document.body.dataset.ready", "1")
+    _wait(driver, "return document.body.dataset.frame", code)
+    assert driver.find_element("id", "slider").get_attribute("value") == str(int(code) - 100)
+    assert _errors(driver) == []
+
+
+def test_clicking_the_heatmap_seeks_the_frame_under_the_pointer(page) -> None:  # type: ignore[no-untyped-def]
+    from selenium.webdriver.common.action_chains import ActionChains
+
+    driver, url = page
+    _open(driver, url)
+    heat = driver.find_element("id", "heatmap")
+    width = heat.size["width"]
+    # Pointer at 30.5 % of the width: frame floor(0.305 * 150) = 45, time code 145.
+    x = round(0.305 * width) - width // 2
+    ActionChains(driver).move_to_element_with_offset(heat, x, 0).click().perform()
+    got = int(driver.execute_script("return document.body.dataset.frame"))
+    _wait(driver, "return document.body.dataset.frame", str(got))
+    assert abs(got - 145) <= 1, got
+    assert _errors(driver) == []
