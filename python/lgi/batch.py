@@ -24,6 +24,7 @@ import numpy as np
 
 from lgi.errors import FileWriteError, InputError
 from lgi.io import takes as take_files
+from lgi.io.atomic import atomic_path, check_writable
 from lgi.io.topology import topology
 from lgi.model import Model, estimate_marker_noise
 
@@ -204,9 +205,8 @@ def _write_manifest(
 ) -> None:
     """Writes the manifest atomically (a crash mid-batch leaves the previous one whole)."""
     data = {"version": MANIFEST_VERSION, "model": model_info, "shots": shots}
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    tmp.write_text(json.dumps(data, indent=2, sort_keys=True) + "\n", encoding="utf-8")
-    os.replace(tmp, path)
+    with atomic_path(path) as tmp:
+        tmp.write_text(json.dumps(data, indent=2, sort_keys=True) + "\n", encoding="utf-8")
 
 
 def _record(shot: Shot) -> dict[str, Any]:
@@ -425,6 +425,7 @@ def solve_shots(
         out.mkdir(parents=True, exist_ok=True)
     except OSError as e:
         raise FileWriteError(f"out_dir {out}: cannot create the folder ({e})") from None
+    check_writable(out / MANIFEST, "out_dir")  # before any shot is solved, not after
     import lgi
 
     settings_hash = hashlib.sha256(

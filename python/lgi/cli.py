@@ -17,6 +17,7 @@ from typing import Any, NoReturn
 
 import lgi
 from lgi import pipeline
+from lgi.interrupt import import_usd
 
 
 def _cmd_demo(args: argparse.Namespace) -> int:
@@ -67,6 +68,7 @@ def _cmd_build(args: argparse.Namespace) -> int:
         config=args.config,
         jaw=args.jaw,
         units=args.units,
+        force=args.force,
         say=_say(args),
     )
     print(f"wrote {out}")
@@ -85,6 +87,7 @@ def _cmd_solve(args: argparse.Namespace) -> int:
         take_units=args.take_units,
         jaw=args.jaw,
         chunk=args.chunk,
+        force=args.force,
         quiet=args.quiet,
         say=_say(args),
     )
@@ -94,7 +97,12 @@ def _cmd_solve(args: argparse.Namespace) -> int:
 
 def _cmd_export(args: argparse.Namespace) -> int:
     out, n = pipeline.export_file(
-        args.result, args.out, frames=args.frames, fps=args.fps, quiet=args.quiet
+        args.result,
+        args.out,
+        frames=args.frames,
+        fps=args.fps,
+        force=args.force,
+        quiet=args.quiet,
     )
     print(f"wrote {out} ({n} frames)")
     return 0
@@ -108,6 +116,7 @@ def _cmd_rig(args: argparse.Namespace) -> int:
         args.out,
         combine=args.combine,
         noise=args.marker_noise,
+        force=args.force,
         quiet=args.quiet,
         say=_say(args),
     )
@@ -129,6 +138,7 @@ def _cmd_report(args: argparse.Namespace) -> int:
         take=args.take,
         model=args.model,
         take_units=args.take_units,
+        force=args.force,
     )
     print(f"wrote {out}")
     return 0
@@ -289,6 +299,9 @@ def _add_pipeline_commands(sub: Any) -> None:
     )
     b.add_argument("markers", metavar="MARKERS", help="marker layout CSV: name,x,y,z")
     b.add_argument("-o", "--out", required=True, help="model file to write (.lgi)")
+    b.add_argument(
+        "--force", action="store_true", help="replace an existing output (default: refuse)"
+    )
     b.add_argument("--config", default=None, help="JSON object of BuildConfig fields")
     b.add_argument(
         "--jaw",
@@ -319,6 +332,9 @@ def _add_pipeline_commands(sub: Any) -> None:
         "--out",
         required=True,
         help="output: .usd/.usdc/.usda point cache, NAME.obj (writes NAME.0000.obj, ...) or .npz",
+    )
+    s.add_argument(
+        "--force", action="store_true", help="replace an existing output (default: refuse)"
     )
     s.add_argument(
         "--marker-noise",
@@ -362,6 +378,9 @@ def _add_pipeline_commands(sub: Any) -> None:
     )
     e.add_argument("result", metavar="RESULT", help="solved take (.npz from lgi solve)")
     e.add_argument("-o", "--out", required=True, help="output: .usd/.usdc/.usda, NAME.obj, .npz")
+    e.add_argument(
+        "--force", action="store_true", help="replace an existing output (default: refuse)"
+    )
     e.add_argument("--frames", default=None, metavar="A:B", help="frames A..B-1 (0-based)")
     e.add_argument("--fps", type=float, default=None, help="frame rate (default: the result's)")
     e.add_argument("-q", "--quiet", action="store_true", help="no progress bars")
@@ -385,6 +404,9 @@ def _add_pipeline_commands(sub: Any) -> None:
         "--out",
         required=True,
         help="output: .usd/.usdc/.usda (UsdSkel blendshapes), .gltf/.glb (morph targets), .npz",
+    )
+    r.add_argument(
+        "--force", action="store_true", help="replace an existing output (default: refuse)"
     )
     r.add_argument(
         "--combine",
@@ -417,6 +439,9 @@ def _add_pipeline_commands(sub: Any) -> None:
     )
     rp.add_argument("solved", metavar="SOLVED", help="solved take (.npz from lgi solve)")
     rp.add_argument("-o", "--out", required=True, help="report to write (.html)")
+    rp.add_argument(
+        "--force", action="store_true", help="replace an existing output (default: refuse)"
+    )
     rp.add_argument(
         "--compare",
         default=None,
@@ -505,6 +530,7 @@ def _cmd_triangulate(args: argparse.Namespace) -> int:
     from lgi.capture import frontend
     from lgi.io import calibration, tracks
 
+    pipeline.ready_output(args.out, args.cameras, args.tracks, args.rest, force=args.force)
     cams = calibration.load_cameras(args.cameras)
     uv = tracks.read_tracks(args.tracks, len(cams))
     rest = tracks.read_rest(args.rest)
@@ -534,6 +560,9 @@ def _add_front_end_commands(sub: argparse._SubParsersAction[_Parser]) -> None:
     tr.add_argument("--tracks", required=True, help=".npz with uv (F, B, C, 2) in pixels")
     tr.add_argument("--rest", required=True, help="marker rest layout: .npy or name,x,y,z CSV")
     tr.add_argument("--out", required=True, help="output .npz (frames, rotations, ...)")
+    tr.add_argument(
+        "--force", action="store_true", help="replace an existing output (default: refuse)"
+    )
     tr.add_argument("--max-error", type=float, default=3.0, help="reject above this RMS px")
     tr.add_argument("--no-despike", action="store_true", help="keep one-frame jumps")
     tr.set_defaults(func=_cmd_triangulate)
@@ -611,7 +640,12 @@ def main(argv: Sequence[str] | None = None) -> int:
         parser.print_help()
         return 0
     try:
+        if any(str(a).lower().endswith((".usd", ".usda", ".usdc")) for a in argv or sys.argv):
+            import_usd()  # up front, so a Ctrl-C during pxr's import cannot be swallowed
         return int(args.func(args))
+    except KeyboardInterrupt:
+        print("lgi: interrupted", file=sys.stderr)
+        return 130
     except lgi.LgiError as e:
         print(f"lgi: error: {e}", file=sys.stderr)
         return 2
@@ -620,5 +654,16 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 2
 
 
+def entry() -> None:
+    """The `lgi` command: `main`, with a Ctrl-C that arrives while Python is still loading the
+    package answered the same way (one line, exit 130)."""
+    try:
+        code = main()
+    except KeyboardInterrupt:
+        print("lgi: interrupted", file=sys.stderr)
+        code = 130
+    sys.exit(code)
+
+
 if __name__ == "__main__":
-    sys.exit(main())
+    entry()

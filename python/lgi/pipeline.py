@@ -22,6 +22,7 @@ from lgi._lgi import BuildConfig, SolveResult
 from lgi.dataset import Dataset
 from lgi.errors import InputError, MarkerError
 from lgi.io import takes
+from lgi.io.atomic import check_writable, existing_sequence, refuse_existing
 from lgi.io.paths import output_file
 from lgi.io.result import read_result_npz
 from lgi.io.sink import FrameSink
@@ -71,6 +72,27 @@ def not_an_input(out: Path, *inputs: str | os.PathLike[str]) -> None:
         q = Path(i)
         if q.exists() and q.resolve() == out.resolve():
             raise InputError(f"--out {out}: is an input of the command ({i}); choose another path")
+
+
+def ready_output(out: str | os.PathLike[str], *inputs: str | os.PathLike[str], force: bool) -> Path:
+    """The checks every command makes on `--out` before any work: a file path in a folder that
+    exists, not one of the command's `inputs`, not an existing file (or, for `NAME.obj`, an
+    existing sequence `NAME.NNNN.obj`) unless `force`, in a folder lgi can write to (a probe
+    file is made and removed: a read-only folder fails now, not after the solve)."""
+    dest = output_file(os.fspath(out), "--out")
+    not_an_input(dest, *inputs)
+    if dest.suffix.lower() == ".obj" and not dest.exists():
+        old = existing_sequence(dest.parent, dest.stem)
+        if old and not force:
+            raise InputError(
+                f"--out {dest}: the sequence {dest.stem}.NNNN.obj exists ({len(old)} frames, "
+                f"{old[0].name} to {old[-1].name}); use --force to replace it (its frames are "
+                "removed, never mixed with the new ones)"
+            )
+    else:
+        refuse_existing(dest, "--out", force)
+    check_writable(dest)
+    return dest
 
 
 def read_dataset(neutral: str, shapes: str) -> Dataset:
@@ -206,27 +228,36 @@ def write_output(
     units: str | None,
     jaw_theta: np.ndarray | None,
     head: takes.HeadMotion | None = None,
+    markers: np.ndarray | None = None,
     quiet: bool = False,
 ) -> Path:
     """Writes solved frames as `kind` (`output_kind`) to `out`, `CHUNK_FRAMES` at a time with
-    a progress bar (the head transform, when known, beside them in a USD cache); returns the
-    path written (`NAME.NNNN.obj` for a sequence)."""
+    a progress bar (the head transform, when known, beside them in a USD cache; the take's
+    `markers` in an npz); returns the path written (`NAME.NNNN.obj` for a sequence). Nothing
+    is left at `out` if it fails or is interrupted."""
     from tqdm import tqdm
 
     sink = FrameSink(kind, out, topo, names=names, fps=fps, start=start, units=units)
     n = vertices.shape[0]
-    with tqdm(total=n, desc=f"lgi write {kind}", unit="frame", disable=quiet, leave=False) as bar:
-        for a in range(0, n, CHUNK_FRAMES):
-            b = min(n, a + CHUNK_FRAMES)
-            sink.add(
-                vertices[a:b],
-                residuals[a:b],
-                missing[a:b],
-                None if jaw_theta is None else jaw_theta[a:b],
-                None if head is None else head[a:b],
-            )
-            bar.update(b - a)
-    return sink.close()
+    try:
+        with tqdm(
+            total=n, desc=f"lgi write {kind}", unit="frame", disable=quiet, leave=False
+        ) as bar:
+            for a in range(0, n, CHUNK_FRAMES):
+                b = min(n, a + CHUNK_FRAMES)
+                sink.add(
+                    vertices[a:b],
+                    residuals[a:b],
+                    missing[a:b],
+                    None if jaw_theta is None else jaw_theta[a:b],
+                    None if head is None else head[a:b],
+                    None if markers is None else markers[a:b],
+                )
+                bar.update(b - a)
+        return sink.close()
+    except BaseException:
+        sink.abort()
+        raise
 
 
 def write_solved(
@@ -239,6 +270,7 @@ def write_solved(
     fps: float | None,
     start: int,
     head: takes.HeadMotion | None = None,
+    markers: np.ndarray | None = None,
     quiet: bool = False,
 ) -> Path:
     """`write_output` of a whole `SolveResult` of model `m` (its marker names and unit)."""
@@ -255,6 +287,7 @@ def write_solved(
         units=m.units,
         jaw_theta=res.jaw_theta,
         head=head,
+        markers=markers,
         quiet=quiet,
     )
 
@@ -379,6 +412,7 @@ def build_file(
     config: str | os.PathLike[str] | None = None,
     jaw: str = "auto",
     units: str | None = None,
+    force: bool = False,
     say: Say = _silent,
 ) -> Path:
     """`lgi build`: a model file `out` from `neutral` and `shapes` (`read_dataset`), the
@@ -388,8 +422,9 @@ def build_file(
     `units`. Returns `out`."""
     if jaw not in ("auto", "none"):
         raise InputError(f"--jaw {jaw!r}: expected 'auto' or 'none'")
-    dest = output_file(os.fspath(out), "--out")
-    not_an_input(dest, neutral, shapes, markers, *([config] if config is not None else []))
+    dest = ready_output(
+        out, neutral, shapes, markers, *([config] if config is not None else []), force=force
+    )
     cfg = read_config(None if config is None else os.fspath(config))
     layout = takes.read_layout(existing_file(os.fspath(markers), "MARKERS"))
     t0 = time.perf_counter()
@@ -435,6 +470,7 @@ def solve_file(
     take_units: str | None = None,
     jaw: str = "auto",
     chunk: int | None = None,
+    force: bool = False,
     quiet: bool = False,
     say: Say = _silent,
 ) -> tuple[Path, int]:
@@ -451,9 +487,9 @@ def solve_file(
         raise InputError(f"--chunk {chunk}: must be a whole number of frames >= 1")
     if jaw not in JAW_POSES:
         raise InputError(f"--jaw {jaw!r}: expected one of {', '.join(JAW_POSES)}")
-    dest = output_file(os.fspath(out), "--out")
-    not_an_input(dest, model, take)
+    not_an_input(output_file(os.fspath(out), "--out"), model, take)
     kind = output_kind(os.fspath(out))
+    dest = ready_output(out, model, take, force=force)
     m = Model.load(existing_file(os.fspath(model), "MODEL"))
     t = takes.read(
         existing_file(os.fspath(take), "TAKE"),
@@ -481,7 +517,7 @@ def solve_file(
     if chunk is None:
         res = m.solve(x, jaw=jaw_mode, marker_noise=sigma, quiet=quiet)
         written = write_solved(
-            kind, dest, topo, res, m, fps=rate, start=start, head=head, quiet=quiet
+            kind, dest, topo, res, m, fps=rate, start=start, head=head, markers=x, quiet=quiet
         )
         return written, int(x.shape[0])
     from tqdm import tqdm
@@ -492,18 +528,23 @@ def solve_file(
     # Each chunk continues the temporal solve from the last frame of the one before
     # (`Model.solve_iter`): the chunks together are one `solve` of the range.
     chunks = m.solve_iter(x, chunk=size, jaw=jaw_mode, marker_noise=sigma, quiet=True, out=buf)
-    with tqdm(total=n, desc="lgi solve", unit="frame", disable=quiet, leave=False) as bar:
-        for a, res in zip(range(0, n, size), chunks, strict=True):
-            b = min(n, a + size)
-            sink.add(
-                res.vertices,
-                res.bundle_residuals,
-                res.missing,
-                res.jaw_theta,
-                None if head is None else head[a:b],
-            )
-            bar.update(b - a)
-    return sink.close(), n
+    try:
+        with tqdm(total=n, desc="lgi solve", unit="frame", disable=quiet, leave=False) as bar:
+            for a, res in zip(range(0, n, size), chunks, strict=True):
+                b = min(n, a + size)
+                sink.add(
+                    res.vertices,
+                    res.bundle_residuals,
+                    res.missing,
+                    res.jaw_theta,
+                    None if head is None else head[a:b],
+                    x[a:b],
+                )
+                bar.update(b - a)
+        return sink.close(), n
+    except BaseException:
+        sink.abort()
+        raise
 
 
 def export_file(
@@ -512,15 +553,16 @@ def export_file(
     *,
     frames: str | None = None,
     fps: float | None = None,
+    force: bool = False,
     quiet: bool = False,
 ) -> tuple[Path, int]:
     """`lgi export`: a solved `.npz` (`lgi solve -o x.npz`) written again by `out`'s suffix,
     optionally a frame range (`--frames A:B`) at another rate. Returns the path written and
     the frame count."""
-    dest = output_file(os.fspath(out), "--out")
+    not_an_input(output_file(os.fspath(out), "--out"), result)
     kind = output_kind(os.fspath(out))
     src = existing_file(os.fspath(result), "RESULT")
-    not_an_input(dest, src)
+    dest = ready_output(out, src, force=force)
     r = read_result_npz(src)
     rng = frame_range(frames, r.vertices.shape[0])
     written = write_output(
@@ -535,6 +577,7 @@ def export_file(
         start=r.start + rng.start,
         units=r.units,
         jaw_theta=None if r.jaw_theta is None else r.jaw_theta[rng],
+        markers=None if r.markers is None else r.markers[rng],
         quiet=quiet,
     )
     return written, int(r.vertices[rng].shape[0])
@@ -552,6 +595,7 @@ def rig_file(
     *,
     combine: list[str] | None = None,
     noise: str | None = None,
+    force: bool = False,
     quiet: bool = False,
     say: Say = _silent,
 ) -> tuple[Path, int]:
@@ -570,7 +614,7 @@ def rig_file(
             f"--out {dest}: unknown rig format {suffix or '(no suffix)'!r}; use "
             ".usd/.usdc/.usda (UsdSkel blendshapes), .gltf/.glb (morph targets) or .npz"
         )
-    not_an_input(dest, model, neutral, *([] if shapes == "-" else [shapes]))
+    ready_output(dest, model, neutral, *([] if shapes == "-" else [shapes]), force=force)
     if noise == "auto":
         raise InputError("--marker-noise auto: a rig has no take to estimate it from")
     sigma = marker_noise(noise, np.zeros((0, 0, 3)))
@@ -604,16 +648,18 @@ def report_file(
     take: str | os.PathLike[str] | None = None,
     model: str | os.PathLike[str] | None = None,
     take_units: str | None = None,
+    force: bool = False,
 ) -> Path:
     """`lgi report`: the QC page of a solved `.npz` (`lgi.report`), compared with `compare`
     (another solve of the same mesh and frames) when given; `take` with `model` adds the
     take's estimated marker noise."""
     from lgi import report
 
-    dest = output_file(os.fspath(out), "--out")
-    not_an_input(dest, *(p for p in (solved, compare, take, model) if p is not None))
-    if dest.suffix.lower() not in (".html", ".htm"):
+    if Path(out).suffix.lower() not in (".html", ".htm"):
         raise InputError(f"--out {out}: the report is an .html file")
+    dest = ready_output(
+        out, *(p for p in (solved, compare, take, model) if p is not None), force=force
+    )
     noise = None
     if take is not None:
         if model is None:

@@ -20,6 +20,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from lgi.errors import InputError
+from lgi.io.atomic import atomic_path
 from lgi.io.result import Result, read_result_npz
 
 F64 = NDArray[np.float64]
@@ -442,10 +443,6 @@ def write_report(
         findings=findings,
     )
     target = Path(out)
-    tmp = target.with_name(f".{target.name}.{os.getpid()}.tmp")
-    try:
+    with atomic_path(target) as tmp:
         tmp.write_text(text, encoding="utf-8")
-        os.replace(tmp, target)
-    finally:
-        tmp.unlink(missing_ok=True)
     return target

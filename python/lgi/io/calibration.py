@@ -16,6 +16,7 @@ from numpy.typing import NDArray
 
 from lgi.capture.camera import Camera
 from lgi.errors import InputError
+from lgi.io.atomic import atomic_path
 from lgi.io.paths import output_file
 
 F64 = NDArray[np.float64]
@@ -157,7 +158,8 @@ def save_cameras(path: str | os.PathLike[str], cameras: Sequence[Camera]) -> Non
     values = _storage_values(cameras)
     suffix = p.suffix.lower()
     if suffix in (".yaml", ".yml"):
-        p.write_text(_write_yaml(values))
+        with atomic_path(p) as tmp:
+            tmp.write_text(_write_yaml(values))
     elif suffix == ".json":
         out = {
             k: (
@@ -173,7 +175,8 @@ def save_cameras(path: str | os.PathLike[str], cameras: Sequence[Camera]) -> Non
             )
             for k, v in values.items()
         }
-        p.write_text(json.dumps(out, indent=4) + "\n")
+        with atomic_path(p) as tmp:
+            tmp.write_text(json.dumps(out, indent=4) + "\n")
     else:
         raise InputError(f"{p}: calibration files are .yaml, .yml or .json")
 

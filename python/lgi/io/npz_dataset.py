@@ -9,7 +9,8 @@ from typing import Any
 import numpy as np
 
 import lgi._lgi as _lgi
-from lgi.errors import DatasetError, DatasetFileError, InputError
+from lgi.errors import DatasetError, DatasetFileError, FileWriteError, InputError
+from lgi.io.atomic import atomic_path
 
 __all__ = ["NPZ_KEYS", "read_npz", "write_npz"]
 
@@ -85,20 +86,27 @@ def write_npz(dataset: _lgi.Dataset, path: str | os.PathLike[str]) -> None:
     """Writes `dataset` as a compressed `.npz` archive of the `NPZ_KEYS` layout (numpy appends
     `.npz` to `path` when it has no such suffix)."""
     name = os.fspath(path)
+    if not name.endswith(".npz"):  # numpy's own rule for a file name without the suffix
+        name += ".npz"
     polygons: dict[str, Any] = {}
     if dataset.polygons is not None:
         counts, vertices, uvs = dataset.polygons
         polygons = {"polygon_counts": counts, "polygon_vertices": vertices, "polygon_uvs": uvs}
     try:
-        np.savez_compressed(
-            name,
-            neutral=dataset.neutral,
-            triangles=dataset.triangles,
-            shapes=dataset.shapes,
-            names=np.array(dataset.names).astype("str"),
-            uvs=dataset.uvs,
-            uv_triangles=dataset.uv_triangles,
-            **polygons,
-        )
+        with atomic_path(name) as tmp, open(tmp, "wb") as fh:
+            _savez(fh, dataset, polygons)
     except OSError as e:
-        raise DatasetFileError(f"cannot read {name}: {e}") from e
+        raise FileWriteError(f"cannot write {name}: {e.strerror or e}") from None
+
+
+def _savez(fh: Any, dataset: _lgi.Dataset, polygons: dict[str, Any]) -> None:
+    np.savez_compressed(
+        fh,
+        neutral=dataset.neutral,
+        triangles=dataset.triangles,
+        shapes=dataset.shapes,
+        names=np.array(dataset.names).astype("str"),
+        uvs=dataset.uvs,
+        uv_triangles=dataset.uv_triangles,
+        **polygons,
+    )

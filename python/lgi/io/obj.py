@@ -12,6 +12,7 @@ from numpy.typing import NDArray
 
 from lgi.dataset import Dataset
 from lgi.errors import InputError
+from lgi.io.atomic import atomic_path
 from lgi.io.paths import output_file
 from lgi.io.topology import Topology, topology, vertex_frames
 
@@ -56,7 +57,8 @@ def write_obj_sequence(
     paths = []
     for i in range(v.shape[0]):
         p = out / f"{name}.{start + i:0{digits}d}.obj"
-        p.write_text("# written by lgi\n" + template % tuple(v[i].ravel().tolist()) + faces)
+        with atomic_path(p) as tmp:
+            tmp.write_text("# written by lgi\n" + template % tuple(v[i].ravel().tolist()) + faces)
         paths.append(p)
     return paths
 
@@ -78,4 +80,5 @@ def write_obj(
         lines += (f"f {a}/{d} {b}/{e} {c}/{f}" for (a, b, c), (d, e, f) in zip(t, ut, strict=True))
     else:
         lines += (f"f {a} {b} {c}" for a, b, c in t)
-    output_file(path, "OBJ output").write_text("\n".join(lines) + "\n")
+    with atomic_path(output_file(path, "OBJ output")) as tmp:
+        tmp.write_text("\n".join(lines) + "\n")

@@ -16,6 +16,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from lgi.errors import InputError
+from lgi.io.atomic import atomic_path
 from lgi.io.paths import output_file
 from lgi.io.topology import Topology, vertex_frames
 
@@ -33,7 +34,8 @@ __all__ = [
 def write_sequence_npz(path: str | os.PathLike[str], **arrays: NDArray[np.generic]) -> None:
     """Writes named arrays (e.g. `vertices` (F, V, 3), `bundle_residuals` (F, B)) to `.npz`."""
     named: dict[str, Any] = dict(arrays)
-    np.savez_compressed(output_file(path, "npz output"), **named)
+    with atomic_path(output_file(path, "npz output")) as tmp, open(tmp, "wb") as fh:
+        np.savez_compressed(fh, **named)
 
 
 RESULT_NPZ_KEYS = (
@@ -116,7 +118,8 @@ def write_result_npz(
                 f"{len(marker_names)}, 3), got {mk.shape}"
             )
         arrays["markers"] = mk
-    with open(p, "wb") as fh:  # a file object: numpy would append '.npz' to another suffix
+    # A file object: numpy would append '.npz' to another suffix.
+    with atomic_path(p) as tmp, open(tmp, "wb") as fh:
         np.savez_compressed(fh, **arrays)
     return p
 

@@ -18,10 +18,11 @@ from numpy.typing import NDArray
 
 from lgi.dataset import Dataset
 from lgi.errors import FileWriteError, InputError
+from lgi.io.atomic import atomic_path, temporary_beside
 from lgi.io.paths import output_file
 from lgi.io.topology import topology
 from lgi.io.units import METERS_PER_UNIT, normalize_unit
-from lgi.io.usd import define_usd_mesh, new_stage
+from lgi.io.usd import define_usd_mesh, new_stage, save_stage
 from lgi.rig import CORRECTIVE_PREFIX
 
 __all__ = ["gltf_vertices", "write_gltf_rig", "write_usd_rig"]
@@ -123,7 +124,8 @@ def write_gltf_rig(path: str | os.PathLike[str], dataset: Dataset) -> Path:
     text = json.dumps(doc, separators=(",", ":")).encode()
     try:
         if suffix == ".gltf":
-            out.write_bytes(text)
+            with atomic_path(out) as tmp:
+                tmp.write_bytes(text)
         else:
             text += b" " * (-len(text) % 4)
             chunks = (
@@ -132,7 +134,8 @@ def write_gltf_rig(path: str | os.PathLike[str], dataset: Dataset) -> Path:
                 + struct.pack("<II", len(blob), 0x004E4942)
                 + blob
             )
-            out.write_bytes(struct.pack("<III", 0x46546C67, 2, 12 + len(chunks)) + chunks)
+            with atomic_path(out) as tmp:
+                tmp.write_bytes(struct.pack("<III", 0x46546C67, 2, 12 + len(chunks)) + chunks)
     except OSError as e:
         raise FileWriteError(f"glTF output {out}: cannot be written: {e}") from None
     return out
@@ -185,7 +188,8 @@ def write_usd_rig(
     if out.suffix.lower() not in (".usd", ".usdc", ".usda"):
         raise InputError(f"USD output {out}: the suffix must be .usd, .usdc or .usda")
     neutral, shapes = _checked(dataset)
-    stage = new_stage(Usd, Sdf, out)
+    tmp = temporary_beside(out)
+    stage = new_stage(Usd, Sdf, tmp)
     UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.y)
     if units is not None:
         UsdGeom.SetStageMetersPerUnit(stage, METERS_PER_UNIT[normalize_unit(units, "units")])
@@ -221,8 +225,5 @@ def write_usd_rig(
     anim.CreateBlendShapeWeightsAttr(Vt.FloatArray(len(tokens)))
     UsdSkel.BindingAPI.Apply(skel.GetPrim()).CreateAnimationSourceRel().SetTargets([anim.GetPath()])
     binding.CreateSkeletonRel().SetTargets([skel.GetPath()])
-    try:
-        stage.GetRootLayer().Save()
-    except Exception as e:  # Tf.ErrorException on I/O failures
-        raise FileWriteError(f"USD output {out}: cannot be written: {e}") from None
+    save_stage(stage, tmp, out)
     return out

@@ -9,6 +9,7 @@ from pathlib import Path
 import numpy as np
 
 from lgi.errors import InputError
+from lgi.io.atomic import discard_staging, replace_sequence, sequence_staging
 from lgi.io.obj import write_obj_sequence
 from lgi.io.result import write_result_npz
 from lgi.io.takes import HeadMotion
@@ -22,7 +23,10 @@ class FrameSink:
     """Where solved frames go, chunk after chunk: a USD cache (`UsdCache`), OBJ files, or
     float32 copies gathered for one solved-take `.npz` (written at `close`). `kind` is
     "usd", "obj" or "npz"; `close` returns the path written (`NAME.NNNN.obj` for a
-    sequence)."""
+    sequence). Nothing appears at the output until `close`: the USD cache is saved under a
+    temporary name and renamed, the OBJ frames are gathered in a hidden folder beside the
+    sequence and moved in (replacing an older sequence of the same name, never mixing with
+    it), the npz is written whole; `abort` drops everything (a failure, Ctrl-C)."""
 
     def __init__(
         self,
@@ -39,11 +43,16 @@ class FrameSink:
         self.fps, self.start, self.units = fps, start, units
         self.next = start
         self.usd: UsdCache | None = None
+        self.staging: Path | None = None
+        if kind == "obj":
+            self.staging = sequence_staging(out.parent, out.stem)
         if kind == "usd":
             if fps is None:
                 raise InputError("a USD point cache needs a frame rate (--fps)")
             self.usd = UsdCache(out, topo, fps=fps, units=units, start=start)
-        self.parts: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None]] = []
+        self.parts: list[
+            tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None, np.ndarray | None]
+        ] = []
 
     def add(
         self,
@@ -52,6 +61,7 @@ class FrameSink:
         missing: np.ndarray,
         jaw_theta: np.ndarray | None,
         head: HeadMotion | None = None,
+        markers: np.ndarray | None = None,
     ) -> None:
         if self.usd is not None:
             self.usd.add(
@@ -61,20 +71,23 @@ class FrameSink:
                 head_rotations=None if head is None else head.rotations,
                 head_translations=None if head is None else head.translations,
             )
-        elif self.kind == "obj":
+        elif self.staging is not None:
             write_obj_sequence(
-                self.out.parent, self.topo, vertices, name=self.out.stem, start=self.next
+                self.staging, self.topo, vertices, name=self.out.stem, start=self.next
             )
         else:
-            self.parts.append((vertices.astype(np.float32), residuals, missing, jaw_theta))
+            self.parts.append((vertices.astype(np.float32), residuals, missing, jaw_theta, markers))
         self.next += int(vertices.shape[0])
 
     def close(self) -> Path:
         if self.usd is not None:
             return self.usd.close()
-        if self.kind == "obj":
+        if self.staging is not None:
+            replace_sequence(self.staging, self.out.parent, self.out.stem)
+            self.staging = None
             return self.out.parent / f"{self.out.stem}.NNNN.obj"
         jaws = [p[3] for p in self.parts if p[3] is not None]
+        marks = [p[4] for p in self.parts if p[4] is not None]
         return write_result_npz(
             self.out,
             self.topo,
@@ -86,4 +99,14 @@ class FrameSink:
             start=self.start,
             units=self.units,
             jaw_theta=np.concatenate(jaws) if len(jaws) == len(self.parts) else None,
+            markers=np.concatenate(marks) if len(marks) == len(self.parts) else None,
         )
+
+    def abort(self) -> None:
+        """Drops what was added: nothing is left at the output or beside it."""
+        if self.usd is not None:
+            self.usd.discard()
+        if self.staging is not None:
+            discard_staging(self.staging)
+            self.staging = None
+        self.parts.clear()

@@ -8,12 +8,13 @@ from __future__ import annotations
 import os
 from collections.abc import Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray
 
 from lgi.errors import InputError
+from lgi.io.atomic import atomic_path
 from lgi.io.paths import output_file
 from lgi.io.takes import Layout, read_layout
 
@@ -64,8 +65,13 @@ def write_bundles(path: str | Path, front: FrontEnd, names: Sequence[str]) -> No
     rays = front.rays
     if len(names) != front.frames.shape[1]:
         raise InputError(f"{len(names)} marker names for {front.frames.shape[1]} markers")
+    with atomic_path(output_file(path, "bundles output")) as tmp, open(tmp, "wb") as fh:
+        _save_bundles(fh, front, names, rays)
+
+
+def _save_bundles(fh: Any, front: FrontEnd, names: Sequence[str], rays: Any) -> None:
     np.savez(
-        output_file(path, "bundles output"),
+        fh,
         markers=front.frames,
         names=np.asarray(list(names), dtype=str),
         frames=front.frames,

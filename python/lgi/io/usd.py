@@ -12,7 +12,8 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from lgi.dataset import Dataset
-from lgi.errors import InputError
+from lgi.errors import FileWriteError, InputError
+from lgi.io.atomic import temporary_beside
 from lgi.io.paths import output_file
 from lgi.io.topology import Topology, topology, vertex_frames
 from lgi.io.units import METERS_PER_UNIT, normalize_unit
@@ -35,6 +36,39 @@ def new_stage(usd: Any, sdf: Any, path: Path) -> Any:
         return usd.Stage.CreateNew(str(path))
     except Exception as e:  # pxr raises Tf.ErrorException (a RuntimeError) for I/O failures
         raise InputError(f"USD output {path}: cannot be created: {e}") from None
+
+
+def save_stage(stage: Any, tmp: Path, target: Path) -> None:
+    """Saves a stage created on the temporary `tmp` (`lgi.io.atomic.temporary_beside`) and
+    renames it onto `target`; on any failure the temporary is removed and the target left as
+    it was."""
+    try:
+        try:
+            saved = stage.GetRootLayer().Save()
+        except Exception as e:  # pxr's Tf.ErrorException: a full disk, a vanished folder
+            raise FileWriteError(
+                f"USD output {target}: could not be written: {_pxr_words(e)}"
+            ) from None
+        if not saved:
+            raise FileWriteError(f"USD output {target}: could not be written")
+        try:
+            os.replace(tmp, target)
+        except OSError as e:
+            raise FileWriteError(
+                f"USD output {target}: could not be written: {e.strerror}"
+            ) from None
+    finally:
+        Path(tmp).unlink(missing_ok=True)
+
+
+def _pxr_words(e: Exception) -> str:
+    """The useful end of a pxr error ('Permission denied', 'No space left on device'), not its
+    C++ function names and source lines."""
+    text = str(e)
+    for known in ("Permission denied", "No space left on device", "Read-only file system"):
+        if known.lower() in text.lower():
+            return known.lower()
+    return text.strip().splitlines()[-1] if text.strip() else "unknown reason"
 
 
 def define_usd_mesh(stage: Any, prim_path: str, topo: Topology) -> Any:
@@ -92,7 +126,10 @@ class UsdCache:
         self._topo = topo
         self._next = int(start)
         self._start = int(start)
-        stage = new_stage(Usd, Sdf, self._path)
+        # Written under a temporary name and renamed at `close`: an interrupted or failed
+        # write leaves nothing at the final path.
+        self._tmp = temporary_beside(self._path)
+        stage = new_stage(Usd, Sdf, self._tmp)
         UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.y)
         if units is not None:
             UsdGeom.SetStageMetersPerUnit(stage, METERS_PER_UNIT[normalize_unit(units, "units")])
@@ -183,13 +220,12 @@ class UsdCache:
             raise InputError(f"USD output {self._path}: no frames were added")
         self._stage.SetStartTimeCode(self._start)
         self._stage.SetEndTimeCode(self._next - 1)
-        try:
-            saved = self._stage.GetRootLayer().Save()
-        except Exception as e:  # pxr's Tf.ErrorException: a full disk, a vanished folder
-            raise InputError(f"USD output {self._path}: could not be written: {e}") from None
-        if not saved:
-            raise InputError(f"USD output {self._path}: could not be written")
+        save_stage(self._stage, self._tmp, self._path)
         return self._path
+
+    def discard(self) -> None:
+        """Drops the frames: nothing is written (after a failure or an interrupt)."""
+        self._tmp.unlink(missing_ok=True)
 
     def __enter__(self) -> UsdCache:
         return self
@@ -197,6 +233,8 @@ class UsdCache:
     def __exit__(self, exc_type: object, *_: object) -> None:
         if exc_type is None:
             self.close()
+        else:
+            self.discard()
 
 
 def write_usd(

@@ -35,6 +35,7 @@ from numpy.typing import NDArray
 import lgi._lgi as _lgi
 from lgi.dataset import Dataset
 from lgi.errors import DatasetError, DatasetFileError, InputError
+from lgi.io.atomic import atomic_path
 from lgi.jaw import JawRig
 from lgi.lab.face import (
     EYE_A,
@@ -447,7 +448,11 @@ def save_sample(sample: Sample, path: str | Path) -> None:
     payload["names"] = np.array(sample.names, dtype=np.str_)
     payload["marker_names"] = np.array(sample.marker_names, dtype=np.str_)
     payload["seed"] = np.array(sample.seed, dtype=np.int64)
-    np.savez_compressed(Path(path), **payload)
+    target = Path(path)
+    if target.suffix != ".npz":  # numpy's own rule for a file name without the suffix
+        target = target.with_name(target.name + ".npz")
+    with atomic_path(target) as tmp, open(tmp, "wb") as fh:
+        np.savez_compressed(fh, **payload)
 
 
 def load_sample(path: str | Path) -> Sample:

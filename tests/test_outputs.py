@@ -1,0 +1,206 @@
+"""Outputs are whole or absent, never mixed, never replaced without `--force`, and Ctrl-C ends a
+command at once with one line and exit 130: a writer interrupted mid-way leaves nothing at the
+final path and no temporary beside it; an existing output is refused before any work; a
+folder lgi cannot write to fails before the solve."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import lgi
+from lgi import cli
+from lgi.interrupt import deferred_interrupt
+from lgi.io import sink as sink_module
+from lgi.io.result import read_result_npz
+from pipeline_files import write_actor, write_c3d
+
+FRAMES = 120  # > 2 chunks of pipeline.CHUNK_FRAMES, so a write can be stopped mid-way
+
+
+@pytest.fixture(scope="module")
+def files(tmp_path_factory, sample):  # type: ignore[no-untyped-def]
+    d = tmp_path_factory.mktemp("outputs")
+    actor = write_actor(d, sample, num_shapes=8)
+    model = d / "actor.lgi"
+    argv = ["build", actor.neutral, actor.shapes, actor.markers, "-o", model, "--units", "cm"]
+    assert cli.main([str(x) for x in [*argv, "-q"]]) == 0
+    take = d / "take.c3d"
+    write_c3d(take, np.asarray(sample.performance[:FRAMES]), actor.names, 30.0, "cm")
+    return {"model": model, "take": take}
+
+
+def _leftovers(folder: Path) -> list[str]:
+    """Hidden temporaries (files or staging folders) lgi left in `folder`."""
+    return sorted(p.name for p in folder.iterdir() if p.name.startswith("."))
+
+
+def _solve(files, out: Path, *extra: str) -> int:  # type: ignore[no-untyped-def]
+    argv = ["solve", files["model"], files["take"], "-o", out, "-q", *extra]
+    return cli.main([str(a) for a in argv])
+
+
+@pytest.mark.parametrize("name", ["take.usd", "take.usda", "take.npz", "seq/take.obj"])
+def test_a_write_interrupted_mid_way_leaves_nothing_at_the_final_path(
+    files, tmp_path: Path, monkeypatch, capsys, name: str
+) -> None:  # type: ignore[no-untyped-def]
+    out = tmp_path / name
+    out.parent.mkdir(exist_ok=True)
+    calls = []
+    add = sink_module.FrameSink.add
+
+    def add_then_interrupt(self, *args, **kwargs):  # type: ignore[no-untyped-def]
+        calls.append(1)
+        if len(calls) == 2:  # the second chunk: the first is already written somewhere
+            raise KeyboardInterrupt
+        return add(self, *args, **kwargs)
+
+    monkeypatch.setattr(sink_module.FrameSink, "add", add_then_interrupt)
+    assert _solve(files, out) == 130
+    assert capsys.readouterr().err == "lgi: interrupted\n"
+    assert len(calls) == 2
+    assert not out.exists()
+    assert list(out.parent.glob("take*")) == []
+    assert _leftovers(out.parent) == []
+
+
+def test_an_npz_whose_bytes_stop_half_way_is_not_left_at_the_final_path(
+    files, tmp_path: Path, monkeypatch, capsys
+) -> None:  # type: ignore[no-untyped-def]
+    import lgi.io.result as result_module
+
+    def half_then_interrupt(fh, **arrays):  # type: ignore[no-untyped-def]
+        fh.write(b"PK\x03\x04" + b"\0" * 1000)  # the start of a zip, then Ctrl-C
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(result_module.np, "savez_compressed", half_then_interrupt)
+    out = tmp_path / "take.npz"
+    assert _solve(files, out) == 130
+    assert not out.exists() and _leftovers(tmp_path) == []
+
+
+def test_model_save_over_an_existing_model_is_whole_and_leaves_no_temporary(
+    files, tmp_path: Path
+) -> None:  # type: ignore[no-untyped-def]
+    m = lgi.Model.load(files["model"])
+    target = tmp_path / "copy.lgi"
+    target.write_bytes(b"an older file")
+    m.save(target)
+    assert lgi.Model.load(target).num_bundles == m.num_bundles
+    assert _leftovers(tmp_path) == []
+
+
+def test_an_existing_output_is_refused_before_solving_and_replaced_with_force(
+    files, tmp_path: Path, monkeypatch, capsys
+) -> None:  # type: ignore[no-untyped-def]
+    out = tmp_path / "take.npz"
+    out.write_bytes(b"an earlier solve")
+    solved = []
+    real = lgi.Model.solve
+    monkeypatch.setattr(lgi.Model, "solve", lambda *a, **k: solved.append(1) or real(*a, **k))
+    assert _solve(files, out) == 2
+    err = capsys.readouterr().err
+    assert f"lgi: error: --out {out}: exists (use --force to replace it)" in err
+    assert solved == [] and out.read_bytes() == b"an earlier solve"
+    assert _solve(files, out, "--force") == 0
+    assert solved == [1]
+    assert read_result_npz(out).vertices.shape[0] == FRAMES
+
+
+def test_an_obj_sequence_over_a_longer_one_never_mixes(files, tmp_path: Path, capsys) -> None:  # type: ignore[no-untyped-def]
+    out = tmp_path / "seq" / "shot.obj"
+    out.parent.mkdir()
+    assert _solve(files, out) == 0
+    assert len(list(out.parent.glob("shot.*.obj"))) == FRAMES
+    # A shorter range over it: refused, naming the old sequence; with --force, only the new.
+    assert _solve(files, out, "--frames", "0:10") == 2
+    err = capsys.readouterr().err
+    assert f"the sequence shot.NNNN.obj exists ({FRAMES} frames" in err
+    assert len(list(out.parent.glob("shot.*.obj"))) == FRAMES
+    assert _solve(files, out, "--frames", "0:10", "--force") == 0
+    names = sorted(p.name for p in out.parent.iterdir())
+    assert names == [f"shot.{k:04d}.obj" for k in range(10)]
+
+
+def test_a_folder_that_cannot_be_written_fails_before_the_solve(
+    files, tmp_path: Path, monkeypatch, capsys
+) -> None:  # type: ignore[no-untyped-def]
+    monkeypatch.setattr(lgi.Model, "solve", lambda *a, **k: pytest.fail("solved before failing"))
+    if os.geteuid() != 0:
+        locked = tmp_path / "locked"
+        locked.mkdir()
+        locked.chmod(0o555)
+        try:
+            assert _solve(files, locked / "take.usd") == 2
+        finally:
+            locked.chmod(0o755)
+        err = capsys.readouterr().err
+        assert "cannot write to the folder" in err and "permission denied" in err
+    # Root writes anywhere a permission allows; /proc refuses new files to everyone.
+    if Path("/proc").is_dir():
+        assert _solve(files, Path("/proc/take.usd")) == 2
+        err = capsys.readouterr().err
+        assert "lgi: error: --out /proc/take.usd: cannot write to the folder /proc" in err
+        assert "Tf" not in err and "Traceback" not in err
+
+
+def test_ctrl_c_during_a_deferred_block_is_raised_after_it_never_swallowed() -> None:
+    reached = []
+    with pytest.raises(KeyboardInterrupt), deferred_interrupt():
+        os.kill(os.getpid(), signal.SIGINT)
+        reached.append("the block went on")  # an import that must not be torn apart
+    assert reached == ["the block went on"]
+
+
+_DRIVER = """
+import os, signal, sys
+import lgi
+from lgi import cli
+real = lgi.Model.solve
+def solve_then_ctrl_c(*a, **k):
+    os.kill(os.getpid(), signal.SIGINT)
+    return real(*a, **k)
+if sys.argv[1] == "solve":
+    lgi.Model.solve = solve_then_ctrl_c
+else:
+    from lgi.io import usd
+    add = usd.UsdCache.add
+    calls = []
+    def add_then_ctrl_c(self, *a, **k):
+        calls.append(1)
+        if len(calls) == 2:
+            os.kill(os.getpid(), signal.SIGINT)
+        return add(self, *a, **k)
+    usd.UsdCache.add = add_then_ctrl_c
+sys.argv = ["lgi", "solve", sys.argv[2], sys.argv[3], "-o", sys.argv[4], "-q"]
+cli.entry()
+"""
+
+
+@pytest.mark.parametrize("when", ["solve", "write"])
+def test_a_real_sigint_ends_the_command_with_one_line_and_exit_130(
+    files, tmp_path: Path, when: str
+) -> None:  # type: ignore[no-untyped-def]
+    out = tmp_path / "take.usd"
+    p = subprocess.run(
+        [
+            sys.executable,
+            "-c",
+            textwrap.dedent(_DRIVER),
+            when,
+            *map(str, (files["model"], files["take"], out)),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert p.returncode == 130, p.stderr
+    assert p.stderr == "lgi: interrupted\n"
+    assert not out.exists() and _leftovers(tmp_path) == []
