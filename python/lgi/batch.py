@@ -260,6 +260,9 @@ def solve_shot(
                 allow_missing=allow_missing,
             )
             x, rate, start = t.frames, fps if fps is not None else t.fps, t.first_frame
+            from lgi.pipeline import check_take_scale
+
+            check_take_scale(t, t.frames, m, stated=take_units is not None)
         else:
             x, rate, start = take, fps, 0
         frames = int(x.shape[0])

@@ -125,7 +125,7 @@ def _cmd_rig(args: argparse.Namespace) -> int:
 
 
 def _cmd_info(args: argparse.Namespace) -> int:
-    for line in pipeline.describe(args.file, model=args.model):
+    for line in pipeline.describe(args.file, model=args.model, take_units=args.take_units):
         print(line)
     return 0
 
@@ -428,6 +428,11 @@ def _add_pipeline_commands(sub: Any) -> None:
     i.add_argument("file", metavar="FILE")
     i.add_argument(
         "--model", default=None, help="with a take: how its labels match this model's markers"
+    )
+    i.add_argument(
+        "--take-units",
+        default=None,
+        help="with a take and --model: the take's length unit when its file is silent or wrong",
     )
     i.set_defaults(func=_cmd_info)
 

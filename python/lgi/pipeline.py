@@ -28,6 +28,7 @@ from lgi.io.result import read_result_npz
 from lgi.io.sink import FrameSink
 from lgi.io.topology import Topology, topology
 from lgi.model import Model, estimate_marker_noise
+from lgi.placement import ScaleFit, check_scale, describe_scale
 
 __all__ = [
     "CHUNK_FRAMES",
@@ -293,7 +294,9 @@ def write_solved(
 
 
 def describe(
-    path: str | os.PathLike[str], model: str | os.PathLike[str] | None = None
+    path: str | os.PathLike[str],
+    model: str | os.PathLike[str] | None = None,
+    take_units: str | None = None,
 ) -> list[str]:
     """`lgi info`: a few lines summarising a model (`.lgi`), a take, a solved `.npz` or a USD
     file; for a take with `model` (`--model`), how its labels match the model's markers."""
@@ -362,7 +365,9 @@ def describe(
             *(
                 []
                 if model is None
-                else _matching(raw, Model.load(existing_file(os.fspath(model), "--model")))
+                else _matching(
+                    raw, Model.load(existing_file(os.fspath(model), "--model")), take_units
+                )
             ),
         ]
     if suffix in (".usd", ".usdc", ".usda"):
@@ -390,11 +395,33 @@ def describe(
     )
 
 
-def _matching(raw: takes.RawTake, model: Model) -> list[str]:
-    """How a take's labels meet a model's marker names (`lgi info TAKE --model MODEL`)."""
+def check_take_scale(
+    t: takes.Take, frames: np.ndarray, m: Model, *, stated: bool
+) -> ScaleFit | None:
+    """`lgi.placement.check_scale` of a take read for model `m` (its frames `frames`)."""
+    return check_scale(
+        frames,
+        m.markers_rest,
+        path=t.path,
+        file_units=t.source_units,
+        model_units=m.units,
+        stated=stated,
+    )
+
+
+def _matching(raw: takes.RawTake, model: Model, take_units: str | None = None) -> list[str]:
+    """How a take's labels meet a model's marker names, and its size against the model's
+    layout (`lgi info TAKE --model MODEL`)."""
     _, absent, unknown = takes.label_columns(raw, model.marker_names)
     if not absent and not unknown:
-        return [f"  matches the model's {model.num_bundles} markers by name"]
+        t = takes.read(raw.path, model.marker_names, units=model.units, take_units=take_units)
+        try:
+            size = describe_scale(
+                check_take_scale(t, t.frames, model, stated=take_units is not None)
+            )
+        except InputError as e:
+            size = f"  size: refused by lgi solve: {e}"
+        return [f"  matches the model's {model.num_bundles} markers by name", size]
     out = []
     if absent:
         out.append(f"  model markers not in the take ({len(absent)}): {', '.join(absent)}")
@@ -502,6 +529,7 @@ def solve_file(
         say(f"left out {len(t.ignored)} labels unknown to the model: {', '.join(t.ignored)}")
     rng = frame_range(frames, t.num_frames)
     x = t.frames[rng]
+    check_take_scale(t, x, m, stated=take_units is not None)
     head = None if t.head is None else t.head[rng]
     rate = frame_rate(fps, t.fps, kind)
     sigma = marker_noise(noise, x)
