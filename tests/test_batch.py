@@ -112,7 +112,7 @@ def test_a_corrupt_take_and_an_infinite_marker_fail_alone_and_are_in_the_manifes
     shots = manifest["shots"]
     assert sorted(shots) == ["sh010", "sh020", "sh030", "sh040", "sh050"]
     assert shots["sh030"]["status"] == "failed"
-    assert "not a readable C3D file" in shots["sh030"]["error"]
+    assert "not a C3D file" in shots["sh030"]["error"]
     assert "sh030.c3d" in shots["sh030"]["error"]
     assert shots["sh050"]["status"] == "failed"
     assert shots["sh050"]["error"].startswith("InputError")

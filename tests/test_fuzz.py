@@ -383,3 +383,107 @@ def test_fuzzed_build_configs_build_a_model_that_solves_finite_or_raise_an_lgi_e
     res = model.solve(s.markers_rest[None], quiet=True)
     assert np.isfinite(res.vertices).all()
     _count("build config", "built with a warning" if warned else "built")
+
+
+# -- takes on set: TRC frame numbering, cut rows, corrupt C3D bytes, the size check -------------
+
+
+@FUZZ
+@given(
+    steps=st.lists(st.integers(-2, 4), min_size=1, max_size=12),
+    cut=st.integers(0, 40),
+)
+def test_fuzzed_trc_frame_numbers_and_cut_rows_read_in_order_or_raise_input_error(
+    tmp_path_factory: pytest.TempPathFactory, steps: list[int], cut: int
+) -> None:
+    from lgi.io import takes
+
+    numbers = [1]
+    for s in steps:
+        numbers.append(numbers[-1] + s)
+    lines = [
+        "PathFileType\t4\t(X/Y/Z)\tf.trc",
+        "DataRate\tNumFrames\tUnits",
+        f"100\t{len(numbers)}\tmm",
+        "Frame#\tTime\ta\t\t\tb\t\t",
+        "\t\tX1\tY1\tZ1\tX2\tY2\tZ2",
+        "",
+    ]
+    lines += [f"{k}\t{(k - 1) / 100:.4f}\t1\t2\t3\t4\t5\t6" for k in numbers]
+    text = "\n".join(lines)
+    p = tmp_path_factory.mktemp("trc") / "f.trc"
+    p.write_text(text[: len(text) - cut])
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", lgi.LgiWarning)
+            raw = takes.read_raw(p)
+    except lgi.InputError as e:
+        assert str(p) in str(e)
+        _count("trc", "refused")
+        return
+    # Read: the first and last rows are frames, gaps between them missing frames.
+    present = ~np.isnan(raw.points).any(axis=2).all(axis=1)
+    assert present[0] and present[-1] and present.sum() <= len(numbers)
+    _count("trc", "read")
+
+
+@FUZZ
+@given(
+    edits=st.lists(
+        st.tuples(st.floats(0, 1, exclude_max=True), st.binary(min_size=1, max_size=4)),
+        min_size=1,
+        max_size=4,
+    )
+)
+def test_fuzzed_c3d_bytes_read_as_a_take_or_raise_input_error(
+    tmp_path_factory: pytest.TempPathFactory, edits: list[tuple[float, bytes]]
+) -> None:
+    from lgi.io import takes
+    from pipeline_files import write_c3d
+
+    tmp = tmp_path_factory.mktemp("c3d")
+    good = tmp / "good.c3d"
+    frames = np.arange(5 * 4 * 3, dtype=np.float64).reshape(5, 4, 3)
+    write_c3d(good, frames, ["a", "b", "c", "d"], 100.0, "mm")
+    data = bytearray(good.read_bytes())
+    for at, b in edits:
+        i = int(at * (len(data) - len(b)))
+        data[i : i + len(b)] = b
+    p = tmp / "fuzz.c3d"
+    p.write_bytes(bytes(data))
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", lgi.LgiWarning)
+            raw = takes.read_raw(p)
+    except lgi.InputError as e:
+        assert str(p) in str(e) and "ignoreBadFormatting" not in str(e)
+        _count("c3d", "refused")
+        return
+    assert raw.points.ndim == 3 and raw.points.shape[2] == 3
+    assert len(raw.labels) == raw.points.shape[1]
+    _count("c3d", "read")
+
+
+@FUZZ
+@given(
+    values=st.lists(
+        st.floats(allow_nan=True, allow_infinity=True, width=32), min_size=3 * 6, max_size=3 * 6
+    ),
+    frames=st.integers(1, 3),
+)
+def test_fuzzed_takes_pass_the_size_check_or_raise_input_error(
+    values: list[float], frames: int
+) -> None:
+    from lgi.placement import check_scale
+
+    rest = _small()[0].markers_rest[:6]
+    x = np.tile(np.asarray(values, dtype=np.float64).reshape(1, 6, 3), (frames, 1, 1))
+    x[np.isinf(x).any(axis=2)] = np.nan  # the magnitude policy refuses infinities first
+    try:
+        fit = check_scale(x, rest, path="t", file_units="cm", model_units="cm")
+    except lgi.InputError as e:
+        assert "x the size of the model's layout" in str(e)
+        _count("size check", "refused")
+        return
+    assert fit is None or np.isfinite(fit.factor)
+    _count("size check", "passed")

@@ -79,7 +79,8 @@ def test_lgi_solve_writes_a_usd_cache_whose_samples_equal_model_solve(
     np.testing.assert_array_equal(counts, actor.counts)
     points = mesh.GetPointsAttr()
     times = points.GetTimeSamples()
-    assert times == [float(t) for t in range(take_frames.shape[0])]
+    # Time codes start at the C3D header's first frame (1, as a TRC's Frame# would count).
+    assert times == [float(t) for t in range(1, take_frames.shape[0] + 1)]
     for f, t in enumerate(times):
         got = np.array(points.Get(t), dtype=np.float64)
         np.testing.assert_allclose(got, ref.vertices[f], rtol=0, atol=1e-6 * model.diagonal)
@@ -98,19 +99,19 @@ def test_lgi_export_turns_the_solved_npz_into_usd_and_an_obj_sequence_with_the_s
     r = lgi_cli("solve", model_path, c3d, "-o", npz, "--frames", "5:9", "-q")
     assert r.returncode == 0, r.stderr
     res = lgi.io.result.read_result_npz(npz)
-    assert res.vertices.shape[0] == 4 and res.start == 5 and res.fps == FPS
+    assert res.vertices.shape[0] == 4 and res.start == 6 and res.fps == FPS  # take frame 1 + 5
     usd = tmp_path / "again.usda"
     assert lgi_cli("export", npz, "-o", usd, "-q").returncode == 0
     stage = Usd.Stage.Open(str(usd))
     points = UsdGeom.Mesh(stage.GetPrimAtPath("/Face/Mesh")).GetPointsAttr()
-    assert points.GetTimeSamples() == [5.0, 6.0, 7.0, 8.0]
-    np.testing.assert_array_equal(np.array(points.Get(7.0)), res.vertices[2])
+    assert points.GetTimeSamples() == [6.0, 7.0, 8.0, 9.0]
+    np.testing.assert_array_equal(np.array(points.Get(8.0)), res.vertices[2])
     objs = tmp_path / "objs" / "shot.obj"
     objs.parent.mkdir()
     r = lgi_cli("export", npz, "-o", objs, "-q")
     assert r.returncode == 0, r.stderr
     written = sorted(objs.parent.glob("shot.*.obj"))
-    assert [p.name for p in written] == [f"shot.{f:04d}.obj" for f in range(5, 9)]
+    assert [p.name for p in written] == [f"shot.{f:04d}.obj" for f in range(6, 10)]
     back = lgi.Dataset.from_obj(written[1])
     np.testing.assert_array_equal(back.polygons[0], actor.counts)
     np.testing.assert_allclose(back.neutral, res.vertices[1], rtol=0, atol=1e-6)
@@ -158,9 +159,9 @@ def test_ict_through_the_cli_keeps_its_quads_in_the_usd_and_matches_model_solve(
     np.testing.assert_array_equal(counts, corners)
     assert (counts == 4).sum() == 25836 and (counts == 3).sum() == 548
     points = mesh.GetPointsAttr()
-    assert points.GetTimeSamples() == [float(t) for t in range(6)]
+    assert points.GetTimeSamples() == [float(t) for t in range(1, 7)]
     for f in range(6):
-        got = np.array(points.Get(f), dtype=np.float64)
+        got = np.array(points.Get(f + 1), dtype=np.float64)
         np.testing.assert_allclose(got, ref.vertices[f], rtol=0, atol=1e-6 * model.diagonal)
 
 

@@ -176,7 +176,7 @@ def test_npz_take_reads_back_and_a_csv_without_units_is_taken_in_the_models_unit
         ("t.csv", "frame,a_x,a_y,a_z\n0,1,x,3\n", "line 2: a value is not a number"),
         ("t.csv", "frame,a_x,a_y,a_z\n0,1,2\n", "line 2: 3 columns"),
         ("t.csv", "frame,a_x,a_y,a_z\n0,1,inf,3\n", "line 2: infinite"),
-        ("t.c3d", "garbage" * 20, "not a readable C3D file"),
+        ("t.c3d", "garbage" * 20, "truncated C3D file: 140 bytes"),
         ("t.npz", "garbage", "not a readable take"),
         ("t.bvh", "x", "unknown take format '.bvh'"),
     ],

@@ -20,6 +20,7 @@ import numpy as np
 
 from lgi._lgi import BuildConfig, SolveResult
 from lgi.dataset import Dataset
+from lgi.diagnose import diagnose, diagnose_result, summary
 from lgi.errors import InputError, MarkerError
 from lgi.io import takes
 from lgi.io.atomic import check_writable, existing_sequence, refuse_existing
@@ -343,13 +344,26 @@ def describe(
             ]
         if "vertices" in files:
             r = read_result_npz(path)
+            found = diagnose_result(r)
             return [
                 f"solved take {path}",
                 f"  frames: {r.vertices.shape[0]} from time code {r.start}, "
                 f"fps {r.fps if r.fps is not None else 'unknown'}",
                 f"  mesh: {r.vertices.shape[1]} vertices, {r.topology.num_faces} faces",
-                f"  markers: {len(r.marker_names)}, residual max {r.bundle_residuals.max():.3g}",
+                f"  markers: {len(r.marker_names)}",
                 f"  units: {r.units or 'not given'}",
+                *(
+                    f"  {line}"
+                    for line in summary(
+                        r.bundle_residuals,
+                        r.missing,
+                        r.marker_names,
+                        found,
+                        start=r.start,
+                        units=r.units,
+                        shown=6,
+                    )
+                ),
             ]
     if suffix in takes.TAKE_SUFFIXES:
         raw = takes.read_raw(path)
@@ -393,6 +407,16 @@ def describe(
         f"{path}: unknown file kind {suffix or '(no suffix)'!r}; lgi info reads .lgi models, "
         f"takes ({', '.join(takes.TAKE_SUFFIXES)}), solved .npz and USD files"
     )
+
+
+def _say_findings(
+    say: Say, residuals: np.ndarray, missing: np.ndarray, markers: np.ndarray, m: Model, start: int
+) -> None:
+    """The solve's summary (`lgi.diagnose`): residuals, then flagged markers and frames."""
+    names = m.marker_names
+    found = diagnose(residuals, missing, names, size=m.diagonal, markers=markers)
+    for line in summary(residuals, missing, names, found, start=start, units=m.units):
+        say(line)
 
 
 def check_take_scale(
@@ -547,6 +571,7 @@ def solve_file(
         written = write_solved(
             kind, dest, topo, res, m, fps=rate, start=start, head=head, markers=x, quiet=quiet
         )
+        _say_findings(say, res.bundle_residuals, res.missing, x, m, start)
         return written, int(x.shape[0])
     from tqdm import tqdm
 
@@ -556,10 +581,13 @@ def solve_file(
     # Each chunk continues the temporal solve from the last frame of the one before
     # (`Model.solve_iter`): the chunks together are one `solve` of the range.
     chunks = m.solve_iter(x, chunk=size, jaw=jaw_mode, marker_noise=sigma, quiet=True, out=buf)
+    residuals, absent = [], []
     try:
         with tqdm(total=n, desc="lgi solve", unit="frame", disable=quiet, leave=False) as bar:
             for a, res in zip(range(0, n, size), chunks, strict=True):
                 b = min(n, a + size)
+                residuals.append(res.bundle_residuals.copy())
+                absent.append(res.missing.copy())
                 sink.add(
                     res.vertices,
                     res.bundle_residuals,
@@ -569,10 +597,12 @@ def solve_file(
                     x[a:b],
                 )
                 bar.update(b - a)
-        return sink.close(), n
+        written = sink.close()
     except BaseException:
         sink.abort()
         raise
+    _say_findings(say, np.concatenate(residuals), np.concatenate(absent), x, m, start)
+    return written, n
 
 
 def export_file(

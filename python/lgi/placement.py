@@ -64,7 +64,9 @@ def take_scale(frames: ArrayLike, rest: ArrayLike) -> ScaleFit | None:
         if not use.any():
             continue
         d = np.linalg.norm(x[f, i[use]] - x[f, j[use]], axis=1)
-        factors.append(float(np.median(d / rest_d[use])))
+        ratio = float(np.median(d / rest_d[use]))
+        if np.isfinite(ratio):
+            factors.append(ratio)
         if len(factors) == FRAMES_LOOKED_AT:
             break
     if not factors:
@@ -77,6 +79,8 @@ def take_scale(frames: ArrayLike, rest: ArrayLike) -> ScaleFit | None:
 def _likely_unit(factor: float, declared: str) -> str | None:
     """The unit that, read instead of `declared`, brings `factor` nearest 1 (within the
     tolerance), or None."""
+    if not (np.isfinite(factor) and factor > 0):
+        return None
     best, best_err = None, np.log(SCALE_TOLERANCE)
     for u in METERS_PER_UNIT:
         if u == declared:

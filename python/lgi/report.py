@@ -434,13 +434,16 @@ def write_report(
         )
         solved = solved_job.result()
         reference = None if reference_job is None else reference_job.result()
+    from lgi.diagnose import diagnose_result
+
+    found = [f.describe(solved.start, solved.units) for f in diagnose_result(solved)]
     text = render_report(
         solved,
         source=os.fspath(solved_path),
         reference=reference,
         reference_label=os.path.basename(os.fspath(reference_path or "")),
         take_noise=take_noise,
-        findings=findings,
+        findings=[*found, *findings],
     )
     target = Path(out)
     with atomic_path(target) as tmp:

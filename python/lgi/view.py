@@ -213,17 +213,21 @@ def serve(data: ViewData, *, port: int = 0) -> tuple[ThreadingHTTPServer, str]:
     """Starts the viewer's server on 127.0.0.1 (`port` 0: any free port) in a daemon thread;
     returns it and its address. `/report.html` is `lgi report`'s page of the take, its worst
     frames linking back to the viewer."""
+    from lgi.diagnose import diagnose_result
     from lgi.report import render_report
 
     def report() -> str:
         data.wait(data.num_frames)
         data.reference_wait(data.num_frames)
+        s = data.solved
+        found = [f.describe(s.start, s.units) for f in diagnose_result(s)]
         return render_report(
             data.solved,
             source=data.source,
             reference=data.reference,
             reference_label=data.reference_label,
             viewer_url="/",
+            findings=found,
         )
 
     try:

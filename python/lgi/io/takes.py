@@ -7,15 +7,17 @@ matched to the model's marker names and their units converted to the model's
 
 from __future__ import annotations
 
+import itertools
 import os
 import struct
+import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
 
-from lgi.errors import InputError
+from lgi.errors import InputError, LgiWarning
 from lgi.io.csv_rows import read_csv_rows
 from lgi.io.units import convert_units, normalize_unit
 
@@ -165,11 +167,15 @@ def read_c3d(path: str | os.PathLike[str]) -> RawTake:
         raise InputError(f"{p}: reading C3D needs the ezc3d package (pip install ezc3d)") from None
     if not os.path.isfile(p):
         raise InputError(f"{p}: no such take file")
+    if os.path.getsize(p) == 0:
+        raise InputError(f"{p}: the file is empty")
     try:
         c = ezc3d.c3d(p)
-    except Exception as e:  # ezc3d raises RuntimeError/IOError/ValueError for bad files
-        raise InputError(f"{p}: not a readable C3D file: {e}") from None
-    _check_c3d_frames(p, int(np.shape(c["data"]["points"])[-1]))
+    except Exception:  # ezc3d refuses some real writers' files (OptiTrack, BTK's tests)
+        return _read_c3d_ourselves(p)
+    if int(np.shape(c["data"]["points"])[1]) == 0:
+        raise InputError(f"{p}: the C3D file holds no 3D marker points (only analog data)")
+    header_first = _check_c3d_frames(p, int(np.shape(c["data"]["points"])[-1]))
     point = c["parameters"]["POINT"]
     labels: list[str] = []
     for key in ["LABELS", *(f"LABELS{k}" for k in range(2, 100))]:
@@ -192,11 +198,34 @@ def read_c3d(path: str | os.PathLike[str]) -> RawTake:
     units = str(units_v[0]).strip() if len(units_v) and str(units_v[0]).strip() else None
     rate_v = point["RATE"]["value"] if "RATE" in point else []
     fps = float(rate_v[0]) if len(rate_v) and float(rate_v[0]) > 0 else None
-    first = int(c["header"]["points"].get("first_frame", 0))
+    # The file's own (1-based) number of its first frame, as a TRC's Frame# counts: ezc3d
+    # reports it 0-based, so the same take as C3D and TRC would be a frame apart.
+    first = (
+        header_first
+        if header_first is not None
+        else int(c["header"]["points"].get("first_frame", 0)) + 1
+    )
     return RawTake(labels[:n], xyz, fps, units, p, first)
 
 
-def _check_c3d_frames(p: str, read: int) -> None:
+def _read_c3d_ourselves(p: str) -> RawTake:
+    """The file ezc3d refused, read by `lgi.io.c3d_format` (the format's own description,
+    tolerant of the defects BTK reads past, each said in a warning); its `InputError` names
+    the defect when the file cannot be read at all."""
+    from lgi.io.c3d_format import read_c3d_file
+
+    c = read_c3d_file(p)
+    if c.defects:
+        more = f" (and {len(c.defects) - 1} more)" if len(c.defects) > 1 else ""
+        warnings.warn(
+            f"{p}: read past a defect in the file: {c.defects[0]}{more}",
+            LgiWarning,
+            stacklevel=3,
+        )
+    return RawTake(c.labels, c.points, c.fps, c.units, p, c.first_frame)
+
+
+def _check_c3d_frames(p: str, read: int) -> int | None:
     """Refuses a C3D file with fewer frames than its header's first and last frame give (a
     truncated copy: ezc3d reads what is there and rewrites its header and `POINT:FRAMES` to
     match, so only the file's own header bytes tell). Header words 4 and 5, in the byte
@@ -208,7 +237,7 @@ def _check_c3d_frames(p: str, read: int) -> None:
         f.seek(max(block - 1, 0) * 512)
         params = f.read(4)
     if len(head) < 10 or len(params) < 4:
-        return
+        return None
     order = ">" if params[3] == 86 else "<"
     first, last = struct.unpack(f"{order}HH", head[6:10])
     expected = last - first + 1
@@ -217,21 +246,34 @@ def _check_c3d_frames(p: str, read: int) -> None:
             f"{p}: truncated C3D file: its header gives frames {first}-{last} ({expected}), "
             f"only {read} are in the file"
         )
+    return int(first)
 
 
 def read_trc(path: str | os.PathLike[str]) -> RawTake:
     """Reads a TRC file (Motion Analysis / OpenSim, tab-separated): line 2 names the fields
-    of line 3 (`DataRate`, `Units`, ...), line 4 is `Frame#`, `Time` and one name per marker
-    (each over 3 columns), line 5 the `X1 Y1 Z1 ...` headers, then one row per frame; empty
-    cells are missing samples."""
+    of line 3 (`DataRate`, `NumFrames`, `Units`, ...), line 4 is `Frame#`, `Time` and one name
+    per marker (each over 3 columns), line 5 the `X1 Y1 Z1 ...` headers, then one row per
+    frame; empty cells are missing samples. Time is kept: `Frame#` numbers the frames (a gap
+    becomes missing frames at their numbers, with an `LgiWarning`; a repeated or backward
+    number is an error), `Time` must agree with it at `DataRate`, a row with fewer columns
+    than the markers need (a cut row) and a `NumFrames` that is not the rows' count are
+    errors naming the line. Values past the named markers (some writers leave unnamed
+    columns) are not read, with a warning."""
     p = os.fspath(path)
     try:
-        with open(p, encoding="utf-8") as fh:
+        with open(p, encoding="utf-8-sig") as fh:
             lines = fh.read().splitlines()
     except (OSError, UnicodeDecodeError) as e:
         raise InputError(f"{p}: cannot read a TRC file: {e}") from None
-    if len(lines) < 5 or not lines[0].startswith("PathFileType"):
+    if not lines or not any(line.strip() for line in lines):
+        raise InputError(f"{p}: the file is empty")
+    if not lines[0].startswith("PathFileType"):
         raise InputError(f"{p}: not a TRC file (line 1 must start with 'PathFileType')")
+    if len(lines) < 5:
+        raise InputError(
+            f"{p}: truncated TRC file: it ends at line {len(lines)}, inside the header (a TRC "
+            "file has 5 header lines before the frames)"
+        )
     keys = [k.strip() for k in lines[1].split("\t")]
     vals = [v.strip() for v in lines[2].split("\t")]
     meta = dict(zip(keys, vals, strict=False))
@@ -240,31 +282,125 @@ def read_trc(path: str | os.PathLike[str]) -> RawTake:
         raise InputError(f"{p}, line 4: expected 'Frame#', 'Time' and the marker names")
     labels = [h.strip() for h in head[2:] if h.strip()]
     n = len(labels)
+    try:
+        fps = float(meta["DataRate"]) if meta.get("DataRate") else None
+    except ValueError:
+        raise InputError(f"{p}, line 3: DataRate {meta['DataRate']!r} is not a number") from None
+    declared_markers = _header_count(p, meta, "NumMarkers")
+    if declared_markers is not None and declared_markers != n:
+        warnings.warn(
+            f"{p}: line 3 gives NumMarkers {declared_markers}, line 4 names {n} markers; "
+            f"the {n} named ones are read",
+            LgiWarning,
+            stacklevel=2,
+        )
+    need = 2 + 3 * n
     rows: list[list[float]] = []
-    frame_numbers: list[int] = []
+    numbers: list[int] = []
+    times: list[tuple[int, float]] = []
+    extra = 0
     for i, raw in enumerate(lines[5:]):
         line = i + 6
         if not raw.strip():
             continue
         cells = raw.split("\t")
-        if len(cells) < 2 + 3 * n:
-            cells += [""] * (2 + 3 * n - len(cells))
+        if len(cells) < need and any(c.strip() for c in cells):
+            raise InputError(
+                f"{p}, line {line}: the row has {len(cells)} of {need} columns ({n} markers): "
+                "a cut row"
+            )
+        if any(c.strip() for c in cells[need:]):
+            extra = max(extra, len(cells))
         try:
-            frame_numbers.append(int(float(cells[0])))
-            rows.append([float(c) if c.strip() else np.nan for c in cells[2 : 2 + 3 * n]])
+            number = float(cells[0])
+            if number != int(number):
+                raise ValueError
+            rows.append([float(c) if c.strip() else np.nan for c in cells[2:need]])
         except ValueError:
             raise InputError(f"{p}, line {line}: a value is not a number") from None
+        if numbers and int(number) <= numbers[-1]:
+            raise InputError(
+                f"{p}, line {line}: Frame# {int(number)} after {numbers[-1]}: frame numbers "
+                "must increase"
+            )
+        numbers.append(int(number))
+        if cells[1].strip():
+            try:
+                times.append((line, float(cells[1])))
+            except ValueError:
+                raise InputError(f"{p}, line {line}: Time {cells[1]!r} is not a number") from None
+        else:
+            times.append((line, np.nan))
     if not rows:
         raise InputError(f"{p}: the take has no frames")
-    xyz = np.array(rows, dtype=np.float64).reshape(len(rows), n, 3)
+    declared_frames = _header_count(p, meta, "NumFrames")
+    if declared_frames is not None and declared_frames != len(rows):
+        raise InputError(
+            f"{p}, line 3: NumFrames is {declared_frames} but the file holds {len(rows)} frame "
+            "rows: a truncated or edited file"
+        )
+    if extra:
+        warnings.warn(
+            f"{p}: rows carry values past the {n} markers named in line 4 (up to column "
+            f"{extra}); those columns have no names and are not read",
+            LgiWarning,
+            stacklevel=2,
+        )
+    _check_trc_times(p, numbers, times, fps)
+    first, last = numbers[0], numbers[-1]
+    xyz = np.full((last - first + 1, n, 3), np.nan)
+    xyz[np.asarray(numbers) - first] = np.array(rows, dtype=np.float64).reshape(len(rows), n, 3)
+    if len(rows) < xyz.shape[0]:
+        gaps = _gaps(numbers)
+        shown = ", ".join(f"{a}-{b}" if a != b else f"{a}" for a, b in gaps[:3])
+        warnings.warn(
+            f"{p}: Frame# skips {xyz.shape[0] - len(rows)} frames ({shown}"
+            f"{', ...' if len(gaps) > 3 else ''}); they are missing frames at their time codes",
+            LgiWarning,
+            stacklevel=2,
+        )
     if np.isinf(xyz).any():
         raise InputError(f"{p}: infinite coordinate")
-    try:
-        fps = float(meta["DataRate"]) if meta.get("DataRate") else None
-    except ValueError:
-        raise InputError(f"{p}, line 3: DataRate {meta['DataRate']!r} is not a number") from None
     units = meta.get("Units") or None
-    return RawTake(labels, xyz, fps, units, p, frame_numbers[0])
+    return RawTake(labels, xyz, fps, units, p, first)
+
+
+def _header_count(p: str, meta: dict[str, str], key: str) -> int | None:
+    """A whole-number field of a TRC's line 3 (`NumFrames`, `NumMarkers`), None if absent."""
+    v = meta.get(key, "").strip()
+    if not v:
+        return None
+    try:
+        return int(v)
+    except ValueError:
+        raise InputError(f"{p}, line 3: {key} {v!r} is not a whole number") from None
+
+
+def _gaps(numbers: list[int]) -> list[tuple[int, int]]:
+    """Runs of frame numbers absent between consecutive `numbers`."""
+    return [(a + 1, b - 1) for a, b in itertools.pairwise(numbers) if b - a > 1]
+
+
+def _check_trc_times(
+    p: str, numbers: list[int], times: list[tuple[int, float]], fps: float | None
+) -> None:
+    """Each row's `Time` must be the first row's plus (Frame# - first Frame#) / DataRate,
+    to half a frame: a `Time` that disagrees means the frame numbers cannot be trusted."""
+    if fps is None or fps <= 0:
+        return
+    t0 = next((t for _, t in times if np.isfinite(t)), None)
+    if t0 is None:
+        return
+    k0 = numbers[next(k for k, (_, t) in enumerate(times) if np.isfinite(t))]
+    for number, (line, t) in zip(numbers, times, strict=True):
+        if not np.isfinite(t):
+            continue
+        want = t0 + (number - k0) / fps
+        if abs(t - want) > 0.5 / fps:
+            raise InputError(
+                f"{p}, line {line}: Time {t:g} s does not match Frame# {number} at "
+                f"{fps:g} frames per second ({want:g} s)"
+            )
 
 
 _AXES = ("x", "y", "z")
@@ -433,6 +569,51 @@ def label_columns(
     return cols, absent, unknown
 
 
+SHOWN_LABELS = 8
+"""Labels an error lists before "... and N more"."""
+
+
+def _some(labels: Sequence[str]) -> str:
+    shown = ", ".join(labels[:SHOWN_LABELS])
+    more = len(labels) - SHOWN_LABELS
+    return shown + (f", ... and {more} more" if more > 0 else "")
+
+
+def label_hint(unknown: Sequence[str], names: Sequence[str]) -> str | None:
+    """Why a take's labels miss the layout when the reason is mechanical: a common prefix
+    or suffix (`Actor1_m000`, `m000_R`), a separator, or letter case. None otherwise."""
+    wanted = set(names)
+    if not unknown:
+        return None
+    lowered = {n.lower(): n for n in names}
+    if sum(lab.lower() in lowered for lab in unknown) >= len(unknown) / 2:
+        return "the labels differ from the layout's names only in letter case: rename them"
+    best: tuple[int, str, str] = (0, "", "")
+    for side in ("prefix", "suffix"):
+        counts: dict[str, int] = {}
+        for lab in unknown:
+            for n in wanted:
+                if len(lab) > len(n) and (
+                    lab.endswith(n) if side == "prefix" else lab.startswith(n)
+                ):
+                    cut = lab[: len(lab) - len(n)] if side == "prefix" else lab[len(n) :]
+                    counts[cut] = counts.get(cut, 0) + 1
+        for cut, k in counts.items():
+            if k > best[0]:
+                best = (k, side, cut)
+    k, side, cut = best
+    if k < max(1, len(unknown) // 2):
+        return None
+    example = next(
+        lab for lab in unknown if (lab.startswith(cut) if side == "prefix" else lab.endswith(cut))
+    )
+    return (
+        f"{k} of the {len(unknown)} unknown labels are layout names with the {side} {cut!r} "
+        f"(e.g. {example!r}): remove it from the take's labels, or name the layout's markers "
+        "with it"
+    )
+
+
 def match_layout(
     raw: RawTake, names: Sequence[str], allow_missing: bool = False
 ) -> tuple[F64, tuple[str, ...]]:
@@ -444,13 +625,15 @@ def match_layout(
     if (absent or unknown) and not allow_missing:
         parts = []
         if absent:
-            parts.append(f"{len(absent)} layout markers are not in the take: {', '.join(absent)}")
+            parts.append(f"{len(absent)} layout markers are not in the take: {_some(absent)}")
         if unknown:
-            parts.append(f"{len(unknown)} take labels are not in the layout: {', '.join(unknown)}")
+            parts.append(f"{len(unknown)} take labels are not in the layout: {_some(unknown)}")
+        hint = label_hint(unknown, names)
         raise InputError(
-            f"{raw.path}: labels do not match the model's markers: {'; '.join(parts)} "
-            "(allow_missing / --allow-missing solves with the absent markers missing and the "
-            "unknown labels left out)"
+            f"{raw.path}: labels do not match the model's markers: {'; '.join(parts)}"
+            + (f". {hint}" if hint else "")
+            + " (allow_missing / --allow-missing solves with the absent markers missing and "
+            "the unknown labels left out)"
         )
     out = np.full((raw.points.shape[0], len(names), 3), np.nan)
     for b, c in enumerate(cols):

@@ -1,0 +1,280 @@
+"""Which markers misbehaved, and when: after a solve, marker samples whose residual (with
+`--marker-noise`, the correction the solve applied) is an outlier for the take's own spread
+are gathered per marker into frame ranges, short ones called spikes; two markers off over the
+same frames whose positions fit each other's tracks at the range's edges are a likely label
+swap. The rule (docs/reliability.md): a sample is an outlier when its residual exceeds the
+median of all present samples by `OUTLIER_MADS` scaled median absolute deviations, and is
+at least `FLOOR` of the face's size (an exact solve's residuals are round-off)."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from lgi.io.result import Result
+
+__all__ = [
+    "FLOOR",
+    "OUTLIER_MADS",
+    "SPIKE_FRAMES",
+    "Finding",
+    "diagnose",
+    "diagnose_result",
+    "summary",
+]
+
+OUTLIER_MADS = 8.0
+"""How many scaled MADs (1.4826 x MAD: sigma for Gaussian residuals) above the median a
+residual must be to count (measured false-positive rate on clean takes: docs/reliability.md)."""
+
+FLOOR = 1e-3
+"""Smallest outlier residual, as a share of the face's size: 0.25 mm on a 25 cm face."""
+
+SPIKE_FRAMES = 5
+"""A marker off for at most this many frames is a spike; longer, a marker off."""
+
+_GAP = 1
+"""Frames a range may skip and stay one range (a sample that dips under the threshold)."""
+
+
+@dataclass(frozen=True)
+class Finding:
+    """One thing wrong with a take: `kind` is "swap", "spike", "off" or "cut" (the whole face
+    jumps); frames are indices
+    into the solve (0-based, inclusive); `worst` is the largest residual, in the take's
+    unit."""
+
+    kind: str
+    markers: tuple[str, ...]
+    first: int
+    last: int
+    worst: float
+
+    def describe(self, start: int = 0, units: str | None = None) -> str:
+        u = f" {units}" if units else ""
+        span = (
+            f"time code {start + self.first}"
+            if self.first == self.last
+            else f"time codes {start + self.first}-{start + self.last}"
+        )
+        if self.kind == "cut":
+            return f"the whole face jumps at {span}: a cut in the take or a tracking glitch"
+        if self.kind == "swap":
+            a, b = self.markers
+            return f"likely label swap: {a} <-> {b}, {span} (residuals up to {self.worst:.3g}{u})"
+        what = "spike" if self.kind == "spike" else "marker off"
+        return f"{what}: {self.markers[0]}, {span} (residual up to {self.worst:.3g}{u})"
+
+
+def _runs(flags: NDArray[np.bool_]) -> list[tuple[int, int]]:
+    """Inclusive frame ranges where `flags` holds, joined across gaps of `_GAP` frames."""
+    idx = np.flatnonzero(flags)
+    if idx.size == 0:
+        return []
+    runs = [[int(idx[0]), int(idx[0])]]
+    for k in idx[1:].tolist():
+        if k - runs[-1][1] <= _GAP + 1:
+            runs[-1][1] = k
+        else:
+            runs.append([k, k])
+    return [(a, b) for a, b in runs]
+
+
+def _threshold(r: NDArray[np.float64], size: float) -> float:
+    vals = r[np.isfinite(r)]
+    if vals.size == 0:
+        return np.inf
+    med = float(np.median(vals))
+    mad = 1.4826 * float(np.median(np.abs(vals - med)))
+    return max(med + OUTLIER_MADS * mad, FLOOR * size)
+
+
+def _swapped(x: NDArray[np.float64], a: int, b: int, first: int, last: int) -> bool:
+    """Whether markers `a` and `b` trade tracks over frames first..last: at an edge of the
+    range where both are seen on both sides, each one's position is nearer the other's on the
+    far side than its own."""
+    votes = []
+    for inside, outside in ((first, first - 1), (last, last + 1)):
+        if not 0 <= outside < x.shape[0]:
+            continue
+        pa, pb, qa, qb = x[inside, a], x[inside, b], x[outside, a], x[outside, b]
+        if np.isnan([pa, pb, qa, qb]).any():
+            continue
+        same = np.linalg.norm(pa - qa) + np.linalg.norm(pb - qb)
+        traded = np.linalg.norm(pa - qb) + np.linalg.norm(pb - qa)
+        votes.append(traded < 0.5 * same)
+    return bool(votes) and all(votes)
+
+
+JUMP_MADS = 12.0
+"""How many scaled MADs above the median frame-to-frame step a marker's step must be to be a
+jump (a sample leaving or rejoining its track)."""
+
+JUMP_FLOOR = 0.02
+"""Smallest jump, as a share of the face's size: 1 cm on ICT's 47.5 cm head."""
+
+
+FACE_SHARE = 0.1
+"""Share of the markers that, jumping at one frame, make it the face's motion, not theirs."""
+
+CUT_SHARE = 0.5
+"""Share of the markers that, jumping at one frame, is reported as a cut in the take."""
+
+
+def _is_spike(track: NDArray[np.float64], first: int, last: int) -> bool:
+    """Whether a marker's excursion over first..last is a spike: short, and back where it left
+    (the jump back lands within half the jump away of the frame before)."""
+    if last - first + 1 > SPIKE_FRAMES or first == 0 or last + 1 >= track.shape[0]:
+        return False
+    before, away, back = track[first - 1], track[first], track[last + 1]
+    if np.isnan([before, away, back]).any():
+        return False
+    return bool(np.linalg.norm(back - before) < 0.5 * np.linalg.norm(away - before))
+
+
+def _track_ranges(x: NDArray[np.float64], size: float) -> dict[int, list[tuple[int, int]]]:
+    """Per marker, the frame ranges it spends off its track: from a jump away to the jump
+    back, read from the take alone, so an exact solve, whose residuals
+    are zero, still shows them."""
+    f, b = x.shape[:2]
+    step = np.full((f, b), np.nan)
+    for k in range(b):
+        seen = np.flatnonzero(~np.isnan(x[:, k]).any(axis=1))
+        if seen.size > 1:
+            # Per frame elapsed: across a dropout the face moved for several frames.
+            gap = np.diff(seen).astype(np.float64)
+            step[seen[1:], k] = np.linalg.norm(x[seen[1:], k] - x[seen[:-1], k], axis=1) / gap
+    vals = step[np.isfinite(step)]
+    if vals.size == 0:
+        return {}
+    med = float(np.median(vals))
+    limit = max(med + JUMP_MADS * 1.4826 * float(np.median(np.abs(vals - med))), JUMP_FLOOR * size)
+    with np.errstate(invalid="ignore"):
+        jumped = step > limit
+    # Many markers jumping together is the whole face moving (a cut, a tracking glitch of
+    # the head), not a marker leaving its track: those frames are set aside.
+    count = jumped.sum(axis=1)
+    together = count > max(3, FACE_SHARE * b)
+    jumped[together] = False
+    # Reported only when most markers jump: a fast jaw opening moves a third of them.
+    out: dict[int, list[tuple[int, int]]] = {
+        -1: [(int(k), int(k)) for k in np.flatnonzero(count > CUT_SHARE * b)]
+    }
+    for k in range(b):
+        jumps = np.flatnonzero(jumped[:, k]).tolist()
+        # Jumps pair up as away and back; a last jump with no return is left to the
+        # residuals (one fast step of real motion must not flag the rest of the take).
+        ranges = [(jumps[i], jumps[i + 1] - 1) for i in range(0, len(jumps) - 1, 2)]
+        if ranges:
+            out[k] = ranges
+    return out
+
+
+def diagnose(
+    residuals: ArrayLike,
+    missing: ArrayLike,
+    names: Sequence[str],
+    *,
+    size: float,
+    markers: ArrayLike | None = None,
+) -> list[Finding]:
+    """The findings of a solved take: `residuals` and `missing` (F, B), the marker `names`,
+    the face's `size` (its bounding-box diagonal, in the residuals' unit) and, when known, the
+    take's `markers` (F, B, 3) for the swap test. Swaps first, then the worst first."""
+    r = np.where(np.asarray(missing, dtype=bool), np.nan, np.asarray(residuals, dtype=np.float64))
+    limit = _threshold(r, size)
+    with np.errstate(invalid="ignore"):
+        out = r > limit
+    runs = {b: _runs(out[:, b]) for b in range(r.shape[1])}
+    x = None if markers is None else np.asarray(markers, dtype=np.float64)
+    face_jumps: list[Finding] = []
+    if x is not None:
+        for b, ranges in _track_ranges(x, size).items():
+            if b < 0:
+                face_jumps = [Finding("cut", (), k, k, float("nan")) for k, _ in ranges]
+                continue
+            known = runs[b]
+            for s0, e0 in ranges:
+                # A residual run over the same frames is the same event: keep the wider one.
+                overlap = [(s1, e1) for s1, e1 in known if s1 <= e0 and s0 <= e1]
+                for o in overlap:
+                    known.remove(o)
+                known.append(
+                    (min([s0, *(o[0] for o in overlap)]), max([e0, *(o[1] for o in overlap)]))
+                )
+            known.sort()
+    findings: list[Finding] = []
+    taken: set[tuple[int, int, int]] = set()
+    if x is not None:
+        flat = [(b, s, e) for b, rs in runs.items() for s, e in rs]
+        for i, (a, s1, e1) in enumerate(flat):
+            for b, s2, e2 in flat[i + 1 :]:
+                if b == a or (a, s1, e1) in taken or (b, s2, e2) in taken:
+                    continue
+                lo, hi = max(s1, s2), min(e1, e2)
+                if hi < lo or (hi - lo + 1) < 0.5 * (max(e1, e2) - min(s1, s2) + 1):
+                    continue
+                first, last = min(s1, s2), max(e1, e2)
+                if _swapped(x, a, b, first, last):
+                    worst = _worst(r[first : last + 1][:, [a, b]])
+                    pair = tuple(sorted((names[a], names[b])))
+                    findings.append(Finding("swap", pair, first, last, worst))
+                    taken |= {(a, s1, e1), (b, s2, e2)}
+    singles = []
+    for b, rs in runs.items():
+        for s, e in rs:
+            if (b, s, e) in taken:
+                continue
+            backed = bool(out[s : e + 1, b].any())
+            if not backed and (x is None or not _is_spike(x[:, b], s, e)):
+                continue  # two unrelated steps of real motion, not a marker off its track
+            kind = "spike" if e - s + 1 <= SPIKE_FRAMES else "off"
+            singles.append(Finding(kind, (names[b],), s, e, _worst(r[s : e + 1, b])))
+    singles.sort(key=lambda f: -f.worst)
+    return findings + singles + face_jumps
+
+
+def _worst(r: NDArray[np.float64]) -> float:
+    return float(np.nanmax(r)) if np.isfinite(r).any() else float("nan")
+
+
+def diagnose_result(r: Result) -> list[Finding]:
+    """`diagnose` of a solved file (label swaps only where it keeps the take's markers); the
+    face's size from its first frame."""
+    v0 = np.asarray(r.vertices[0], dtype=np.float64)
+    size = float(np.linalg.norm(v0.max(axis=0) - v0.min(axis=0)))
+    return diagnose(r.bundle_residuals, r.missing, r.marker_names, size=size, markers=r.markers)
+
+
+def summary(
+    residuals: ArrayLike,
+    missing: ArrayLike,
+    names: Sequence[str],
+    findings: Sequence[Finding],
+    *,
+    start: int = 0,
+    units: str | None = None,
+    shown: int = 4,
+) -> list[str]:
+    """A few lines for `lgi solve` and `lgi info`: the residuals' median and largest (marker,
+    time code), then the findings (at most `shown`)."""
+    r = np.where(np.asarray(missing, dtype=bool), np.nan, np.asarray(residuals, dtype=np.float64))
+    u = f" {units}" if units else ""
+    if not np.isfinite(r).any():
+        return ["residuals: none (every sample missing)"]
+    f, b = (int(k) for k in np.unravel_index(int(np.nanargmax(r)), r.shape))
+    lines = [
+        f"residual median {np.nanmedian(r):.3g}{u}, 95th percentile "
+        f"{np.nanpercentile(r, 95):.3g}{u}, largest {r[f, b]:.3g}{u} ({names[b]} at time code "
+        f"{start + f})"
+    ]
+    if not findings:
+        lines.append("no marker flagged (outliers, spikes, label swaps)")
+    for item in findings[:shown]:
+        lines.append(item.describe(start, units))
+    if len(findings) > shown:
+        lines.append(f"... and {len(findings) - shown} more (lgi report shows them all)")
+    return lines
