@@ -126,7 +126,7 @@ def test_an_obj_sequence_over_a_longer_one_never_mixes(files, tmp_path: Path, ca
     assert len(list(out.parent.glob("shot.*.obj"))) == FRAMES
     assert _solve(files, out, "--frames", "0:10", "--force") == 0
     names = sorted(p.name for p in out.parent.iterdir())
-    assert names == [f"shot.{k:04d}.obj" for k in range(10)]
+    assert names == [f"shot.{k:04d}.obj" for k in range(1, 11)]  # from the C3D's first frame
 
 
 def test_a_folder_that_cannot_be_written_fails_before_the_solve(
