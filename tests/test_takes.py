@@ -274,3 +274,19 @@ def test_converting_to_a_whole_multiple_unit_divides_exactly_as_a_user_would() -
     np.testing.assert_array_equal(units.convert_units(x, "mm", "m"), x / 1000.0)
     np.testing.assert_array_equal(units.convert_units(x, "cm", "mm"), x * 10.0)
     np.testing.assert_allclose(units.convert_units(x, "in", "cm"), x * 2.54, rtol=1e-15)
+
+
+def test_labels_with_a_prefix_are_refused_in_a_short_message_that_names_the_prefix() -> None:
+    from lgi.io.takes import RawTake, match_layout
+
+    names = [f"m{i:03d}" for i in range(240)]
+    raw = RawTake([f"Actor1_{n}" for n in names], np.zeros((2, 240, 3)), 60.0, "mm", "t.c3d")
+    with pytest.raises(InputError) as e:
+        match_layout(raw, names)
+    text = str(e.value)
+    assert "with the prefix 'Actor1_' (e.g. 'Actor1_m000')" in text
+    assert "240 of the 240 unknown labels" in text
+    assert "... and 232 more" in text and len(text) < 1000
+    upper = RawTake([n.upper() for n in names], np.zeros((2, 240, 3)), 60.0, "mm", "t.c3d")
+    with pytest.raises(InputError, match="differ from the layout's names only in letter case"):
+        match_layout(upper, names)
