@@ -16,31 +16,13 @@ import numpy as np
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parent / "tests"))
 
+from headless import chromium  # noqa: E402
 from lgi.lab.sample import make_sample  # noqa: E402
 from pipeline_files import write_actor, write_c3d  # noqa: E402
 
 
 def lgi(*args: object) -> None:
     subprocess.run([sys.executable, "-m", "lgi.cli", *map(str, args)], check=True)
-
-
-def browser():  # type: ignore[no-untyped-def]
-    from selenium import webdriver
-    from selenium.webdriver.chrome.options import Options
-    from selenium.webdriver.chrome.service import Service
-
-    o = Options()
-    o.binary_location = "/usr/bin/chromium"
-    for a in (
-        "--headless=new",
-        "--no-sandbox",
-        "--use-angle=swiftshader",
-        "--enable-unsafe-swiftshader",
-        "--window-size=1100,800",
-        "--hide-scrollbars",
-    ):
-        o.add_argument(a)
-    return webdriver.Chrome(service=Service("/usr/bin/chromedriver"), options=o)
 
 
 def main() -> None:
@@ -69,7 +51,7 @@ def main() -> None:
         lgi("solve", d / "m.lgi", d / "take.c3d", "-o", d / "solved.npz", "--marker-noise", "0.02")
         lgi("solve", d / "m.lgi", d / "take.c3d", "-o", d / "exact.npz", "-q")
         lgi("report", d / "solved.npz", "--compare", d / "exact.npz", "-o", d / "report.html")
-        driver = browser()
+        driver = chromium()
         try:
             driver.set_window_size(1100, 1500)
             driver.get((d / "report.html").as_uri())

@@ -11,6 +11,10 @@ import tempfile
 import time
 from pathlib import Path
 
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+
+from headless import chromium
+
 
 def time_report(solved: str, compare: str | None) -> float:
     with tempfile.TemporaryDirectory() as d:
@@ -21,21 +25,7 @@ def time_report(solved: str, compare: str | None) -> float:
 
 
 def time_view(solved: str, compare: str | None) -> float:
-    from selenium import webdriver
-    from selenium.webdriver.chrome.options import Options
-    from selenium.webdriver.chrome.service import Service
-
-    o = Options()
-    o.binary_location = "/usr/bin/chromium"
-    for a in (
-        "--headless=new",
-        "--no-sandbox",
-        "--use-angle=swiftshader",
-        "--enable-unsafe-swiftshader",
-        "--window-size=1100,800",
-    ):
-        o.add_argument(a)
-    driver = webdriver.Chrome(service=Service("/usr/bin/chromedriver"), options=o)
+    driver = chromium()
     driver.get("about:blank")  # the browser's own start is not lgi's time
     cmd = [sys.executable, "-m", "lgi.cli", "view", solved]
     t = time.perf_counter()

@@ -122,3 +122,31 @@ def lgi_cli(*args: str | Path) -> subprocess.CompletedProcess[str]:
         env={**os.environ, "PYTHONWARNINGS": "error"},
         timeout=600,
     )
+
+
+def spiked_sample_take(sample, model):  # type: ignore[no-untyped-def]
+    """The sample's performance with marker m010 pushed 1.5 cm out along z in frames 40-42."""
+    frames = np.asarray(sample.performance).copy()
+    frames[40:43, list(model.marker_names).index("m010"), 2] += 1.5
+    return frames
+
+
+def write_solve(path: Path, model, frames, noise: float | None) -> Path:  # type: ignore[no-untyped-def]
+    """`frames` solved with `model` (noise-aware with `noise`) as a solved-take npz at 30 fps
+    from time code 100, the take's markers kept."""
+    from lgi.io.result import write_result_npz
+    from lgi.io.topology import topology
+
+    res = model.solve(frames, marker_noise=noise, quiet=True)
+    return write_result_npz(
+        path,
+        topology(model.dataset),
+        res.vertices,
+        res.bundle_residuals,
+        res.missing,
+        list(model.marker_names),
+        fps=30.0,
+        start=100,
+        units="cm",
+        markers=frames,
+    )

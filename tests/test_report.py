@@ -12,9 +12,9 @@ import pytest
 
 from lgi.errors import InputError
 from lgi.io.result import Result, read_result_npz, write_result_npz
-from lgi.io.topology import Topology, topology
+from lgi.io.topology import Topology
 from lgi.report import compare, marker_stats, render_report
-from pipeline_files import lgi_cli
+from pipeline_files import lgi_cli, spiked_sample_take, write_solve
 
 
 def _result(vertices, residuals, missing, names, units="cm", start=0):  # type: ignore[no-untyped-def]
@@ -82,25 +82,10 @@ def test_comparing_solves_of_different_meshes_or_units_is_refused() -> None:
 
 @pytest.fixture(scope="module")
 def spiked(sample, sample_model, tmp_path_factory):  # type: ignore[no-untyped-def]
-    """The sample's performance with marker m010 pushed 1.5 cm out in frames 40-42, solved
-    noise-aware (so the solve corrects the spike instead of following it) as a solved npz."""
-    frames = sample.performance.copy()
-    k = list(sample_model.marker_names).index("m010")
-    frames[40:43, k, 2] += 1.5
-    res = sample_model.solve(frames, marker_noise=0.02, quiet=True)
-    path = tmp_path_factory.mktemp("report") / "spiked.npz"
-    write_result_npz(
-        path,
-        topology(sample_model.dataset),
-        res.vertices,
-        res.bundle_residuals,
-        res.missing,
-        list(sample_model.marker_names),
-        fps=30.0,
-        start=100,
-        units="cm",
-    )
-    return path
+    """The spiked sample take (`spiked_sample_take`) solved noise-aware, so the solve
+    corrects the spike instead of following it."""
+    frames = spiked_sample_take(sample, sample_model)
+    return write_solve(tmp_path_factory.mktemp("report") / "spiked.npz", sample_model, frames, 0.02)
 
 
 def test_report_names_a_planted_spike_by_marker_and_time_code_with_units(spiked: Path) -> None:

@@ -7,74 +7,36 @@ installed (the README's test command installs one)."""
 from __future__ import annotations
 
 import io
-import shutil
 import time
 from collections.abc import Iterator
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pytest
 
-from lgi.io.result import write_result_npz
-from lgi.io.topology import topology
+import headless
+from pipeline_files import spiked_sample_take, write_solve
 
-CHROMIUM = shutil.which("chromium") or "/usr/bin/chromium"
-CHROMEDRIVER = shutil.which("chromedriver") or "/usr/bin/chromedriver"
 BACKGROUND = np.array([0xF4, 0xF4, 0xF4])
 
 
 def _browser() -> Any:
-    try:
-        from selenium import webdriver
-        from selenium.webdriver.chrome.options import Options
-        from selenium.webdriver.chrome.service import Service
-    except ImportError:
-        pytest.skip("selenium is not installed (pip install lgi[test])")
-    if not (Path(CHROMIUM).exists() and Path(CHROMEDRIVER).exists()):
-        pytest.skip("Debian's chromium and chromium-driver are not installed (scripts/test.sh)")
-    o = Options()
-    o.binary_location = CHROMIUM
-    for a in (
-        "--headless=new",
-        "--no-sandbox",
-        "--disable-dev-shm-usage",
-        "--window-size=1100,800",
-        # WebGL without a GPU: Chromium's software rasteriser.
-        "--use-angle=swiftshader",
-        "--enable-unsafe-swiftshader",
-    ):
-        o.add_argument(a)
-    o.set_capability("goog:loggingPrefs", {"browser": "ALL"})
-    return webdriver.Chrome(service=Service(CHROMEDRIVER), options=o)
+    why = headless.missing()
+    if why is not None:
+        pytest.skip(why)
+    return headless.chromium()
 
 
 @pytest.fixture(scope="module")
 def solved_pair(sample, sample_model, tmp_path_factory):  # type: ignore[no-untyped-def]
-    """The sample solved noise-aware with marker m010 spiking in frames 40-42 (A), and the
-    same take solved exactly (B), with their markers, from time code 100."""
-    frames = sample.performance.copy()
-    k = list(sample_model.marker_names).index("m010")
-    frames[40:43, k, 2] += 1.5
+    """The spiked sample take solved noise-aware (A) and exactly (B), with its markers, from
+    time code 100."""
+    frames = spiked_sample_take(sample, sample_model)
     folder = tmp_path_factory.mktemp("view")
-    paths = []
-    for name, noise in (("noise-aware.npz", 0.02), ("exact.npz", None)):
-        res = sample_model.solve(frames, marker_noise=noise, quiet=True)
-        path = folder / name
-        write_result_npz(
-            path,
-            topology(sample_model.dataset),
-            res.vertices,
-            res.bundle_residuals,
-            res.missing,
-            list(sample_model.marker_names),
-            fps=30.0,
-            start=100,
-            units="cm",
-            markers=frames,
-        )
-        paths.append(path)
-    return paths
+    return [
+        write_solve(folder / "noise-aware.npz", sample_model, frames, 0.02),
+        write_solve(folder / "exact.npz", sample_model, frames, None),
+    ]
 
 
 @pytest.fixture(scope="module")
