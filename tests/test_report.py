@@ -137,3 +137,36 @@ def test_cli_report_compares_two_solves_and_refuses_a_non_html_output(
     assert p.returncode == 2 and "lgi: error: --out" in p.stderr and ".html" in p.stderr
     p = lgi_cli("report", spiked, "-o", tmp_path / "r2.html", "--take", spiked)
     assert p.returncode == 2 and "--take needs --model" in p.stderr
+
+
+def test_lgi_solve_report_writes_the_page_of_the_solve_naming_a_swap(
+    sample, tmp_path: Path
+) -> None:  # type: ignore[no-untyped-def]
+    from pipeline_files import write_actor, write_c3d
+
+    actor = write_actor(tmp_path, sample, num_shapes=8)
+    model = tmp_path / "m.lgi"
+    p = lgi_cli("build", actor.neutral, actor.shapes, actor.markers, "-o", model, "--units", "cm")
+    assert p.returncode == 0, p.stderr
+    frames = np.asarray(sample.performance).copy()
+    frames[40:90, [3, 50]] = frames[40:90, [50, 3]]
+    write_c3d(tmp_path / "take.c3d", frames, actor.names, 30.0, "cm")
+    page = tmp_path / "solve.html"
+    p = lgi_cli("solve", model, tmp_path / "take.c3d", "-o", tmp_path / "o.npz", "--report", page)
+    assert p.returncode == 0, p.stderr
+    pair = " &lt;-&gt; ".join(sorted((actor.names[3], actor.names[50])))
+    assert f"likely label swap: {pair}, time codes 41-90" in page.read_text()
+    assert f"likely label swap: {pair.replace('&lt;-&gt;', '<->')}" in p.stderr  # the summary
+    p = lgi_cli(
+        "solve",
+        model,
+        tmp_path / "take.c3d",
+        "-o",
+        tmp_path / "o2.npz",
+        "--report",
+        tmp_path / "r2.html",
+        "--chunk",
+        "10",
+    )
+    assert p.returncode == 2 and "--report needs the whole take solved at once" in p.stderr
+    assert not (tmp_path / "o2.npz").exists()

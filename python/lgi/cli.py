@@ -88,6 +88,7 @@ def _cmd_solve(args: argparse.Namespace) -> int:
         jaw=args.jaw,
         chunk=args.chunk,
         force=args.force,
+        report=args.report,
         quiet=args.quiet,
         say=_say(args),
     )
@@ -335,6 +336,12 @@ def _add_pipeline_commands(sub: Any) -> None:
     )
     s.add_argument(
         "--force", action="store_true", help="replace an existing output (default: refuse)"
+    )
+    s.add_argument(
+        "--report",
+        default=None,
+        metavar="FILE.html",
+        help="also write lgi report's page of the solve (not with --chunk)",
     )
     s.add_argument(
         "--marker-noise",

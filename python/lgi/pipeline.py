@@ -409,6 +409,40 @@ def describe(
     )
 
 
+def _write_solve_report(
+    page: Path,
+    res: SolveResult,
+    m: Model,
+    topo: Topology,
+    markers: np.ndarray,
+    *,
+    fps: float | None,
+    start: int,
+    source: Path,
+) -> None:
+    """`lgi solve --report`: `lgi report`'s page of the solve just made, from memory."""
+    from lgi.diagnose import diagnose_result
+    from lgi.io.atomic import atomic_path
+    from lgi.io.result import Result
+    from lgi.report import render_report
+
+    solved = Result(
+        vertices=np.asarray(res.vertices, dtype=np.float32),
+        bundle_residuals=res.bundle_residuals,
+        missing=res.missing,
+        marker_names=list(m.marker_names),
+        fps=fps,
+        start=start,
+        units=m.units,
+        topology=topo,
+        jaw_theta=res.jaw_theta,
+        markers=np.asarray(markers, dtype=np.float32),
+    )
+    found = [f.describe(start, m.units) for f in diagnose_result(solved)]
+    with atomic_path(page) as tmp:
+        tmp.write_text(render_report(solved, source=str(source), findings=found), encoding="utf-8")
+
+
 def _say_findings(
     say: Say, residuals: np.ndarray, missing: np.ndarray, markers: np.ndarray, m: Model, start: int
 ) -> None:
@@ -522,6 +556,7 @@ def solve_file(
     jaw: str = "auto",
     chunk: int | None = None,
     force: bool = False,
+    report: str | os.PathLike[str] | None = None,
     quiet: bool = False,
     say: Say = _silent,
 ) -> tuple[Path, int]:
@@ -541,6 +576,16 @@ def solve_file(
     not_an_input(output_file(os.fspath(out), "--out"), model, take)
     kind = output_kind(os.fspath(out))
     dest = ready_output(out, model, take, force=force)
+    page = None
+    if report is not None:
+        if chunk is not None:
+            raise InputError(
+                "--report needs the whole take solved at once; without --chunk, or run "
+                "lgi report on an .npz output"
+            )
+        if Path(report).suffix.lower() not in (".html", ".htm"):
+            raise InputError(f"--report {report}: the report is an .html file")
+        page = ready_output(report, model, take, out, force=force)
     m = Model.load(existing_file(os.fspath(model), "MODEL"))
     t = takes.read(
         existing_file(os.fspath(take), "TAKE"),
@@ -572,6 +617,9 @@ def solve_file(
             kind, dest, topo, res, m, fps=rate, start=start, head=head, markers=x, quiet=quiet
         )
         _say_findings(say, res.bundle_residuals, res.missing, x, m, start)
+        if page is not None:
+            _write_solve_report(page, res, m, topo, x, fps=rate, start=start, source=dest)
+            say(f"wrote the report {page}")
         return written, int(x.shape[0])
     from tqdm import tqdm
 
