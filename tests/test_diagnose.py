@@ -99,3 +99,5 @@ def test_lgi_solve_prints_the_findings_and_lgi_info_names_them_from_the_file(
     assert "likely label swap: m012 <-> m047, time codes 101-150" in out
     assert "spike: m033, time codes 201-203" in out
     assert "residual median" in out and " cm" in out
+    assert "worst markers (largest residual): m033 " in out
+    assert "worst frames (time code, largest residual, marker): 20" in out

@@ -25,7 +25,7 @@ from lgi.errors import InputError, MarkerError
 from lgi.io import takes
 from lgi.io.atomic import check_writable, existing_sequence, refuse_existing
 from lgi.io.paths import output_file
-from lgi.io.result import read_result_npz
+from lgi.io.result import Result, read_result_npz
 from lgi.io.sink import FrameSink
 from lgi.io.topology import Topology, topology
 from lgi.model import Model, estimate_marker_noise
@@ -364,6 +364,7 @@ def describe(
                         shown=6,
                     )
                 ),
+                *_worst_lines(r),
             ]
     if suffix in takes.TAKE_SUFFIXES:
         raw = takes.read_raw(path)
@@ -465,6 +466,31 @@ def check_take_scale(
         model_units=m.units,
         stated=stated,
     )
+
+
+def _worst_lines(r: Result, shown: int = 5) -> list[str]:
+    """`lgi info`'s worst markers (by largest residual) and worst frames of a solved take."""
+    r_ = np.where(r.missing, np.nan, r.bundle_residuals.astype(np.float64))
+    if not np.isfinite(r_).any():
+        return []
+    u = f" {r.units}" if r.units else ""
+    with np.errstate(all="ignore"):
+        by_marker = np.nanmax(np.where(np.isfinite(r_), r_, -np.inf), axis=0)
+        by_frame = np.nanmax(np.where(np.isfinite(r_), r_, -np.inf), axis=1)
+    markers = [int(b) for b in np.argsort(by_marker)[::-1][:shown] if np.isfinite(by_marker[b])]
+    frames = [int(f) for f in np.argsort(by_frame)[::-1][:shown] if np.isfinite(by_frame[f])]
+    return [
+        "  worst markers (largest residual): "
+        + ", ".join(
+            f"{r.marker_names[b]} {by_marker[b]:.3g}{u} at {r.start + int(np.nanargmax(r_[:, b]))}"
+            for b in markers
+        ),
+        "  worst frames (time code, largest residual, marker): "
+        + ", ".join(
+            f"{r.start + f} {by_frame[f]:.3g}{u} {r.marker_names[int(np.nanargmax(r_[f]))]}"
+            for f in frames
+        ),
+    ]
 
 
 def _matching(raw: takes.RawTake, model: Model, take_units: str | None = None) -> list[str]:
