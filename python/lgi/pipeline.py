@@ -194,13 +194,15 @@ def marker_noise(spec: str | None, frames: np.ndarray) -> float | None:
 
 
 def output_kind(path: str) -> str:
-    """`--out`'s format by suffix: 'usd', 'obj' (a sequence) or 'npz'."""
+    """`--out`'s format by suffix: 'usd', 'obj' (a sequence), 'npz', 'pc2' or 'mdd'."""
     suffix = Path(path).suffix.lower()
     kinds = {".usd": "usd", ".usdc": "usd", ".usda": "usd", ".npz": "npz", ".obj": "obj"}
+    kinds |= {".pc2": "pc2", ".mdd": "mdd"}
     if suffix not in kinds:
         raise InputError(
             f"--out {path}: unknown output format {suffix or '(no suffix)'!r}; "
-            "use .usd/.usdc/.usda (point cache), .obj (OBJ sequence) or .npz"
+            "use .usd/.usdc/.usda (point cache), .obj (OBJ sequence), .pc2 or .mdd (point "
+            "caches for Blender's Mesh Cache, Houdini, 3ds Max) or .npz"
         )
     return kinds[suffix]
 
@@ -211,8 +213,8 @@ def frame_rate(given: float | None, take_fps: float | None, kind: str) -> float 
         if not np.isfinite(given) or given <= 0:
             raise InputError(f"--fps {given}: must be a positive number")
         return float(given)
-    if take_fps is None and kind == "usd":
-        raise InputError("the take has no frame rate; pass --fps for the USD time codes")
+    if take_fps is None and kind in ("usd", "mdd"):
+        raise InputError(f"the take has no frame rate; pass --fps for the {kind.upper()} times")
     return take_fps
 
 

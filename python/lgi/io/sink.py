@@ -11,6 +11,7 @@ import numpy as np
 from lgi.errors import InputError
 from lgi.io.atomic import discard_staging, replace_sequence, sequence_staging
 from lgi.io.obj import write_obj_sequence
+from lgi.io.pointcache import PointCache
 from lgi.io.result import write_result_npz
 from lgi.io.takes import HeadMotion
 from lgi.io.topology import Topology
@@ -43,7 +44,10 @@ class FrameSink:
         self.fps, self.start, self.units = fps, start, units
         self.next = start
         self.usd: UsdCache | None = None
+        self.cache: PointCache | None = None
         self.staging: Path | None = None
+        if kind in ("pc2", "mdd"):
+            self.cache = PointCache(out, topo.num_vertices, fps=fps, start=start)
         if kind == "obj":
             self.staging = sequence_staging(out.parent, out.stem)
         if kind == "usd":
@@ -71,6 +75,8 @@ class FrameSink:
                 head_rotations=None if head is None else head.rotations,
                 head_translations=None if head is None else head.translations,
             )
+        elif self.cache is not None:
+            self.cache.add(vertices)
         elif self.staging is not None:
             write_obj_sequence(
                 self.staging, self.topo, vertices, name=self.out.stem, start=self.next
@@ -82,6 +88,8 @@ class FrameSink:
     def close(self) -> Path:
         if self.usd is not None:
             return self.usd.close()
+        if self.cache is not None:
+            return self.cache.close()
         if self.staging is not None:
             replace_sequence(self.staging, self.out.parent, self.out.stem)
             self.staging = None
@@ -106,6 +114,8 @@ class FrameSink:
         """Drops what was added: nothing is left at the output or beside it."""
         if self.usd is not None:
             self.usd.discard()
+        if self.cache is not None:
+            self.cache.discard()
         if self.staging is not None:
             discard_staging(self.staging)
             self.staging = None
