@@ -89,6 +89,7 @@ def _cmd_solve(args: argparse.Namespace) -> int:
         chunk=args.chunk,
         force=args.force,
         report=args.report,
+        curves=args.curves,
         quiet=args.quiet,
         say=_say(args),
     )
@@ -336,6 +337,14 @@ def _add_pipeline_commands(sub: Any) -> None:
     )
     s.add_argument(
         "--force", action="store_true", help="replace an existing output (default: refuse)"
+    )
+    s.add_argument(
+        "--curves",
+        default=None,
+        metavar="FILE",
+        help="also write each frame's global blendshape fit and jaw pose as curves: "
+        ".usd/.usda/.usdc (UsdSkel animation over the blend-shape rig) or .csv (Live Link "
+        "Face, ARKit names)",
     )
     s.add_argument(
         "--report",

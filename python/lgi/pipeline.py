@@ -412,6 +412,32 @@ def describe(
     )
 
 
+def _joined(parts: list[np.ndarray | None]) -> np.ndarray | None:
+    """Chunks' arrays end to end; None if any chunk had none."""
+    whole = [p for p in parts if p is not None]
+    return np.concatenate(whole) if whole and len(whole) == len(parts) else None
+
+
+def _write_curves(
+    out: Path,
+    fit: np.ndarray | None,
+    jaw_theta: np.ndarray | None,
+    m: Model,
+    *,
+    fps: float | None,
+    start: int,
+) -> None:
+    """`lgi solve --curves`: the solve's global fit weights and jaw pose as curves."""
+    from lgi.io.curves import write_curves
+
+    if fit is None:
+        raise InputError(
+            "--curves: this solve made no global fit (a model built with fit off, or without "
+            "shapes), so there are no curves to write"
+        )
+    write_curves(out, m.dataset, fit, fps=fps, start=start, units=m.units, jaw_theta=jaw_theta)
+
+
 def _write_solve_report(
     page: Path,
     res: SolveResult,
@@ -585,6 +611,7 @@ def solve_file(
     chunk: int | None = None,
     force: bool = False,
     report: str | os.PathLike[str] | None = None,
+    curves: str | os.PathLike[str] | None = None,
     quiet: bool = False,
     say: Say = _silent,
 ) -> tuple[Path, int]:
@@ -614,6 +641,15 @@ def solve_file(
         if Path(report).suffix.lower() not in (".html", ".htm"):
             raise InputError(f"--report {report}: the report is an .html file")
         page = ready_output(report, model, take, out, force=force)
+    curves_out = None
+    if curves is not None:
+        from lgi.io.curves import CURVE_SUFFIXES
+
+        if Path(curves).suffix.lower() not in CURVE_SUFFIXES:
+            raise InputError(
+                f"--curves {curves}: use .usd/.usda/.usdc (UsdSkel) or .csv (Live Link Face)"
+            )
+        curves_out = ready_output(curves, model, take, out, force=force)
     m = Model.load(existing_file(os.fspath(model), "MODEL"))
     t = takes.read(
         existing_file(os.fspath(take), "TAKE"),
@@ -641,6 +677,9 @@ def solve_file(
     start = t.first_frame + rng.start
     if chunk is None:
         res = m.solve(x, jaw=jaw_mode, marker_noise=sigma, quiet=quiet)
+        if curves_out is not None:
+            _write_curves(curves_out, res.fit_weights, res.jaw_theta, m, fps=rate, start=start)
+            say(f"wrote the curves {curves_out}")
         written = write_solved(
             kind, dest, topo, res, m, fps=rate, start=start, head=head, markers=x, quiet=quiet
         )
@@ -657,13 +696,18 @@ def solve_file(
     # Each chunk continues the temporal solve from the last frame of the one before
     # (`Model.solve_iter`): the chunks together are one `solve` of the range.
     chunks = m.solve_iter(x, chunk=size, jaw=jaw_mode, marker_noise=sigma, quiet=True, out=buf)
-    residuals, absent = [], []
+    residuals: list[np.ndarray] = []
+    absent: list[np.ndarray] = []
+    fits: list[np.ndarray | None] = []
+    jaws: list[np.ndarray | None] = []
     try:
         with tqdm(total=n, desc="lgi solve", unit="frame", disable=quiet, leave=False) as bar:
             for a, res in zip(range(0, n, size), chunks, strict=True):
                 b = min(n, a + size)
                 residuals.append(res.bundle_residuals.copy())
                 absent.append(res.missing.copy())
+                fits.append(None if res.fit_weights is None else res.fit_weights.copy())
+                jaws.append(None if res.jaw_theta is None else res.jaw_theta.copy())
                 sink.add(
                     res.vertices,
                     res.bundle_residuals,
@@ -673,6 +717,11 @@ def solve_file(
                     x[a:b],
                 )
                 bar.update(b - a)
+        if curves_out is not None:
+            fit = _joined(fits)
+            jaw_all = _joined(jaws)
+            _write_curves(curves_out, fit, jaw_all, m, fps=rate, start=start)
+            say(f"wrote the curves {curves_out}")
         written = sink.close()
     except BaseException:
         sink.abort()

@@ -10,6 +10,7 @@ import base64
 import json
 import os
 import struct
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -25,7 +26,7 @@ from lgi.io.units import METERS_PER_UNIT, normalize_unit
 from lgi.io.usd import define_usd_mesh, new_stage, save_stage
 from lgi.rig import CORRECTIVE_PREFIX
 
-__all__ = ["gltf_vertices", "write_gltf_rig", "write_usd_rig"]
+__all__ = ["RigAnimation", "gltf_vertices", "write_gltf_rig", "write_usd_rig"]
 
 _FLOAT, _UINT = 5126, 5125  # glTF componentType codes
 _ARRAY_BUFFER, _ELEMENT_ARRAY_BUFFER = 34962, 34963
@@ -159,6 +160,40 @@ def _combination(name: str, names: list[str]) -> list[str] | None:
     return out if len(out) >= 2 else None
 
 
+@dataclass(frozen=True)
+class RigAnimation:
+    """Time-sampled blend-shape weights for `write_usd_rig`: (F, S) `weights` in the
+    dataset's shape order, from time code `start` at `fps`, and optionally (F, 3) `jaw_theta`."""
+
+    weights: np.ndarray
+    fps: float
+    start: int = 0
+    jaw_theta: np.ndarray | None = None
+
+
+def _animate(stage: Any, anim: Any, weights_attr: Any, a: RigAnimation, count: int) -> None:
+    from pxr import Gf, Sdf, Usd, Vt
+
+    w = np.asarray(a.weights, dtype=np.float32)
+    if w.ndim != 2 or w.shape[1] != count:
+        raise InputError(f"rig animation: weights must be (F, {count}), got {w.shape}")
+    jaw = None if a.jaw_theta is None else np.asarray(a.jaw_theta, dtype=np.float64)
+    jaw_attr = None
+    if jaw is not None:
+        jaw_attr = anim.GetPrim().CreateAttribute(
+            "lgi:jawTheta", Sdf.ValueTypeNames.Float3, custom=True
+        )
+    for f in range(w.shape[0]):
+        t = Usd.TimeCode(a.start + f)
+        weights_attr.Set(Vt.FloatArray.FromNumpy(np.ascontiguousarray(w[f])), t)
+        if jaw_attr is not None and jaw is not None:
+            jaw_attr.Set(Gf.Vec3f(*map(float, jaw[f])), t)
+    stage.SetTimeCodesPerSecond(float(a.fps))
+    stage.SetFramesPerSecond(float(a.fps))
+    stage.SetStartTimeCode(a.start)
+    stage.SetEndTimeCode(a.start + w.shape[0] - 1)
+
+
 def _usd_name(name: str, taken: set[str]) -> str:
     """A valid, unique USD prim name for a shape name."""
     from pxr import Tf
@@ -172,7 +207,11 @@ def _usd_name(name: str, taken: set[str]) -> str:
 
 
 def write_usd_rig(
-    path: str | os.PathLike[str], dataset: Dataset, *, units: str | None = None
+    path: str | os.PathLike[str],
+    dataset: Dataset,
+    *,
+    units: str | None = None,
+    animation: RigAnimation | None = None,
 ) -> Path:
     """Writes the neutral and its shapes as a USD blendshape rig: `SkelRoot` `/Rig` (default
     prim) holding the `UsdGeom.Mesh` `/Rig/Face` (the neutral's source polygons, UVs as `st`)
@@ -181,7 +220,9 @@ def write_usd_rig(
     vertex, with `pointIndices`), a `Skeleton` `/Rig/Skel` without joints and its
     `SkelAnimation` `/Rig/Skel/Weights` (every weight 0), so a DCC has the channels. A
     corrective's prim carries `lgi:combination` (the shapes it corrects). `units` as in
-    `lgi.io.usd.write_usd`."""
+    `lgi.io.usd.write_usd`. With `animation`, the weights are time-sampled curves (time codes
+    `start`, `start + 1`, ... at `fps`) and the jaw pose, when given, is `lgi:jawTheta` (float3:
+    open, lateral in radians, forward) on the animation prim."""
     from pxr import Sdf, Usd, UsdGeom, UsdSkel, Vt
 
     out = output_file(path, "USD output")
@@ -222,7 +263,9 @@ def write_usd_rig(
     skel = UsdSkel.Skeleton.Define(stage, "/Rig/Skel")
     anim = UsdSkel.Animation.Define(stage, "/Rig/Skel/Weights")
     anim.CreateBlendShapesAttr(Vt.TokenArray(tokens))
-    anim.CreateBlendShapeWeightsAttr(Vt.FloatArray(len(tokens)))
+    weights_attr = anim.CreateBlendShapeWeightsAttr(Vt.FloatArray(len(tokens)))
+    if animation is not None:
+        _animate(stage, anim, weights_attr, animation, len(tokens))
     UsdSkel.BindingAPI.Apply(skel.GetPrim()).CreateAnimationSourceRel().SetTargets([anim.GetPath()])
     binding.CreateSkeletonRel().SetTargets([skel.GetPath()])
     save_stage(stage, tmp, out)
