@@ -90,6 +90,9 @@ def _cmd_solve(args: argparse.Namespace) -> int:
         force=args.force,
         report=args.report,
         curves=args.curves,
+        units=args.units,
+        scale=args.scale,
+        up=args.up,
         quiet=args.quiet,
         say=_say(args),
     )
@@ -104,6 +107,9 @@ def _cmd_export(args: argparse.Namespace) -> int:
         frames=args.frames,
         fps=args.fps,
         force=args.force,
+        units=args.units,
+        scale=args.scale,
+        up=args.up,
         quiet=args.quiet,
     )
     print(f"wrote {out} ({n} frames)")
@@ -286,6 +292,27 @@ def _add_batch_command(sub: Any) -> None:
     b.set_defaults(func=_cmd_batch)
 
 
+def _add_frame_options(p: argparse.ArgumentParser) -> None:
+    """`--units`, `--scale`, `--up` of the mesh writers (lgi.io.frame)."""
+    p.add_argument(
+        "--units",
+        default=None,
+        help="write the mesh in this unit (mm, cm, m, in, ft), converted from the model's",
+    )
+    p.add_argument(
+        "--scale",
+        type=float,
+        default=None,
+        help="multiply the mesh's coordinates (not with --units)",
+    )
+    p.add_argument(
+        "--up",
+        choices=["y", "z"],
+        default="y",
+        help="the output's up axis (default y, the model's)",
+    )
+
+
 def _add_pipeline_commands(sub: Any) -> None:
     b = sub.add_parser(
         "build",
@@ -338,6 +365,7 @@ def _add_pipeline_commands(sub: Any) -> None:
     s.add_argument(
         "--force", action="store_true", help="replace an existing output (default: refuse)"
     )
+    _add_frame_options(s)
     s.add_argument(
         "--curves",
         default=None,
@@ -397,6 +425,7 @@ def _add_pipeline_commands(sub: Any) -> None:
     e.add_argument(
         "--force", action="store_true", help="replace an existing output (default: refuse)"
     )
+    _add_frame_options(e)
     e.add_argument("--frames", default=None, metavar="A:B", help="frames A..B-1 (0-based)")
     e.add_argument("--fps", type=float, default=None, help="frame rate (default: the result's)")
     e.add_argument("-q", "--quiet", action="store_true", help="no progress bars")

@@ -24,6 +24,7 @@ from lgi.diagnose import diagnose, diagnose_result, summary
 from lgi.errors import InputError, MarkerError
 from lgi.io import takes
 from lgi.io.atomic import check_writable, existing_sequence, refuse_existing
+from lgi.io.frame import OutputFrame, output_frame
 from lgi.io.paths import output_file
 from lgi.io.result import Result, read_result_npz
 from lgi.io.sink import FrameSink
@@ -233,6 +234,7 @@ def write_output(
     jaw_theta: np.ndarray | None,
     head: takes.HeadMotion | None = None,
     markers: np.ndarray | None = None,
+    frame: OutputFrame | None = None,
     quiet: bool = False,
 ) -> Path:
     """Writes solved frames as `kind` (`output_kind`) to `out`, `CHUNK_FRAMES` at a time with
@@ -241,7 +243,7 @@ def write_output(
     is left at `out` if it fails or is interrupted."""
     from tqdm import tqdm
 
-    sink = FrameSink(kind, out, topo, names=names, fps=fps, start=start, units=units)
+    sink = FrameSink(kind, out, topo, names=names, fps=fps, start=start, units=units, frame=frame)
     n = vertices.shape[0]
     try:
         with tqdm(
@@ -275,6 +277,7 @@ def write_solved(
     start: int,
     head: takes.HeadMotion | None = None,
     markers: np.ndarray | None = None,
+    frame: OutputFrame | None = None,
     quiet: bool = False,
 ) -> Path:
     """`write_output` of a whole `SolveResult` of model `m` (its marker names and unit)."""
@@ -292,6 +295,7 @@ def write_solved(
         jaw_theta=res.jaw_theta,
         head=head,
         markers=markers,
+        frame=frame,
         quiet=quiet,
     )
 
@@ -612,6 +616,9 @@ def solve_file(
     force: bool = False,
     report: str | os.PathLike[str] | None = None,
     curves: str | os.PathLike[str] | None = None,
+    units: str | None = None,
+    scale: float | None = None,
+    up: str = "y",
     quiet: bool = False,
     say: Say = _silent,
 ) -> tuple[Path, int]:
@@ -651,6 +658,12 @@ def solve_file(
             )
         curves_out = ready_output(curves, model, take, out, force=force)
     m = Model.load(existing_file(os.fspath(model), "MODEL"))
+    frame = output_frame(m.units, units=units, scale=scale, up=up)
+    if kind == "npz" and not frame.identity:
+        raise InputError(
+            "--units, --scale and --up apply to USD, OBJ, PC2 and MDD outputs; a solved .npz "
+            "stays in the model's frame (lgi export converts it)"
+        )
     t = takes.read(
         existing_file(os.fspath(take), "TAKE"),
         m.marker_names,
@@ -681,7 +694,17 @@ def solve_file(
             _write_curves(curves_out, res.fit_weights, res.jaw_theta, m, fps=rate, start=start)
             say(f"wrote the curves {curves_out}")
         written = write_solved(
-            kind, dest, topo, res, m, fps=rate, start=start, head=head, markers=x, quiet=quiet
+            kind,
+            dest,
+            topo,
+            res,
+            m,
+            fps=rate,
+            start=start,
+            head=head,
+            markers=x,
+            frame=frame,
+            quiet=quiet,
         )
         _say_findings(say, res.bundle_residuals, res.missing, x, m, start)
         if page is not None:
@@ -691,7 +714,9 @@ def solve_file(
     from tqdm import tqdm
 
     n, size = int(x.shape[0]), int(chunk)
-    sink = FrameSink(kind, dest, topo, names=m.marker_names, fps=rate, start=start, units=m.units)
+    sink = FrameSink(
+        kind, dest, topo, names=m.marker_names, fps=rate, start=start, units=m.units, frame=frame
+    )
     buf = np.empty((min(size, n), m.num_vertices, 3))
     # Each chunk continues the temporal solve from the last frame of the one before
     # (`Model.solve_iter`): the chunks together are one `solve` of the range.
@@ -737,6 +762,9 @@ def export_file(
     frames: str | None = None,
     fps: float | None = None,
     force: bool = False,
+    units: str | None = None,
+    scale: float | None = None,
+    up: str = "y",
     quiet: bool = False,
 ) -> tuple[Path, int]:
     """`lgi export`: a solved `.npz` (`lgi solve -o x.npz`) written again by `out`'s suffix,
@@ -747,6 +775,7 @@ def export_file(
     src = existing_file(os.fspath(result), "RESULT")
     dest = ready_output(out, src, force=force)
     r = read_result_npz(src)
+    frame = output_frame(r.units, units=units, scale=scale, up=up)
     rng = frame_range(frames, r.vertices.shape[0])
     written = write_output(
         kind,
@@ -761,6 +790,7 @@ def export_file(
         units=r.units,
         jaw_theta=None if r.jaw_theta is None else r.jaw_theta[rng],
         markers=None if r.markers is None else r.markers[rng],
+        frame=frame,
         quiet=quiet,
     )
     return written, int(r.vertices[rng].shape[0])

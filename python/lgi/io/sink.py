@@ -10,6 +10,7 @@ import numpy as np
 
 from lgi.errors import InputError
 from lgi.io.atomic import discard_staging, replace_sequence, sequence_staging
+from lgi.io.frame import OutputFrame
 from lgi.io.obj import write_obj_sequence
 from lgi.io.pointcache import PointCache
 from lgi.io.result import write_result_npz
@@ -39,7 +40,16 @@ class FrameSink:
         fps: float | None,
         start: int,
         units: str | None,
+        frame: OutputFrame | None = None,
     ) -> None:
+        if frame is not None and not frame.identity and kind == "npz":
+            raise InputError(
+                "--units, --scale and --up apply to USD, OBJ, PC2 and MDD outputs; a solved "
+                ".npz stays in the model's frame (lgi export converts it)"
+            )
+        self.frame = frame if frame is not None and not frame.identity else None
+        if self.frame is not None:
+            units = self.frame.units
         self.kind, self.out, self.topo, self.names = kind, out, topo, names
         self.fps, self.start, self.units = fps, start, units
         self.next = start
@@ -53,7 +63,8 @@ class FrameSink:
         if kind == "usd":
             if fps is None:
                 raise InputError("a USD point cache needs a frame rate (--fps)")
-            self.usd = UsdCache(out, topo, fps=fps, units=units, start=start)
+            up = "y" if self.frame is None else self.frame.up
+            self.usd = UsdCache(out, topo, fps=fps, units=units, start=start, up=up)
         self.parts: list[
             tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None, np.ndarray | None]
         ] = []
@@ -67,6 +78,16 @@ class FrameSink:
         head: HeadMotion | None = None,
         markers: np.ndarray | None = None,
     ) -> None:
+        if self.frame is not None:
+            vertices = self.frame.points(vertices)
+            residuals = self.frame.lengths(residuals)
+            if jaw_theta is not None:  # open and lateral are angles; forward is a length
+                jaw_theta = np.asarray(jaw_theta, dtype=np.float64).copy()
+                jaw_theta[:, 2] *= self.frame.scale
+            if head is not None:
+                head = HeadMotion(
+                    self.frame.rotations(head.rotations), self.frame.points(head.translations)
+                )
         if self.usd is not None:
             self.usd.add(
                 vertices,

@@ -110,6 +110,7 @@ class UsdCache:
         fps: float,
         units: str | None = None,
         start: int = 0,
+        up: str = "y",
     ) -> None:
         try:
             from pxr import Gf, Sdf, Usd, UsdGeom, Vt
@@ -130,7 +131,7 @@ class UsdCache:
         # write leaves nothing at the final path.
         self._tmp = temporary_beside(self._path)
         stage = new_stage(Usd, Sdf, self._tmp)
-        UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.y)
+        UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.z if up == "z" else UsdGeom.Tokens.y)
         if units is not None:
             UsdGeom.SetStageMetersPerUnit(stage, METERS_PER_UNIT[normalize_unit(units, "units")])
         stage.SetTimeCodesPerSecond(float(fps))
