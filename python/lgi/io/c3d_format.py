@@ -147,13 +147,18 @@ def _parameters(r: _Reader, defects: list[str]) -> dict[tuple[str, str], Any]:
     return {(groups.get(g, "?"), nm): v for g, nm, v in params}
 
 
+def _text(raw: bytes) -> str:
+    """A C3D string: fixed width, padded with spaces or NULs."""
+    return raw.decode("latin-1").replace("\0", " ").strip()
+
+
 def _value(r: _Reader, kind: int, dims: list[int], raw: bytes) -> Any:
     if kind == -1:  # characters: dims[0] per string
         if not dims:
-            return [raw.decode("latin-1").strip()]
+            return [_text(raw)]
         width = dims[0]
         count = int(np.prod(dims[1:])) if len(dims) > 1 else 1
-        return [raw[k * width : (k + 1) * width].decode("latin-1").strip() for k in range(count)]
+        return [_text(raw[k * width : (k + 1) * width]) for k in range(count)]
     if kind == 1:
         return list(raw)
     if kind == 2:
@@ -166,6 +171,13 @@ def _value(r: _Reader, kind: int, dims: list[int], raw: bytes) -> Any:
 
 def read_c3d_file(path: str) -> C3dContents:
     """Reads a C3D file's 3D points (`InputError` naming the defect when it cannot)."""
+    try:
+        return _read(path)
+    except (struct.error, ValueError, IndexError, OverflowError, MemoryError) as e:
+        raise InputError(f"{path}: a malformed C3D file ({type(e).__name__}: {e})") from None
+
+
+def _read(path: str) -> C3dContents:
     try:
         with open(path, "rb") as fh:
             data = fh.read()
@@ -202,6 +214,9 @@ def read_c3d_file(path: str) -> C3dContents:
         defects.append(f"POINT:LABELS names {len(labels)} of {n_points} points; the rest are P#")
         labels += [f"P{k + 1}" for k in range(len(labels), n_points)]
     frames = last - first + 1
+    declared = params.get(("POINT", "FRAMES"))
+    if last == 0xFFFF and declared:  # the header's ceiling: the parameter holds the count
+        frames = int(declared[0]) & 0xFFFF if isinstance(declared[0], int) else int(declared[0])
     if frames <= 0:
         raise InputError(f"{path}: the header's frames {first}-{last} hold no frame")
     floats = scale < 0

@@ -1,6 +1,6 @@
 """Marker takes in: recordings from the capture stage, read into arrays in the model's terms.
 
-Marker takes (`read`): C3D (through `ezc3d`), TRC, labelled CSV and `.npz`, with their labels
+Marker takes (`read`): C3D (`lgi.io.c3d_format`), TRC, labelled CSV and `.npz`, with their labels
 matched to the model's marker names and their units converted to the model's
 (`lgi.io.units`); marker layouts (`read_layout`: CSV `name,x,y,z`).
 """
@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import itertools
 import os
-import struct
 import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -157,61 +156,24 @@ class Take:
 
 
 def read_c3d(path: str | os.PathLike[str]) -> RawTake:
-    """Reads a C3D file with `ezc3d`: labels from `POINT:LABELS` (then `LABELS2`, ... past
-    255), units from `POINT:UNITS`, rate from `POINT:RATE`; a sample with a negative residual
-    or all-zero coordinates is missing (NaN)."""
+    """Reads a C3D file (`lgi.io.c3d_format`): labels from `POINT:LABELS` (then `LABELS2`,
+    ... past 255), units from `POINT:UNITS`, rate from `POINT:RATE`, the first frame from the
+    header (1-based, as a TRC's `Frame#`); a sample with a negative residual or all-zero
+    coordinates is missing (NaN). Not ezc3d: it refuses real writers' files (OptiTrack, BTK's
+    tests) and crashed the process (a segmentation fault) on damaged ones the fuzz suite
+    made; on every shared file ezc3d reads, the two agree to the float
+    (`tests/test_set_files.py`)."""
     p = os.fspath(path)
-    try:
-        import ezc3d
-    except ImportError:  # pragma: no cover - ezc3d is a dependency
-        raise InputError(f"{p}: reading C3D needs the ezc3d package (pip install ezc3d)") from None
     if not os.path.isfile(p):
         raise InputError(f"{p}: no such take file")
     if os.path.getsize(p) == 0:
         raise InputError(f"{p}: the file is empty")
-    try:
-        c = ezc3d.c3d(p)
-    except Exception:  # ezc3d refuses some real writers' files (OptiTrack, BTK's tests)
-        return _read_c3d_ourselves(p)
-    if int(np.shape(c["data"]["points"])[1]) == 0:
-        raise InputError(f"{p}: the C3D file holds no 3D marker points (only analog data)")
-    header_first = _check_c3d_frames(p, int(np.shape(c["data"]["points"])[-1]))
-    point = c["parameters"]["POINT"]
-    labels: list[str] = []
-    for key in ["LABELS", *(f"LABELS{k}" for k in range(2, 100))]:
-        if key not in point:
-            break
-        labels += [str(x).strip() for x in point[key]["value"]]
-    pts = np.asarray(c["data"]["points"], dtype=np.float64)
-    if pts.ndim != 3 or pts.shape[0] < 3:
-        raise InputError(f"{p}: C3D points have shape {pts.shape}, expected (4, N, F)")
-    n = pts.shape[1]
-    if len(labels) < n:
-        raise InputError(f"{p}: {n} points but only {len(labels)} labels in POINT:LABELS")
-    xyz = np.ascontiguousarray(pts[:3].transpose(2, 1, 0))
-    residuals = c["data"]["meta_points"].get("residuals")
-    if residuals is not None and np.size(residuals) == n * xyz.shape[0]:
-        res = np.asarray(residuals, dtype=np.float64).reshape(n, -1).T
-        xyz[res < 0] = np.nan
-    xyz[np.all(xyz == 0.0, axis=2)] = np.nan
-    units_v = point["UNITS"]["value"] if "UNITS" in point else []
-    units = str(units_v[0]).strip() if len(units_v) and str(units_v[0]).strip() else None
-    rate_v = point["RATE"]["value"] if "RATE" in point else []
-    fps = float(rate_v[0]) if len(rate_v) and float(rate_v[0]) > 0 else None
-    # The file's own (1-based) number of its first frame, as a TRC's Frame# counts: ezc3d
-    # reports it 0-based, so the same take as C3D and TRC would be a frame apart.
-    first = (
-        header_first
-        if header_first is not None
-        else int(c["header"]["points"].get("first_frame", 0)) + 1
-    )
-    return RawTake(labels[:n], xyz, fps, units, p, first)
+    return _read_c3d_ourselves(p)
 
 
 def _read_c3d_ourselves(p: str) -> RawTake:
-    """The file ezc3d refused, read by `lgi.io.c3d_format` (the format's own description,
-    tolerant of the defects BTK reads past, each said in a warning); its `InputError` names
-    the defect when the file cannot be read at all."""
+    """`lgi.io.c3d_format`'s reading (tolerant of the defects BTK reads past, each said in a
+    warning); its `InputError` names the defect when the file cannot be read at all."""
     from lgi.io.c3d_format import read_c3d_file
 
     c = read_c3d_file(p)
@@ -223,30 +185,6 @@ def _read_c3d_ourselves(p: str) -> RawTake:
             stacklevel=3,
         )
     return RawTake(c.labels, c.points, c.fps, c.units, p, c.first_frame)
-
-
-def _check_c3d_frames(p: str, read: int) -> int | None:
-    """Refuses a C3D file with fewer frames than its header's first and last frame give (a
-    truncated copy: ezc3d reads what is there and rewrites its header and `POINT:FRAMES` to
-    match, so only the file's own header bytes tell). Header words 4 and 5, in the byte
-    order of the processor the parameter section names (MIPS: big-endian); a header last
-    frame of 65535 is the format's ceiling, so a longer take is not checked past it."""
-    with open(p, "rb") as f:
-        head = f.read(512)
-        block = head[0] if head else 0
-        f.seek(max(block - 1, 0) * 512)
-        params = f.read(4)
-    if len(head) < 10 or len(params) < 4:
-        return None
-    order = ">" if params[3] == 86 else "<"
-    first, last = struct.unpack(f"{order}HH", head[6:10])
-    expected = last - first + 1
-    if expected > read and not (last == 0xFFFF and read >= expected):
-        raise InputError(
-            f"{p}: truncated C3D file: its header gives frames {first}-{last} ({expected}), "
-            f"only {read} are in the file"
-        )
-    return int(first)
 
 
 def read_trc(path: str | os.PathLike[str]) -> RawTake:
