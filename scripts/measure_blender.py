@@ -22,7 +22,9 @@ def evaluated(obj) -> np.ndarray:  # type: ignore[no-untyped-def]
     mesh = obj.evaluated_get(dg).to_mesh()
     co = np.empty(len(mesh.vertices) * 3)
     mesh.vertices.foreach_get("co", co)
-    return (np.asarray(obj.matrix_world) @ np.c_[co.reshape(-1, 3), np.ones(len(co) // 3)].T).T[:, :3]
+    return (np.asarray(obj.matrix_world) @ np.c_[co.reshape(-1, 3), np.ones(len(co) // 3)].T).T[
+        :, :3
+    ]
 
 
 def usd(path: str) -> None:
@@ -32,8 +34,10 @@ def usd(path: str) -> None:
     obj = next(o for o in bpy.data.objects if o.type == "MESH")
     v = evaluated(obj)
     size = v.max(axis=0) - v.min(axis=0)
-    print(f"{path}: Blender {bpy.app.version_string}: mesh size (x, y, z) {np.round(size, 4)}; "
-          f"scene fps {s.render.fps}/{s.render.fps_base:g}, frames {s.frame_start}-{s.frame_end}")
+    print(
+        f"{path}: Blender {bpy.app.version_string}: mesh size (x, y, z) {np.round(size, 4)}; "
+        f"scene fps {s.render.fps}/{s.render.fps_base:g}, frames {s.frame_start}-{s.frame_end}"
+    )
 
 
 def pc2(cache: str, obj_path: str) -> None:
@@ -53,9 +57,11 @@ def pc2(cache: str, obj_path: str) -> None:
     got = evaluated(obj)
     gaps = {k: float(np.abs(got - want[k]).max()) for k in range(frames)}
     shown = min(gaps, key=gaps.get)
-    print(f"{cache}: Mesh Cache modifier, default options: scene frame {scene_frame} shows the "
-          f"cache's sample {shown} (time code {int(start) + shown}) to {gaps[shown]:.3g}; the "
-          f"file's start frame is {start:g}; modifier Frame Start {mod.frame_start:g}")
+    print(
+        f"{cache}: Mesh Cache modifier, default options: scene frame {scene_frame} shows the "
+        f"cache's sample {shown} (time code {int(start) + shown}) to {gaps[shown]:.3g}; the "
+        f"file's start frame is {start:g}; modifier Frame Start {mod.frame_start:g}"
+    )
 
 
 if __name__ == "__main__":
