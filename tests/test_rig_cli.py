@@ -105,3 +105,41 @@ def test_rig_file_mistakes_are_user_errors(actor, capsys, tmp_path: Path) -> Non
     lgi.Dataset.from_arrays(x, [[0, 1, 2], [0, 2, 3]], np.zeros((1, 4, 3))).to_npz(other)
     code, err = run(capsys, "rig", model, other, "-", "-o", tmp_path / "r.usd")
     assert code == 2 and "template: 4 vertices" in err, err
+
+
+def test_rig_in_metres_z_up_holds_the_neutral_and_offsets_turned_and_scaled(
+    tmp_path_factory, sample, capsys, tmp_path: Path
+) -> None:  # type: ignore[no-untyped-def]
+    from pxr import Usd, UsdGeom, UsdSkel
+
+    d = tmp_path_factory.mktemp("rig-cm")
+    files = write_actor(d, sample, num_shapes=4)
+    model = d / "actor.lgi"
+    argv = ["build", files.neutral, files.shapes, files.markers, "-o", model, "--units", "cm"]
+    assert cli.main([str(x) for x in [*argv, "-q", "--jaw", "none"]]) == 0
+    out = tmp_path / "rig.usda"
+    code, err = run(
+        capsys, "rig", model, files.neutral, files.shapes, "-o", out, "--units", "m", "--up", "z"
+    )
+    assert code == 0, err
+    template = lgi.Dataset.from_obj(files.neutral, str(files.shapes / "*.obj"))
+    expected = rig.actor_rig(lgi.Model.load(model), template, [], quiet=True)
+    turn = lambda p: np.stack([p[..., 0], -p[..., 2], p[..., 1]], axis=-1) / 100.0  # noqa: E731
+    stage = Usd.Stage.Open(str(out))
+    assert UsdGeom.GetStageMetersPerUnit(stage) == 1.0
+    assert UsdGeom.GetStageUpAxis(stage) == UsdGeom.Tokens.z
+    face = UsdGeom.Mesh(stage.GetPrimAtPath("/Rig/Face"))
+    np.testing.assert_allclose(
+        np.array(face.GetPointsAttr().Get()), turn(np.asarray(expected.neutral)), atol=1e-7
+    )
+    first = UsdSkel.BlendShape(stage.GetPrimAtPath(f"/Rig/Face/{expected.names[0]}"))
+    idx = np.array(first.GetPointIndicesAttr().Get())
+    np.testing.assert_allclose(
+        np.array(first.GetOffsetsAttr().Get()),
+        turn(np.asarray(expected.shapes[0])[idx]),
+        atol=1e-7,
+    )
+    code, err = run(
+        capsys, "rig", model, files.neutral, files.shapes, "-o", tmp_path / "r.glb", "--up", "z"
+    )
+    assert code == 2 and "glTF is Y up by its specification" in err

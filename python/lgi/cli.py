@@ -125,6 +125,9 @@ def _cmd_rig(args: argparse.Namespace) -> int:
         combine=args.combine,
         noise=args.marker_noise,
         force=args.force,
+        units=args.units,
+        scale=args.scale,
+        up=args.up,
         quiet=args.quiet,
         say=_say(args),
     )
@@ -466,6 +469,7 @@ def _add_pipeline_commands(sub: Any) -> None:
         metavar="SIGMA|none",
         help="as for lgi solve (default none: markers interpolated exactly)",
     )
+    _add_frame_options(r)
     r.add_argument("-q", "--quiet", action="store_true", help="no progress output")
     r.set_defaults(func=_cmd_rig)
 

@@ -809,6 +809,9 @@ def rig_file(
     combine: list[str] | None = None,
     noise: str | None = None,
     force: bool = False,
+    units: str | None = None,
+    scale: float | None = None,
+    up: str = "y",
     quiet: bool = False,
     say: Say = _silent,
 ) -> tuple[Path, int]:
@@ -832,6 +835,11 @@ def rig_file(
         raise InputError("--marker-noise auto: a rig has no take to estimate it from")
     sigma = marker_noise(noise, np.zeros((0, 0, 3)))
     m = Model.load(existing_file(os.fspath(model), "MODEL"))
+    frame = output_frame(m.units, units=units, scale=scale, up=up)
+    if suffix == ".npz" and not frame.identity:
+        raise InputError("--units, --scale and --up: a dataset .npz stays in the model's frame")
+    if suffix in (".gltf", ".glb") and frame.up != "y":
+        raise InputError(f"--out {dest}: glTF is Y up by its specification; --up z is for USD")
     template = read_dataset(neutral, shapes)
     combos = []
     for spec in combine or []:
@@ -845,11 +853,11 @@ def rig_file(
     except InputError as e:
         raise InputError(f"--combine: {e}" if str(e).startswith("combination") else str(e)) from e
     if suffix in (".gltf", ".glb"):
-        write_gltf_rig(dest, result)
+        write_gltf_rig(dest, result, frame=frame)
     elif suffix == ".npz":
         result.to_npz(dest)
     else:
-        write_usd_rig(dest, result, units=m.units)
+        write_usd_rig(dest, result, units=m.units, frame=frame)
     return dest, result.num_shapes
 
 

@@ -20,6 +20,7 @@ from numpy.typing import NDArray
 from lgi.dataset import Dataset
 from lgi.errors import FileWriteError, InputError
 from lgi.io.atomic import atomic_path, temporary_beside
+from lgi.io.frame import OutputFrame
 from lgi.io.paths import output_file
 from lgi.io.topology import topology
 from lgi.io.units import METERS_PER_UNIT, normalize_unit
@@ -32,12 +33,20 @@ _FLOAT, _UINT = 5126, 5125  # glTF componentType codes
 _ARRAY_BUFFER, _ELEMENT_ARRAY_BUFFER = 34962, 34963
 
 
-def _checked(dataset: Dataset) -> tuple[NDArray[np.float64], NDArray[np.float32]]:
+def _checked(
+    dataset: Dataset, frame: OutputFrame | None = None
+) -> tuple[NDArray[np.float64], NDArray[np.float32]]:
+    """The neutral and the shapes' offsets, in `frame` (scaled and turned; offsets are
+    vectors, so they take the same linear map as the points)."""
     if not isinstance(dataset, Dataset):
         raise InputError(f"expected an lgi.Dataset, got {type(dataset).__name__}")
     if dataset.num_shapes == 0:
         raise InputError("the dataset has no shapes to export as blendshapes")
-    return np.asarray(dataset.neutral), np.asarray(dataset.shapes, dtype=np.float32)
+    neutral, shapes = np.asarray(dataset.neutral), np.asarray(dataset.shapes, dtype=np.float32)
+    if frame is not None and not frame.identity:
+        neutral = frame.points(neutral)
+        shapes = frame.points(shapes).astype(np.float32)
+    return neutral, shapes
 
 
 def gltf_vertices(dataset: Dataset) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
@@ -53,7 +62,9 @@ def gltf_vertices(dataset: Dataset) -> tuple[NDArray[np.int64], NDArray[np.int64
     return unique[:, 0], inverse.reshape(-1, 3)
 
 
-def write_gltf_rig(path: str | os.PathLike[str], dataset: Dataset) -> Path:
+def write_gltf_rig(
+    path: str | os.PathLike[str], dataset: Dataset, *, frame: OutputFrame | None = None
+) -> Path:
     """Writes the neutral as one glTF mesh (triangles; TEXCOORD_0 when the dataset has UVs,
     vertices split at seams: `gltf_vertices`) with every shape as a morph target (POSITION
     displacements), names in `mesh.extras.targetNames`, all weights 0. `.glb`: binary;
@@ -62,7 +73,11 @@ def write_gltf_rig(path: str | os.PathLike[str], dataset: Dataset) -> Path:
     suffix = out.suffix.lower()
     if suffix not in (".gltf", ".glb"):
         raise InputError(f"glTF output {out}: the suffix must be .gltf or .glb")
-    neutral, shapes = _checked(dataset)
+    if frame is not None and frame.up != "y":
+        raise InputError(
+            f"glTF output {path}: glTF is Y up by its specification; --up z is for USD"
+        )
+    neutral, shapes = _checked(dataset, frame)
     source, tris = gltf_vertices(dataset)
     blobs: list[bytes] = []
     views: list[dict[str, Any]] = []
@@ -212,6 +227,7 @@ def write_usd_rig(
     *,
     units: str | None = None,
     animation: RigAnimation | None = None,
+    frame: OutputFrame | None = None,
 ) -> Path:
     """Writes the neutral and its shapes as a USD blendshape rig: `SkelRoot` `/Rig` (default
     prim) holding the `UsdGeom.Mesh` `/Rig/Face` (the neutral's source polygons, UVs as `st`)
@@ -228,10 +244,13 @@ def write_usd_rig(
     out = output_file(path, "USD output")
     if out.suffix.lower() not in (".usd", ".usdc", ".usda"):
         raise InputError(f"USD output {out}: the suffix must be .usd, .usdc or .usda")
-    neutral, shapes = _checked(dataset)
+    neutral, shapes = _checked(dataset, frame)
+    if frame is not None and not frame.identity:
+        units = frame.units
     tmp = temporary_beside(out)
     stage = new_stage(Usd, Sdf, tmp)
-    UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.y)
+    up_z = frame is not None and frame.up == "z"
+    UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.z if up_z else UsdGeom.Tokens.y)
     if units is not None:
         UsdGeom.SetStageMetersPerUnit(stage, METERS_PER_UNIT[normalize_unit(units, "units")])
     root = UsdSkel.Root.Define(stage, "/Rig")
