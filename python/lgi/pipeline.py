@@ -430,8 +430,10 @@ def _write_curves(
     *,
     fps: float | None,
     start: int,
+    frame: OutputFrame | None = None,
 ) -> None:
-    """`lgi solve --curves`: the solve's global fit weights and jaw pose as curves."""
+    """`lgi solve --curves`: the solve's global fit weights and jaw pose as curves (a USD rig
+    in the output's frame)."""
     from lgi.io.curves import write_curves
 
     if fit is None:
@@ -439,7 +441,9 @@ def _write_curves(
             "--curves: this solve made no global fit (a model built with fit off, or without "
             "shapes), so there are no curves to write"
         )
-    write_curves(out, m.dataset, fit, fps=fps, start=start, units=m.units, jaw_theta=jaw_theta)
+    write_curves(
+        out, m.dataset, fit, fps=fps, start=start, units=m.units, jaw_theta=jaw_theta, frame=frame
+    )
 
 
 def _write_solve_report(
@@ -691,7 +695,9 @@ def solve_file(
     if chunk is None:
         res = m.solve(x, jaw=jaw_mode, marker_noise=sigma, quiet=quiet)
         if curves_out is not None:
-            _write_curves(curves_out, res.fit_weights, res.jaw_theta, m, fps=rate, start=start)
+            _write_curves(
+                curves_out, res.fit_weights, res.jaw_theta, m, fps=rate, start=start, frame=frame
+            )
             say(f"wrote the curves {curves_out}")
         written = write_solved(
             kind,
@@ -745,7 +751,7 @@ def solve_file(
         if curves_out is not None:
             fit = _joined(fits)
             jaw_all = _joined(jaws)
-            _write_curves(curves_out, fit, jaw_all, m, fps=rate, start=start)
+            _write_curves(curves_out, fit, jaw_all, m, fps=rate, start=start, frame=frame)
             say(f"wrote the curves {curves_out}")
         written = sink.close()
     except BaseException:

@@ -17,6 +17,7 @@ import numpy as np
 from lgi.dataset import Dataset
 from lgi.errors import InputError, LgiWarning
 from lgi.io.atomic import atomic_path
+from lgi.io.frame import OutputFrame
 from lgi.io.livelink import arkit_to_dataset
 from lgi.io.rig import RigAnimation, write_usd_rig
 
@@ -58,14 +59,20 @@ def write_usd_curves(
     start: int = 0,
     units: str | None = None,
     jaw_theta: Any | None = None,
+    frame: OutputFrame | None = None,
 ) -> Path:
-    """The blend-shape rig of `dataset` (`write_usd_rig`) with (F, S) `weights` as its
-    `SkelAnimation`'s time-sampled `blendShapeWeights` and the jaw pose as `lgi:jawTheta`."""
+    """The blend-shape rig of `dataset` (`write_usd_rig`, in `frame` when given) with (F, S)
+    `weights` as its `SkelAnimation`'s time-sampled `blendShapeWeights` and the jaw pose as
+    `lgi:jawTheta` (its forward translation scaled with the frame)."""
+    jaw = None if jaw_theta is None else np.asarray(jaw_theta, dtype=np.float64).copy()
+    if jaw is not None and frame is not None:
+        jaw[:, 2] *= frame.scale
     return write_usd_rig(
         path,
         dataset,
         units=units,
-        animation=RigAnimation(np.asarray(weights), fps, start, jaw_theta),
+        animation=RigAnimation(np.asarray(weights), fps, start, jaw),
+        frame=frame,
     )
 
 
@@ -131,8 +138,10 @@ def write_curves(
     start: int,
     units: str | None,
     jaw_theta: Any | None,
+    frame: OutputFrame | None = None,
 ) -> Path:
-    """`--curves FILE` by suffix: USD (`write_usd_curves`) or Live Link CSV."""
+    """`--curves FILE` by suffix: USD (`write_usd_curves`, its rig in `frame`) or Live Link
+    CSV (weights have no unit)."""
     suffix = Path(path).suffix.lower()
     if suffix not in CURVE_SUFFIXES:
         raise InputError(f"--curves {path}: use .usd/.usda/.usdc (UsdSkel) or .csv (Live Link)")
@@ -146,5 +155,5 @@ def write_curves(
             )
         return write_livelink_csv(path, list(dataset.names), weights, fps=fps, start=start)
     return write_usd_curves(
-        path, dataset, weights, fps=fps, start=start, units=units, jaw_theta=jaw_theta
+        path, dataset, weights, fps=fps, start=start, units=units, jaw_theta=jaw_theta, frame=frame
     )
