@@ -170,3 +170,21 @@ def test_lgi_solve_report_writes_the_page_of_the_solve_naming_a_swap(
     )
     assert p.returncode == 2 and "--report needs the whole take solved at once" in p.stderr
     assert not (tmp_path / "o2.npz").exists()
+
+
+def test_a_report_and_a_view_read_a_usd_cache_lgi_solve_wrote(spiked: Path, tmp_path: Path) -> None:
+    from lgi.view import load
+
+    usd = tmp_path / "spiked.usd"
+    assert lgi_cli("export", spiked, "-o", usd, "-q").returncode == 0
+    out = tmp_path / "r.html"
+    p = lgi_cli("report", usd, "-o", out)
+    assert p.returncode == 0, p.stderr
+    page = out.read_text()
+    worst = page.split("<h2>Worst markers</h2>")[1].split("</table>")[0]
+    assert re.findall(r"<tr><td>([^<]+)</td>", worst)[0] == "m010"  # names kept in the USD
+    assert "time codes 100 to 249" in page
+    view = load(usd)
+    npz = read_result_npz(spiked)
+    np.testing.assert_array_equal(view.solved.vertices, npz.vertices)
+    np.testing.assert_allclose(view.solved.bundle_residuals, npz.bundle_residuals, rtol=1e-6)

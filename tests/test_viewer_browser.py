@@ -162,3 +162,28 @@ def test_clicking_the_heatmap_seeks_the_frame_under_the_pointer(page) -> None:  
     _wait(driver, "return document.body.dataset.frame", str(got))
     assert abs(got - 145) <= 1, got
     assert _errors(driver) == []
+
+
+def test_clicking_a_heatmap_cell_in_the_report_opens_the_viewer_at_that_frame(page) -> None:  # type: ignore[no-untyped-def]
+    driver, url = page
+    driver.get(url + "report.html")
+    # A real click (trusted event) at the middle of frame 60's column (time code 160), a
+    # quarter down the markers, after scrolling the picture's top into view.
+    driver.execute_script(
+        "const img = document.getElementById('heatmap'); img.scrollIntoView({block: 'start'});"
+    )
+    box = driver.execute_script(
+        "const img = document.getElementById('heatmap'); const r = img.getBoundingClientRect();"
+        "const [l, t, w, h] = img.dataset.box.split(',').map(Number);"
+        "return [r.left + r.width * (l + w * 60.5 / 150), r.top + r.height * (t + h * 0.25)];"
+    )
+    from selenium.webdriver.common.actions.action_builder import ActionBuilder
+
+    actions = ActionBuilder(driver)
+    actions.pointer_action.move_to_location(int(box[0]), int(box[1])).click()
+    actions.perform()
+    _wait(driver, "return document.body.dataset.ready", "1")
+    got = int(driver.execute_script("return document.body.dataset.frame"))
+    _wait(driver, "return document.body.dataset.frame", str(got))
+    assert abs(got - 160) <= 1, got
+    assert _errors(driver) == []

@@ -491,7 +491,9 @@ def _add_pipeline_commands(sub: Any) -> None:
         description="Residual heatmap, worst markers and frames, dropouts, the jaw, and the "
         "difference to a second solve (--compare), in one HTML file readable without a server.",
     )
-    rp.add_argument("solved", metavar="SOLVED", help="solved take (.npz from lgi solve)")
+    rp.add_argument(
+        "solved", metavar="SOLVED", help="solved take: .npz or USD point cache from lgi solve"
+    )
     rp.add_argument("-o", "--out", required=True, help="report to write (.html)")
     rp.add_argument(
         "--force", action="store_true", help="replace an existing output (default: refuse)"
@@ -515,7 +517,9 @@ def _add_pipeline_commands(sub: Any) -> None:
         "solved mesh with its markers coloured by residual; colour vertices by displacement or "
         "by the difference to --compare; the residual heatmap and worst frames seek.",
     )
-    vw.add_argument("solved", metavar="SOLVED", help="solved take (.npz from lgi solve)")
+    vw.add_argument(
+        "solved", metavar="SOLVED", help="solved take: .npz or USD point cache from lgi solve"
+    )
     vw.add_argument("--compare", default=None, metavar="NPZ", help="a second solve (A/B colour)")
     vw.add_argument("--port", type=int, default=0, help="port on 127.0.0.1 (default: any free)")
     vw.add_argument("--open", action="store_true", help="open the page in the default browser")

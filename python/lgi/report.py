@@ -10,6 +10,7 @@ from __future__ import annotations
 import base64
 import html
 import io
+import json
 import os
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -153,7 +154,7 @@ def _face_size(solved: Result) -> float:
     return float(np.linalg.norm(v.max(axis=0) - v.min(axis=0))) or 1.0
 
 
-def _heatmap(solved: Result, frames: F64) -> str:
+def _heatmap(solved: Result, frames: F64) -> tuple[str, tuple[float, float, float, float]]:
     """Marker x frame residuals; missing samples in grey; the colour scale tops at the 99th
     percentile so one spike does not hide the rest (values above are drawn at the top)."""
     from matplotlib import colormaps
@@ -184,7 +185,10 @@ def _heatmap(solved: Result, frames: F64) -> str:
     ax.set_title("marker residual per frame (grey: missing)")
     cb = fig.colorbar(im, ax=ax, extend="max", pad=0.01)
     cb.set_label(f"residual{_unit(solved.units)}; top = 99th percentile")
-    return _png(fig)
+    uri = _png(fig)
+    # Where the cells are in the picture (after the layout ran): the page maps a click to them.
+    x0, y0, w, h = ax.get_position().bounds
+    return uri, (x0, 1.0 - y0 - h, w, h)
 
 
 def _per_frame(solved: Result, frames: F64) -> str:
@@ -264,6 +268,39 @@ def _comparison_figures(solved: Result, cmp: Comparison, frames: F64) -> tuple[s
     cb.set_label(f"mean distance over frames{_unit(solved.units)}")
     fig.suptitle(f"difference to {cmp.label} per vertex (drawn on the first frame)")
     return per_frame, _png(fig)
+
+
+def _heatmap_tag(solved: Result, frames: F64, viewer_url: str | None) -> str:
+    """The heatmap picture with what a click needs: the cells' box (fractions of the picture,
+    from its top left), the time codes and the marker names; `_PICK_JS` reads them."""
+    uri, (left, top, width, height) = _heatmap(solved, frames)
+    names = html.escape(json.dumps(list(solved.marker_names)))
+    return (
+        f"<img id=heatmap alt='marker by frame residual heatmap' src='{uri}' "
+        f"data-box='{left:.6f},{top:.6f},{width:.6f},{height:.6f}' "
+        f"data-start='{solved.start}' data-frames='{len(frames)}' data-markers='{names}'"
+        + (f" data-viewer='{html.escape(viewer_url)}'" if viewer_url else "")
+        + " style='cursor:crosshair'>"
+    )
+
+
+_PICK_JS = """
+<script>
+const img = document.getElementById('heatmap');
+if (img) img.addEventListener('click', (e) => {
+  const r = img.getBoundingClientRect();
+  const [l, t, w, h] = img.dataset.box.split(',').map(Number);
+  const fx = ((e.clientX - r.left) / r.width - l) / w;
+  const fy = ((e.clientY - r.top) / r.height - t) / h;
+  if (fx < 0 || fx >= 1 || fy < 0 || fy >= 1) return;
+  const names = JSON.parse(img.dataset.markers);
+  const code = Number(img.dataset.start) + Math.floor(fx * Number(img.dataset.frames));
+  const marker = names[Math.floor(fy * names.length)];
+  document.getElementById('heat-pick').textContent = `${marker}, time code ${code}`;
+  if (img.dataset.viewer) location.href = `${img.dataset.viewer}#frame=${code}`;
+});
+</script>
+"""
 
 
 def _seek_link(viewer_url: str | None, code: int) -> str:
@@ -355,7 +392,10 @@ def render_report(
         "<h2>Residuals</h2>",
         "<p class=note>A marker's residual is its distance to the solved surface (with "
         "<code>--marker-noise</code>, the correction the solve applied to it).</p>",
-        f"<img alt='marker by frame residual heatmap' src='{_heatmap(solved, frames)}'>",
+        _heatmap_tag(solved, frames, viewer_url),
+        "<p class=note id=heat-pick>Click a cell: its marker and time code"
+        + (", and the viewer opens at that frame." if viewer_url else ".")
+        + "</p>",
         f"<img alt='residuals per frame' src='{_per_frame(solved, frames)}'>",
     ]
     order = np.argsort(np.nan_to_num(stats.max, nan=-np.inf))[::-1][:WORST_SHOWN]
@@ -410,8 +450,21 @@ def render_report(
     return (
         "<!DOCTYPE html><html lang=en><head><meta charset=utf-8>"
         f"<title>lgi report: {esc(os.path.basename(source))}</title><style>{_CSS}</style>"
-        "</head><body>" + "\n".join(body) + "</body></html>\n"
+        "</head><body>" + "\n".join(body) + _PICK_JS + "</body></html>\n"
     )
+
+
+USD_SUFFIXES = (".usd", ".usda", ".usdc")
+
+
+def read_solved(path: str | os.PathLike[str]) -> Result:
+    """A solved take from a `.npz` (`read_result_npz`) or a USD point cache `lgi solve` wrote
+    (`lgi.io.usd.read_usd_cache`: no missing flags, no marker positions)."""
+    if Path(path).suffix.lower() in USD_SUFFIXES:
+        from lgi.io.usd import read_usd_cache
+
+        return read_usd_cache(path)
+    return read_result_npz(path)
 
 
 def write_report(
@@ -428,10 +481,8 @@ def write_report(
 
     # Two compressed solves are mostly zlib time, which runs without the GIL: read side by side.
     with ThreadPoolExecutor(max_workers=2) as pool:
-        solved_job = pool.submit(read_result_npz, solved_path)
-        reference_job = (
-            None if reference_path is None else pool.submit(read_result_npz, reference_path)
-        )
+        solved_job = pool.submit(read_solved, solved_path)
+        reference_job = None if reference_path is None else pool.submit(read_solved, reference_path)
         solved = solved_job.result()
         reference = None if reference_job is None else reference_job.result()
     from lgi.diagnose import diagnose_result

@@ -241,8 +241,8 @@ def serve(data: ViewData, *, port: int = 0) -> tuple[ThreadingHTTPServer, str]:
 
 def load(solved: str | os.PathLike[str], compare: str | os.PathLike[str] | None = None) -> ViewData:
     """The view of a solved `.npz` (and a second solve to colour the difference to)."""
-    s, wait = stream_result_npz(solved)
-    ref, ref_wait = (None, _ready) if compare is None else stream_result_npz(compare)
+    s, wait = _open(solved)
+    ref, ref_wait = (None, _ready) if compare is None else _open(compare)
     return ViewData(
         s,
         os.fspath(solved),
@@ -251,6 +251,17 @@ def load(solved: str | os.PathLike[str], compare: str | os.PathLike[str] | None 
         wait=wait,
         reference_wait=ref_wait,
     )
+
+
+def _open(path: str | os.PathLike[str]) -> tuple[Result, Callable[[int], None]]:
+    """A `.npz` streamed (`stream_result_npz`); a USD cache read whole (`read_usd_cache`)."""
+    from lgi.report import USD_SUFFIXES
+
+    if Path(path).suffix.lower() in USD_SUFFIXES:
+        from lgi.io.usd import read_usd_cache
+
+        return read_usd_cache(path), _ready
+    return stream_result_npz(path)
 
 
 def _ready(_stop: int) -> None:

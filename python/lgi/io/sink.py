@@ -64,7 +64,9 @@ class FrameSink:
             if fps is None:
                 raise InputError("a USD point cache needs a frame rate (--fps)")
             up = "y" if self.frame is None else self.frame.up
-            self.usd = UsdCache(out, topo, fps=fps, units=units, start=start, up=up)
+            self.usd = UsdCache(
+                out, topo, fps=fps, units=units, start=start, up=up, marker_names=names
+            )
         self.parts: list[
             tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None, np.ndarray | None]
         ] = []

@@ -15,13 +15,14 @@ from lgi.dataset import Dataset
 from lgi.errors import FileWriteError, InputError
 from lgi.io.atomic import temporary_beside
 from lgi.io.paths import output_file
+from lgi.io.result import Result
 from lgi.io.topology import Topology, topology, vertex_frames
 from lgi.io.units import METERS_PER_UNIT, normalize_unit
 
 if TYPE_CHECKING:
     from lgi.model import Model
 
-__all__ = ["UsdCache", "define_usd_mesh", "new_stage", "write_usd"]
+__all__ = ["UsdCache", "define_usd_mesh", "new_stage", "read_usd_cache", "write_usd"]
 
 
 def new_stage(usd: Any, sdf: Any, path: Path) -> Any:
@@ -111,6 +112,7 @@ class UsdCache:
         units: str | None = None,
         start: int = 0,
         up: str = "y",
+        marker_names: list[str] | None = None,
     ) -> None:
         try:
             from pxr import Gf, Sdf, Usd, UsdGeom, Vt
@@ -141,6 +143,10 @@ class UsdCache:
         mesh = define_usd_mesh(stage, "/Face/Mesh", topo)
         self._stage, self._mesh = stage, mesh
         self._points = mesh.GetPointsAttr()
+        if marker_names:  # what `lgi:markerResidual`'s entries are (read_usd_cache)
+            mesh.GetPrim().CreateAttribute(
+                "lgi:markerNames", Sdf.ValueTypeNames.StringArray, custom=True
+            ).Set(Vt.StringArray(list(marker_names)))
         self._extent = mesh.CreateExtentAttr()
         self._jaw = None
         self._residual = None
@@ -236,6 +242,71 @@ class UsdCache:
             self.close()
         else:
             self.discard()
+
+
+def read_usd_cache(path: str | os.PathLike[str]) -> Result:
+    """A USD point cache `lgi solve` wrote, as a solved take (`lgi report`, `lgi view`): the
+    mesh's time-sampled points, faces and UVs, `lgi:markerResidual` (which it must have),
+    `lgi:markerNames` (else `m000`, ...), `lgi:jawTheta`, the rate, first time code and unit.
+    A USD cache keeps no missing-marker flags and no marker positions."""
+    from pxr import Usd, UsdGeom
+
+    p = os.fspath(path)
+    if not os.path.isfile(p):
+        raise InputError(f"{p}: no such USD file")
+    try:
+        stage = Usd.Stage.Open(p)
+    except Exception:  # pxr's Tf.ErrorException for unreadable layers
+        stage = None
+    if stage is None:
+        raise InputError(f"{p}: not a readable USD file")
+    prim = stage.GetPrimAtPath("/Face/Mesh")
+    if not prim or not prim.IsA(UsdGeom.Mesh):
+        prim = next((q for q in stage.Traverse() if q.IsA(UsdGeom.Mesh)), None)
+    if prim is None:
+        raise InputError(f"{p}: holds no mesh")
+    mesh = UsdGeom.Mesh(prim)
+    times = mesh.GetPointsAttr().GetTimeSamples()
+    res_attr = prim.GetAttribute("lgi:markerResidual")
+    if not times or not res_attr or not res_attr.GetTimeSamples():
+        raise InputError(
+            f"{p}: not a solved take: a point cache written by lgi solve has time-sampled "
+            "points and lgi:markerResidual"
+        )
+    vertices = np.array([np.asarray(mesh.GetPointsAttr().Get(t)) for t in times], np.float32)
+    residuals = np.array([np.asarray(res_attr.Get(t), dtype=np.float64) for t in times])
+    counts = np.asarray(mesh.GetFaceVertexCountsAttr().Get(), dtype=np.int64)
+    indices = np.asarray(mesh.GetFaceVertexIndicesAttr().Get(), dtype=np.int64)
+    st = UsdGeom.PrimvarsAPI(mesh).GetPrimvar("st")
+    uvs = uv_idx = None
+    if st and st.IsIndexed():
+        uvs = np.asarray(st.Get(), dtype=np.float64)
+        uv_idx = np.asarray(st.GetIndices(), dtype=np.int64)
+    names_attr = prim.GetAttribute("lgi:markerNames")
+    names = list(names_attr.Get()) if names_attr and names_attr.Get() else []
+    if len(names) != residuals.shape[1]:
+        names = [f"m{k:03d}" for k in range(residuals.shape[1])]
+    jaw_attr = prim.GetAttribute("lgi:jawTheta")
+    jaw = (
+        np.array([np.asarray(jaw_attr.Get(t), dtype=np.float64) for t in times])
+        if jaw_attr and jaw_attr.GetTimeSamples()
+        else None
+    )
+    mpu = UsdGeom.GetStageMetersPerUnit(stage)
+    units = next((u for u, m in METERS_PER_UNIT.items() if abs(m - mpu) <= 1e-9 * m), None)
+    if not stage.HasAuthoredMetadata("metersPerUnit"):
+        units = None
+    return Result(
+        vertices=vertices,
+        bundle_residuals=residuals,
+        missing=np.zeros(residuals.shape, dtype=bool),
+        marker_names=names,
+        fps=float(stage.GetTimeCodesPerSecond()),
+        start=int(times[0]),
+        units=units,
+        topology=Topology(vertices.shape[1], counts, indices, uvs, uv_idx),
+        jaw_theta=jaw,
+    )
 
 
 def write_usd(
