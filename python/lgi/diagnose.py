@@ -23,6 +23,8 @@ __all__ = [
     "Finding",
     "diagnose",
     "diagnose_result",
+    "face_size",
+    "finding_lines",
     "summary",
 ]
 
@@ -241,12 +243,27 @@ def _worst(r: NDArray[np.float64]) -> float:
     return float(np.nanmax(r)) if np.isfinite(r).any() else float("nan")
 
 
+def face_size(first_frame: ArrayLike) -> float:
+    """The size findings are measured against: the solved first frame's bounding-box
+    diagonal (the same whether the solve is in memory or read back from its file)."""
+    v0 = np.asarray(first_frame, dtype=np.float64)
+    return float(np.linalg.norm(v0.max(axis=0) - v0.min(axis=0)))
+
+
 def diagnose_result(r: Result) -> list[Finding]:
-    """`diagnose` of a solved file (label swaps only where it keeps the take's markers); the
-    face's size from its first frame."""
-    v0 = np.asarray(r.vertices[0], dtype=np.float64)
-    size = float(np.linalg.norm(v0.max(axis=0) - v0.min(axis=0)))
-    return diagnose(r.bundle_residuals, r.missing, r.marker_names, size=size, markers=r.markers)
+    """`diagnose` of a solved take (label swaps only where it keeps the take's markers)."""
+    return diagnose(
+        r.bundle_residuals,
+        r.missing,
+        r.marker_names,
+        size=face_size(r.vertices[0]),
+        markers=r.markers,
+    )
+
+
+def finding_lines(r: Result) -> list[str]:
+    """`diagnose_result`'s findings as the lines `lgi report` and `lgi view` list."""
+    return [f.describe(r.start, r.units) for f in diagnose_result(r)]
 
 
 def summary(

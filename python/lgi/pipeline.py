@@ -20,11 +20,11 @@ import numpy as np
 
 from lgi._lgi import BuildConfig, SolveResult
 from lgi.dataset import Dataset
-from lgi.diagnose import diagnose, diagnose_result, summary
+from lgi.diagnose import Finding, diagnose, diagnose_result, face_size, summary
 from lgi.errors import InputError, MarkerError
 from lgi.io import takes
 from lgi.io.atomic import check_writable, existing_sequence, refuse_existing
-from lgi.io.frame import OutputFrame, output_frame
+from lgi.io.frame import DATASET_NPZ, OutputFrame, output_frame
 from lgi.io.paths import output_file
 from lgi.io.result import Result, read_result_npz
 from lgi.io.sink import FrameSink
@@ -452,13 +452,14 @@ def _write_solve_report(
     m: Model,
     topo: Topology,
     markers: np.ndarray,
+    found: list[Finding],
     *,
     fps: float | None,
     start: int,
     source: Path,
 ) -> None:
-    """`lgi solve --report`: `lgi report`'s page of the solve just made, from memory."""
-    from lgi.diagnose import diagnose_result
+    """`lgi solve --report`: `lgi report`'s page of the solve just made, from memory, with
+    the findings the summary printed."""
     from lgi.io.atomic import atomic_path
     from lgi.io.result import Result
     from lgi.report import render_report
@@ -475,19 +476,27 @@ def _write_solve_report(
         jaw_theta=res.jaw_theta,
         markers=np.asarray(markers, dtype=np.float32),
     )
-    found = [f.describe(start, m.units) for f in diagnose_result(solved)]
+    lines = [f.describe(start, m.units) for f in found]
     with atomic_path(page) as tmp:
-        tmp.write_text(render_report(solved, source=str(source), findings=found), encoding="utf-8")
+        tmp.write_text(render_report(solved, source=str(source), findings=lines), encoding="utf-8")
 
 
 def _say_findings(
-    say: Say, residuals: np.ndarray, missing: np.ndarray, markers: np.ndarray, m: Model, start: int
-) -> None:
-    """The solve's summary (`lgi.diagnose`): residuals, then flagged markers and frames."""
+    say: Say,
+    residuals: np.ndarray,
+    missing: np.ndarray,
+    markers: np.ndarray,
+    first_frame: np.ndarray,
+    m: Model,
+    start: int,
+) -> list[Finding]:
+    """The solve's summary (`lgi.diagnose`): residuals, then flagged markers and frames;
+    returns the findings (measured as `lgi info` measures them on the file)."""
     names = m.marker_names
-    found = diagnose(residuals, missing, names, size=m.diagonal, markers=markers)
+    found = diagnose(residuals, missing, names, size=face_size(first_frame), markers=markers)
     for line in summary(residuals, missing, names, found, start=start, units=m.units):
         say(line)
+    return found
 
 
 def check_take_scale(
@@ -506,25 +515,23 @@ def check_take_scale(
 
 def _worst_lines(r: Result, shown: int = 5) -> list[str]:
     """`lgi info`'s worst markers (by largest residual) and worst frames of a solved take."""
-    r_ = np.where(r.missing, np.nan, r.bundle_residuals.astype(np.float64))
-    if not np.isfinite(r_).any():
+    from lgi.report import marker_stats, worst_frames, worst_markers
+
+    stats = marker_stats(r)
+    markers = worst_markers(stats, shown)
+    if not markers:
         return []
     u = f" {r.units}" if r.units else ""
-    with np.errstate(all="ignore"):
-        by_marker = np.nanmax(np.where(np.isfinite(r_), r_, -np.inf), axis=0)
-        by_frame = np.nanmax(np.where(np.isfinite(r_), r_, -np.inf), axis=1)
-    markers = [int(b) for b in np.argsort(by_marker)[::-1][:shown] if np.isfinite(by_marker[b])]
-    frames = [int(f) for f in np.argsort(by_frame)[::-1][:shown] if np.isfinite(by_frame[f])]
     return [
         "  worst markers (largest residual): "
         + ", ".join(
-            f"{r.marker_names[b]} {by_marker[b]:.3g}{u} at {r.start + int(np.nanargmax(r_[:, b]))}"
+            f"{r.marker_names[b]} {stats.max[b]:.3g}{u} at {r.start + int(stats.worst_frame[b])}"
             for b in markers
         ),
         "  worst frames (time code, largest residual, marker): "
         + ", ".join(
-            f"{r.start + f} {by_frame[f]:.3g}{u} {r.marker_names[int(np.nanargmax(r_[f]))]}"
-            for f in frames
+            f"{r.start + w.frame} {w.residual:.3g}{u} {r.marker_names[w.marker]}"
+            for w in worst_frames(r, shown)
         ),
     ]
 
@@ -663,11 +670,7 @@ def solve_file(
         curves_out = ready_output(curves, model, take, out, force=force)
     m = Model.load(existing_file(os.fspath(model), "MODEL"))
     frame = output_frame(m.units, units=units, scale=scale, up=up)
-    if kind == "npz" and not frame.identity:
-        raise InputError(
-            "--units, --scale and --up apply to USD, OBJ, PC2 and MDD outputs; a solved .npz "
-            "stays in the model's frame (lgi export converts it)"
-        )
+    frame.check_writer(kind, f"--out {dest}")  # before the take is read
     t = takes.read(
         existing_file(os.fspath(take), "TAKE"),
         m.marker_names,
@@ -712,9 +715,9 @@ def solve_file(
             frame=frame,
             quiet=quiet,
         )
-        _say_findings(say, res.bundle_residuals, res.missing, x, m, start)
+        found = _say_findings(say, res.bundle_residuals, res.missing, x, res.vertices[0], m, start)
         if page is not None:
-            _write_solve_report(page, res, m, topo, x, fps=rate, start=start, source=dest)
+            _write_solve_report(page, res, m, topo, x, found, fps=rate, start=start, source=dest)
             say(f"wrote the report {page}")
         return written, int(x.shape[0])
     from tqdm import tqdm
@@ -730,11 +733,14 @@ def solve_file(
     residuals: list[np.ndarray] = []
     absent: list[np.ndarray] = []
     fits: list[np.ndarray | None] = []
+    first_frame: np.ndarray | None = None
     jaws: list[np.ndarray | None] = []
     try:
         with tqdm(total=n, desc="lgi solve", unit="frame", disable=quiet, leave=False) as bar:
             for a, res in zip(range(0, n, size), chunks, strict=True):
                 b = min(n, a + size)
+                if first_frame is None:
+                    first_frame = res.vertices[0].copy()
                 residuals.append(res.bundle_residuals.copy())
                 absent.append(res.missing.copy())
                 fits.append(None if res.fit_weights is None else res.fit_weights.copy())
@@ -757,7 +763,8 @@ def solve_file(
     except BaseException:
         sink.abort()
         raise
-    _say_findings(say, np.concatenate(residuals), np.concatenate(absent), x, m, start)
+    assert first_frame is not None  # a take has at least one frame (takes.read)
+    _say_findings(say, np.concatenate(residuals), np.concatenate(absent), x, first_frame, m, start)
     return written, n
 
 
@@ -842,10 +849,8 @@ def rig_file(
     sigma = marker_noise(noise, np.zeros((0, 0, 3)))
     m = Model.load(existing_file(os.fspath(model), "MODEL"))
     frame = output_frame(m.units, units=units, scale=scale, up=up)
-    if suffix == ".npz" and not frame.identity:
-        raise InputError("--units, --scale and --up: a dataset .npz stays in the model's frame")
-    if suffix in (".gltf", ".glb") and frame.up != "y":
-        raise InputError(f"--out {dest}: glTF is Y up by its specification; --up z is for USD")
+    rig_kind = {".npz": "npz", ".gltf": "gltf", ".glb": "gltf"}.get(suffix, "usd")
+    frame.check_writer(rig_kind, f"--out {dest}", npz=DATASET_NPZ)
     template = read_dataset(neutral, shapes)
     combos = []
     for spec in combine or []:

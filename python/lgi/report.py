@@ -26,7 +26,17 @@ from lgi.io.result import Result, read_result_npz
 
 F64 = NDArray[np.float64]
 
-__all__ = ["Comparison", "MarkerStats", "compare", "marker_stats", "render_report", "write_report"]
+__all__ = [
+    "Comparison",
+    "MarkerStats",
+    "WorstFrame",
+    "compare",
+    "marker_stats",
+    "render_report",
+    "worst_frames",
+    "worst_markers",
+    "write_report",
+]
 
 WORST_SHOWN = 10
 """Rows of the worst-markers and worst-frames tables."""
@@ -61,9 +71,14 @@ def _longest_run(flags: NDArray[np.bool_]) -> int:
     return int((edges[1::2] - edges[::2]).max())
 
 
+def _present(solved: Result) -> F64:
+    """(F, B) residuals, NaN where a marker is missing."""
+    return np.where(solved.missing, np.nan, solved.bundle_residuals.astype(np.float64))
+
+
 def marker_stats(solved: Result) -> MarkerStats:
     """Residual statistics of every marker over the frames where it is present."""
-    r = np.where(solved.missing, np.nan, solved.bundle_residuals.astype(np.float64))
+    r = _present(solved)
     present = ~solved.missing
     seen = present.any(axis=0)
     with np.errstate(all="ignore"):
@@ -86,6 +101,39 @@ def marker_stats(solved: Result) -> MarkerStats:
         missing=solved.missing.mean(axis=0).astype(np.float64),
         longest_gap=gaps,
     )
+
+
+def _largest_first(values: F64, count: int) -> list[int]:
+    """Indices of the `count` largest finite `values`, largest first."""
+    order = np.argsort(np.nan_to_num(values, nan=-np.inf, neginf=-np.inf))[::-1][:count]
+    return [int(k) for k in order if np.isfinite(values[k])]
+
+
+def worst_markers(stats: MarkerStats, count: int) -> list[int]:
+    """The markers with the largest residual, largest first (never-present ones left out)."""
+    return _largest_first(stats.max, count)
+
+
+@dataclass(frozen=True)
+class WorstFrame:
+    frame: int
+    """Index into the solve (its time code is `start + frame`)."""
+    residual: float
+    marker: int
+    """The marker with that residual."""
+
+
+def worst_frames(solved: Result, count: int) -> list[WorstFrame]:
+    """The `count` frames with the largest present residual, largest first, with the marker."""
+    r = _present(solved)
+    with np.errstate(all="ignore"):
+        frame_max = np.nanmax(np.where(np.isfinite(r), r, -np.inf), axis=1)
+    return [
+        WorstFrame(
+            f, float(frame_max[f]), int(np.nanargmax(np.where(np.isfinite(r[f]), r[f], -np.inf)))
+        )
+        for f in _largest_first(frame_max, count)
+    ]
 
 
 @dataclass(frozen=True)
@@ -160,7 +208,7 @@ def _heatmap(solved: Result, frames: F64) -> tuple[str, tuple[float, float, floa
     from matplotlib import colormaps
     from matplotlib.colors import Normalize
 
-    r = np.where(solved.missing, np.nan, solved.bundle_residuals.astype(np.float64))
+    r = _present(solved)
     finite = r[np.isfinite(r)]
     top = float(np.percentile(finite, 99)) if finite.size else 0.0
     # An exact solve's residuals are round-off (1e-15 cm): a scale floored at a millionth of
@@ -192,7 +240,7 @@ def _heatmap(solved: Result, frames: F64) -> tuple[str, tuple[float, float, floa
 
 
 def _per_frame(solved: Result, frames: F64) -> str:
-    r = np.where(solved.missing, np.nan, solved.bundle_residuals.astype(np.float64))
+    r = _present(solved)
     fig = _figure(11, 3.4)
     ax = fig.add_subplot()
     with np.errstate(all="ignore"):
@@ -228,18 +276,6 @@ def _jaw(solved: Result, frames: F64) -> str | None:
     return _png(fig)
 
 
-def _triangles(solved: Result) -> NDArray[np.int64]:
-    """The faces fan-split into triangles (for the per-vertex picture)."""
-    counts, idx = solved.topology.counts, solved.topology.indices
-    starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
-    tris = [
-        np.stack([idx[np.full(c - 2, s)], idx[s + 1 : s + c - 1], idx[s + 2 : s + c]], axis=1)
-        for s, c in zip(starts.tolist(), counts.tolist(), strict=True)
-        if c >= 3
-    ]
-    return np.concatenate(tris) if tris else np.zeros((0, 3), np.int64)
-
-
 def _comparison_figures(solved: Result, cmp: Comparison, frames: F64) -> tuple[str, str]:
     from matplotlib import colormaps
     from matplotlib.cm import ScalarMappable
@@ -261,7 +297,7 @@ def _comparison_figures(solved: Result, cmp: Comparison, frames: F64) -> tuple[s
     top = float(np.percentile(cmp.per_vertex_mean, 99.5)) or 1.0
     norm, cmap = Normalize(0.0, top), colormaps["viridis"]
     rest = solved.vertices[0].astype(np.float64)
-    tris = _triangles(solved)
+    tris = solved.topology.triangles()
     for ax, yaw in zip(axes, (0.0, 35.0), strict=True):
         draw_mesh(ax, rest, tris, cmp.per_vertex_mean, norm, cmap, yaw)
     cb = fig.colorbar(ScalarMappable(norm=norm, cmap=cmap), ax=axes, extend="max", shrink=0.8)
@@ -343,7 +379,7 @@ def render_report(
     u = solved.units
     frames = solved.start + np.arange(nf, dtype=np.float64)
     stats = marker_stats(solved)
-    r = np.where(solved.missing, np.nan, solved.bundle_residuals.astype(np.float64))
+    r = _present(solved)
     present = r[np.isfinite(r)]
     med = float(np.median(present)) if present.size else float("nan")
     esc = html.escape
@@ -398,7 +434,7 @@ def render_report(
         + "</p>",
         f"<img alt='residuals per frame' src='{_per_frame(solved, frames)}'>",
     ]
-    order = np.argsort(np.nan_to_num(stats.max, nan=-np.inf))[::-1][:WORST_SHOWN]
+    order = worst_markers(stats, WORST_SHOWN)
     body += [
         "<h2>Worst markers</h2>",
         "<p class=note>Ranked by their largest residual.</p>",
@@ -406,7 +442,7 @@ def render_report(
         f"<th>max{_unit(u)}</th><th>at time code</th><th>missing</th>"
         "<th>longest gap (frames)</th></tr>",
     ]
-    for b in order.tolist():
+    for b in order:
         wf = int(stats.worst_frame[b])
         body.append(
             f"<tr><td>{esc(stats.names[b])}</td><td>{_fmt(stats.median[b], None)}</td>"
@@ -415,22 +451,17 @@ def render_report(
             f"<td>{100 * stats.missing[b]:.1f} %</td><td>{stats.longest_gap[b]}</td></tr>"
         )
     body.append("</table>")
-    with np.errstate(all="ignore"):
-        frame_max = np.nanmax(np.where(np.isfinite(r), r, -np.inf), axis=1)
-    worst_frames = np.argsort(frame_max)[::-1][:WORST_SHOWN]
     body += [
         "<h2>Worst frames</h2>",
         f"<table><tr><th>time code</th><th>largest residual{_unit(u)}</th><th>marker</th>"
         "<th>missing markers</th></tr>",
     ]
-    for f in worst_frames.tolist():
-        if not np.isfinite(frame_max[f]):
-            continue
-        b = int(np.nanargmax(np.where(np.isfinite(r[f]), r[f], -np.inf)))
+    for w in worst_frames(solved, WORST_SHOWN):
+        code = solved.start + w.frame
         body.append(
-            f"<tr id='frame-{solved.start + f}'><td>{_seek_link(viewer_url, solved.start + f)}</td>"
-            f"<td>{_fmt(float(frame_max[f]), None)}</td><td>{esc(stats.names[b])}</td>"
-            f"<td>{int(solved.missing[f].sum())}</td></tr>"
+            f"<tr id='frame-{code}'><td>{_seek_link(viewer_url, code)}</td>"
+            f"<td>{_fmt(w.residual, None)}</td><td>{esc(stats.names[w.marker])}</td>"
+            f"<td>{int(solved.missing[w.frame].sum())}</td></tr>"
         )
     body.append("</table>")
     jaw = _jaw(solved, frames)
@@ -485,9 +516,9 @@ def write_report(
         reference_job = None if reference_path is None else pool.submit(read_solved, reference_path)
         solved = solved_job.result()
         reference = None if reference_job is None else reference_job.result()
-    from lgi.diagnose import diagnose_result
+    from lgi.diagnose import finding_lines
 
-    found = [f.describe(solved.start, solved.units) for f in diagnose_result(solved)]
+    found = finding_lines(solved)
     text = render_report(
         solved,
         source=os.fspath(solved_path),

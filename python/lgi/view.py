@@ -21,7 +21,6 @@ from typing import Any
 from urllib.parse import parse_qs, urlsplit
 
 import numpy as np
-from numpy.typing import NDArray
 
 from lgi.errors import InputError
 from lgi.io.result import Result, stream_result_npz
@@ -32,18 +31,6 @@ CHUNK_FRAMES = 32
 """Frames per request: 32 ICT frames are 10 MB of float32 positions."""
 
 _TYPES = {".html": "text/html; charset=utf-8", ".js": "text/javascript; charset=utf-8"}
-
-
-def _triangles(solved: Result) -> NDArray[np.uint32]:
-    """The faces fan-split into triangles."""
-    counts, idx = solved.topology.counts, solved.topology.indices
-    starts = np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.int64)
-    out = []
-    for k in range(1, int(counts.max(initial=3)) - 1):
-        sel = counts > k + 1
-        s = starts[sel]
-        out.append(np.stack([idx[s], idx[s + k], idx[s + k + 1]], axis=1))
-    return np.concatenate(out).astype(np.uint32) if out else np.zeros((0, 3), np.uint32)
 
 
 @dataclass
@@ -68,18 +55,16 @@ class ViewData:
                 f"{self.solved.vertices.shape[0]} frames of {self.solved.vertices.shape[1]}; "
                 "compare solves of the same mesh and frames"
             )
-        self._triangles = _triangles(self.solved)
+        self._triangles = self.solved.topology.triangles().astype(np.uint32)
 
     @property
     def num_frames(self) -> int:
         return int(self.solved.vertices.shape[0])
 
     def meta(self) -> dict[str, Any]:
+        from lgi.report import WORST_SHOWN, worst_frames
+
         s = self.solved
-        r = np.where(s.missing, np.nan, s.bundle_residuals.astype(np.float64))
-        with np.errstate(all="ignore"):
-            frame_max = np.nanmax(np.where(np.isfinite(r), r, -np.inf), axis=1)
-        worst = [int(f) for f in np.argsort(frame_max)[::-1][:10] if np.isfinite(frame_max[f])]
         return {
             "source": os.path.basename(self.source),
             "frames": self.num_frames,
@@ -94,12 +79,8 @@ class ViewData:
             "reference": self.reference_label if self.reference is not None else None,
             "chunk": CHUNK_FRAMES,
             "worst_frames": [
-                {
-                    "frame": f,
-                    "residual": float(frame_max[f]),
-                    "marker": s.marker_names[int(np.nanargmax(np.nan_to_num(r[f], nan=-1.0)))],
-                }
-                for f in worst
+                {"frame": w.frame, "residual": w.residual, "marker": s.marker_names[w.marker]}
+                for w in worst_frames(s, WORST_SHOWN)
             ],
         }
 
@@ -213,14 +194,14 @@ def serve(data: ViewData, *, port: int = 0) -> tuple[ThreadingHTTPServer, str]:
     """Starts the viewer's server on 127.0.0.1 (`port` 0: any free port) in a daemon thread;
     returns it and its address. `/report.html` is `lgi report`'s page of the take, its worst
     frames linking back to the viewer."""
-    from lgi.diagnose import diagnose_result
+    from lgi.diagnose import finding_lines
     from lgi.report import render_report
 
     def report() -> str:
         data.wait(data.num_frames)
         data.reference_wait(data.num_frames)
         s = data.solved
-        found = [f.describe(s.start, s.units) for f in diagnose_result(s)]
+        found = finding_lines(s)
         return render_report(
             data.solved,
             source=data.source,

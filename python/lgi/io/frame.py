@@ -18,6 +18,9 @@ __all__ = ["UP_AXES", "OutputFrame", "output_frame"]
 
 UP_AXES = ("y", "z")
 
+SOLVED_NPZ = "a solved .npz stays in the model's frame (lgi export converts it)"
+DATASET_NPZ = "a dataset .npz stays in the model's frame"
+
 # Y up to Z up, a rotation about X by +90 degrees: (x, y, z) -> (x, -z, y); a face looking
 # down +Z (Y up) looks down -Y (Z up), as Blender's and Unreal's importers turn Y-up files.
 _Y_TO_Z = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
@@ -34,6 +37,16 @@ class OutputFrame:
     @property
     def identity(self) -> bool:
         return self.scale == 1.0 and self.up == "y"
+
+    def check_writer(self, kind: str, where: str, npz: str = SOLVED_NPZ) -> None:
+        """Refuses a frame the writer `kind` cannot carry: any but the model's for an npz
+        (`npz` says which: a solved take or a dataset), Z up for glTF (Y up by its spec)."""
+        if kind == "npz" and not self.identity:
+            raise InputError(
+                f"--units, --scale and --up apply to USD, OBJ, PC2 and MDD outputs; {npz}"
+            )
+        if kind == "gltf" and self.up != "y":
+            raise InputError(f"{where}: glTF is Y up by its specification; --up z is for USD")
 
     def points(self, p: NDArray[np.floating]) -> NDArray[np.float64]:
         """(…, 3) points in the output's frame."""

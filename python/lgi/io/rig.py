@@ -73,10 +73,8 @@ def write_gltf_rig(
     suffix = out.suffix.lower()
     if suffix not in (".gltf", ".glb"):
         raise InputError(f"glTF output {out}: the suffix must be .gltf or .glb")
-    if frame is not None and frame.up != "y":
-        raise InputError(
-            f"glTF output {path}: glTF is Y up by its specification; --up z is for USD"
-        )
+    if frame is not None:
+        frame.check_writer("gltf", f"glTF output {path}")
     neutral, shapes = _checked(dataset, frame)
     source, tris = gltf_vertices(dataset)
     blobs: list[bytes] = []

@@ -42,11 +42,8 @@ class FrameSink:
         units: str | None,
         frame: OutputFrame | None = None,
     ) -> None:
-        if frame is not None and not frame.identity and kind == "npz":
-            raise InputError(
-                "--units, --scale and --up apply to USD, OBJ, PC2 and MDD outputs; a solved "
-                ".npz stays in the model's frame (lgi export converts it)"
-            )
+        if frame is not None:
+            frame.check_writer(kind, f"--out {out}")
         self.frame = frame if frame is not None and not frame.identity else None
         if self.frame is not None:
             units = self.frame.units

@@ -35,6 +35,16 @@ class Topology:
     def num_faces(self) -> int:
         return int(self.counts.shape[0])
 
+    def triangles(self) -> I64:
+        """(T, 3) the faces fan-split into triangles (corner 0 with each pair of neighbours),
+        grouped by fan position: every face's first triangle, then every second, ..."""
+        starts = np.concatenate([[0], np.cumsum(self.counts)[:-1]]).astype(np.int64)
+        out = []
+        for k in range(1, int(self.counts.max(initial=3)) - 1):
+            s = starts[self.counts > k + 1]
+            out.append(np.stack([self.indices[s], self.indices[s + k], self.indices[s + k + 1]], 1))
+        return np.concatenate(out).astype(np.int64) if out else np.zeros((0, 3), np.int64)
+
 
 def topology(dataset: Dataset) -> Topology:
     """The dataset neutral's source polygons (or its triangles when it has none) and UVs."""
