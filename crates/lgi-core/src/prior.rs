@@ -8,6 +8,7 @@ use crate::baselines::BlendshapeSolver;
 use crate::error::{LgiError, Result};
 use crate::linalg::{cholesky, cholesky_solve, Lu};
 use glam::DVec3;
+use std::sync::OnceLock;
 
 /// Ridge weight of the fit, relative to the mean squared column norm of its matrix.
 pub const FIT_L2: f64 = 1e-4;
@@ -35,6 +36,9 @@ pub struct FitPrior {
     displacements: Vec<DVec3>,
     /// Unit-amplitude correlation of the residual field between bundles (B × B).
     correlation: Vec<f64>,
+    /// The displacements' Gram matrix over every bundle (S × S), made on the first
+    /// [`active_residuals`](Self::active_residuals) of a frame with every marker present.
+    gram: OnceLock<Vec<f64>>,
 }
 
 impl FitPrior {
@@ -75,6 +79,7 @@ impl FitPrior {
             rest,
             displacements,
             correlation,
+            gram: OnceLock::new(),
         }))
     }
 
@@ -137,11 +142,23 @@ impl FitPrior {
         let k = active.len();
         let col = |j: usize, n: usize| self.displacements[active[j] * b + n];
         let mut g = vec![0.0; k * k];
-        for i in 0..k {
-            for j in 0..=i {
-                let x: f64 = present.iter().map(|&n| col(i, n).dot(col(j, n))).sum();
-                g[i * k + j] = x;
-                g[j * k + i] = x;
+        if present.len() == b {
+            // Every marker present: the active shapes' entries of the whole Gram matrix, the
+            // same sums (a gather instead of O(B k²) products per call).
+            let s = self.displacements.len() / b.max(1);
+            let full = self.gram.get_or_init(|| self.gram_over(&present));
+            for i in 0..k {
+                for j in 0..k {
+                    g[i * k + j] = full[active[i] * s + active[j]];
+                }
+            }
+        } else {
+            for i in 0..k {
+                for j in 0..=i {
+                    let x: f64 = present.iter().map(|&n| col(i, n).dot(col(j, n))).sum();
+                    g[i * k + j] = x;
+                    g[j * k + i] = x;
+                }
             }
         }
         // A whisker of ridge keeps collinear shapes (an augmented dataset's) solvable; it is
@@ -176,6 +193,23 @@ impl FitPrior {
         let r = project(&offset);
         let dirs = directions.iter().map(|d| project(d)).collect();
         Ok((r, dirs))
+    }
+
+    /// The displacements' Gram matrix over the bundles `rows` (S × S), each entry summed
+    /// over `rows` in order as [`active_residuals`](Self::active_residuals) sums it.
+    fn gram_over(&self, rows: &[usize]) -> Vec<f64> {
+        let b = self.rest.len();
+        let s = self.displacements.len() / b.max(1);
+        let d = &self.displacements;
+        let mut g = vec![0.0; s * s];
+        for i in 0..s {
+            for j in 0..=i {
+                let x: f64 = rows.iter().map(|&n| d[i * b + n].dot(d[j * b + n])).sum();
+                g[i * s + j] = x;
+                g[j * s + i] = x;
+            }
+        }
+        g
     }
 
     /// Noise-aware targets: the fit's positions plus its residuals smoothed across
