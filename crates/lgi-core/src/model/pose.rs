@@ -118,8 +118,8 @@ impl RestFit {
     }
 
     /// The pose of a checked frame: the shapes' poses weighted by its fit's weights clipped
-    /// to [0, 1], summed in shape order.
-    fn pose(&self, frame: &[DVec3], shape_thetas: &[JawParams]) -> Result<JawParams> {
+    /// to [0, 1], summed in shape order; and the fit's weights (S, dataset shape order).
+    fn pose(&self, frame: &[DVec3], shape_thetas: &[JawParams]) -> Result<(JawParams, Vec<f64>)> {
         let target: Vec<f64> = frame
             .iter()
             .zip(&self.rest)
@@ -133,8 +133,16 @@ impl RestFit {
                 *t += wk * x;
             }
         }
-        Ok(JawParams::from_array(theta))
+        Ok((JawParams::from_array(theta), w))
     }
+}
+
+/// Each frame's jaw pose (`None`: the rest pose) and, for a pose from the fit, the fit's
+/// weights (S, dataset shape order): where the frame's fit in its bin starts
+/// ([`Model::refine_jaw`]), the same minimum in fewer steps.
+pub(super) struct FramePoses {
+    pub(super) poses: Option<Vec<JawParams>>,
+    pub(super) fit_starts: Vec<Vec<f64>>,
 }
 
 /// numpy's `pairwise_sum` of float64 (what `np.sum` of a contiguous vector adds): below 8
@@ -172,13 +180,14 @@ impl Model {
 
     /// Each frame's jaw pose (`None`: the rest pose). Frames whose pose is computed from them
     /// are checked first (as [`prepare`](Self::prepare) checks them; errors name the frame).
-    pub(super) fn jaw_poses(
-        &self,
-        frames: &[Vec<DVec3>],
-        pose: &JawPose,
-    ) -> Result<Option<Vec<JawParams>>> {
+    pub(super) fn jaw_poses(&self, frames: &[Vec<DVec3>], pose: &JawPose) -> Result<FramePoses> {
         let jaw = match pose {
-            JawPose::Rest => return Ok(None),
+            JawPose::Rest => {
+                return Ok(FramePoses {
+                    poses: None,
+                    fit_starts: Vec::new(),
+                })
+            }
             _ => self.jaw_setup()?,
         };
         if let JawPose::Given(poses) = pose {
@@ -189,14 +198,17 @@ impl Model {
                     frames.len()
                 )));
             }
-            return Ok(Some(poses.clone()));
+            return Ok(FramePoses {
+                poses: Some(poses.clone()),
+                fit_starts: Vec::new(),
+            });
         }
         let extent = Extent::new(&self.markers_rest, self.diagonal);
         for (f, t) in frames.iter().enumerate() {
             self.check_targets(&extent, t)
                 .map_err(|e| frame_context(e, f))?;
         }
-        let poses = match pose {
+        let (poses, fit_starts) = match pose {
             JawPose::Fit => {
                 let fit = match self.rest_fit.get() {
                     Some(fit) => fit,
@@ -211,19 +223,25 @@ impl Model {
                     .enumerate()
                     .map(|(f, t)| fit.pose(t, thetas).map_err(|e| frame_context(e, f)))
                     .collect::<Result<Vec<_>>>()?
+                    .into_iter()
+                    .unzip()
             }
             _ => {
                 let rest = self.bundle_positions(&self.dataset.neutral().positions)?;
-                track(
+                let poses = track(
                     &jaw.input.rig,
                     &rest,
                     &jaw.bundle_weights,
                     frames,
                     TRACK_WINDOW,
-                )?
+                )?;
+                (poses, Vec::new())
             }
         };
-        Ok(Some(poses))
+        Ok(FramePoses {
+            poses: Some(poses),
+            fit_starts,
+        })
     }
 
     /// Moves a prepared frame's jaw pose to the one whose unskinned markers `u(θ)` the
@@ -260,7 +278,15 @@ impl Model {
         let mut theta = start.to_array();
         // The best pose evaluated, its residual and its fit (what the frame is solved with).
         let mut best: Option<(f64, [f64; 3], FrameFit)> = None;
-        let mut last: Option<FrameFit> = None;
+        // The first fit starts at the frame's fit of the dataset as given (the pose's start),
+        // each later one at the fit before it.
+        let mut last: Option<FrameFit> = prep.fit_start.take().map(|mut weights| {
+            weights.insert(0, 0.0);
+            FrameFit {
+                weights,
+                positions: Vec::new(),
+            }
+        });
         for _ in 0..JAW_ITERATIONS {
             let u = at(theta)?;
             let mut dirs = Vec::with_capacity(dims.len());

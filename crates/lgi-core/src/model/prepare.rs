@@ -25,6 +25,9 @@ pub(super) struct Prepared {
     /// fit's own weights.
     pub(super) blend: Vec<f64>,
     pub(super) corrections: Vec<f64>,
+    /// Where the frame's fit in its bin starts (bin-local shape order, no neutral): the
+    /// weights of the fit its jaw pose came from; `None`: inside the box.
+    pub(super) fit_start: Option<Vec<f64>>,
     /// The targets as given when noise-aware solving moved them (residuals are measured
     /// against what the user gave).
     pub(super) given: Option<Vec<DVec3>>,
@@ -106,6 +109,7 @@ impl Model {
             offer_fit: false,
             blend: Vec::new(),
             corrections: Vec::new(),
+            fit_start: None,
             given: None,
         })
     }

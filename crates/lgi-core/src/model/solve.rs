@@ -4,7 +4,7 @@
 //! the next frame's choice beside this frame's sewing), independent (frames in parallel) or
 //! smoothed (all choices, then temporal smoothing of the shape weights, then sewing).
 
-use super::pose::JawPose;
+use super::pose::{FramePoses, JawPose};
 use super::prepare::{frame_context, Prepared};
 use super::{FrameInfo, FrameState, LocalShapeId, Model};
 use crate::choose::{choose, Choice, ChoiceParams, FrameErrors, Scoring, Scratch, NO_TET};
@@ -459,7 +459,10 @@ impl Model {
                 frames.len() * nv
             )));
         }
-        let poses = self.jaw_poses(frames, &options.jaw)?;
+        let FramePoses {
+            poses,
+            mut fit_starts,
+        } = self.jaw_poses(frames, &options.jaw)?;
         let theta = |f: usize| poses.as_ref().map(|p| p[f]);
         // Bins are picked in order: in a temporal solve a frame keeps the previous frame's bin
         // while its opening allows (hysteresis).
@@ -470,9 +473,18 @@ impl Model {
                 Some(p) => Some(p.bin).filter(|_| temporal),
                 None => previous.and_then(|s| s.bin),
             };
-            let prep = self
+            let mut prep = self
                 .prepare(t, theta(f), previous_bin)
                 .map_err(|e| frame_context(e, f))?;
+            if let Some(start) = fit_starts.get_mut(f) {
+                let lk = &self.lookups[prep.bin];
+                prep.fit_start = Some(match lk.reference {
+                    None => std::mem::take(start),
+                    Some(_) => (1..=lk.members.len())
+                        .map(|j| start[lk.global_id(LocalShapeId(j as u32)).0 as usize - 1])
+                        .collect(),
+                });
+            }
             prepared.push(prep);
         }
         // A pose from the fit is refined against the bin's fit, in the jaw's unskinned space.
