@@ -140,6 +140,92 @@ def per_frame_ms(solve: Any, frames: np.ndarray, **options: Any) -> tuple[np.nda
     return np.diff(np.array([t0, *stamps])) * 1e3, res
 
 
+PATH_PASSES = 3
+
+
+def whole_call_ms(
+    solve: Any, frames: np.ndarray, passes: int = PATH_PASSES, **options: Any
+) -> float:
+    """Milliseconds per frame of the fastest of `passes` whole `solve(frames, **options)` calls
+    (the jaw poses and fits run before the first frame is sewn, so a per-frame median
+    between progress callbacks would miss them; contention only adds time)."""
+    best = np.inf
+    for _ in range(passes):
+        t = time.perf_counter()
+        solve(frames, **options)
+        best = min(best, time.perf_counter() - t)
+    return float(best / len(frames) * 1e3)
+
+
+def path_rows(data: Any, markers: np.ndarray, frames: np.ndarray, exact: Any) -> dict[str, Any]:
+    """The solve paths users run, side by side in this process (ICT's default build: a jaw
+    rig from jawOpen): the exact mode (the paper's, no rig), the default `solve(frames)` (jaw
+    pose from the frame's fit, refined) and the recommended `solve(frames,
+    marker_noise=NOISE)`, clean and with a fresh random 10 % of the markers missing on every
+    frame (a new set each pass), beside the dense evaluation of every shape. The stages of
+    the recommended path come from the same build solved with less: at the rest pose, with
+    the poses it found given (the jaw's unskinning and the sewing's jaw map), with those
+    poses and the noise (the fit, noise-aware targets and the fit candidate); the pose is
+    what remains."""
+    import lgi
+
+    out: dict[str, Any] = {}
+    rec = lgi.Model.build(data, markers)
+    out["paths_jaw"] = rec.jaw_rig is not None
+    buf = np.empty((len(frames), data.num_vertices, 3))
+    core = rec.core
+    first = core.solve(frames, jaw="fit", marker_noise=NOISE, out=buf)
+    theta = np.asarray(first.jaw_theta) if first.jaw_theta is not None else None
+    out["paths_exact_ms"] = whole_call_ms(exact.core.solve, frames, out=buf)
+    out["paths_default_ms"] = whole_call_ms(core.solve, frames, jaw="fit", out=buf)
+    out["paths_recommended_ms"] = whole_call_ms(
+        core.solve, frames, jaw="fit", marker_noise=NOISE, out=buf
+    )
+    out["paths_rest_ms"] = whole_call_ms(core.solve, frames, jaw=None, out=buf)
+    if theta is not None:
+        out["paths_given_ms"] = whole_call_ms(core.solve, frames, jaw=theta, out=buf)
+        out["paths_given_noise_ms"] = whole_call_ms(
+            core.solve, frames, jaw=theta, marker_noise=NOISE, out=buf
+        )
+    rng = np.random.default_rng(SEED + 3)
+    k = max(1, round(0.1 * frames.shape[1]))
+    takes = [with_dropouts(frames, k, rng) for _ in range(PATH_PASSES)]
+
+    def messy(solve: Any, **options: Any) -> float:
+        return min(whole_call_ms(solve, t, passes=1, **options) for t in takes)
+
+    out["paths_dropout_markers"] = k
+    out["paths_exact_dropout_ms"] = messy(exact.core.solve, out=buf)
+    out["paths_default_dropout_ms"] = messy(core.solve, jaw="fit", out=buf)
+    out["paths_recommended_dropout_ms"] = messy(
+        core.solve, jaw="fit", marker_noise=NOISE, out=buf
+    )
+    flat = data.shapes.reshape(data.shapes.shape[0], -1)
+    weights = rng.uniform(0, 1, (len(frames), flat.shape[0])).astype(np.float32)
+    x0 = data.neutral.astype(np.float32).reshape(-1)
+
+    def dense(w: np.ndarray, **_: Any) -> None:
+        for row in w:
+            x0 + row @ flat
+
+    out["paths_dense_ms"] = whole_call_ms(dense, weights)
+    out["paths_frames"] = len(frames)
+    out["paths_shapes"] = int(data.num_shapes)
+    return out
+
+
+def paths_worker(args: argparse.Namespace) -> dict[str, Any]:
+    import lgi
+
+    out: dict[str, Any] = {"threads": os.environ.get("RAYON_NUM_THREADS")}
+    name, data, markers = load_workload(args.shapes)
+    out["workload"] = name
+    exact = lgi.Model.build(data, markers, jaw=None)
+    frames = make_frames(exact, data, args.frames)
+    out.update(path_rows(data, markers, frames, exact))
+    return out
+
+
 def worker(args: argparse.Namespace) -> dict[str, Any]:
     import lgi
 
@@ -209,16 +295,8 @@ def worker(args: argparse.Namespace) -> dict[str, Any]:
         model.core.solve, frames, temporal=True, marker_noise=NOISE, out=warm
     )
     out["noise_out_ms_median"] = float(np.median(per_noise_out))
-    # The recommended path end to end: the default build (a jaw rig from the jaw shapes) and
-    # `solve(frames, marker_noise=...)` (each frame's pose from its fit, refined in the core).
-    t = time.perf_counter()
-    recommended = lgi.Model.build(data, markers)
-    out["recommended_build_s"] = time.perf_counter() - t
-    out["recommended_jaw"] = recommended.jaw_rig is not None
-    recommended.solve(frames[:10], marker_noise=NOISE, quiet=True)
-    t = time.perf_counter()
-    recommended.solve(frames, marker_noise=NOISE, quiet=True)
-    out["recommended_ms_mean"] = (time.perf_counter() - t) / len(frames) * 1e3
+    # The paths users run (the default build with its jaw rig), beside the exact mode.
+    out.update(path_rows(data, markers, frames, model))
     with tempfile.TemporaryDirectory() as d:
         p = Path(d) / "model.lgi"
         t = time.perf_counter()
@@ -373,6 +451,8 @@ def run_threads(
     cmd += ["--streamed-shapes", str(args.streamed_shapes)]
     if args.quick:
         cmd.append("--quick")
+    if args.paths:
+        cmd.append("--paths")
     if reference:
         cmd.append("--reference")
     if stream:
@@ -401,6 +481,86 @@ def machine() -> str:
         pass
     cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
     return f"{model}; {cores} cores available; {ram} RAM; Python {platform.python_version()}"
+
+
+def path_table_rows(r1: dict[str, Any], r2: dict[str, Any]) -> list[tuple[str, str]]:
+    """The rows of `path_rows`: each path's mean per frame at 1 and 2 threads, as a ratio to
+    the exact mode and to the dense evaluation of the same run, then the recommended path's
+    stages."""
+    jaw = "a jaw rig from jawOpen" if r1["paths_jaw"] else "no jaw shapes, so no rig"
+    k = r1["paths_dropout_markers"]
+    rows: list[tuple[str, str]] = []
+
+    def cell(r: dict[str, Any], key: str, clean: str | None = None) -> str:
+        ms = r[key]
+        text = (
+            f"{ms:.2f} ms = {ms / r['paths_exact_ms']:.2f} x exact, "
+            f"{ms / r['paths_dense_ms']:.2f} x dense"
+        )
+        if clean is not None:
+            text += f", {ms / r[clean]:.2f} x clean"
+        return text
+
+    paths = [
+        ("paths_exact_ms", None, "Exact mode (the paper's; no rig), `core.solve(frames)`"),
+        ("paths_default_ms", None, f"Default `solve(frames)` ({jaw}; pose from the fit)"),
+        ("paths_recommended_ms", None, f"Recommended `solve(frames, marker_noise={NOISE})`"),
+        (
+            "paths_exact_dropout_ms",
+            "paths_exact_ms",
+            f"Exact mode, {k} fresh missing markers (10 %) every frame",
+        ),
+        (
+            "paths_default_dropout_ms",
+            "paths_default_ms",
+            f"Default `solve(frames)`, {k} fresh missing markers every frame",
+        ),
+        (
+            "paths_recommended_dropout_ms",
+            "paths_recommended_ms",
+            f"Recommended, {k} fresh missing markers every frame",
+        ),
+    ]
+    for key, clean, label in paths:
+        rows.append(
+            (
+                f"{label}: mean per frame of the whole call (best of {PATH_PASSES})",
+                f"1 thread {cell(r1, key, clean)}; 2 threads {cell(r2, key, clean)}",
+            )
+        )
+    rows.append(
+        (
+            f"Dense evaluation of all {r1['paths_shapes']} shapes (numpy float32), per frame",
+            f"1 thread {r1['paths_dense_ms']:.2f} ms; 2 threads {r2['paths_dense_ms']:.2f} ms",
+        )
+    )
+    if "paths_given_ms" in r1:
+
+        def stages(r: dict[str, Any]) -> str:
+            jaw_map = r["paths_given_ms"] - r["paths_rest_ms"]
+            noise = r["paths_given_noise_ms"] - r["paths_given_ms"]
+            pose = r["paths_recommended_ms"] - r["paths_given_noise_ms"]
+            return (
+                f"rest pose {r['paths_rest_ms']:.2f} + jaw map {jaw_map:.2f} + "
+                f"fit and noise {noise:.2f} + pose {pose:.2f} = "
+                f"{r['paths_recommended_ms']:.2f} ms"
+            )
+
+        rows.append(
+            (
+                "Recommended path by stage (the same build solved at the rest pose, with its "
+                "poses given, with those poses and the noise)",
+                f"1 thread: {stages(r1)}; 2 threads: {stages(r2)}",
+            )
+        )
+    return rows
+
+
+def paths_table(r1: dict[str, Any], r2: dict[str, Any]) -> str:
+    lines = ["| Measure | Value |", "|---|---|", f"| Workload | {r1['workload']} |"]
+    lines.append(f"| Frames | {r1['paths_frames']} |")
+    lines += [f"| {a} | {b} |" for a, b in path_table_rows(r1, r2)]
+    return "\n".join(lines)
 
 
 def table(r1: dict[str, Any], r2: dict[str, Any]) -> str:
@@ -467,16 +627,7 @@ def table(r1: dict[str, Any], r2: dict[str, Any]) -> str:
                 "into `out=`",
             )
         )
-    for r in (r1, r2):
-        jaw = "with a jaw rig" if r["recommended_jaw"] else "no jaw shapes"
-        rows.append(
-            (
-                f"Recommended path per frame (default build, {jaw}; `solve(frames, "
-                f"marker_noise={NOISE})` through `lgi.Model`), {r['threads']} thread(s)",
-                f"mean {r['recommended_ms_mean']:.2f} ms = "
-                f"{r['recommended_ms_mean'] / r['solve_ms_mean']:.2f} x the exact solve's mean",
-            )
-        )
+    rows += path_table_rows(r1, r2)
     if "streamed_frames" in r2:
         rows.append(
             (
@@ -572,11 +723,29 @@ def main() -> None:
         help="ICT shapes of the streamed take's model (default 57: ICT-FaceKit as shipped)",
     )
     ap.add_argument("--stream-worker", action="store_true", help=argparse.SUPPRESS)
+    ap.add_argument(
+        "--paths",
+        action="store_true",
+        help="only the solve paths users run (exact, default, recommended; clean and with "
+        "10 %% dropouts; the recommended path's stages), at 1 and 2 threads",
+    )
     args = ap.parse_args()
     if args.quick:
         args.frames = min(args.frames, 100)
     if args.worker:
-        print(json.dumps(streamed(args) if args.stream_worker else worker(args)))
+        if args.paths:
+            print(json.dumps(paths_worker(args)))
+        else:
+            print(json.dumps(streamed(args) if args.stream_worker else worker(args)))
+        return
+    if args.paths:
+        r1 = run_threads(1, args, reference=False)
+        r2 = run_threads(2, args, reference=False)
+        text = paths_table(r1, r2)
+        print(f"Machine: {machine()}\n\n{text}")
+        if args.out:
+            marker = f"bench.py:paths-{r1['workload'].split(':')[0]}"
+            write_out(args.out, f"Machine: {machine()}\n\n{text}\n", marker=marker)
         return
     r1 = run_threads(1, args, reference=True)
     r2 = run_threads(2, args, reference=False)
@@ -589,12 +758,12 @@ def main() -> None:
         write_out(args.out, f"Machine: {desc}\n\n{text}\n")
 
 
-BEGIN, END = "<!-- bench.py:begin -->", "<!-- bench.py:end -->"
-
-
-def write_out(path: Path, block: str) -> None:
-    """Replaces the block between the bench.py markers (keeping hand-written notes around it),
-    or writes a new file with just the block."""
+def write_out(path: Path, block: str, marker: str = "bench.py") -> None:
+    """Replaces the block between the `<!-- MARKER:begin -->` and `<!-- MARKER:end -->` lines
+    (keeping hand-written notes around it), or writes a new file with just the block. The full
+    table's marker is `bench.py`; `--paths` writes its own, one per workload
+    (`bench.py:paths-ICT-300`)."""
+    BEGIN, END = f"<!-- {marker}:begin -->", f"<!-- {marker}:end -->"
     block = f"{BEGIN}\n{block}{END}"
     old = path.read_text() if path.is_file() else ""
     if BEGIN in old and END in old:

@@ -6,8 +6,10 @@ noise-aware (`marker_noise`, with the fit candidate), and a sample solve (with j
 dropouts) so the check says something where the ICT data is absent. The jaw paths: the
 recommended call (a model built with `jaw="auto"` on the workload's base shapes, solved with
 `marker_noise`: each frame's pose from its fit, refined in the core) and the tracked pose
-(`jaw="track"`), on ICT-57 and on the sample; `--save DIR` also writes the tracked poses and the
-recommended vertices (npz) so two builds that differ can be compared by how much.
+(`jaw="track"`), on ICT-57 and on the sample, and the recommended call and the default
+`solve(frames)` on the workload (clean and with 10 % dropouts); `--save DIR` also writes the
+tracked poses and the recommended vertices (npz) so two builds that differ can be compared by
+how much.
 
 Usage: python scripts/identity_check.py [--frames 300] [--out digests.json] [--save DIR]
 """
@@ -89,6 +91,17 @@ def main() -> None:
         saved[f"{key}_recommended_theta"] = np.asarray(rec.jaw_theta)
         saved[f"{key}_track_theta"] = np.asarray(track.jaw_theta)
         saved[f"{key}_track_vertices"] = track.vertices
+    # The recommended path and the default `solve(frames)` on the workload itself (ICT-300's
+    # augmented shapes take the fit's low-rank path), clean and with 10 % dropouts.
+    if base is not sdata:
+        rmodel = lgi.Model.build(data, markers)
+        rframes = frames[: min(args.frames, 100)]
+        for key, fr in (("clean", rframes), ("dropouts", messy[: len(rframes)])):
+            for mode, noise in (("recommended", bench.NOISE), ("default", None)):
+                res = rmodel.solve(fr, quiet=True, marker_noise=noise)
+                out[f"workload_{mode}_{key}"] = digests(res)
+                saved[f"workload_{mode}_{key}_vertices"] = res.vertices
+                saved[f"workload_{mode}_{key}_theta"] = np.asarray(res.jaw_theta)
     if args.save:
         args.save.mkdir(parents=True, exist_ok=True)
         np.savez(args.save / "jaw_paths.npz", **saved)
