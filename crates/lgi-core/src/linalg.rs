@@ -89,8 +89,11 @@ impl Lu {
 /// Lower Cholesky factor of the row-major `n × n` symmetric matrix `g`; a pivot that is not
 /// positive is an [`LgiError::Input`] (shapes linearly dependent at the markers).
 pub fn cholesky(n: usize, mut g: Vec<f64>) -> Result<Vec<f64>> {
+    // Row slices rather than indices: no bounds checks in the inner products, which are
+    // summed in the same order (k ascending) as ever.
+    let dot = |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(x, y)| x * y).sum::<f64>();
     for j in 0..n {
-        let d = g[j * n + j] - (0..j).map(|k| g[j * n + k] * g[j * n + k]).sum::<f64>();
+        let d = g[j * n + j] - dot(&g[j * n..j * n + j], &g[j * n..j * n + j]);
         if d.is_nan() || d <= 0.0 {
             return Err(LgiError::Input(format!(
                 "blendshape normal matrix is not positive definite at shape {j} \
@@ -99,9 +102,11 @@ pub fn cholesky(n: usize, mut g: Vec<f64>) -> Result<Vec<f64>> {
         }
         let d = d.sqrt();
         g[j * n + j] = d;
-        for i in (j + 1)..n {
-            let s = g[i * n + j] - (0..j).map(|k| g[i * n + k] * g[j * n + k]).sum::<f64>();
-            g[i * n + j] = s / d;
+        let (above, below) = g.split_at_mut((j + 1) * n);
+        let row_j = &above[j * n..j * n + j];
+        for row_i in below.chunks_exact_mut(n) {
+            let s = row_i[j] - dot(&row_i[..j], row_j);
+            row_i[j] = s / d;
         }
     }
     Ok(g)
@@ -111,7 +116,11 @@ pub fn cholesky(n: usize, mut g: Vec<f64>) -> Result<Vec<f64>> {
 pub fn cholesky_solve(n: usize, l: &[f64], b: &[f64]) -> Vec<f64> {
     let mut y = b.to_vec();
     for i in 0..n {
-        let s: f64 = (0..i).map(|k| l[i * n + k] * y[k]).sum();
+        let s: f64 = l[i * n..i * n + i]
+            .iter()
+            .zip(&y[..i])
+            .map(|(a, b)| a * b)
+            .sum();
         y[i] = (y[i] - s) / l[i * n + i];
     }
     for i in (0..n).rev() {
