@@ -106,6 +106,65 @@ def test_estimate_marker_noise_recovers_a_known_sigma_within_20_percent() -> Non
         lgi.estimate_marker_noise(rest[None])
 
 
+def _independent_frames(model, dataset, n: int, sigma: float, seed: int) -> np.ndarray:  # type: ignore[no-untyped-def]
+    """`n` frames of random shape weights in [0, 1] drawn independently (a take sampled so
+    sparsely that no two frames are related), sampled at the markers, plus noise `sigma`."""
+    rng = np.random.default_rng(seed)
+    w = rng.uniform(0.0, 1.0, (n, dataset.num_shapes)) * (rng.random((n, dataset.num_shapes)) < 0.3)
+    meshes = dataset.neutral[None] + np.einsum("fs,svd->fvd", w, dataset.shapes)
+    return model.bundle_positions(meshes) + rng.normal(0.0, sigma, (n, model.num_bundles, 3))
+
+
+def test_the_fit_bound_caps_a_noise_estimate_that_reads_motion_between_distant_frames(
+    sample_model,
+) -> None:  # type: ignore[no-untyped-def]
+    from lgi.errors import LgiWarning
+    from lgi.model import fit_noise_bound
+
+    _, sample_model = sample_model
+    sample_dataset = sample_model.dataset
+    for sigma, seed in ((0.02, 1), (0.05, 2)):
+        frames = _independent_frames(sample_model, sample_dataset, 60, sigma, seed)
+        tracks = lgi.estimate_marker_noise(frames)
+        assert tracks > 1.8 * sigma  # motion read as noise
+        # The frames lie in the dataset's span, so the fit leaves the noise (less its rank's
+        # share, which the bound restores) and a little ridge bias.
+        assert fit_noise_bound(sample_model, frames) == pytest.approx(sigma, rel=0.15)
+        with pytest.warns(LgiWarning, match="frames too far apart to tell noise from motion"):
+            both = lgi.estimate_marker_noise(frames, sample_model)
+        assert both == pytest.approx(sigma, rel=0.15)
+    # One frame is enough with a model (the bound alone); without one it is an error.
+    one = _independent_frames(sample_model, sample_dataset, 1, 0.05, 3)
+    assert lgi.estimate_marker_noise(one, sample_model) == pytest.approx(0.05, rel=0.3)
+    with pytest.raises(lgi.InputError, match="at least 3 frames"):
+        lgi.estimate_marker_noise(one)
+
+
+def test_a_full_rate_take_keeps_its_track_estimate_under_the_fit_bound(
+    sample_model,
+) -> None:  # type: ignore[no-untyped-def]
+    _, sample_model = sample_model
+    sample_dataset = sample_model.dataset
+    # Slow motion sampled densely (60 fps) between two dataset poses: the tracks see the
+    # noise alone and the bound is not lower, so the estimate is the tracks' and no warning.
+    import warnings
+
+    rng = np.random.default_rng(7)
+    a, b = rng.uniform(0, 1, (2, sample_dataset.num_shapes))
+    t = (0.5 - 0.5 * np.cos(np.linspace(0, np.pi, 240)))[:, None]
+    meshes = sample_dataset.neutral[None] + np.einsum(
+        "fs,svd->fvd", (1 - t) * a + t * b, sample_dataset.shapes
+    )
+    frames = sample_model.bundle_positions(meshes) + rng.normal(
+        0.0, 0.03, (240, sample_model.num_bundles, 3)
+    )
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        got = lgi.estimate_marker_noise(frames, sample_model)
+    assert got == lgi.estimate_marker_noise(frames)
+    assert got == pytest.approx(0.03, rel=0.2)
+
+
 def test_noise_aware_solve_tends_to_the_exact_solve_as_sigma_goes_to_zero(sample_model) -> None:  # type: ignore[no-untyped-def]
     s, model = sample_model
     frames = s.performance[:12]

@@ -404,6 +404,11 @@ class Model:
         ``"fit"``, ``"track"``, (F, 3) poses or None (rest); ``fit`` offers the global fit as a
         candidate (None: exactly when ``marker_noise`` is given), ``marker_noise`` (data units)
         solves noise-aware, ``previous`` (a temporal solve's ``state``) continues that solve."""
+    def fit_residuals(
+        self, frames: ArrayLike, jaw: str | ArrayLike | None = None
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """Each frame's global-fit residual (F, B, 3; NaN where missing) and the fit's rank
+        at the bundles (F,)."""
     def bundle_positions(self, meshes: ArrayLike) -> NDArray[np.float64]:
         """(F, V, 3) meshes -> (F, B, 3) bundle surface positions."""
     def bundle_stats(self) -> _BundleStats:

@@ -268,7 +268,7 @@ def solve_shot(
         frames = int(x.shape[0])
         opts = dict(options)
         if opts.get("marker_noise") == "auto":
-            opts["marker_noise"] = estimate_marker_noise(x)
+            opts["marker_noise"] = estimate_marker_noise(x, m)
         if kind == "usd" and rate is None:
             raise InputError("the take has no frame rate; a USD point cache needs fps=")
         res = m.solve(x, quiet=True, **opts)

@@ -176,13 +176,13 @@ def frame_range(spec: str | None, count: int) -> slice:
     return slice(a, b)
 
 
-def marker_noise(spec: str | None, frames: np.ndarray) -> float | None:
-    """`--marker-noise`: a sigma >= 0 (model units), 'auto' (estimated from `frames`) or
-    'none'/None (exact interpolation)."""
+def marker_noise(spec: str | None, frames: np.ndarray, model: Model | None) -> float | None:
+    """`--marker-noise`: a sigma >= 0 (model units), 'auto' (estimated from `frames`, bounded
+    by what `model`'s fit leaves at the markers) or 'none'/None (exact interpolation)."""
     if spec is None or spec == "none":
         return None
     if spec == "auto":
-        return estimate_marker_noise(frames)
+        return estimate_marker_noise(frames, model)
     try:
         sigma = float(spec)
     except ValueError:
@@ -685,7 +685,7 @@ def solve_file(
     check_take_scale(t, x, m, stated=take_units is not None)
     head = None if t.head is None else t.head[rng]
     rate = frame_rate(fps, t.fps, kind)
-    sigma = marker_noise(noise, x)
+    sigma = marker_noise(noise, x, m)
     jaw_mode = None if m.jaw_rig is None or jaw == "rest" else jaw
     missing = np.isnan(x).any(axis=2)
     say(
@@ -846,7 +846,7 @@ def rig_file(
     ready_output(dest, model, neutral, *([] if shapes == "-" else [shapes]), force=force)
     if noise == "auto":
         raise InputError("--marker-noise auto: a rig has no take to estimate it from")
-    sigma = marker_noise(noise, np.zeros((0, 0, 3)))
+    sigma = marker_noise(noise, np.zeros((0, 0, 3)), None)
     m = Model.load(existing_file(os.fspath(model), "MODEL"))
     frame = output_frame(m.units, units=units, scale=scale, up=up)
     rig_kind = {".npz": "npz", ".gltf": "gltf", ".glb": "gltf"}.get(suffix, "usd")

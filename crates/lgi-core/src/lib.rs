@@ -51,9 +51,9 @@ pub use magnitude::{
 };
 pub use mesh::{Mesh, SurfacePoint};
 pub use model::{
-    default_marker_names, BinParts, BinPartsRef, BuildConfig, BundleStats, FrameInfo, FrameState,
-    JawInput, JawPose, JawSetup, LocalShapeId, Lookup, Model, ModelParts, ModelPartsRef,
-    PartsError, ShapeId, SolveOptions, MAX_UNIT_LEN,
+    default_marker_names, BinParts, BinPartsRef, BuildConfig, BundleStats, FitResiduals, FrameInfo,
+    FrameState, JawInput, JawPose, JawSetup, LocalShapeId, Lookup, Model, ModelParts,
+    ModelPartsRef, PartsError, ShapeId, SolveOptions, MAX_UNIT_LEN,
 };
 pub use polygons::Polygons;
 pub use prior::{FitPrior, FrameFit, FIT_L2, FIT_PENALTY, RESIDUAL_LENGTH};

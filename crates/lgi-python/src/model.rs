@@ -17,6 +17,9 @@ use pyo3::prelude::*;
 use pyo3::types::{PyBytes, PyDict};
 use std::sync::Arc;
 
+/// Two numpy arrays returned together.
+type ArrayPair<'py> = (Bound<'py, PyArrayDyn<f64>>, Bound<'py, PyArrayDyn<f64>>);
+
 /// A built LGI model (immutable, thread-safe).
 #[pyclass(frozen, module = "lgi._lgi")]
 pub struct Model {
@@ -243,6 +246,37 @@ impl Model {
         };
         let ns = self.inner.dataset().num_shapes();
         result::pack(py, &solved, vertices, b, ns)
+    }
+
+    /// Each frame's global-fit residual (F, B, 3; NaN for a missing marker, in the jaw
+    /// bin's space) with the jaw pose `jaw` as in `solve` (a pose from the fit is refined),
+    /// and the fit's rank at the bundles per frame (F,): frames independent, GIL released.
+    #[pyo3(signature = (frames, jaw=None))]
+    fn fit_residuals<'py>(
+        &self,
+        py: Python<'py>,
+        frames: &Bound<'py, PyAny>,
+        jaw: Option<&Bound<'py, PyAny>>,
+    ) -> PyResult<ArrayPair<'py>> {
+        let b = self.inner.num_bundles();
+        let frames = point_sets(frames, "frames", ("frame", "bundle"), Some(b), true)?;
+        let pose = solve_args::jaw_pose(jaw, &self.inner, frames.len())?;
+        let model = self.inner.clone();
+        let fitted = py
+            .detach(|| model.fit_residuals(&frames, &pose))
+            .map_err(PyLgiError)?;
+        let nf = fitted.residuals.len();
+        let flat: Vec<f64> = fitted
+            .residuals
+            .iter()
+            .flatten()
+            .flat_map(|p| [p.x, p.y, p.z])
+            .collect();
+        let ranks: Vec<f64> = fitted.ranks.iter().map(|&r| r as f64).collect();
+        Ok((
+            flat_to_array(py, flat, &[nf, b, 3])?,
+            flat_to_array(py, ranks, &[nf])?,
+        ))
     }
 
     /// Bundle surface positions (F, B, 3) of meshes (F, V, 3) with the neutral's topology.

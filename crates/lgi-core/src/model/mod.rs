@@ -32,6 +32,7 @@ pub mod lookup;
 mod parts;
 mod pose;
 mod prepare;
+mod residuals;
 mod sanity;
 mod solve;
 #[cfg(test)]
@@ -43,6 +44,7 @@ pub use labels::{default_marker_names, MAX_UNIT_LEN};
 pub use lookup::{LocalShapeId, Lookup, ShapeId};
 pub use parts::{BinParts, BinPartsRef, ModelParts, ModelPartsRef, PartsError};
 pub use pose::JawPose;
+pub use residuals::FitResiduals;
 pub use solve::SolveOptions;
 
 /// Jaw articulation of a model (paper Eq. 2): the rig, each dataset shape's jaw parameters

@@ -103,10 +103,22 @@ impl Model {
         self.sew_frame_into(prep, choices, &pieces, out)
     }
 
+    /// A fit's weights over the dataset's shapes (S) as a start for bin `bin`'s fit: its
+    /// members' weights, in bin-local order.
+    pub(super) fn fit_start_in_bin(&self, bin: usize, start: Vec<f64>) -> Vec<f64> {
+        let lk = &self.lookups[bin];
+        match lk.reference {
+            None => start,
+            Some(_) => (1..=lk.members.len())
+                .map(|j| start[lk.global_id(LocalShapeId(j as u32)).0 as usize - 1])
+                .collect(),
+        }
+    }
+
     /// Adds the frame's global fit to a prepared frame (offered as a candidate with
     /// `offer`) and, with `marker_noise`, moves its targets to the noise-aware ones, in the
     /// bin's space and back to the frame's.
-    fn add_fit(
+    pub(super) fn add_fit(
         &self,
         prep: &mut Prepared,
         offer: bool,
@@ -477,13 +489,7 @@ impl Model {
                 .prepare(t, theta(f), previous_bin)
                 .map_err(|e| frame_context(e, f))?;
             if let Some(start) = fit_starts.get_mut(f) {
-                let lk = &self.lookups[prep.bin];
-                prep.fit_start = Some(match lk.reference {
-                    None => std::mem::take(start),
-                    Some(_) => (1..=lk.members.len())
-                        .map(|j| start[lk.global_id(LocalShapeId(j as u32)).0 as usize - 1])
-                        .collect(),
-                });
+                prep.fit_start = Some(self.fit_start_in_bin(prep.bin, std::mem::take(start)));
             }
             prepared.push(prep);
         }
