@@ -197,9 +197,7 @@ def path_rows(data: Any, markers: np.ndarray, frames: np.ndarray, exact: Any) ->
     out["paths_dropout_markers"] = k
     out["paths_exact_dropout_ms"] = messy(exact.core.solve, out=buf)
     out["paths_default_dropout_ms"] = messy(core.solve, jaw="fit", out=buf)
-    out["paths_recommended_dropout_ms"] = messy(
-        core.solve, jaw="fit", marker_noise=NOISE, out=buf
-    )
+    out["paths_recommended_dropout_ms"] = messy(core.solve, jaw="fit", marker_noise=NOISE, out=buf)
     flat = data.shapes.reshape(data.shapes.shape[0], -1)
     weights = rng.uniform(0, 1, (len(frames), flat.shape[0])).astype(np.float32)
     x0 = data.neutral.astype(np.float32).reshape(-1)
