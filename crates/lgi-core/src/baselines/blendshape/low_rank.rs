@@ -10,6 +10,7 @@
 
 use crate::error::Result;
 use crate::linalg::{cholesky, cholesky_solve, Lu};
+use std::borrow::Cow;
 
 /// A rank below this fraction of the shape count takes the low-rank path (the dense path is
 /// cheaper near full rank).
@@ -158,8 +159,31 @@ impl LowRank {
             k
         });
         let atr = self.w_times(&c);
+        // With markers missing, K = V Vᵀ (Cholesky) turns the frame's `W K Wᵀ` into the
+        // complete frame's form `W' W'ᵀ` with W' = W V: every Newton step then solves a
+        // symmetric system by Cholesky (r³/6) instead of forming `K M` and factoring it by LU
+        // (4r³/3), for O(S r²) once per fit. A K that is not positive definite (a direction
+        // seen only by missing rows) keeps the general form.
+        let (w, wtw, k) = match k.as_ref().map(|k| cholesky(r, k.clone())) {
+            None => (
+                Cow::Borrowed(&self.w[..]),
+                Cow::Borrowed(&self.wtw[..]),
+                None,
+            ),
+            Some(Ok(v)) => {
+                let wv = times_lower(&self.w, r, &v);
+                // (W V)ᵀ(W V) = Vᵀ (WᵀW) V: O(r³) rather than O(S r²).
+                let t = times_lower(&self.wtw, r, &v);
+                let wtw = lower_t_times(&v, r, &t);
+                (Cow::Owned(wv), Cow::Owned(wtw), None)
+            }
+            Some(Err(_)) => (Cow::Borrowed(&self.w[..]), Cow::Borrowed(&self.wtw[..]), k),
+        };
         let frame = Frame {
-            f: self,
+            rank: r,
+            shapes: self.shapes,
+            w,
+            wtw,
             k,
             tt,
             clamped: vec![false; self.shapes],
@@ -170,24 +194,61 @@ impl LowRank {
 
     /// W y (S).
     fn w_times(&self, y: &[f64]) -> Vec<f64> {
-        self.w
-            .chunks(self.rank)
-            .map(|row| row.iter().zip(y).map(|(a, b)| a * b).sum())
-            .collect()
+        w_times(&self.w, self.rank, y)
     }
+}
 
-    /// Wᵀ v (r).
-    fn wt_times(&self, v: &[f64]) -> Vec<f64> {
-        let mut out = vec![0.0; self.rank];
-        for (row, &x) in self.w.chunks(self.rank).zip(v) {
+/// `W y` (S) of a row-major `S × r` matrix `w`.
+fn w_times(w: &[f64], r: usize, y: &[f64]) -> Vec<f64> {
+    w.chunks(r)
+        .map(|row| row.iter().zip(y).map(|(a, b)| a * b).sum())
+        .collect()
+}
+
+/// `Wᵀ v` (r) of a row-major `S × r` matrix `w`.
+fn wt_times(w: &[f64], r: usize, v: &[f64]) -> Vec<f64> {
+    let mut out = vec![0.0; r];
+    for (row, &x) in w.chunks(r).zip(v) {
+        if x != 0.0 {
+            for (o, a) in out.iter_mut().zip(row) {
+                *o += a * x;
+            }
+        }
+    }
+    out
+}
+
+/// `Vᵀ T` of a lower-triangular `r × r` matrix `v` and a row-major `r × r` matrix `t`.
+fn lower_t_times(v: &[f64], r: usize, t: &[f64]) -> Vec<f64> {
+    let mut out = vec![0.0; r * r];
+    // Row j of Vᵀ T is Σ_{l ≥ j} v[l][j] · row l of T.
+    for l in 0..r {
+        let t_row = &t[l * r..(l + 1) * r];
+        for j in 0..=l {
+            let x = v[l * r + j];
             if x != 0.0 {
-                for (o, a) in out.iter_mut().zip(row) {
-                    *o += a * x;
+                for (o, &y) in out[j * r..(j + 1) * r].iter_mut().zip(t_row) {
+                    *o += x * y;
                 }
             }
         }
-        out
     }
+    out
+}
+
+/// `W V` of a row-major `S × r` matrix `w` and a lower-triangular `r × r` matrix `v`.
+fn times_lower(w: &[f64], r: usize, v: &[f64]) -> Vec<f64> {
+    let mut out = vec![0.0; w.len()];
+    for (row, o) in w.chunks(r).zip(out.chunks_mut(r)) {
+        for (l, &x) in row.iter().enumerate() {
+            if x != 0.0 {
+                for (oj, vj) in o[..=l].iter_mut().zip(&v[l * r..l * r + l + 1]) {
+                    *oj += x * vj;
+                }
+            }
+        }
+    }
+    out
 }
 
 /// `m += sign x xᵀ` on and above the diagonal of the row-major `r × r` matrix `m`, each entry
@@ -233,7 +294,12 @@ fn gram_of(m: &[f64], n: usize, r: usize) -> Vec<f64> {
 /// One frame's normal equations `W K Wᵀ` with the weights clamped by the box so far (their
 /// `Σ w_i w_iᵀ` kept up to date as the active set changes, O(r²) per change).
 pub(super) struct Frame<'f> {
-    f: &'f LowRank,
+    rank: usize,
+    shapes: usize,
+    /// The frame's W (the matrix's, or W V with markers missing) and its `WᵀW`.
+    w: Cow<'f, [f64]>,
+    wtw: Cow<'f, [f64]>,
+    /// K when it is kept in the general form (not positive definite), else None for I.
     k: Option<Vec<f64>>,
     /// ‖t_p‖².
     tt: f64,
@@ -244,7 +310,7 @@ pub(super) struct Frame<'f> {
 impl Frame<'_> {
     /// K v.
     fn k_times(&self, v: &[f64]) -> Vec<f64> {
-        let r = self.f.rank;
+        let r = self.rank;
         match &self.k {
             None => v.to_vec(),
             Some(k) => k
@@ -263,12 +329,12 @@ impl Frame<'_> {
         l2: f64,
         penalty: f64,
     ) -> Result<Vec<f64>> {
-        let (r, lr) = (self.f.rank, self.f);
+        let r = self.rank;
         let mut changed = false;
         for (i, &c) in clamped.iter().enumerate() {
             if c != self.clamped[i] {
                 let sign = if c { 1.0 } else { -1.0 };
-                add_outer_upper(&mut self.sum_clamped, r, sign, &lr.w[i * r..(i + 1) * r]);
+                add_outer_upper(&mut self.sum_clamped, r, sign, &self.w[i * r..(i + 1) * r]);
                 self.clamped[i] = c;
                 changed = true;
             }
@@ -279,14 +345,14 @@ impl Frame<'_> {
         let (free, held) = (1.0 / l2, 1.0 / (l2 + penalty));
         let dinv = |i: usize| if self.clamped[i] { held } else { free };
         // M = Wᵀ D⁻¹ W.
-        let m: Vec<f64> = lr
+        let m: Vec<f64> = self
             .wtw
             .iter()
             .zip(&self.sum_clamped)
             .map(|(a, c)| a * free - c * (free - held))
             .collect();
         let scaled: Vec<f64> = rhs.iter().enumerate().map(|(i, b)| b * dinv(i)).collect();
-        let g = lr.wt_times(&scaled);
+        let g = wt_times(&self.w, r, &scaled);
         let y = match &self.k {
             None => {
                 let mut n = m;
@@ -316,13 +382,16 @@ impl Frame<'_> {
                     .collect()
             }
         };
-        let wy = lr.w_times(&y);
-        Ok((0..lr.shapes).map(|i| dinv(i) * (rhs[i] - wy[i])).collect())
+        let wy = w_times(&self.w, r, &y);
+        Ok((0..self.shapes)
+            .map(|i| dinv(i) * (rhs[i] - wy[i]))
+            .collect())
     }
 
     /// `(dᵀ G w, dᵀ G d)` with G the frame's `A_pᵀ A_p`.
     pub(super) fn products(&self, d: &[f64], w: &[f64]) -> (f64, f64) {
-        let (u, v) = (self.f.wt_times(d), self.f.wt_times(w));
+        let r = self.rank;
+        let (u, v) = (wt_times(&self.w, r, d), wt_times(&self.w, r, w));
         let ku = self.k_times(&u);
         let dot = |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(x, y)| x * y).sum::<f64>();
         (dot(&ku, &v), dot(&ku, &u))
@@ -330,7 +399,7 @@ impl Frame<'_> {
 
     /// ‖A_p w − t_p‖² given `atr` = A_pᵀ t_p.
     pub(super) fn data_term(&self, w: &[f64], atr: &[f64]) -> f64 {
-        let v = self.f.wt_times(w);
+        let v = wt_times(&self.w, self.rank, w);
         let kv = self.k_times(&v);
         let vkv: f64 = v.iter().zip(&kv).map(|(a, b)| a * b).sum();
         let wa: f64 = w.iter().zip(atr).map(|(a, b)| a * b).sum();
