@@ -13,31 +13,26 @@ import warnings
 
 import numpy as np
 
+import ict_captures
 import lgi
-from lgi.io.livelink import read_livelinkface
 from lgi.lab import ict
-from lgi.lab.capture import HingeJaw, make_capture
+from lgi.lab.capture import make_capture
 from lgi.model import fit_noise_bound
 
 STEP = 20
-D = "../shared/data/ict-facekit"
 
 
 def main() -> None:
     warnings.filterwarnings("ignore")
-    d = ict.load_dataset(D)
-    lay = ict.load_layout(D)
-    jaw = HingeJaw.fit(d, ict.lower_teeth())
+    d, positions, jaw, m = ict_captures.setup()
     skin = ict.skin()
-    m = lgi.Model.build(d, lay.positions)
     head = "| take | true sigma | frames | tracks | fit bound | estimate | error at: true sigma"
     print(head + " | tracks | estimate |")
     print("|---|---|---|---|---|---|---|---|---|")
-    for rec in ["alex_rom_4", "jmtechart_myslate_3"]:
-        w = read_livelinkface(f"../shared/data/livelinkface/{rec}.csv").for_dataset(d.names)
+    for rec, w in ict_captures.recordings(d):
         for sigma, seed in ((0.0, 1), (0.02, 1)):
             t = make_capture(
-                d, w, lay.positions, sigma=sigma, dropout=0.0, holdout=0, seed=seed, jaw=jaw
+                d, w, positions, sigma=sigma, dropout=0.0, holdout=0, seed=seed, jaw=jaw
             )
             fr, truth = t.frames[::STEP], t.truth[::STEP]
             tracks = lgi.estimate_marker_noise(fr)

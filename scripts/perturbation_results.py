@@ -16,12 +16,9 @@ import warnings
 
 import numpy as np
 
-import lgi
-from lgi.io.livelink import read_livelinkface
-from lgi.lab import ict
-from lgi.lab.capture import HingeJaw, make_capture
+import ict_captures
+from lgi.lab.capture import make_capture
 
-D = "../shared/data/ict-facekit"
 MOVE = 1e-4  # cm: 1 micrometre
 
 
@@ -37,20 +34,16 @@ def main() -> None:
     ap.add_argument("--frames", type=int, default=200)
     args = ap.parse_args()
     warnings.filterwarnings("ignore")
-    d = ict.load_dataset(D)
-    lay = ict.load_layout(D)
-    jaw = HingeJaw.fit(d, ict.lower_teeth())
-    m = lgi.Model.build(d, lay.positions)
+    d, positions, jaw, m = ict_captures.setup()
     head = "| take | mode | frames | median gain | max gain | frames with gain > 100"
     print(head + " | of those, a choice changed |")
     print("|---|---|---|---|---|---|---|")
-    for rec in ["alex_rom_4", "jmtechart_myslate_3"]:
-        w = read_livelinkface(f"../shared/data/livelinkface/{rec}.csv").for_dataset(d.names)
+    for rec, w in ict_captures.recordings(d):
         step = max(1, len(w) // args.frames)
         t = make_capture(
             d,
             w[::step][: args.frames],
-            lay.positions,
+            positions,
             sigma=0.02,
             dropout=0.0,
             holdout=0,

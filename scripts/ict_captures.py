@@ -1,0 +1,33 @@
+"""What the capture measurements of issue 34 share (scripts/noise_estimate_results.py,
+scripts/perturbation_results.py): ICT-FaceKit with its generic layout, the capture truth rig's
+hinge jaw, the default build, and the shared Live Link recordings' curves on ICT's shapes."""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from typing import Any
+
+import numpy as np
+
+import lgi
+from lgi.io.livelink import read_livelinkface
+from lgi.lab import ict
+from lgi.lab.capture import HingeJaw
+
+ICT = "../shared/data/ict-facekit"
+LIVELINK = "../shared/data/livelinkface"
+RECORDINGS = ("alex_rom_4", "jmtechart_myslate_3")
+
+
+def setup() -> tuple[Any, np.ndarray, HingeJaw, lgi.Model]:
+    """ICT's dataset, its layout's rest positions, the hinge jaw and the default build."""
+    d = ict.load_dataset(ICT)
+    positions = ict.load_layout(ICT).positions
+    jaw = HingeJaw.fit(d, ict.lower_teeth())
+    return d, positions, jaw, lgi.Model.build(d, positions)
+
+
+def recordings(dataset: Any) -> Iterator[tuple[str, np.ndarray]]:
+    """Each shared recording's name and its curves as weights of `dataset`'s shapes."""
+    for rec in RECORDINGS:
+        yield rec, read_livelinkface(f"{LIVELINK}/{rec}.csv").for_dataset(dataset.names)
