@@ -131,11 +131,16 @@ impl FitPrior {
     /// projection of `targets − rest` onto those shapes' displacements over the present rows,
     /// and the same projection's residual of each of `directions` (B points each). Zero for
     /// a dataset shape's own markers when it is active; rows missing from `targets` are zero.
+    ///
+    /// `cache` keeps the Gram entries summed over a frame's present markers between calls
+    /// for the same frame (the same markers missing): each entry is summed once, as it would
+    /// be on every call (the same bits).
     pub fn active_residuals(
         &self,
         targets: &[DVec3],
         directions: &[Vec<DVec3>],
         active: &[usize],
+        cache: &mut GramCache,
     ) -> Result<(Vec<DVec3>, Vec<Vec<DVec3>>)> {
         let b = self.rest.len();
         let present: Vec<usize> = (0..b).filter(|&i| !targets[i].is_nan()).collect();
@@ -153,9 +158,21 @@ impl FitPrior {
                 }
             }
         } else {
+            let s = self.displacements.len() / b.max(1);
+            let mut kept = cache.entries(s);
             for i in 0..k {
                 for j in 0..=i {
-                    let x: f64 = present.iter().map(|&n| col(i, n).dot(col(j, n))).sum();
+                    let slot = active[i] * s + active[j];
+                    let x = match kept.as_deref().map(|e| e[slot]) {
+                        Some(x) if !x.is_nan() => x,
+                        _ => {
+                            let x: f64 = present.iter().map(|&n| col(i, n).dot(col(j, n))).sum();
+                            if let Some(e) = kept.as_deref_mut() {
+                                e[slot] = x;
+                            }
+                            x
+                        }
+                    };
                     g[i * k + j] = x;
                     g[j * k + i] = x;
                 }
@@ -253,6 +270,30 @@ impl FitPrior {
             out[i] = fit.positions[i] + DVec3::from_array(s);
         }
         Ok(out)
+    }
+}
+
+/// Gram entries of one frame's present markers kept between
+/// [`FitPrior::active_residuals`] calls for that frame (the jaw refinement's steps), made on
+/// first use; none for datasets of more than [`GramCache::MAX_SHAPES`] shapes.
+#[derive(Debug, Default)]
+pub struct GramCache {
+    entries: Vec<f64>,
+}
+
+impl GramCache {
+    /// Above this many shapes the S × S table is not kept (8 MiB at 1,024).
+    pub const MAX_SHAPES: usize = 1024;
+
+    /// The table for `s` shapes, NaN where not yet summed; `None` past the size limit.
+    fn entries(&mut self, s: usize) -> Option<&mut [f64]> {
+        if s > Self::MAX_SHAPES {
+            return None;
+        }
+        if self.entries.len() != s * s {
+            self.entries = vec![f64::NAN; s * s];
+        }
+        Some(&mut self.entries)
     }
 }
 

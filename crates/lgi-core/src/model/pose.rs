@@ -10,7 +10,7 @@ use crate::geom::interpolate3;
 use crate::jaw::{JawParams, JawRig};
 use crate::linalg::Lu;
 use crate::magnitude::Extent;
-use crate::prior::{FitPrior, FrameFit, FIT_L2, FIT_PENALTY};
+use crate::prior::{FitPrior, FrameFit, GramCache, FIT_L2, FIT_PENALTY};
 use glam::DVec3;
 use rayon::prelude::*;
 
@@ -276,6 +276,8 @@ impl Model {
             self.lookup_targets(&prep.targets, Some(JawParams::from_array(t)), prep.bin)
         };
         let mut theta = start.to_array();
+        // The Gram entries over the frame's present markers, kept between the steps.
+        let mut gram = GramCache::default();
         // The best pose evaluated, its residual and its fit (what the frame is solved with).
         let mut best: Option<(f64, [f64; 3], FrameFit)> = None;
         // The first fit starts at the frame's fit of the dataset as given (the pose's start),
@@ -316,7 +318,7 @@ impl Model {
                 .filter(|&j| fit.weights[j] > 0.0)
                 .map(|j| j - 1)
                 .collect();
-            let (res, pjs) = prior.active_residuals(&u, &dirs, &active)?;
+            let (res, pjs) = prior.active_residuals(&u, &dirs, &active, &mut gram)?;
             let n = dims.len();
             let (mut m, mut g, mut e) = (vec![0.0; n * n], vec![[0.0; 3]; n], 0.0);
             for &i in &prep.present {
