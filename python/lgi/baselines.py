@@ -7,6 +7,9 @@
   learned or example-based correction). Linear in the data, so the V x B matrix is computed once.
 - `BlendshapeFit`: per frame, box-penalised least-squares blendshape weights (the standard
   production solve), solved exactly by an active-set iteration in the Rust core.
+- `FitJaw`: the same fit with the jaw as a joint (lgi's own weights and jaw pose, the blend of
+  jaw-unskinned shapes skinned by the pose): the peer a production rig solve gives, differing
+  from LGI only in the local geometry.
 - `LgiRbf`: LGI's per-bundle local geometry choices spread with normalised Gaussian weights over
   UV distance (no Sibson sewing), plus an RBF correction of the residuals so every marker is
   interpolated: isolates what LGI's sewing contributes.
@@ -16,7 +19,7 @@ Each baseline has one name: the class name here, with `label` the name in result
 (`RbfInterpolator`, `BlendshapeSolver`, in `lgi_core::baselines` and `lgi._lgi` alike).
 
 Every result's `Choices` holds -1 shapes and 0 weights where the method has no choice
-(`DisplacementInterpolation`, `BlendshapeFit`); `LgiRbf` reports LGI's choices.
+(`DisplacementInterpolation`, `BlendshapeFit`, `FitJaw`); `LgiRbf` reports LGI's choices.
 """
 
 from __future__ import annotations
@@ -34,7 +37,7 @@ from lgi.model import Model
 
 F64 = NDArray[np.float64]
 
-__all__ = ["BlendshapeFit", "DisplacementInterpolation", "LgiRbf", "vertex_uvs"]
+__all__ = ["BlendshapeFit", "DisplacementInterpolation", "FitJaw", "LgiRbf", "vertex_uvs"]
 
 
 def _diagonal(points: F64) -> float:
@@ -186,6 +189,50 @@ class BlendshapeFit:
         self.last_weights = w
         verts = self._s.neutral[None] + np.einsum("fk,kvd->fvd", w, self._shapes)
         return self._s.result(verts, fr)
+
+
+class FitJaw:
+    """The peer a production TD already has, the rig solve with the jaw turned as a joint:
+    each frame's blendshape weights and jaw pose solved together, the mesh the shapes' blend
+    skinned by the pose, `T(theta) (x0 + sum_k w_k u_k)`, with `u_k` shape k unskinned by its
+    own pose. The weights and pose are lgi's own (the frame's global fit in the jaw's unskinned
+    space, the pose refined against it: `model.solve(frames, jaw="fit", fit=True)`), so the
+    only difference from lgi's result is the local geometry. Needs a model built with a jaw rig
+    and without jaw bins (a binned model fits each bin's re-posed shapes)."""
+
+    label: ClassVar[str] = "fit + jaw"
+
+    def __init__(self, model: Model, surface_tolerance: float = 0.02) -> None:
+        rig = model.jaw_rig
+        jaw = model.core.jaw()
+        if rig is None or jaw is None:
+            raise InputError("FitJaw needs a model built with a jaw rig (Model.build(jaw=...))")
+        if model.jaw_bins is not None:
+            raise InputError("FitJaw: the model has jaw bins; build it without jaw_bins")
+        self._model = model
+        self._rig = rig
+        data = model.dataset
+        self._s = _Surface(data, model.markers_rest, surface_tolerance)
+        x0 = self._s.neutral
+        theta = np.asarray(jaw["shape_theta"], dtype=np.float64)
+        shapes = np.asarray(data.shapes)
+        # float32 like the dataset: (S, V, 3).
+        self._unskinned = np.stack(
+            [rig.unskin_displacements(x0, shapes[k], theta[k]) for k in range(len(shapes))]
+        ).astype(np.float32)
+
+    @property
+    def num_bundles(self) -> int:
+        return self._s.num_bundles
+
+    def solve(self, frames: ArrayLike, *, quiet: bool = False, **_: Any) -> SolveResult:
+        fr = _frames(frames, self._s)
+        solved = self._model.solve(fr, jaw="fit", fit=True, quiet=True)
+        w, theta = solved.fit_weights, solved.jaw_theta
+        if w is None or theta is None:
+            raise InputError("FitJaw: the solve made no fit or no jaw pose")
+        blend = self._s.neutral[None] + np.einsum("fk,kvd->fvd", w, self._unskinned)
+        return self._s.result(self._rig.skin(blend, theta), fr)
 
 
 def vertex_uvs(dataset: Dataset) -> F64:
