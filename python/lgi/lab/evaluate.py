@@ -265,16 +265,22 @@ class Recommended:
 
 
 def capture_methods(dataset: Dataset, markers: ArrayLike, sigma: float) -> dict[str, Solver]:
-    """The methods of the capture protocol: the two baselines, LGI in the paper's exact mode
-    (no jaw rig, no fit: tets only) and LGI's recommended path (defaults, `marker_noise`)."""
-    from lgi.baselines import BlendshapeFit, DisplacementInterpolation
+    """The methods of the capture protocol: the two baselines, the fit with the jaw as a joint
+    (`FitJaw`, the production rig solve, where the dataset gives a jaw rig), LGI in the paper's
+    exact mode (no jaw rig, no fit: tets only) and LGI's recommended path (defaults,
+    `marker_noise`)."""
+    from lgi.baselines import BlendshapeFit, DisplacementInterpolation, FitJaw
 
-    return {
+    recommended = Model.build(dataset, markers)
+    methods: dict[str, Solver] = {
         DisplacementInterpolation.label: DisplacementInterpolation(dataset, markers),
         BlendshapeFit.label: BlendshapeFit(dataset, markers),
-        "LGI (paper)": Recommended(Model.build(dataset, markers, jaw=None), None),
-        "LGI": Recommended(Model.build(dataset, markers), sigma),
     }
+    if recommended.jaw_rig is not None:
+        methods[FitJaw.label] = FitJaw(recommended)
+    methods["LGI (paper)"] = Recommended(Model.build(dataset, markers, jaw=None), None)
+    methods["LGI"] = Recommended(recommended, sigma)
+    return methods
 
 
 def capture_protocol(

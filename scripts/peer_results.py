@@ -1,0 +1,50 @@
+"""LGI's recommended call against the strongest peer a TD has, the fit with the jaw as a joint
+(`lgi.baselines.FitJaw`), in the capture protocol (`lgi.lab.evaluate.capture_protocol`: both
+shared Live Link recordings driving ICT with a rotating jaw, 200 frames each, 2 % dropouts,
+markers_120), at two noise levels and with a quarter of the shapes held out or none; mean
+face-skin error in cm (docs/results.md, issue 34).
+
+Usage: python scripts/peer_results.py (from the checkout, ../shared beside it).
+"""
+
+from __future__ import annotations
+
+import warnings
+
+from lgi.lab import evaluate, ict
+
+ICT = "../shared/data/ict-facekit"
+RECORDINGS = [f"../shared/data/livelinkface/{r}.csv" for r in ("alex_rom_4", "jmtechart_myslate_3")]
+METHODS = ("blendshape fit", "fit + jaw", "LGI (paper)", "LGI")
+
+
+def main() -> None:
+    warnings.filterwarnings("ignore")
+    d = ict.load_dataset(ICT)
+    markers = ict.load_layout(ICT).positions
+    print("| recording | sigma (cm) | held out | " + " | ".join(METHODS) + " | LGI / fit + jaw |")
+    print("|---" * (len(METHODS) + 4) + "|")
+    for sigma in (0.02, 0.05):
+        for holdout in (0.0, 0.25):
+            rows = evaluate.capture_protocol(
+                d,
+                markers,
+                RECORDINGS,
+                sigma=sigma,
+                holdout=holdout,
+                jaw_rigid=ict.lower_teeth(),
+                region=ict.skin(),
+                frames=200,
+            )
+            by: dict[str, dict[str, float]] = {}
+            for r in rows:
+                rec, method = r["method"].split(": ", 1)
+                by.setdefault(rec, {})[method] = r["mean"]
+            for rec, m in by.items():
+                cells = " | ".join(f"{m[k]:.4f}" for k in METHODS)
+                ratio = m["LGI"] / m["fit + jaw"]
+                print(f"| {rec} | {sigma} | {holdout:.0%} | {cells} | {ratio:.3f} |")
+
+
+if __name__ == "__main__":
+    main()
