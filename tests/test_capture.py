@@ -248,6 +248,7 @@ def test_capture_protocol_recommended_lgi_beats_both_baselines_on_a_short_real_t
         "displacement interpolation",
         "blendshape fit",
         "fit + jaw",
+        "fit + jaw + residual",
         "LGI (paper)",
         "LGI",
     }

@@ -10,6 +10,8 @@
 - `FitJaw`: the same fit with the jaw as a joint (lgi's own weights and jaw pose, the blend of
   jaw-unskinned shapes skinned by the pose): the peer a production rig solve gives, differing
   from LGI only in the local geometry.
+- `FitJawResidual`: `FitJaw` plus a smoothing thin-plate spline of its marker residuals, the
+  smoothing chosen per take by leaving markers out (the production method before LGI).
 - `LgiRbf`: LGI's per-bundle local geometry choices spread with normalised Gaussian weights over
   UV distance (no Sibson sewing), plus an RBF correction of the residuals so every marker is
   interpolated: isolates what LGI's sewing contributes.
@@ -37,7 +39,14 @@ from lgi.model import Model
 
 F64 = NDArray[np.float64]
 
-__all__ = ["BlendshapeFit", "DisplacementInterpolation", "FitJaw", "LgiRbf", "vertex_uvs"]
+__all__ = [
+    "BlendshapeFit",
+    "DisplacementInterpolation",
+    "FitJaw",
+    "FitJawResidual",
+    "LgiRbf",
+    "vertex_uvs",
+]
 
 
 def _diagonal(points: F64) -> float:
@@ -233,6 +242,96 @@ class FitJaw:
             raise InputError("FitJaw: the solve made no fit or no jaw pose")
         blend = self._s.neutral[None] + np.einsum("fk,kvd->fvd", w, self._unskinned)
         return self._s.result(self._rig.skin(blend, theta), fr)
+
+
+#: Smoothing candidates of `FitJawResidual`, times the median distance between markers.
+RESIDUAL_SMOOTHING = (0.0, 1e-2, 3e-2, 0.1, 0.3, 1.0, 3.0, 10.0, 30.0, 100.0, 1e3)
+#: Frames of a take (spread over it) whose left-out errors choose the smoothing.
+SMOOTHING_FRAMES = 50
+
+
+class FitJawResidual:
+    """`FitJaw` followed by a corrective of its marker residuals (the production method before
+    LGI, Bhat et al. 2013): each frame's residuals at the present markers spread over the mesh
+    by a smoothing thin-plate spline in 3D (phi(r) = r, a linear polynomial, `lam` taken from
+    the kernel's diagonal: phi is conditionally negative definite). `lam` is chosen per take
+    without the truth: the candidate
+    (`RESIDUAL_SMOOTHING` times the median distance between markers) with the least squared
+    error at each marker left out in turn, summed over up to `SMOOTHING_FRAMES` frames
+    (Rippa's closed form: the left-out error of marker i is c_i / (A^-1)_ii, A the spline's
+    system). `smoothing` fixes the candidates (e.g. `[0.0]`: exact interpolation)."""
+
+    label: ClassVar[str] = "fit + jaw + residual"
+
+    def __init__(
+        self,
+        model: Model,
+        smoothing: ArrayLike | None = None,
+        surface_tolerance: float = 0.02,
+    ) -> None:
+        self._peer = FitJaw(model, surface_tolerance)
+        s = self._peer._s
+        c = np.asarray(s.rbf.centres, dtype=np.float64)
+        self._kbb = np.linalg.norm(c[:, None] - c[None], axis=2)
+        self._pb = np.hstack([np.ones((len(c), 1)), c])
+        v = s.neutral
+        self._kvb = np.linalg.norm(v[:, None] - c[None], axis=2)
+        self._pv = np.hstack([np.ones((len(v), 1)), v])
+        off = self._kbb + np.diag(np.full(len(c), np.inf))
+        spacing = float(np.median(off.min(axis=1)))
+        cands = RESIDUAL_SMOOTHING if smoothing is None else smoothing
+        self._candidates = [float(x) * spacing for x in np.atleast_1d(np.asarray(cands))]
+        if not self._candidates or min(self._candidates) < 0:
+            raise InputError("smoothing: expected one or more values >= 0")
+        self.last_smoothing: float | None = None
+
+    @property
+    def num_bundles(self) -> int:
+        return self._peer.num_bundles
+
+    def _system(self, present: NDArray[np.bool_], lam: float) -> F64:
+        # phi(r) = r is conditionally negative definite: smoothing subtracts lam (the
+        # spline of -phi, conditionally positive definite, with lam added), never crossing
+        # the kernel's spectrum.
+        k = self._kbb[np.ix_(present, present)] - lam * np.eye(int(present.sum()))
+        p = self._pb[present]
+        n = k.shape[0]
+        a = np.zeros((n + 4, n + 4))
+        a[:n, :n], a[:n, n:], a[n:, :n] = k, p, p.T
+        return a
+
+    def left_out_error(self, residuals: F64, lam: float) -> float:
+        """Sum over the frames (F, B, 3) of the squared error at each present marker of the
+        spline fitted without it (Rippa's closed form)."""
+        total = 0.0
+        for r in residuals:
+            present = np.isfinite(r).all(axis=1)
+            n = int(present.sum())
+            if n < 5:
+                continue
+            inv = np.linalg.inv(self._system(present, lam))
+            coef = inv[:, :n] @ r[present]
+            total += float(np.sum((coef[:n] / np.diag(inv)[:n, None]) ** 2))
+        return total
+
+    def solve(self, frames: ArrayLike, *, quiet: bool = False, **_: Any) -> SolveResult:
+        s = self._peer._s
+        fr = _frames(frames, s)
+        base = self._peer.solve(fr)
+        residuals = fr - base.bundle_positions
+        pick = np.unique(np.linspace(0, len(fr) - 1, SMOOTHING_FRAMES).round().astype(int))
+        lam = min(self._candidates, key=lambda x: self.left_out_error(residuals[pick], x))
+        self.last_smoothing = lam
+        vertices = np.array(base.vertices)
+        for f, r in enumerate(residuals):
+            present = np.isfinite(r).all(axis=1)
+            n = int(present.sum())
+            if n < 5:
+                continue
+            rhs = np.vstack([r[present], np.zeros((4, 3))])
+            coef = np.linalg.solve(self._system(present, lam), rhs)
+            vertices[f] += self._kvb[:, present] @ coef[:n] + self._pv @ coef[n:]
+        return s.result(vertices, fr)
 
 
 def vertex_uvs(dataset: Dataset) -> F64:

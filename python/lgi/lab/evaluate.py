@@ -266,10 +266,11 @@ class Recommended:
 
 def capture_methods(dataset: Dataset, markers: ArrayLike, sigma: float) -> dict[str, Solver]:
     """The methods of the capture protocol: the two baselines, the fit with the jaw as a joint
-    (`FitJaw`, the production rig solve, where the dataset gives a jaw rig), LGI in the paper's
+    (`FitJaw`, the production rig solve, where the dataset gives a jaw rig) and the same with
+    its residual corrective (`FitJawResidual`), LGI in the paper's
     exact mode (no jaw rig, no fit: tets only) and LGI's recommended path (defaults,
     `marker_noise`)."""
-    from lgi.baselines import BlendshapeFit, DisplacementInterpolation, FitJaw
+    from lgi.baselines import BlendshapeFit, DisplacementInterpolation, FitJaw, FitJawResidual
 
     recommended = Model.build(dataset, markers)
     methods: dict[str, Solver] = {
@@ -278,6 +279,7 @@ def capture_methods(dataset: Dataset, markers: ArrayLike, sigma: float) -> dict[
     }
     if recommended.jaw_rig is not None:
         methods[FitJaw.label] = FitJaw(recommended)
+        methods[FitJawResidual.label] = FitJawResidual(recommended)
     methods["LGI (paper)"] = Recommended(Model.build(dataset, markers, jaw=None), None)
     methods["LGI"] = Recommended(recommended, sigma)
     return methods
