@@ -131,9 +131,11 @@ def spiked_sample_take(sample, model):  # type: ignore[no-untyped-def]
     return frames
 
 
-def write_solve(path: Path, model, frames, noise: float | None) -> Path:  # type: ignore[no-untyped-def]
-    """`frames` solved with `model` (noise-aware with `noise`) as a solved-take npz at 30 fps
-    from time code 100, the take's markers kept."""
+def write_solve(  # type: ignore[no-untyped-def]
+    path: Path, model, frames, noise: float | None, fps: float = 30.0, start: int = 100
+) -> Path:
+    """`frames` solved with `model` (noise-aware with `noise`) as a solved-take npz at `fps`
+    from time code `start`, the take's markers kept."""
     from lgi.io.result import write_result_npz
     from lgi.io.topology import topology
 
@@ -145,8 +147,8 @@ def write_solve(path: Path, model, frames, noise: float | None) -> Path:  # type
         res.bundle_residuals,
         res.missing,
         list(model.marker_names),
-        fps=30.0,
-        start=100,
+        fps=fps,
+        start=start,
         units="cm",
         markers=frames,
     )

@@ -12,8 +12,7 @@ import pytest
 
 from lgi import cli
 from lgi.diagnose import Finding, diagnose, summary
-from lgi.io.result import write_result_npz
-from lgi.io.topology import topology
+from pipeline_files import write_solve
 
 
 @pytest.fixture(scope="module")
@@ -80,20 +79,7 @@ def test_lgi_solve_prints_the_findings_and_lgi_info_names_them_from_the_file(
     ict_model, capture, tmp_path: Path, capsys
 ) -> None:  # type: ignore[no-untyped-def]
     x = _planted(capture)
-    res = ict_model.solve(x, marker_noise=0.05, quiet=True)
-    solved = tmp_path / "take.npz"
-    write_result_npz(
-        solved,
-        topology(ict_model.dataset),
-        res.vertices,
-        res.bundle_residuals,
-        res.missing,
-        list(ict_model.marker_names),
-        fps=60.0,
-        start=1,
-        units="cm",
-        markers=x,
-    )
+    solved = write_solve(tmp_path / "take.npz", ict_model, x, 0.05, fps=60.0, start=1)
     assert cli.main(["info", str(solved)]) == 0
     out = capsys.readouterr().out
     assert "likely label swap: m012 <-> m047, time codes 101-150" in out
