@@ -226,8 +226,9 @@ def test_fit_jaw_residual_left_out_errors_equal_refits_without_each_marker() -> 
     s = make_sample(0)
     model = lgi.Model.build(sample_dataset(s), s.markers_rest)
     frames = np.asarray(s.performance[:12])
-    peer = FitJawResidual(model)
-    base = FitJaw(model).solve(frames)
+    jaw_peer = FitJaw(model)
+    peer = FitJawResidual(jaw_peer)
+    base = jaw_peer.solve(frames)
     r = (frames - base.bundle_positions)[3]
     lam = peer._candidates[3]
     # Brute force: the spline refitted without marker i, evaluated at marker i.
@@ -242,7 +243,7 @@ def test_fit_jaw_residual_left_out_errors_equal_refits_without_each_marker() -> 
         brute += float(np.sum((r[i] - pred) ** 2))
     assert peer.left_out_error(r[None], lam) == pytest.approx(brute, rel=1e-9)
     # The corrective takes most of the peer's marker residual (measured 0.0302 -> 0.0026).
-    got = FitJawResidual(model, smoothing=[0.0]).solve(frames)
+    got = FitJawResidual(jaw_peer, smoothing=[0.0]).solve(frames)
     assert got.bundle_residuals.mean() < 0.2 * base.bundle_residuals.mean()
     with pytest.raises(lgi.InputError, match="smoothing"):
-        FitJawResidual(model, smoothing=[-1.0])
+        FitJawResidual(jaw_peer, smoothing=[-1.0])

@@ -259,18 +259,14 @@ class FitJawResidual:
     (`RESIDUAL_SMOOTHING` times the median distance between markers) with the least squared
     error at each marker left out in turn, summed over up to `SMOOTHING_FRAMES` frames
     (Rippa's closed form: the left-out error of marker i is c_i / (A^-1)_ii, A the spline's
-    system). `smoothing` fixes the candidates (e.g. `[0.0]`: exact interpolation)."""
+    system). `smoothing` fixes the candidates (e.g. `[0.0]`: exact interpolation). Built on a
+    `FitJaw` (its unskinned shapes and marker sampling are shared, not made again)."""
 
     label: ClassVar[str] = "fit + jaw + residual"
 
-    def __init__(
-        self,
-        model: Model,
-        smoothing: ArrayLike | None = None,
-        surface_tolerance: float = 0.02,
-    ) -> None:
-        self._peer = FitJaw(model, surface_tolerance)
-        s = self._peer._s
+    def __init__(self, peer: FitJaw, smoothing: ArrayLike | None = None) -> None:
+        self._peer = peer
+        s = peer._s
         c = np.asarray(s.rbf.centres, dtype=np.float64)
         self._kbb = np.linalg.norm(c[:, None] - c[None], axis=2)
         self._pb = np.hstack([np.ones((len(c), 1)), c])

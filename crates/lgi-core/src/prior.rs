@@ -151,7 +151,7 @@ impl FitPrior {
             // Every marker present: the active shapes' entries of the whole Gram matrix, the
             // same sums (a gather instead of O(B k²) products per call).
             let s = self.displacements.len() / b.max(1);
-            let full = self.gram.get_or_init(|| self.gram_over(&present));
+            let full = self.gram.get_or_init(|| self.whole_gram());
             for i in 0..k {
                 for j in 0..k {
                     g[i * k + j] = full[active[i] * s + active[j]];
@@ -212,16 +212,16 @@ impl FitPrior {
         Ok((r, dirs))
     }
 
-    /// The displacements' Gram matrix over the bundles `rows` (S × S), each entry summed
-    /// over `rows` in order as [`active_residuals`](Self::active_residuals) sums it.
-    fn gram_over(&self, rows: &[usize]) -> Vec<f64> {
+    /// The displacements' Gram matrix over every bundle (S × S), each entry summed over the
+    /// bundles in order as [`active_residuals`](Self::active_residuals) sums it.
+    fn whole_gram(&self) -> Vec<f64> {
         let b = self.rest.len();
         let s = self.displacements.len() / b.max(1);
         let d = &self.displacements;
         let mut g = vec![0.0; s * s];
         for i in 0..s {
             for j in 0..=i {
-                let x: f64 = rows.iter().map(|&n| d[i * b + n].dot(d[j * b + n])).sum();
+                let x: f64 = (0..b).map(|n| d[i * b + n].dot(d[j * b + n])).sum();
                 g[i * s + j] = x;
                 g[j * s + i] = x;
             }

@@ -278,8 +278,9 @@ def capture_methods(dataset: Dataset, markers: ArrayLike, sigma: float) -> dict[
         BlendshapeFit.label: BlendshapeFit(dataset, markers),
     }
     if recommended.jaw_rig is not None:
-        methods[FitJaw.label] = FitJaw(recommended)
-        methods[FitJawResidual.label] = FitJawResidual(recommended)
+        peer = FitJaw(recommended)
+        methods[FitJaw.label] = peer
+        methods[FitJawResidual.label] = FitJawResidual(peer)
     methods["LGI (paper)"] = Recommended(Model.build(dataset, markers, jaw=None), None)
     methods["LGI"] = Recommended(recommended, sigma)
     return methods
