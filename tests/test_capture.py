@@ -138,6 +138,15 @@ def test_the_fit_bound_caps_a_noise_estimate_that_reads_motion_between_distant_f
     assert lgi.estimate_marker_noise(one, sample_model) == pytest.approx(0.05, rel=0.3)
     with pytest.raises(lgi.InputError, match="at least 3 frames"):
         lgi.estimate_marker_noise(one)
+    # Frames the fit cannot read (all markers lost) are left out of the bound, not an error
+    # naming a frame of the subsample; a take for another layout names both shapes.
+    holed = _independent_frames(sample_model, sample_dataset, 20, 0.05, 4)
+    holed[[2, 7]] = np.nan
+    assert fit_noise_bound(sample_model, holed) == pytest.approx(0.05, rel=0.3)
+    assert fit_noise_bound(sample_model, np.full_like(holed, np.nan)) is None
+    wrong = r"expected shape \(F, 106, 3\) with F >= 1, got \(20, 50, 3\)"
+    with pytest.raises(lgi.InputError, match=wrong):
+        lgi.estimate_marker_noise(holed[:, :50], sample_model)
 
 
 def test_a_full_rate_take_keeps_its_track_estimate_under_the_fit_bound(

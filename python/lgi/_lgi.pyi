@@ -13,6 +13,7 @@ __all__ = [
     "FIT_PENALTY",
     "MAGNITUDE_LIMIT",
     "MAX_THREADS",
+    "MIN_PRESENT_MARKERS",
     "BlendshapeSolver",
     "BuildConfig",
     "Choices",
@@ -31,6 +32,7 @@ __all__ = [
 
 __version__: str
 FIT_L2: float
+MIN_PRESENT_MARKERS: int
 FIT_PENALTY: float
 MAGNITUDE_LIMIT: float
 MAX_THREADS: int

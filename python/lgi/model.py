@@ -94,7 +94,7 @@ def estimate_marker_noise(frames: ArrayLike, model: Model | None = None) -> floa
     if bound is None:
         return tracks
     if tracks > 1.5 * bound:
-        unit = f" {model.units}" if model.units else " (data units)"
+        unit = f" {model.units}" if model.units else " data units"
         warnings.warn(
             f"marker noise: the take's tracks give {tracks:.4g}{unit}, more than the "
             f"dataset's fit leaves at the markers ({bound:.4g}{unit}): frames too far apart "
@@ -126,11 +126,18 @@ def fit_noise_bound(model: Model, frames: ArrayLike) -> float | None:
     `NOISE_BOUND_FRAMES` frames spread over the take, each with its jaw pose from the fit (as
     `solve` finds it). Independent marker noise is part of the residual, so this bounds the
     noise sigma from above; what the dataset cannot explain adds to it. None when no frame
-    has more present rows than the fit's rank."""
+    has more present rows than the fit's rank, or none has the solve's minimum of present
+    markers."""
     arr = np.asarray(frames, dtype=np.float64)
-    if arr.ndim != 3 or arr.shape[0] == 0:
-        raise InputError(f"frames: expected shape (F, B, 3) with F >= 1, got {arr.shape}")
-    pick = np.unique(np.linspace(0, arr.shape[0] - 1, NOISE_BOUND_FRAMES).round().astype(int))
+    b = model.num_bundles
+    if arr.ndim != 3 or arr.shape[0] == 0 or arr.shape[1:] != (b, 3):
+        raise InputError(f"frames: expected shape (F, {b}, 3) with F >= 1, got {arr.shape}")
+    # Frames the fit can read (the solve's minimum of present markers), spread over the take.
+    usable = np.flatnonzero(np.isfinite(arr).all(axis=2).sum(axis=1) >= _lgi.MIN_PRESENT_MARKERS)
+    if usable.size == 0:
+        return None
+    at = np.unique(np.linspace(0, usable.size - 1, NOISE_BOUND_FRAMES).round().astype(int))
+    pick = usable[at]
     jaw = "fit" if model.jaw_rig is not None else None
     residuals, ranks = model.core.fit_residuals(arr[pick], jaw=jaw)
     present = np.isfinite(residuals[..., 0])
