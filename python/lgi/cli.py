@@ -39,10 +39,14 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
         ict_dir,
         sigma=args.sigma,
         holdout=args.holdout,
+        takes=args.take,
+        frames_per_take=args.frames,
+        held_out=args.held_out,
         quiet=args.quiet,
     )
     print(evaluate.to_markdown(rows), end="")
-    print(f"wrote {args.out}/results.md, {args.out}/results.csv and {args.out}/panel.png")
+    written = [f"{args.out}/{n}" for n in ("results.md", "results.csv", "panel.png")]
+    print("wrote " + ", ".join(w for w in written if Path(w).is_file()))
     return 0
 
 
@@ -657,10 +661,12 @@ def build_parser() -> argparse.ArgumentParser:
     ev.add_argument("--data", choices=["sample", "ict"], default="sample")
     ev.add_argument(
         "--protocol",
-        choices=["performance", "verification", "loo", "noise", "dropout", "capture"],
+        choices=["performance", "verification", "loo", "noise", "dropout", "capture", "lomo"],
         default="performance",
         help="capture (--data ict): the shared Live Link Face recordings drive ICT with a "
-        "hinged jaw, markers with noise, dropouts and held-out shapes (docs/results.md)",
+        "hinged jaw, markers with noise, dropouts and held-out shapes; lomo (--data ict): real "
+        "marker takes retargeted onto ICT, each method scored on markers it was not given "
+        "(docs/results.md)",
     )
     ev.add_argument(
         "--sigma",
@@ -673,6 +679,26 @@ def build_parser() -> argparse.ArgumentParser:
         type=_fraction,
         default=0.0,
         help="capture protocol: fraction of the shapes the methods do not get (default 0)",
+    )
+    ev.add_argument(
+        "--take",
+        action="append",
+        default=[],
+        metavar="FILE",
+        help="lomo protocol: a real take (TRC or C3D) with the AnimFace marker labels, its first "
+        "frame at rest; repeat for more (default: the takes in animface/ beside ict-facekit/)",
+    )
+    ev.add_argument(
+        "--frames",
+        type=_positive_int,
+        default=250,
+        help="lomo protocol: frames solved per take, evenly spaced (default 250)",
+    )
+    ev.add_argument(
+        "--held-out",
+        type=_positive_int,
+        default=8,
+        help="lomo protocol: markers left out, one at a time, per take (default 8)",
     )
     ev.add_argument("-q", "--quiet", action="store_true", help="no progress bars")
     ev.add_argument(

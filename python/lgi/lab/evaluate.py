@@ -16,8 +16,9 @@ from numpy.typing import ArrayLike, NDArray
 
 from lgi._lgi import SolveResult
 from lgi.dataset import Dataset, without_shapes
+from lgi.errors import InputError
 from lgi.lab.capture import HingeJaw, box_diagonal, make_capture, marker_samples
-from lgi.model import Model
+from lgi.model import Model, estimate_marker_noise
 
 F64 = NDArray[np.float64]
 Row = dict[str, Any]
@@ -264,15 +265,22 @@ class Recommended:
         )
 
 
-def capture_methods(dataset: Dataset, markers: ArrayLike, sigma: float) -> dict[str, Solver]:
+def capture_methods(
+    dataset: Dataset, markers: ArrayLike, sigma: float | None, frames: ArrayLike | None = None
+) -> dict[str, Solver]:
     """The methods of the capture protocol: the two baselines, the fit with the jaw as a joint
     (`FitJaw`, the production rig solve, where the dataset gives a jaw rig) and the same with
     its residual corrective (`FitJawResidual`), LGI in the paper's
     exact mode (no jaw rig, no fit: tets only) and LGI's recommended path (defaults,
-    `marker_noise`)."""
+    `marker_noise` = `sigma`; None: estimated from `frames` with the model, as
+    `--marker-noise auto` does)."""
     from lgi.baselines import BlendshapeFit, DisplacementInterpolation, FitJaw, FitJawResidual
 
     recommended = Model.build(dataset, markers)
+    if sigma is None:
+        if frames is None:
+            raise InputError("capture methods: sigma None needs the frames to estimate it from")
+        sigma = estimate_marker_noise(frames, recommended)
     methods: dict[str, Solver] = {
         DisplacementInterpolation.label: DisplacementInterpolation(dataset, markers),
         BlendshapeFit.label: BlendshapeFit(dataset, markers),
@@ -328,6 +336,55 @@ def capture_protocol(
     return rows
 
 
+def lomo_protocol(
+    dataset: Dataset,
+    takes: Sequence[str | os.PathLike[str]],
+    landmarks: ArrayLike,
+    face: ArrayLike,
+    *,
+    frames: int = 250,
+    held_out: int = 8,
+    quiet: bool = True,
+) -> tuple[list[Row], list[Row]]:
+    """Leave-one-marker-out on real takes (`lgi.lab.lomo`): each TRC/C3D take with AnimFace's
+    labels is retargeted onto `dataset` (`landmarks`: the 68 iBUG vertices; `face`: the
+    triangles a marker may lie on), and `held_out` of its non-skull markers are left out one at
+    a time; the methods are the capture protocol's (LGI's noise estimated from the whole take
+    at its capture rate, as `--marker-noise auto` does) and the neutral, each solving about
+    `frames` evenly spaced frames.
+    Returns the rows ("take: method", `lomo.LOMO_COLUMNS`, then "all takes: method" over
+    every held-out marker) and one row per take and held-out marker (each method's mean)."""
+    from lgi.io.takes import read_raw
+    from lgi.lab import lomo
+
+    lm = np.asarray(landmarks, dtype=np.int64)
+    marks = {name: int(lm[k]) for name, k in lomo.ANIMFACE_IBUG.items()}
+
+    def methods_for(ds: Dataset, rest: F64, fr: F64) -> dict[str, Any]:
+        return {lomo.Rest.label: lomo.Rest(ds), **capture_methods(ds, rest, None, fr)}
+
+    rows: list[Row] = []
+    markers: list[Row] = []
+    measured: list[lomo.Scores] = []
+    for path in _steps(list(takes), "lgi evaluate: lomo", quiet):
+        take = lomo.retarget(read_raw(path), dataset.neutral, face, marks)
+        step = max(1, take.frames.shape[0] // max(1, frames))
+        rigid = set(lomo.RIGID)
+        cand = [i for i, n in enumerate(take.names) if n not in rigid]
+        picked = lomo.held_out_markers(take.rest, take.frames, cand, held_out)
+        got = lomo.lomo(dataset, take, picked, methods_for, step=step)
+        measured.append(got)
+        stem = Path(path).stem
+        rows += lomo.rows([got], stem)
+        for j in picked:
+            name = take.names[j]
+            means = {m: float(e[name].mean()) for m, e in got.errors.items()}
+            markers.append({"take": stem, "marker": name, **means})
+    if len(measured) > 1:
+        rows += lomo.rows(measured, "all takes")
+    return rows, markers
+
+
 def _steps(items: Sequence[Any], desc: str, quiet: bool) -> Any:
     """`items` with a progress bar on stderr (none when `quiet`)."""
     from tqdm import tqdm
@@ -374,20 +431,25 @@ def run_protocol(
     *,
     sigma: float = 0.05,
     holdout: float = 0.0,
+    takes: Sequence[str | os.PathLike[str]] = (),
+    frames_per_take: int = 250,
+    held_out: int = 8,
     quiet: bool = False,
 ) -> list[Row]:
     """Runs `protocol` on `data` ("sample", or "ict" read from the folder `ict_dir`) and writes
     results.md, results.csv and panel.png (the heatmap of one frame: the most expressive; for
-    leave-one-out, the most displaced shape held out) into `out`. `sigma` and `holdout` are the
-    capture protocol's (ICT with the Live Link Face recordings beside it). Progress bars on
-    stderr unless `quiet`."""
-    from lgi.errors import InputError
+    leave-one-out, the most displaced shape held out; none for lomo, which has no dense truth)
+    into `out`. `sigma` and `holdout` are the capture protocol's (ICT with the Live Link Face
+    recordings beside it); `takes` (default: the shared AnimFace takes), `frames_per_take` and
+    `held_out` the lomo protocol's (`lomo_protocol`). Progress bars on stderr unless
+    `quiet`."""
     from lgi.lab import ict
     from lgi.lab.sample import make_sample, sample_dataset
 
     outp = Path(out)
     outp.mkdir(parents=True, exist_ok=True)
     region: ArrayLike | None = None
+    extra = ""
     if data == "sample":
         s = make_sample(0)
         ds = sample_dataset(s)
@@ -425,6 +487,26 @@ def run_protocol(
             panel=outp / "panel.png",
             quiet=quiet,
         )
+    elif protocol == "lomo":
+        if data != "ict" or ict_dir is None:
+            raise InputError("the lomo protocol needs --data ict (ICT-FaceKit and real takes)")
+        found = ict.animface(Path(ict_dir).parent)
+        chosen = list(takes) if takes else found
+        if not chosen:
+            raise InputError(
+                f"the lomo protocol needs real takes: give them (--take) or put the AnimFace "
+                f"takes in {Path(ict_dir).parent / 'animface'}"
+            )
+        rows, per_marker = lomo_protocol(
+            ds,
+            chosen,
+            ict.load_landmarks(ict_dir),
+            ict.face_triangles(ds),
+            frames=frames_per_take,
+            held_out=held_out,
+            quiet=quiet,
+        )
+        extra = "\n## Each held-out marker: mean error per method\n\n" + to_markdown(per_marker)
     elif protocol == "loo":
         rows = leave_one_out(ds, markers, default_methods, region=region, quiet=quiet)
         frames, truth = verification(ds, markers)
@@ -465,7 +547,7 @@ def run_protocol(
             for r in rows:
                 r["jitter"] = float("nan")  # independent frames: not a sequence
     (outp / "results.md").write_text(
-        f"# lgi evaluate: data {data}, protocol {protocol}\n\n" + to_markdown(rows)
+        f"# lgi evaluate: data {data}, protocol {protocol}\n\n" + to_markdown(rows) + extra
     )
     to_csv(rows, outp / "results.csv")
     return rows

@@ -10,6 +10,7 @@ tests take it from the `LGI_SHARED_DATA` environment variable, `ENV`); `find` ot
 
 from __future__ import annotations
 
+import json
 import os
 from pathlib import Path
 
@@ -24,10 +25,13 @@ __all__ = [
     "LOWER_TEETH",
     "NARROW_FACE",
     "SKIN_VERTICES",
+    "animface",
+    "face_triangles",
     "find",
     "is_ict",
     "livelinkface",
     "load_dataset",
+    "load_landmarks",
     "load_layout",
     "load_markers",
     "lower_teeth",
@@ -65,6 +69,35 @@ def livelinkface(shared_data: str | os.PathLike[str] | None = None) -> list[Path
     sorted; empty when absent."""
     ict = find(shared_data)
     return [] if ict is None else sorted((ict.parent / "livelinkface").glob("*.csv"))
+
+
+def animface(shared_data: str | os.PathLike[str] | None = None) -> list[Path]:
+    """The shared AnimFace marker takes (`animface/*.trc` beside `ict-facekit/`), sorted;
+    empty when absent."""
+    ict = find(shared_data)
+    return [] if ict is None else sorted((ict.parent / "animface").glob("*.trc"))
+
+
+def face_triangles(dataset: Dataset) -> NDArray[np.int64]:
+    """The triangles of the narrow face (`NARROW_FACE`): where a marker can lie."""
+    t = np.asarray(dataset.triangles, dtype=np.int64)
+    return t[(t < NARROW_FACE).all(axis=1)]
+
+
+def load_landmarks(folder: str | os.PathLike[str]) -> NDArray[np.int64]:
+    """The 68 iBUG landmarks' vertices (`vertex_indices.json`, `idx_to_landmark_verts`);
+    `InputError` naming the file when it is missing or does not hold them."""
+    from lgi.errors import InputError
+
+    p = Path(folder) / "vertex_indices.json"
+    try:
+        idx = json.loads(p.read_text())["idx_to_landmark_verts"]
+        out = np.asarray(idx, dtype=np.int64)
+    except (OSError, ValueError, KeyError, TypeError) as e:
+        raise InputError(f"{p}: cannot read the iBUG landmark vertices ({e})") from None
+    if out.shape != (68,):
+        raise InputError(f"{p}: expected 68 landmark vertices, got {out.shape}")
+    return out
 
 
 def is_ict(folder: str | os.PathLike[str]) -> bool:
