@@ -42,6 +42,7 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
         takes=args.take,
         frames_per_take=args.frames,
         held_out=args.held_out,
+        scans=args.scans,
         quiet=args.quiet,
     )
     print(evaluate.to_markdown(rows), end="")
@@ -661,10 +662,21 @@ def build_parser() -> argparse.ArgumentParser:
     ev.add_argument("--data", choices=["sample", "ict"], default="sample")
     ev.add_argument(
         "--protocol",
-        choices=["performance", "verification", "loo", "noise", "dropout", "capture", "lomo"],
+        choices=[
+            "performance",
+            "verification",
+            "loo",
+            "noise",
+            "dropout",
+            "capture",
+            "scans",
+            "lomo",
+        ],
         default="performance",
         help="capture (--data ict): the shared Live Link Face recordings drive ICT with a "
-        "hinged jaw, markers with noise, dropouts and held-out shapes; lomo (--data ict): real "
+        "hinged jaw, markers with noise, dropouts and held-out shapes; scans (--data ict): the "
+        "dataset is whole-face scans picked from one recording's curves, the performance "
+        "another recording; lomo (--data ict): real "
         "marker takes retargeted onto ICT, each method scored on markers it was not given "
         "(docs/results.md)",
     )
@@ -691,14 +703,21 @@ def build_parser() -> argparse.ArgumentParser:
     ev.add_argument(
         "--frames",
         type=_positive_int,
-        default=250,
-        help="lomo protocol: frames solved per take, evenly spaced (default 250)",
+        default=None,
+        help="lomo and scans protocols: frames solved per take, evenly spaced (default 250 "
+        "for lomo, 200 for scans)",
     )
     ev.add_argument(
         "--held-out",
         type=_positive_int,
         default=8,
         help="lomo protocol: markers left out, one at a time, per take (default 8)",
+    )
+    ev.add_argument(
+        "--scans",
+        type=_positive_int,
+        default=120,
+        help="scans protocol: whole-face scans in the dataset (default 120)",
     )
     ev.add_argument("-q", "--quiet", action="store_true", help="no progress bars")
     ev.add_argument(

@@ -14,7 +14,7 @@ from typing import Any, Protocol
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from lgi._lgi import SolveResult
+from lgi._lgi import JawRig, SolveResult
 from lgi.dataset import Dataset, without_shapes
 from lgi.errors import InputError
 from lgi.lab.capture import HingeJaw, box_diagonal, make_capture, marker_samples
@@ -266,17 +266,26 @@ class Recommended:
 
 
 def capture_methods(
-    dataset: Dataset, markers: ArrayLike, sigma: float | None, frames: ArrayLike | None = None
+    dataset: Dataset,
+    markers: ArrayLike,
+    sigma: float | None,
+    frames: ArrayLike | None = None,
+    *,
+    jaw: tuple[JawRig, ArrayLike] | None = None,
 ) -> dict[str, Solver]:
     """The methods of the capture protocol: the two baselines, the fit with the jaw as a joint
     (`FitJaw`, the production rig solve, where the dataset gives a jaw rig) and the same with
     its residual corrective (`FitJawResidual`), LGI in the paper's
     exact mode (no jaw rig, no fit: tets only) and LGI's recommended path (defaults,
     `marker_noise` = `sigma`; None: estimated from `frames` with the model, as
-    `--marker-noise auto` does)."""
+    `--marker-noise auto` does). `jaw`: the rig and each shape's pose for a dataset without
+    ICT's jaw shapes (None: the rig `Model.build` finds, if any)."""
     from lgi.baselines import BlendshapeFit, DisplacementInterpolation, FitJaw, FitJawResidual
 
-    recommended = Model.build(dataset, markers)
+    if jaw is None:
+        recommended = Model.build(dataset, markers)
+    else:
+        recommended = Model.build(dataset, markers, jaw=jaw[0], shape_theta=jaw[1])
     if sigma is None:
         if frames is None:
             raise InputError("capture methods: sigma None needs the frames to estimate it from")
@@ -332,6 +341,58 @@ def capture_protocol(
             error_panel(panel, methods, take.frames[f], take.truth[f], dataset.triangles, region)
         for row in capture(methods, take.frames, take.truth, take.jaw_open, region):
             row["method"] = f"{Path(rec).stem}: {row['method']}"
+            rows.append(row)
+    return rows
+
+
+def scans_protocol(
+    dataset: Dataset,
+    markers: ArrayLike,
+    recordings: Sequence[str | os.PathLike[str]],
+    *,
+    scans: int,
+    sigma: float,
+    jaw_rigid: ArrayLike,
+    region: ArrayLike | None = None,
+    frames: int = 200,
+    dropout: float = 0.02,
+    seed: int = 3,
+    quiet: bool = True,
+) -> list[Row]:
+    """The whole-face-scans protocol (`lgi.lab.scans`): for each Live Link Face recording as
+    the performance, `scans` scans picked from the other recordings' curves and made by the
+    capture truth rig on `dataset` (the jaw turning about the hinge fitted to `jaw_rigid`)
+    are the methods' dataset, with the dataset's jaw rig and each scan's pose; the
+    performance (about `frames` frames) is a capture take of `dataset` with noise `sigma`
+    and `dropout` (`lgi.lab.capture.make_capture`). Rows per performance and method
+    ("performance: method", `CAPTURE_COLUMNS`) plus `bundles_fit`, the share of LGI's bundles
+    that took the global fit."""
+    from lgi.io.livelink import read_livelinkface
+    from lgi.lab.scans import scan_session
+    from lgi.model import _auto_rig
+
+    if len(recordings) < 2:
+        raise InputError("the scans protocol needs two recordings: scans from one, a performance")
+    hinge = HingeJaw.fit(dataset, jaw_rigid)
+    rig, theta = _auto_rig(dataset)
+    curves = [read_livelinkface(r).for_dataset(dataset.names) for r in recordings]
+    rows: list[Row] = []
+    for i, rec in enumerate(_steps(list(recordings), "lgi evaluate: scans", quiet)):
+        source = np.concatenate([c for k, c in enumerate(curves) if k != i])
+        session = scan_session(dataset, source, min(scans, source.shape[0]), hinge, theta)
+        w = curves[i][:: max(1, curves[i].shape[0] // max(1, frames))]
+        take = make_capture(
+            dataset, w, markers, sigma=sigma, dropout=dropout, holdout=0.0, seed=seed, jaw=hinge
+        )
+        given = None if rig is None or session.theta is None else (rig, session.theta)
+        methods = capture_methods(session.dataset, markers, sigma, jaw=given)
+        got = capture(methods, take.frames, take.truth, take.jaw_open, region)
+        took = methods["LGI"].solve(take.frames, temporal=True, quiet=True).choices.fit
+        share = float("nan") if took is None else float(np.mean(took))
+        for row in got:
+            row["bundles_fit"] = share if row["method"] == "LGI" else float("nan")
+            row["method"] = f"{Path(rec).stem}: {row['method']}"
+            row["scans"] = session.dataset.num_shapes
             rows.append(row)
     return rows
 
@@ -432,17 +493,20 @@ def run_protocol(
     sigma: float = 0.05,
     holdout: float = 0.0,
     takes: Sequence[str | os.PathLike[str]] = (),
-    frames_per_take: int = 250,
+    frames_per_take: int | None = None,
     held_out: int = 8,
+    scans: int = 120,
     quiet: bool = False,
 ) -> list[Row]:
     """Runs `protocol` on `data` ("sample", or "ict" read from the folder `ict_dir`) and writes
     results.md, results.csv and panel.png (the heatmap of one frame: the most expressive; for
-    leave-one-out, the most displaced shape held out; none for lomo, which has no dense truth)
+    leave-one-out, the most displaced shape held out; none for lomo, which has no dense truth,
+    and scans)
     into `out`. `sigma` and `holdout` are the capture protocol's (ICT with the Live Link Face
-    recordings beside it); `takes` (default: the shared AnimFace takes), `frames_per_take` and
-    `held_out` the lomo protocol's (`lomo_protocol`). Progress bars on stderr unless
-    `quiet`."""
+    recordings beside it); `takes` (default: the shared AnimFace takes) and `held_out` the lomo
+    protocol's (`lomo_protocol`), `scans` (and `sigma`) the scans protocol's
+    (`scans_protocol`); `frames_per_take` both's (None: 250 for lomo, 200 for scans).
+    Progress bars on stderr unless `quiet`."""
     from lgi.lab import ict
     from lgi.lab.sample import make_sample, sample_dataset
 
@@ -487,6 +551,27 @@ def run_protocol(
             panel=outp / "panel.png",
             quiet=quiet,
         )
+    elif protocol == "scans":
+        if data != "ict" or ict_dir is None:
+            raise InputError("the scans protocol needs --data ict")
+        recordings = ict.livelinkface(Path(ict_dir).parent)
+        if len(recordings) < 2:
+            raise InputError(
+                f"the scans protocol needs two Live Link Face recordings in "
+                f"{Path(ict_dir).parent / 'livelinkface'} (scans from one, the performance "
+                f"from the other); found {len(recordings)}"
+            )
+        rows = scans_protocol(
+            ds,
+            markers,
+            recordings,
+            scans=scans,
+            sigma=sigma,
+            jaw_rigid=ict.lower_teeth(),
+            region=region,
+            frames=frames_per_take or 200,
+            quiet=quiet,
+        )
     elif protocol == "lomo":
         if data != "ict" or ict_dir is None:
             raise InputError("the lomo protocol needs --data ict (ICT-FaceKit and real takes)")
@@ -502,7 +587,7 @@ def run_protocol(
             chosen,
             ict.load_landmarks(ict_dir),
             ict.face_triangles(ds),
-            frames=frames_per_take,
+            frames=frames_per_take or 250,
             held_out=held_out,
             quiet=quiet,
         )
