@@ -1,0 +1,90 @@
+"""Cost against the number of whole-face scans K (issue 34): build, per-frame solve and peak
+memory of the scans protocol's model (`lgi.lab.scans`: K scans picked from the ROM recording
+alex_rom_4, ICT's jaw rig), solving 100 frames of the other recording with the recommended call
+(`marker_noise=0.02`), the paper's exact mode on the same build (`fit=False`, jaw from the
+fit), and the stages: the global fit with its jaw pose alone (`fit_residuals`). Each K runs in
+its own process so its peak RSS (the process's, its own arrays included) is its own.
+
+Usage: python scripts/scans_cost.py [--scans 120 400 1000 2000] [--frames 100]
+(from the checkout, ../shared beside it; RAYON_NUM_THREADS sets the threads, default 2)
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import resource
+import subprocess
+import sys
+import time
+import warnings
+
+import numpy as np
+
+ICT = "../shared/data/ict-facekit"
+LIVELINK = "../shared/data/livelinkface"
+
+
+def one(k: int, frames: int) -> dict[str, float]:
+    import lgi
+    from lgi.io.livelink import read_livelinkface
+    from lgi.lab import ict
+    from lgi.lab.capture import HingeJaw, make_capture
+    from lgi.lab.scans import scan_session
+    from lgi.model import _auto_rig
+
+    warnings.filterwarnings("ignore")
+    d = ict.load_dataset(ICT)
+    markers = ict.load_markers(ICT)
+    hinge = HingeJaw.fit(d, ict.lower_teeth())
+    rig, theta = _auto_rig(d)
+    rom = read_livelinkface(f"{LIVELINK}/alex_rom_4.csv").for_dataset(d.names)
+    perf = read_livelinkface(f"{LIVELINK}/jmtechart_myslate_3.csv").for_dataset(d.names)
+    t0 = time.perf_counter()
+    session = scan_session(d, rom, k, hinge, theta)
+    t_scans = time.perf_counter() - t0
+    take = make_capture(
+        d, perf[:frames], markers, sigma=0.02, dropout=0.0, holdout=0.0, seed=3, jaw=hinge
+    )
+    t0 = time.perf_counter()
+    model = lgi.Model.build(session.dataset, markers, jaw=rig, shape_theta=session.theta)
+    t_build = time.perf_counter() - t0
+    out: dict[str, float] = {"K": k, "scans_s": t_scans, "build_s": t_build}
+    calls = {
+        "recommended_ms": lambda: model.solve(take.frames, marker_noise=0.02, quiet=True),
+        "paper_ms": lambda: model.solve(take.frames, jaw="fit", fit=False, quiet=True),
+        "fit_ms": lambda: model.core.fit_residuals(take.frames, jaw="fit"),
+    }
+    for name, call in calls.items():
+        best = np.inf
+        for _ in range(2):
+            t0 = time.perf_counter()
+            call()
+            best = min(best, time.perf_counter() - t0)
+        out[name] = 1e3 * best / len(take.frames)
+    out["peak_rss_gib"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2**20
+    return out
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--scans", type=int, nargs="+", default=[120, 400, 1000, 2000])
+    ap.add_argument("--frames", type=int, default=100)
+    ap.add_argument("--one", type=int, default=None, help=argparse.SUPPRESS)
+    args = ap.parse_args()
+    if args.one is not None:
+        print(json.dumps(one(args.one, args.frames)))
+        return
+    env = {**os.environ, "RAYON_NUM_THREADS": os.environ.get("RAYON_NUM_THREADS", "2")}
+    cols = ["K", "scans_s", "build_s", "recommended_ms", "paper_ms", "fit_ms", "peak_rss_gib"]
+    print("| " + " | ".join(cols) + " |")
+    print("|---" * len(cols) + "|")
+    for k in args.scans:
+        cmd = [sys.executable, __file__, "--one", str(k), "--frames", str(args.frames)]
+        got = json.loads(subprocess.run(cmd, env=env, check=True, capture_output=True).stdout)
+        print("| " + " | ".join(f"{got[c]:.4g}" for c in cols) + " |", flush=True)
+
+
+if __name__ == "__main__":
+    main()
