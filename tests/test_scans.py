@@ -86,3 +86,51 @@ def test_cli_scans_protocol_scores_every_method_on_both_recordings(tmp_path: Pat
     lgi_rows = [r for r in rows if r["method"].endswith(": LGI")]
     assert all(0.0 <= float(r["bundles_fit"]) <= 1.0 for r in lgi_rows)
     assert all(r["scans"] == "40" for r in rows)
+
+
+@pytest.fixture(scope="module")
+def sample_truth():  # type: ignore[no-untyped-def]
+    from lgi.lab.capture import NonlinearTruth
+    from lgi.lab.sample import make_sample, sample_dataset
+
+    ds = sample_dataset(make_sample(0))
+    return ds, NonlinearTruth(ds)
+
+
+def test_nonlinear_truth_of_one_shape_at_full_weight_is_that_shape(sample_truth) -> None:  # type: ignore[no-untyped-def]
+    ds, truth = sample_truth
+    shapes = np.asarray(ds.shapes, dtype=np.float64)
+    neutral = np.asarray(ds.neutral)
+    w = np.eye(ds.num_shapes)[[0, ds.num_shapes // 2, ds.num_shapes - 1]]
+    got = truth.meshes(w)
+    diag = float(np.linalg.norm(np.ptp(neutral, axis=0)))
+    for row, k in zip(got, np.argmax(w, axis=1), strict=True):
+        # The shape's own gradients solved back: its mesh, to the solve's precision.
+        assert np.abs(row - (neutral + shapes[k])).max() < 1e-6 * diag
+    np.testing.assert_array_equal(truth.meshes(np.zeros((1, ds.num_shapes)))[0], neutral)
+
+
+def test_nonlinear_truth_is_off_the_linear_rig_by_less_than_the_motion(
+    sample_truth,
+) -> None:  # type: ignore[no-untyped-def]
+    from lgi.lab.capture import departure
+
+    ds, truth = sample_truth
+    rng = np.random.default_rng(1)
+    w = rng.uniform(0, 1, size=(3, ds.num_shapes))
+    got, lin = truth.meshes(w), truth.linear(w)
+    moved = departure(lin, np.asarray(ds.neutral)[None].repeat(3, 0))
+    apart = departure(got, lin)
+    # A real departure, well below the motion itself (the rule blends, it does not invent).
+    assert 1e-3 * moved < apart < 0.5 * moved
+    with pytest.raises(InputError, match="weights: expected finite"):
+        truth.meshes(np.full((1, ds.num_shapes), np.nan))
+
+
+def test_nonlinear_scans_are_the_nonlinear_truth_of_their_frames(sample_truth) -> None:  # type: ignore[no-untyped-def]
+    ds, truth = sample_truth
+    w = np.random.default_rng(2).uniform(0, 0.8, size=(12, ds.num_shapes))
+    session = scan_session(ds, w, 4, None, None, nonlinear=truth)
+    want = truth.meshes(w[session.frames]) - np.asarray(ds.neutral)[None]
+    np.testing.assert_allclose(np.asarray(session.dataset.shapes), want, atol=1e-5)
+    assert session.theta is None

@@ -43,6 +43,7 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
         frames_per_take=args.frames,
         held_out=args.held_out,
         scans=args.scans,
+        nonlinear=args.truth == "nonlinear",
         quiet=args.quiet,
     )
     print(evaluate.to_markdown(rows), end="")
@@ -718,6 +719,13 @@ def build_parser() -> argparse.ArgumentParser:
         type=_positive_int,
         default=120,
         help="scans protocol: whole-face scans in the dataset (default 120)",
+    )
+    ev.add_argument(
+        "--truth",
+        choices=["linear", "nonlinear"],
+        default="linear",
+        help="capture and scans protocols: the linear rig with a hinged jaw (default), or the "
+        "shapes' rotations and stretches blended per triangle (lgi.lab.capture.NonlinearTruth)",
     )
     ev.add_argument("-q", "--quiet", action="store_true", help="no progress bars")
     ev.add_argument(

@@ -30,8 +30,10 @@ I64 = NDArray[np.int64]
 __all__ = [
     "CaptureTake",
     "HingeJaw",
+    "NonlinearTruth",
     "box_diagonal",
     "capture_truth",
+    "departure",
     "make_capture",
     "marker_samples",
     "random_layout",
@@ -142,6 +144,65 @@ def capture_truth(dataset: Dataset, weights: ArrayLike, jaw: HingeJaw | None) ->
     return out
 
 
+class NonlinearTruth:
+    """A truth that does not combine linearly: each frame blends the shapes' per-triangle
+    deformation gradients, rotations in the log and stretches linearly (`lgi.deform.blend`,
+    the ARAP in-betweens' rule, `lgi.augment`), and a Poisson solve on the neutral turns them
+    into positions, holding the vertices no shape moves and placing parts without such
+    vertices (the lower teeth, the eyes) at the linear blend's centroid. A rotating part
+    keeps its size where the linear sum shrinks it, and simultaneous shapes compose their
+    rotations instead of adding their displacements; the jaw turns through its shape's
+    rotations (no separate hinge). `departure` says how far it is from the linear rig."""
+
+    def __init__(self, dataset: Dataset) -> None:
+        from lgi.augment import still_vertices
+        from lgi.deform import PoissonMesh, Polar
+
+        self.neutral = np.asarray(dataset.neutral, dtype=np.float64)
+        self.shapes = np.asarray(dataset.shapes)
+        self._mesh = PoissonMesh(self.neutral, dataset.triangles, still_vertices(dataset.core))
+        self._polars = [
+            Polar(self._mesh.gradients(self.neutral + k.astype(np.float64))) for k in self.shapes
+        ]
+
+    @property
+    def num_shapes(self) -> int:
+        return int(self.shapes.shape[0])
+
+    def linear(self, weights: ArrayLike) -> F64:
+        """(F, V, 3) the linear rig's meshes for weights (F, S)."""
+        w = self._weights(weights)
+        return self.neutral[None] + np.einsum("fk,kvd->fvd", w, self.shapes, optimize=True)
+
+    def meshes(self, weights: ArrayLike) -> F64:
+        """(F, V, 3) the nonlinear truth's meshes for weights (F, S)."""
+        from lgi.deform import blend
+
+        w = self._weights(weights)
+        lin = self.linear(w)
+        out = np.empty_like(lin)
+        for f in range(w.shape[0]):
+            terms = [(self._polars[k], float(w[f, k])) for k in np.flatnonzero(w[f])]
+            if not terms:
+                out[f] = self.neutral
+                continue
+            out[f] = self._mesh.solve(blend(terms), lin[f])
+        return out
+
+    def _weights(self, weights: ArrayLike) -> F64:
+        w = np.asarray(weights, dtype=np.float64)
+        if w.ndim != 2 or w.shape[1] != self.num_shapes or not np.isfinite(w).all():
+            raise InputError(f"weights: expected finite (F, {self.num_shapes}), got {w.shape}")
+        return w
+
+
+def departure(truth: ArrayLike, linear: ArrayLike, region: ArrayLike | None = None) -> float:
+    """Mean distance between a truth's meshes and the linear rig's (F, V, 3) over `region`."""
+    idx = slice(None) if region is None else np.asarray(region)
+    t, lin = np.asarray(truth), np.asarray(linear)
+    return float(np.linalg.norm(t[:, idx] - lin[:, idx], axis=2).mean())
+
+
 def random_layout(dataset: Dataset, count: int, seed: int, vertices: ArrayLike) -> F64:
     """(count, 3) marker rest positions spread over the triangles whose corners all lie in
     `vertices`: farthest-point sampling from area-weighted random surface points, like a
@@ -202,19 +263,21 @@ def make_capture(
     seed: int,
     jaw: HingeJaw | None,
     keep: Sequence[str] = ("jawOpen",),
+    nonlinear: NonlinearTruth | None = None,
 ) -> CaptureTake:
     """A capture take from shape weights (F, S) on `dataset` with markers at rest `markers`
     (B, 3): Gaussian noise of `sigma` (data units) per coordinate, a `dropout` fraction of
     marker samples lost in runs of 2 to 8 frames, and a `holdout` fraction of the shapes (never
     those named in `keep`) removed from the dataset the methods get. Seeded: the same
-    arguments give the same take."""
+    arguments give the same take. With `nonlinear` the truth is its meshes (the jaw turning
+    through its shape's rotations) instead of `capture_truth`'s."""
     if not (np.isfinite(sigma) and sigma >= 0):
         raise InputError(f"sigma must be >= 0, got {sigma}")
     if not (0 <= dropout < 1 and 0 <= holdout < 1):
         raise InputError(f"dropout and holdout must be in [0, 1), got {dropout}, {holdout}")
     rng = np.random.default_rng(seed)
     w = np.asarray(weights, dtype=np.float64)
-    truth = capture_truth(dataset, w, jaw)
+    truth = nonlinear.meshes(w) if nonlinear is not None else capture_truth(dataset, w, jaw)
     frames = marker_samples(dataset, markers, truth)
     frames = frames + rng.normal(0.0, sigma, size=frames.shape)
     frames[dropout_mask(frames.shape[0], frames.shape[1], dropout, rng)] = np.nan

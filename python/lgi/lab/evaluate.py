@@ -17,7 +17,14 @@ from numpy.typing import ArrayLike, NDArray
 from lgi._lgi import JawRig, SolveResult
 from lgi.dataset import Dataset, without_shapes
 from lgi.errors import InputError
-from lgi.lab.capture import HingeJaw, box_diagonal, make_capture, marker_samples
+from lgi.lab.capture import (
+    HingeJaw,
+    NonlinearTruth,
+    box_diagonal,
+    departure,
+    make_capture,
+    marker_samples,
+)
 from lgi.model import Model, estimate_marker_noise
 
 F64 = NDArray[np.float64]
@@ -316,6 +323,7 @@ def capture_protocol(
     dropout: float = 0.02,
     seed: int = 3,
     panel: str | os.PathLike[str] | None = None,
+    nonlinear: bool = False,
     quiet: bool = True,
 ) -> list[Row]:
     """The capture protocol: each Live Link Face recording (`lgi.io.livelink.read_livelinkface`,
@@ -324,23 +332,36 @@ def capture_protocol(
     `sigma` and `dropout`; a `holdout` fraction of the shapes is kept from the methods
     (`lgi.lab.capture.make_capture`). Rows per recording and method ("recording: method"). With
     `panel`, the first recording's most expressive frame as a heatmap panel (`error_panel`);
-    a progress bar over the recordings unless `quiet`."""
+    with `nonlinear`, the truth is `lgi.lab.capture.NonlinearTruth`'s (rows then say how far
+    it is from the linear rig: `truth_departure`); a progress bar over the recordings unless
+    `quiet`."""
     from lgi.io.livelink import read_livelinkface
 
     hinge = HingeJaw.fit(dataset, jaw_rigid)
+    truth = NonlinearTruth(dataset) if nonlinear else None
     rows: list[Row] = []
     for i, rec in enumerate(_steps(list(recordings), "lgi evaluate: capture", quiet)):
         w = read_livelinkface(rec).for_dataset(dataset.names)
         w = w[:: max(1, w.shape[0] // max(1, frames))]
         take = make_capture(
-            dataset, w, markers, sigma=sigma, dropout=dropout, holdout=holdout, seed=seed, jaw=hinge
+            dataset,
+            w,
+            markers,
+            sigma=sigma,
+            dropout=dropout,
+            holdout=holdout,
+            seed=seed,
+            jaw=hinge,
+            nonlinear=truth,
         )
         methods = capture_methods(take.dataset, markers, sigma)
         if panel is not None and i == 0:
             f = _most_expressive(take.truth, np.asarray(dataset.neutral))
             error_panel(panel, methods, take.frames[f], take.truth[f], dataset.triangles, region)
+        apart = float("nan") if truth is None else departure(take.truth, truth.linear(w), region)
         for row in capture(methods, take.frames, take.truth, take.jaw_open, region):
             row["method"] = f"{Path(rec).stem}: {row['method']}"
+            row["truth_departure"] = apart
             rows.append(row)
     return rows
 
@@ -357,6 +378,7 @@ def scans_protocol(
     frames: int = 200,
     dropout: float = 0.02,
     seed: int = 3,
+    nonlinear: bool = False,
     quiet: bool = True,
 ) -> list[Row]:
     """The whole-face-scans protocol (`lgi.lab.scans`): for each Live Link Face recording as
@@ -366,7 +388,9 @@ def scans_protocol(
     performance (about `frames` frames) is a capture take of `dataset` with noise `sigma`
     and `dropout` (`lgi.lab.capture.make_capture`). Rows per performance and method
     ("performance: method", `CAPTURE_COLUMNS`) plus `bundles_fit`, the share of LGI's bundles
-    that took the global fit."""
+    that took the global fit. With `nonlinear`, the scans and the performance are
+    `lgi.lab.capture.NonlinearTruth`'s meshes (`truth_departure`: the performance's mean
+    distance from the linear rig)."""
     from lgi.io.livelink import read_livelinkface
     from lgi.lab.scans import scan_session
     from lgi.model import _auto_rig
@@ -375,15 +399,26 @@ def scans_protocol(
         raise InputError("the scans protocol needs two recordings: scans from one, a performance")
     hinge = HingeJaw.fit(dataset, jaw_rigid)
     rig, theta = _auto_rig(dataset)
+    truth = NonlinearTruth(dataset) if nonlinear else None
     curves = [read_livelinkface(r).for_dataset(dataset.names) for r in recordings]
     rows: list[Row] = []
     for i, rec in enumerate(_steps(list(recordings), "lgi evaluate: scans", quiet)):
         source = np.concatenate([c for k, c in enumerate(curves) if k != i])
-        session = scan_session(dataset, source, min(scans, source.shape[0]), hinge, theta)
+        count = min(scans, source.shape[0])
+        session = scan_session(dataset, source, count, hinge, theta, nonlinear=truth)
         w = curves[i][:: max(1, curves[i].shape[0] // max(1, frames))]
         take = make_capture(
-            dataset, w, markers, sigma=sigma, dropout=dropout, holdout=0.0, seed=seed, jaw=hinge
+            dataset,
+            w,
+            markers,
+            sigma=sigma,
+            dropout=dropout,
+            holdout=0.0,
+            seed=seed,
+            jaw=hinge,
+            nonlinear=truth,
         )
+        apart = float("nan") if truth is None else departure(take.truth, truth.linear(w), region)
         given = None if rig is None or session.theta is None else (rig, session.theta)
         methods = capture_methods(session.dataset, markers, sigma, jaw=given)
         got = capture(methods, take.frames, take.truth, take.jaw_open, region)
@@ -393,6 +428,7 @@ def scans_protocol(
             row["bundles_fit"] = share if row["method"] == "LGI" else float("nan")
             row["method"] = f"{Path(rec).stem}: {row['method']}"
             row["scans"] = session.dataset.num_shapes
+            row["truth_departure"] = apart
             rows.append(row)
     return rows
 
@@ -496,6 +532,7 @@ def run_protocol(
     frames_per_take: int | None = None,
     held_out: int = 8,
     scans: int = 120,
+    nonlinear: bool = False,
     quiet: bool = False,
 ) -> list[Row]:
     """Runs `protocol` on `data` ("sample", or "ict" read from the folder `ict_dir`) and writes
@@ -505,7 +542,8 @@ def run_protocol(
     into `out`. `sigma` and `holdout` are the capture protocol's (ICT with the Live Link Face
     recordings beside it); `takes` (default: the shared AnimFace takes) and `held_out` the lomo
     protocol's (`lomo_protocol`), `scans` (and `sigma`) the scans protocol's
-    (`scans_protocol`); `frames_per_take` both's (None: 250 for lomo, 200 for scans).
+    (`scans_protocol`); `frames_per_take` both's (None: 250 for lomo, 200 for scans);
+    `nonlinear` the capture and scans protocols' truth (`lgi.lab.capture.NonlinearTruth`).
     Progress bars on stderr unless `quiet`."""
     from lgi.lab import ict
     from lgi.lab.sample import make_sample, sample_dataset
@@ -549,6 +587,7 @@ def run_protocol(
             jaw_rigid=ict.lower_teeth(),
             region=region,
             panel=outp / "panel.png",
+            nonlinear=nonlinear,
             quiet=quiet,
         )
     elif protocol == "scans":
@@ -570,6 +609,7 @@ def run_protocol(
             jaw_rigid=ict.lower_teeth(),
             region=region,
             frames=frames_per_take or 200,
+            nonlinear=nonlinear,
             quiet=quiet,
         )
     elif protocol == "lomo":

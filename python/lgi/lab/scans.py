@@ -22,11 +22,14 @@ from numpy.typing import ArrayLike, NDArray
 
 from lgi.dataset import Dataset, with_shapes
 from lgi.errors import InputError
-from lgi.lab.capture import HingeJaw, capture_truth
+from lgi.lab.capture import HingeJaw, NonlinearTruth, capture_truth
 
 F64 = NDArray[np.float64]
 
 __all__ = ["ScanSession", "pick_scans", "scan_session", "scan_theta"]
+
+_CHUNK = 100
+"""Scans made at once (their float64 meshes are 64 MB per 100 on ICT)."""
 
 
 def pick_scans(weights: ArrayLike, count: int) -> list[int]:
@@ -71,14 +74,20 @@ def scan_session(
     jaw: HingeJaw | None,
     shape_theta: ArrayLike | None,
     names: Sequence[str] | None = None,
+    nonlinear: NonlinearTruth | None = None,
 ) -> ScanSession:
     """Scans of `source` (a blendshape dataset) at `count` of the curve frames `weights` (F, S)
     picked by `pick_scans`, each made by the capture truth rig with `jaw`; with `shape_theta`
-    (S, 3, the source's shapes' jaw poses) each scan's pose (`scan_theta`)."""
+    (S, 3, the source's shapes' jaw poses) each scan's pose (`scan_theta`). With `nonlinear`
+    the scans are its meshes (`lgi.lab.capture.NonlinearTruth`), not the linear rig's."""
     w = np.asarray(weights, dtype=np.float64)
     picked = pick_scans(w, count)
-    meshes = capture_truth(source, w[picked], jaw)
-    shapes = (meshes - np.asarray(source.neutral)[None]).astype(np.float32)
+    neutral = np.asarray(source.neutral)
+    shapes = np.empty((count, *neutral.shape), dtype=np.float32)
+    for at in range(0, count, _CHUNK):  # float64 meshes a chunk at a time: K = 2,000 fits
+        chunk = w[picked[at : at + _CHUNK]]
+        part = nonlinear.meshes(chunk) if nonlinear else capture_truth(source, chunk, jaw)
+        shapes[at : at + part.shape[0]] = part - neutral[None]
     labels = list(names) if names is not None else [f"scan{i:03d}" for i in range(count)]
     ds = with_shapes(source, shapes, labels)
     theta = None if shape_theta is None else scan_theta(w[picked], shape_theta)
