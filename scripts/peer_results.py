@@ -5,11 +5,16 @@ shared Live Link recordings driving ICT with a rotating jaw, 200 frames each, 2 
 markers_120), at two noise levels and with a quarter of the shapes held out or none; mean
 face-skin error in cm (docs/results.md, issue 34).
 
-Usage: python scripts/peer_results.py (from the checkout, ../shared beside it).
+`--truth nonlinear`: the performance from `lgi.lab.capture.NonlinearTruth` (the shapes'
+rotations and stretches blended per triangle) instead of the linear rig with a hinged jaw.
+
+Usage: python scripts/peer_results.py [--truth linear|nonlinear] [--sigma S ...]
+(from the checkout, ../shared beside it).
 """
 
 from __future__ import annotations
 
+import argparse
 import warnings
 
 from lgi.lab import evaluate, ict
@@ -20,13 +25,17 @@ METHODS = ("blendshape fit", "fit + jaw", "fit + jaw + residual", "LGI (paper)",
 
 
 def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--truth", choices=["linear", "nonlinear"], default="linear")
+    ap.add_argument("--sigma", type=float, nargs="+", default=[0.02, 0.05])
+    args = ap.parse_args()
     warnings.filterwarnings("ignore")
     d = ict.load_dataset(ICT)
     markers = ict.load_layout(ICT).positions
     head = "| recording | sigma (cm) | held out | " + " | ".join(METHODS)
-    print(head + " | LGI / best peer |")
-    print("|---" * (len(METHODS) + 4) + "|")
-    for sigma in (0.02, 0.05):
+    print(head + " | LGI / best peer | truth from linear |")
+    print("|---" * (len(METHODS) + 5) + "|")
+    for sigma in args.sigma:
         for holdout in (0.0, 0.25):
             rows = evaluate.capture_protocol(
                 d,
@@ -37,15 +46,22 @@ def main() -> None:
                 jaw_rigid=ict.lower_teeth(),
                 region=ict.skin(),
                 frames=200,
+                nonlinear=args.truth == "nonlinear",
             )
             by: dict[str, dict[str, float]] = {}
+            apart: dict[str, float] = {}
             for r in rows:
                 rec, method = r["method"].split(": ", 1)
                 by.setdefault(rec, {})[method] = r["mean"]
+                apart[rec] = r["truth_departure"]
             for rec, m in by.items():
                 cells = " | ".join(f"{m[k]:.4f}" for k in METHODS)
                 ratio = m["LGI"] / min(m["fit + jaw"], m["fit + jaw + residual"])
-                print(f"| {rec} | {sigma} | {holdout:.0%} | {cells} | {ratio:.3f} |")
+                print(
+                    f"| {rec} | {sigma} | {holdout:.0%} | {cells} | {ratio:.3f} "
+                    f"| {apart[rec]:.4f} |",
+                    flush=True,
+                )
 
 
 if __name__ == "__main__":

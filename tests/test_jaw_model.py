@@ -272,3 +272,28 @@ def test_jaw_pose_from_the_global_fit_recovers_the_sample_jaw_and_beats_no_jaw(
     again = auto.solve(sample.performance, jaw=res.jaw_theta, quiet=True)
     np.testing.assert_array_equal(again.vertices, res.vertices)
     assert auto.solve(sample.performance[:3], jaw=None, quiet=True).jaw_theta is None
+
+
+def test_refined_jaw_pose_stays_where_the_datasets_shapes_go() -> None:
+    """A face whose jaw markers sit back of the dataset's (a performer who is not the dataset)
+    would be explained by pushing the jaw back, a pose no dataset shape has: the refinement
+    stops at the smallest pose component any shape has (0 here: none goes back or closes)."""
+    import warnings
+
+    from lgi.lab.sample import make_sample, sample_dataset
+
+    s = make_sample(0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        model = lgi.Model.build(sample_dataset(s), s.markers_rest)
+    jaw = model.core.jaw()
+    assert jaw is not None
+    floor = np.minimum(0.0, np.asarray(jaw["shape_theta"]).min(axis=0))
+    weight = np.asarray(jaw["bundle_weights"])
+    frames = s.performance[:40].copy()
+    frames[:, :, 2] -= 0.3 * weight[None]  # the jaw's markers back and up by millimetres
+    frames[:, :, 1] += 0.2 * weight[None]
+    theta = np.asarray(model.solve(frames, quiet=True).jaw_theta)
+    assert (theta >= floor[None] - 1e-12).all()
+    # The floor is what holds the pose: most frames rest on it in the forward component.
+    assert (np.isclose(theta[:, 2], floor[2], rtol=0.0, atol=1e-8)).sum() >= 30

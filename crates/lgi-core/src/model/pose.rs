@@ -250,8 +250,10 @@ impl Model {
     /// on its piece (so each step costs one fit). A linear fit of the skinned markers (the
     /// usual start) reads a partly open jaw as a mix of jawOpen and other shapes; in the
     /// unskinned space the jaw's rotation is gone and the rest is what the shapes span.
-    /// Steps are bounded, the best pose evaluated is kept (and its fit returned, the one the
-    /// frame is solved with), and a frame without a pose or rig is left as it is.
+    /// Steps are bounded, each component stays at or above the smallest any dataset shape has
+    /// (0 where none goes below the neutral), the best pose evaluated is kept (and its fit
+    /// returned, the one the frame is solved with), and a frame without a pose or rig is left
+    /// as it is.
     pub(super) fn refine_jaw(
         &self,
         prep: &mut Prepared,
@@ -271,6 +273,15 @@ impl Model {
             .collect();
         if dims.is_empty() {
             return Ok(None);
+        }
+        // No dataset shape turns the jaw past the neutral in these directions (e.g. ICT's
+        // jaw is never pushed back): a pose there is one the dataset cannot vouch for, where
+        // the refinement would explain a face that is not the dataset's by moving the jaw.
+        let mut floor = [0.0f64; 3];
+        for t in &jaw.input.shape_thetas {
+            for (f, x) in floor.iter_mut().zip(t.to_array()) {
+                *f = f.min(x);
+            }
         }
         let at = |t: [f64; 3]| {
             self.lookup_targets(&prep.targets, Some(JawParams::from_array(t)), prep.bin)
@@ -347,9 +358,9 @@ impl Model {
             let mut largest = 0.0f64;
             for (a, &d) in dims.iter().enumerate() {
                 let limit = JAW_STEP[d] * scale[d];
-                let x = step[a][0].clamp(-limit, limit);
-                theta[d] += x;
-                largest = largest.max(x.abs() / scale[d]);
+                let moved = (theta[d] + step[a][0].clamp(-limit, limit)).max(floor[d]);
+                largest = largest.max((moved - theta[d]).abs() / scale[d]);
+                theta[d] = moved;
             }
             if largest < JAW_TOLERANCE {
                 // The pose has settled: the last one evaluated stands.
