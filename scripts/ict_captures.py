@@ -1,6 +1,8 @@
 """What the capture measurements of issue 34 share (scripts/noise_estimate_results.py,
-scripts/perturbation_results.py): ICT-FaceKit with its generic layout, the capture truth rig's
-hinge jaw, the default build, and the shared Live Link recordings' curves on ICT's shapes."""
+scripts/perturbation_results.py, and the tables of scripts/peer_results.py and
+scripts/scans_results.py): ICT-FaceKit with its generic layout, the capture truth rig's hinge
+jaw, the default build, the shared Live Link recordings' curves on ICT's shapes, and a
+protocol's rows read per recording."""
 
 from __future__ import annotations
 
@@ -31,3 +33,17 @@ def recordings(dataset: Any) -> Iterator[tuple[str, np.ndarray]]:
     """Each shared recording's name and its curves as weights of `dataset`'s shapes."""
     for rec in RECORDINGS:
         yield rec, read_livelinkface(f"{LIVELINK}/{rec}.csv").for_dataset(dataset.names)
+
+
+def by_recording(rows: list[dict[str, Any]]) -> dict[str, dict[str, dict[str, Any]]]:
+    """A protocol's rows ("recording: method") as recording -> method -> row."""
+    out: dict[str, dict[str, dict[str, Any]]] = {}
+    for r in rows:
+        rec, method = r["method"].split(": ", 1)
+        out.setdefault(rec, {})[method] = r
+    return out
+
+
+def peer_ratio(means: dict[str, Any]) -> float:
+    """LGI's mean error over the better of the two peers' (fit + jaw, and its corrective)."""
+    return float(means["LGI"] / min(means["fit + jaw"], means["fit + jaw + residual"]))

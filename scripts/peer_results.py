@@ -15,9 +15,14 @@ Usage: python scripts/peer_results.py [--truth linear|nonlinear] [--sigma S ...]
 from __future__ import annotations
 
 import argparse
+import sys
 import warnings
+from pathlib import Path
 
 from lgi.lab import evaluate, ict
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+import ict_captures
 
 ICT = "../shared/data/ict-facekit"
 RECORDINGS = [f"../shared/data/livelinkface/{r}.csv" for r in ("alex_rom_4", "jmtechart_myslate_3")]
@@ -48,18 +53,12 @@ def main() -> None:
                 frames=200,
                 nonlinear=args.truth == "nonlinear",
             )
-            by: dict[str, dict[str, float]] = {}
-            apart: dict[str, float] = {}
-            for r in rows:
-                rec, method = r["method"].split(": ", 1)
-                by.setdefault(rec, {})[method] = r["mean"]
-                apart[rec] = r["truth_departure"]
-            for rec, m in by.items():
+            for rec, got in ict_captures.by_recording(rows).items():
+                m = {k: r["mean"] for k, r in got.items()}
                 cells = " | ".join(f"{m[k]:.4f}" for k in METHODS)
-                ratio = m["LGI"] / min(m["fit + jaw"], m["fit + jaw + residual"])
                 print(
-                    f"| {rec} | {sigma} | {holdout:.0%} | {cells} | {ratio:.3f} "
-                    f"| {apart[rec]:.4f} |",
+                    f"| {rec} | {sigma} | {holdout:.0%} | {cells} "
+                    f"| {ict_captures.peer_ratio(m):.3f} | {got['LGI']['truth_departure']:.4f} |",
                     flush=True,
                 )
 

@@ -14,13 +14,18 @@ Usage: python scripts/scans_results.py [--scans K ...] [--sigma S ...] [--layout
 from __future__ import annotations
 
 import argparse
+import sys
 import time
 import warnings
+from pathlib import Path
 
 import numpy as np
 
 from lgi.lab import evaluate, ict
 from lgi.lab.capture import random_layout
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+import ict_captures
 
 ICT = "../shared/data/ict-facekit"
 RECORDINGS = [f"../shared/data/livelinkface/{r}.csv" for r in ("alex_rom_4", "jmtechart_myslate_3")]
@@ -63,21 +68,14 @@ def main() -> None:
                     nonlinear=args.truth == "nonlinear",
                 )
                 took = time.perf_counter() - t0
-                by: dict[str, dict[str, float]] = {}
-                share: dict[str, float] = {}
-                apart: dict[str, float] = {}
-                for r in rows:
-                    rec, method = r["method"].split(": ", 1)
-                    by.setdefault(rec, {})[method] = r["mean"]
-                    apart[rec] = r["truth_departure"]
-                    if method == "LGI":
-                        share[rec] = r["bundles_fit"]
-                for rec, m in by.items():
+                for rec, got in ict_captures.by_recording(rows).items():
+                    m = {x: r["mean"] for x, r in got.items()}
                     cells = " | ".join(f"{m[x]:.4f}" for x in METHODS)
-                    ratio = m["LGI"] / min(m["fit + jaw"], m["fit + jaw + residual"])
+                    lgi_row = got["LGI"]
                     print(
-                        f"| {rec} | {name} | {k} | {sigma} | {cells} | {share[rec]:.0%} "
-                        f"| {ratio:.3f} | {apart[rec]:.4f} | {took:.0f} |",
+                        f"| {rec} | {name} | {k} | {sigma} | {cells} "
+                        f"| {lgi_row['bundles_fit']:.0%} | {ict_captures.peer_ratio(m):.3f} "
+                        f"| {lgi_row['truth_departure']:.4f} | {took:.0f} |",
                         flush=True,
                     )
 
