@@ -671,10 +671,15 @@ def run_protocol(
         if not temporal:
             for r in rows:
                 r["jitter"] = float("nan")  # independent frames: not a sequence
-    (outp / "results.md").write_text(
-        f"# lgi evaluate: data {data}, protocol {protocol}\n\n" + to_markdown(rows) + extra
-    )
-    to_csv(rows, outp / "results.csv")
+    from lgi.io.atomic import atomic_path
+
+    with atomic_path(outp / "results.md") as tmp:
+        tmp.write_text(
+            f"# lgi evaluate: data {data}, protocol {protocol}\n\n" + to_markdown(rows) + extra
+        )
+    if rows:
+        with atomic_path(outp / "results.csv") as tmp:
+            to_csv(rows, tmp)
     return rows
 
 
