@@ -26,6 +26,7 @@ __all__ = [
     "__version__",
     "check_count",
     "check_marker_frames",
+    "closest_surface_points",
     "get_num_threads",
     "set_num_threads",
 ]
@@ -50,6 +51,12 @@ def check_count(value: object, name: str) -> int:
 def check_marker_frames(frames: ArrayLike, markers_rest: ArrayLike, diagonal: float) -> None:
     """Raise `lgi.InputError` (naming frame and marker) for frames (F, B, 3) that break the
     magnitude policy of every method."""
+
+def closest_surface_points(
+    vertices: ArrayLike, triangles: ArrayLike, points: ArrayLike
+) -> tuple[NDArray[np.int64], NDArray[np.float64]]:
+    """Each of ``points`` (P, 3)'s closest point on the mesh: the row of ``triangles`` it lies
+    on (P,) (the lowest on a tie) and its barycentric coordinates (P, 3)."""
 
 _Path = str | os.PathLike[str]
 

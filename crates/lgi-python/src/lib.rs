@@ -11,6 +11,7 @@ mod jaw;
 mod model;
 mod result;
 mod solve_args;
+mod surface;
 mod threads;
 
 use pyo3::prelude::*;
@@ -35,6 +36,7 @@ fn _lgi(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<baselines::BlendshapeSolver>()?;
     m.add_function(wrap_pyfunction!(baselines::check_marker_frames, m)?)?;
     m.add_function(wrap_pyfunction!(convert::check_count, m)?)?;
+    m.add_function(wrap_pyfunction!(surface::closest_surface_points, m)?)?;
     m.add_function(wrap_pyfunction!(threads::set_num_threads, m)?)?;
     m.add_function(wrap_pyfunction!(threads::get_num_threads, m)?)?;
     m.add("MAX_THREADS", threads::MAX_THREADS)?;

@@ -30,6 +30,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+import lgi._lgi as _lgi
 from lgi.capture.stabilize import align
 from lgi.dataset import Dataset
 from lgi.errors import InputError
@@ -110,56 +111,13 @@ def similarity(source: ArrayLike, target: ArrayLike) -> tuple[float, F64, F64]:
 def closest_surface_points(
     points: ArrayLike, vertices: ArrayLike, triangles: ArrayLike
 ) -> tuple[I64, F64, F64]:
-    """Each point's closest point on the triangles (brute force over all of them): the row of
-    `triangles` it lies on, its barycentric coordinates (P, 3) and the point itself (P, 3)."""
-    p = np.asarray(points, dtype=np.float64)
+    """Each point's closest point on the triangles (the core's exact query,
+    `lgi._lgi.closest_surface_points`): the row of `triangles` it lies on, its barycentric
+    coordinates (P, 3) and the point itself (P, 3)."""
     v = np.asarray(vertices, dtype=np.float64)
     t = np.asarray(triangles, dtype=np.int64)
-    a, b, c = v[t[:, 0]], v[t[:, 1]], v[t[:, 2]]
-    rows = np.empty(len(p), dtype=np.int64)
-    bary = np.empty((len(p), 3))
-    for i, x in enumerate(p):
-        cand = _closest_on_triangles(x, a, b, c)
-        q = cand[:, :1] * a + cand[:, 1:2] * b + cand[:, 2:] * c
-        k = int(np.argmin(((q - x) ** 2).sum(axis=1)))
-        rows[i], bary[i] = k, cand[k]
+    rows, bary = _lgi.closest_surface_points(v, t, points)
     return rows, bary, np.einsum("pk,pkd->pd", bary, v[t[rows]])
-
-
-def _closest_on_triangles(x: F64, a: F64, b: F64, c: F64) -> F64:
-    """Barycentric coordinates (T, 3) of x's closest point on each triangle (Ericson,
-    Real-Time Collision Detection, 5.1.5: the Voronoi region of a vertex, an edge or the face)."""
-    ab, ac = b - a, c - a
-    ap, bp, cp = x - a, x - b, x - c
-    d1, d2 = (ab * ap).sum(1), (ac * ap).sum(1)
-    d3, d4 = (ab * bp).sum(1), (ac * bp).sum(1)
-    d5, d6 = (ab * cp).sum(1), (ac * cp).sum(1)
-    va, vb, vc = d3 * d6 - d5 * d4, d5 * d2 - d1 * d6, d1 * d4 - d3 * d2
-    out = np.empty((len(a), 3))
-    with np.errstate(divide="ignore", invalid="ignore"):
-        den = va + vb + vc
-        v, w = vb / den, vc / den
-        out[:] = np.stack([1 - v - w, v, w], axis=1)  # inside the face
-        t_ab = d1 / (d1 - d3)
-        t_ac = d2 / (d2 - d6)
-        t_bc = (d4 - d3) / ((d4 - d3) + (d5 - d6))
-    cases = [
-        ((d1 <= 0) & (d2 <= 0), lambda: np.array([1.0, 0.0, 0.0])),
-        ((d3 >= 0) & (d4 <= d3), lambda: np.array([0.0, 1.0, 0.0])),
-        ((d6 >= 0) & (d5 <= d6), lambda: np.array([0.0, 0.0, 1.0])),
-        ((vc <= 0) & (d1 >= 0) & (d3 <= 0), lambda: np.stack([1 - t_ab, t_ab, 0 * t_ab], 1)),
-        ((vb <= 0) & (d2 >= 0) & (d6 <= 0), lambda: np.stack([1 - t_ac, 0 * t_ac, t_ac], 1)),
-        (
-            (va <= 0) & ((d4 - d3) >= 0) & ((d5 - d6) >= 0),
-            lambda: np.stack([0 * t_bc, 1 - t_bc, t_bc], 1),
-        ),
-    ]
-    done = np.zeros(len(a), dtype=bool)
-    for mask, value in cases:
-        m = mask & ~done
-        out[m] = np.broadcast_to(value(), out.shape)[m]
-        done |= m
-    return out
 
 
 @dataclass(frozen=True)
