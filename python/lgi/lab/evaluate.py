@@ -18,6 +18,7 @@ from lgi._lgi import JawRig, SolveResult
 from lgi.dataset import Dataset, without_shapes
 from lgi.errors import InputError
 from lgi.lab.capture import (
+    CaptureTake,
     HingeJaw,
     NonlinearTruth,
     box_diagonal,
@@ -310,6 +311,39 @@ def capture_methods(
     return methods
 
 
+def _performance(
+    dataset: Dataset,
+    curves: F64,
+    markers: ArrayLike,
+    *,
+    frames: int,
+    sigma: float,
+    dropout: float,
+    holdout: float,
+    seed: int,
+    hinge: HingeJaw,
+    truth: NonlinearTruth | None,
+    region: ArrayLike | None,
+) -> tuple[CaptureTake, float]:
+    """A protocol's performance: `curves` (F, S) subsampled to about `frames` frames, made
+    into a capture take (`make_capture`: the hinge's linear rig, or `truth`), and how far its
+    truth is from the linear rig (`departure`; NaN for the linear rig itself)."""
+    w = curves[:: max(1, curves.shape[0] // max(1, frames))]
+    take = make_capture(
+        dataset,
+        w,
+        markers,
+        sigma=sigma,
+        dropout=dropout,
+        holdout=holdout,
+        seed=seed,
+        jaw=hinge,
+        nonlinear=truth,
+    )
+    apart = float("nan") if truth is None else departure(take.truth, truth.linear(w), region)
+    return take, apart
+
+
 def capture_protocol(
     dataset: Dataset,
     markers: ArrayLike,
@@ -341,24 +375,23 @@ def capture_protocol(
     truth = NonlinearTruth(dataset) if nonlinear else None
     rows: list[Row] = []
     for i, rec in enumerate(_steps(list(recordings), "lgi evaluate: capture", quiet)):
-        w = read_livelinkface(rec).for_dataset(dataset.names)
-        w = w[:: max(1, w.shape[0] // max(1, frames))]
-        take = make_capture(
+        take, apart = _performance(
             dataset,
-            w,
+            read_livelinkface(rec).for_dataset(dataset.names),
             markers,
+            frames=frames,
             sigma=sigma,
             dropout=dropout,
             holdout=holdout,
             seed=seed,
-            jaw=hinge,
-            nonlinear=truth,
+            hinge=hinge,
+            truth=truth,
+            region=region,
         )
         methods = capture_methods(take.dataset, markers, sigma)
         if panel is not None and i == 0:
             f = _most_expressive(take.truth, np.asarray(dataset.neutral))
             error_panel(panel, methods, take.frames[f], take.truth[f], dataset.triangles, region)
-        apart = float("nan") if truth is None else departure(take.truth, truth.linear(w), region)
         for row in capture(methods, take.frames, take.truth, take.jaw_open, region):
             row["method"] = f"{Path(rec).stem}: {row['method']}"
             row["truth_departure"] = apart
@@ -401,29 +434,36 @@ def scans_protocol(
     rig, theta = _auto_rig(dataset)
     truth = NonlinearTruth(dataset) if nonlinear else None
     curves = [read_livelinkface(r).for_dataset(dataset.names) for r in recordings]
+    shares: dict[str, float] = {}
+
+    def bundles_fit(name: str, res: SolveResult) -> None:
+        """The share of a method's bundles that took the global fit (LGI's only)."""
+        if res.choices.fit is not None:
+            shares[name] = float(np.mean(res.choices.fit))
+
     rows: list[Row] = []
     for i, rec in enumerate(_steps(list(recordings), "lgi evaluate: scans", quiet)):
         source = np.concatenate([c for k, c in enumerate(curves) if k != i])
         count = min(scans, source.shape[0])
         session = scan_session(dataset, source, count, hinge, theta, nonlinear=truth)
-        w = curves[i][:: max(1, curves[i].shape[0] // max(1, frames))]
-        take = make_capture(
+        take, apart = _performance(
             dataset,
-            w,
+            curves[i],
             markers,
+            frames=frames,
             sigma=sigma,
             dropout=dropout,
             holdout=0.0,
             seed=seed,
-            jaw=hinge,
-            nonlinear=truth,
+            hinge=hinge,
+            truth=truth,
+            region=region,
         )
-        apart = float("nan") if truth is None else departure(take.truth, truth.linear(w), region)
         given = None if rig is None or session.theta is None else (rig, session.theta)
         methods = capture_methods(session.dataset, markers, sigma, jaw=given)
-        got = capture(methods, take.frames, take.truth, take.jaw_open, region)
-        took = methods["LGI"].solve(take.frames, temporal=True, quiet=True).choices.fit
-        share = float("nan") if took is None else float(np.mean(took))
+        shares.clear()
+        got = capture(methods, take.frames, take.truth, take.jaw_open, region, bundles_fit)
+        share = shares.get("LGI", float("nan"))
         for row in got:
             row["bundles_fit"] = share if row["method"] == "LGI" else float("nan")
             row["method"] = f"{Path(rec).stem}: {row['method']}"
@@ -703,10 +743,12 @@ def capture(
     truth: ArrayLike,
     jaw_open: ArrayLike,
     region: ArrayLike | None = None,
+    on_result: Callable[[str, SolveResult], None] | None = None,
 ) -> list[Row]:
     """Scores each method's solve of a capture take (`lgi.lab.capture.make_capture`): the `score`
     row (mean, p95 and max per-vertex error over `region`, residual, jitter, speed) plus the
-    error on the `jaw_open` frames (F,) bool (`CAPTURE_COLUMNS`)."""
+    error on the `jaw_open` frames (F,) bool (`CAPTURE_COLUMNS`). `on_result(name, result)`,
+    when given, sees each method's solve before it is let go (for what the rows do not hold)."""
     fr = np.asarray(frames, dtype=np.float64)
     tr = np.asarray(truth, dtype=np.float64)
     opened = np.asarray(jaw_open, dtype=bool)
@@ -716,6 +758,8 @@ def capture(
         t0 = time.perf_counter()
         res = m.solve(fr, temporal=True, quiet=True)
         row = score(name, res, tr, time.perf_counter() - t0, region)
+        if on_result is not None:
+            on_result(name, res)
         err = np.linalg.norm(np.asarray(res.vertices)[opened][:, idx] - tr[opened][:, idx], axis=2)
         row["open_mean"] = float(err.mean()) if opened.any() else float("nan")
         row["open_p95"] = float(np.percentile(err, 95)) if opened.any() else float("nan")
