@@ -269,6 +269,21 @@ def test_demo_and_evaluate_out_and_seed_mistakes(capsys, tmp_path: Path) -> None
     assert_user_error(capsys, "is a file; --out is a folder", "evaluate", "--out", f)
 
 
+@pytest.mark.parametrize("command", ["demo", "evaluate", "helmet-demo"])
+def test_folder_commands_refuse_a_folder_that_holds_files_unless_forced(
+    capsys, tmp_path: Path, command: str
+) -> None:  # type: ignore[no-untyped-def]
+    out = tmp_path / "results"
+    out.mkdir()
+    (out / "report.md").write_text("an earlier run's")
+    code, err = run(capsys, command, "--out", out, "-q")
+    assert code == 2 and "Traceback" not in err, err
+    assert f"lgi: error: --out {out}: the folder already holds 1 entry (report.md)" in err
+    assert "use --force" in err
+    assert (out / "report.md").read_text() == "an earlier run's"
+    assert [p.name for p in out.iterdir()] == ["report.md"]
+
+
 @pytest.mark.parametrize("markers", [None, "name,x,y,z\nm000,1,2\n"])
 def test_evaluate_ict_with_a_missing_or_garbled_marker_layout(
     capsys, tmp_path: Path, markers: str | None

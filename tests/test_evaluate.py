@@ -71,3 +71,13 @@ def test_cli_evaluate_writes_results_and_a_heatmap_panel_of_every_method(tmp_pat
     assert png[:8] == b"\x89PNG\r\n\x1a\n"
     width, height = int.from_bytes(png[16:20], "big"), int.from_bytes(png[20:24], "big")
     assert width > 4 * height / 2 and height >= 2 * 250
+    # A second run into the same folder replaces nothing unasked; with --force it replaces
+    # its own files and leaves the user's.
+    (tmp_path / "notes.txt").write_text("mine")
+    (tmp_path / "results.md").write_text("old")
+    assert main([*argv, "-q"]) == 2
+    assert (tmp_path / "results.md").read_text() == "old"
+    assert main([*argv, "-q", "--force"]) == 0
+    assert "| LGI |" in (tmp_path / "results.md").read_text()
+    assert (tmp_path / "notes.txt").read_text() == "mine"
+    assert not [p.name for p in tmp_path.iterdir() if ".tmp" in p.name]

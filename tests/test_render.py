@@ -6,6 +6,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from lgi.lab.render import panel
 
@@ -74,3 +75,24 @@ def test_per_column_scales_make_a_ten_times_smaller_error_readable(sample, tmp_p
     # On the shared scale the small errors never reach the top colour; on their own they do.
     assert _yellow_share(left(shared)) < 0.001
     assert _yellow_share(left(own)) > 0.01
+
+
+def test_an_interrupted_panel_leaves_the_earlier_png_whole_and_no_temporary(
+    sample, tmp_path: Path, monkeypatch
+) -> None:  # type: ignore[no-untyped-def]
+    from matplotlib.figure import Figure
+
+    target = tmp_path / "panel.png"
+    target.write_bytes(b"earlier panel")
+    truth = sample.truth[10]
+
+    def half_written(self, fname, **kw):  # type: ignore[no-untyped-def]
+        with open(fname, "wb") as fh:
+            fh.write(b"\x89PNG partial")
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(Figure, "savefig", half_written)
+    with pytest.raises(KeyboardInterrupt):
+        panel(target, {"t": truth}, sample.triangles, {"t": np.zeros(len(truth))}, dpi=20)
+    assert target.read_bytes() == b"earlier panel"
+    assert [p.name for p in tmp_path.iterdir()] == ["panel.png"]

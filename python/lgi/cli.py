@@ -18,17 +18,19 @@ from typing import Any, NoReturn
 import lgi
 from lgi import pipeline
 from lgi.interrupt import import_usd
+from lgi.io.atomic import ready_folder
 
 
 def _cmd_demo(args: argparse.Namespace) -> int:
     from lgi.lab import demo
 
-    return demo.run(Path(args.out), seed=args.seed, quiet=args.quiet)
+    return demo.run(ready_folder(Path(args.out), args.force), seed=args.seed, quiet=args.quiet)
 
 
 def _cmd_evaluate(args: argparse.Namespace) -> int:
     from lgi.lab import evaluate, ict
 
+    ready_folder(Path(args.out), args.force)
     ict_dir = args.ict_dir
     if args.data == "ict" and ict_dir is None:
         ict_dir = ict.find(os.environ.get(ict.ENV))
@@ -610,7 +612,7 @@ def _cmd_triangulate(args: argparse.Namespace) -> int:
 def _cmd_helmet_demo(args: argparse.Namespace) -> int:
     from lgi.lab import demo
 
-    demo.helmet_demo(Path(args.out), seed=args.seed, quiet=args.quiet)
+    demo.helmet_demo(ready_folder(Path(args.out), args.force), seed=args.seed, quiet=args.quiet)
     return 0
 
 
@@ -635,6 +637,11 @@ def _add_front_end_commands(sub: argparse._SubParsersAction[_Parser]) -> None:
         help="the sample filmed by a synthetic helmet, through the whole capture front end",
     )
     hd.add_argument("--out", default="lgi-helmet-output", help="output folder (created)")
+    hd.add_argument(
+        "--force",
+        action="store_true",
+        help="write into an --out folder that already holds files (default: refuse)",
+    )
     hd.add_argument("--seed", type=int, default=0, help="seed of the sample and the take")
     hd.add_argument("-q", "--quiet", action="store_true", help="print nothing")
     hd.set_defaults(func=_cmd_helmet_demo)
@@ -654,6 +661,11 @@ def build_parser() -> argparse.ArgumentParser:
     )
     demo.add_argument(
         "--out", type=_out_folder, default="lgi-demo-output", help="output folder (created)"
+    )
+    demo.add_argument(
+        "--force",
+        action="store_true",
+        help="write into an --out folder that already holds files (default: refuse)",
     )
     demo.add_argument("--seed", type=_seed, default=0, help="seed of the generated sample")
     demo.add_argument("-q", "--quiet", action="store_true", help="no progress bars")
@@ -730,6 +742,11 @@ def build_parser() -> argparse.ArgumentParser:
     ev.add_argument("-q", "--quiet", action="store_true", help="no progress bars")
     ev.add_argument(
         "--out", type=_out_folder, default="lgi-evaluate-output", help="output folder (created)"
+    )
+    ev.add_argument(
+        "--force",
+        action="store_true",
+        help="write into an --out folder that already holds files (default: refuse)",
     )
     ev.add_argument(
         "--ict-dir",

@@ -24,10 +24,12 @@ __all__ = [
     "check_writable",
     "discard_staging",
     "existing_sequence",
+    "ready_folder",
     "refuse_existing",
     "replace_sequence",
     "sequence_staging",
     "temporary_beside",
+    "write_text",
 ]
 
 
@@ -72,6 +74,12 @@ def atomic_path(target: str | os.PathLike[str]) -> Iterator[Path]:
         tmp.unlink(missing_ok=True)
 
 
+def write_text(target: str | os.PathLike[str], text: str) -> None:
+    """`text` (UTF-8) written whole to `target` or not at all (`atomic_path`)."""
+    with atomic_path(target) as tmp:
+        tmp.write_text(text, encoding="utf-8")
+
+
 def check_writable(target: str | os.PathLike[str], what: str = "--out") -> None:
     """Fails now, before any work, if a file cannot be created beside `target` (a read-only
     folder, a full disk's quota, a folder that vanished): a probe file is made and removed."""
@@ -91,6 +99,29 @@ def refuse_existing(target: Path, what: str, force: bool) -> None:
     """An existing output is replaced only with `--force`."""
     if not force and (target.exists() or target.is_symlink()):
         raise InputError(f"{what} {target}: exists (use --force to replace it)")
+
+
+def ready_folder(out: Path, force: bool, what: str = "--out") -> Path:
+    """An output folder a command writes several files into (`lgi demo`, `evaluate`,
+    `helmet-demo`): created when missing; one that already holds anything is written into only
+    with `force` (files of the same names are then replaced, others left as they are), so a
+    second run never replaces the first one's results unasked; checked writable now, before
+    any work (`check_writable`)."""
+    if out.is_dir() and not force:
+        held = sorted(p.name for p in out.iterdir())
+        if held:
+            shown = ", ".join(held[:3]) + (", ..." if len(held) > 3 else "")
+            raise InputError(
+                f"{what} {out}: the folder already holds {len(held)} "
+                f"entr{'y' if len(held) == 1 else 'ies'} ({shown}); use --force to write into "
+                "it (files of the same names are replaced) or give a new or empty folder"
+            )
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as e:
+        raise FileWriteError(f"{what} {out}: cannot create the folder: {e.strerror or e}") from None
+    check_writable(out / "probe", what)
+    return out
 
 
 def _frame_pattern(stem: str) -> re.Pattern[str]:

@@ -13,6 +13,7 @@ from numpy.typing import NDArray
 
 from lgi.capture.frontend import process
 from lgi.dataset import Dataset
+from lgi.io.atomic import atomic_path, write_text
 from lgi.io.calibration import save_cameras
 from lgi.io.obj import write_obj
 from lgi.io.result import write_sequence_npz
@@ -97,7 +98,7 @@ def run(out: Path, seed: int = 0, quiet: bool = False) -> int:
         ),
         "",
     ]
-    (out / "report.md").write_text("\n".join(lines))
+    write_text(out / "report.md", "\n".join(lines))
     print("\n".join(lines[5:]))
     _say(quiet, f"wrote {out}/report.md, {out}/performance.npz and {frames_dir}/*.obj")
     _compare(out, sample, data, model, result, t_solve, quiet)
@@ -126,9 +127,10 @@ def _compare(out: Path, sample, data: Dataset, model: Model, result, t_solve: fl
     verts["LGI"] = result.vertices
     table = evaluate.to_markdown(rows)
     evaluate.to_csv(rows, out / "results.csv")
-    (out / "results.md").write_text(
+    write_text(
+        out / "results.md",
         "# Held-out performance, all methods (errors in cm; residual relative to diagonal)\n\n"
-        + table
+        + table,
     )
     print(table, end="")
     # The most expressive frame: largest mean motion from the neutral.
@@ -170,7 +172,7 @@ def _qc_report(out: Path, data: Dataset, model: Model, result, truth) -> None:  
         reference=solved(truth),
         reference_label="the ground truth",
     )
-    (out / "report.html").write_text(page, encoding="utf-8")
+    write_text(out / "report.html", page)
 
 
 def helmet_demo(out: Path, seed: int = 0, quiet: bool = False) -> str:
@@ -190,7 +192,8 @@ def helmet_demo(out: Path, seed: int = 0, quiet: bool = False) -> str:
     motion = helmet.head_motion(true_bundles.shape[0], s.markers_rest, seed=seed)
     take = helmet.make_helmet_take(true_bundles, cams, motion, seed=seed + 1)
     save_cameras(out / "helmet.yaml", cams)
-    np.savez(out / "tracks.npz", uv=take.uv)
+    with atomic_path(out / "tracks.npz") as tmp, open(tmp, "wb") as fh:
+        np.savez(fh, uv=take.uv)
     front = process(cams, take.uv, s.markers_rest)
     sigma = estimate_marker_noise(front.frames)
     diag = model.diagonal
@@ -229,7 +232,7 @@ def helmet_demo(out: Path, seed: int = 0, quiet: bool = False) -> str:
         f"({time.perf_counter() - t0:.1f} s)",
     ]
     text = "\n".join(lines) + "\n"
-    (out / "helmet_report.md").write_text(text)
+    write_text(out / "helmet_report.md", text)
     if not quiet:
         print(text, end="")
         print(f"wrote {out}/helmet_report.md, {out}/helmet.yaml and {out}/tracks.npz")

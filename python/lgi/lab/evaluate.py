@@ -238,10 +238,13 @@ def to_markdown(rows: Sequence[Row]) -> str:
 
 
 def to_csv(rows: Sequence[Row], path: str | os.PathLike[str]) -> None:
-    """Writes `rows` as CSV with a header."""
+    """Writes `rows` as CSV with a header, whole or not at all (`lgi.io.atomic`); nothing
+    for no rows."""
+    from lgi.io.atomic import atomic_path
+
     if not rows:
         return
-    with open(path, "w", newline="") as f:
+    with atomic_path(path) as tmp, open(tmp, "w", newline="") as f:
         w = csv.DictWriter(f, fieldnames=list(rows[0]))
         w.writeheader()
         w.writerows(rows)
@@ -711,15 +714,13 @@ def run_protocol(
         if not temporal:
             for r in rows:
                 r["jitter"] = float("nan")  # independent frames: not a sequence
-    from lgi.io.atomic import atomic_path
+    from lgi.io.atomic import write_text
 
-    with atomic_path(outp / "results.md") as tmp:
-        tmp.write_text(
-            f"# lgi evaluate: data {data}, protocol {protocol}\n\n" + to_markdown(rows) + extra
-        )
-    if rows:
-        with atomic_path(outp / "results.csv") as tmp:
-            to_csv(rows, tmp)
+    write_text(
+        outp / "results.md",
+        f"# lgi evaluate: data {data}, protocol {protocol}\n\n" + to_markdown(rows) + extra,
+    )
+    to_csv(rows, outp / "results.csv")
     return rows
 
 

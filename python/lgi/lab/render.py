@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import os
 from collections.abc import Mapping, Sequence
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -133,16 +134,24 @@ def panel(
             )
             cb.ax.tick_params(labelsize=7)
             cb.set_label(f"{label}{' (' + units + ')' if units else ''}", fontsize=7)
-        fig.savefig(os.fspath(path), dpi=dpi)
+        _save(fig, path, dpi)
         w, h = fig.canvas.get_width_height()
         return int(w), int(h)
     fig.subplots_adjust(left=0.01, right=1 - 0.9 / width_in, top=0.92, bottom=0.01, wspace=0.02)
     cax = fig.add_axes((1 - 0.75 / width_in, 0.1, 0.15 / width_in, 0.75))
     cb = fig.colorbar(ScalarMappable(norm=norm, cmap=cmap), cax=cax)
     cb.set_label(f"{label}{' (' + units + ')' if units else ''}")
-    fig.savefig(os.fspath(path), dpi=dpi)
+    _save(fig, path, dpi)
     w, h = fig.canvas.get_width_height()
     return int(w), int(h)
+
+
+def _save(fig: Any, path: str | os.PathLike[str], dpi: int) -> None:
+    """The figure as a PNG written whole or not at all (`lgi.io.atomic`)."""
+    from lgi.io.atomic import atomic_path
+
+    with atomic_path(path) as tmp:
+        fig.savefig(os.fspath(tmp), dpi=dpi, format="png")
 
 
 def _cmap():  # type: ignore[no-untyped-def]
