@@ -18,6 +18,7 @@ from lgi._lgi import (
     set_num_threads,
 )
 from lgi.dataset import Dataset
+from lgi.detail import estimate_detail_weight
 from lgi.errors import (
     DatasetError,
     DatasetFileError,
@@ -46,6 +47,7 @@ __all__ = [
     "SolveResult",
     "__version__",
     "capture",
+    "estimate_detail_weight",
     "estimate_marker_noise",
     "get_num_threads",
     "io",

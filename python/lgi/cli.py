@@ -89,6 +89,7 @@ def _cmd_solve(args: argparse.Namespace) -> int:
         args.take,
         args.out,
         noise=args.marker_noise,
+        detail=args.detail_weight,
         frames=args.frames,
         fps=args.fps,
         allow_missing=args.allow_missing,
@@ -397,6 +398,14 @@ def _add_pipeline_commands(sub: Any) -> None:
         metavar="SIGMA|auto|none",
         help="markers' noise sigma in model units (auto: estimated from the take); default "
         "none: every marker interpolated exactly",
+    )
+    s.add_argument(
+        "--detail-weight",
+        default=None,
+        metavar="W|auto|none",
+        help="how much of the dataset's detail between the markers to keep, 0..1 (auto: read "
+        "from the take's markers left out one at a time; for a performer the dataset is not); "
+        "default none: all of it",
     )
     s.add_argument("--frames", default=None, metavar="A:B", help="take frames A..B-1 (0-based)")
     s.add_argument("--fps", type=float, default=None, help="frame rate (default: the take's)")

@@ -18,6 +18,7 @@ from numpy.typing import ArrayLike, NDArray
 import lgi._lgi as _lgi
 from lgi._lgi import BuildConfig, SolveResult
 from lgi.dataset import Dataset
+from lgi.detail import blend_detail, check_detail_weight
 from lgi.errors import InputError, LgiWarning
 from lgi.jaw import JawRig, estimate_rig
 
@@ -339,6 +340,7 @@ class Model:
         out: NDArray[np.float64] | None = None,
         marker_noise: float | None = None,
         fit: bool | None = None,
+        detail_weight: float | None = None,
     ) -> SolveResult:
         """Solves frames (F, B, 3) of marker positions (a single (B, 3) frame gives F = 1).
         NaN rows are missing markers. With `temporal` (a performance), frames are solved in
@@ -375,13 +377,19 @@ class Model:
         False is the paper's method, tets only. Default (None): on exactly when `marker_noise`
         is given (`marker_noise=0` for noise-free markers), so the recommended call on real
         capture is `solve(frames, marker_noise=sigma)`. Not offered with `smooth_window`. The
-        fit costs time with many shapes (docs/performance.md)."""
+        fit costs time with many shapes (docs/performance.md).
+
+        `detail_weight` in [0, 1]: how much of the dataset's detail between the markers to keep
+        (`lgi.detail`; `lgi.estimate_detail_weight` reads it from a take): the result is
+        `w * solved + (1 - w) * smooth`, the smooth part the biharmonic interpolation of the
+        solve's own present marker positions. None or 1 (default): the solve as it is."""
+        w = None if detail_weight is None else check_detail_weight(detail_weight)
         arr = np.asarray(frames)
         if arr.ndim == 2:
             arr = arr[None]
         total = int(arr.shape[0]) if arr.ndim == 3 else 0
         with _progress_bar(total, "lgi solve", quiet) as bar:
-            return self._core.solve(
+            res = self._core.solve(
                 arr,
                 progress=lambda _f: bar.update(1),
                 temporal=temporal,
@@ -391,6 +399,29 @@ class Model:
                 fit=fit,
                 marker_noise=marker_noise,
             )
+        return res if w is None or w == 1.0 else self._with_detail(res, arr, w)
+
+    def _with_detail(self, res: SolveResult, frames: NDArray[Any], weight: float) -> SolveResult:
+        """`res` with `weight` of its detail kept (`lgi.detail.blend_detail`, in place in its
+        vertices, so an `out` buffer receives the result), its marker positions and residuals
+        measured again on the blended surface."""
+        missing = np.asarray(res.missing)
+        v = blend_detail(self, res.vertices, np.asarray(res.bundle_positions), missing, weight)
+        pos = self.bundle_positions(v)
+        given = np.asarray(frames, dtype=np.float64)
+        residuals = np.where(missing, 0.0, np.linalg.norm(np.nan_to_num(given - pos), axis=2))
+        return SolveResult(
+            vertices=v,
+            bundle_residuals=residuals,
+            bundle_positions=pos,
+            missing=missing,
+            choices=res.choices,
+            jaw_theta=res.jaw_theta,
+            jaw_bin=res.jaw_bin,
+            marker_corrections=res.marker_corrections,
+            fit_weights=res.fit_weights,
+            state=res.state,
+        )
 
     def solve_iter(
         self,
@@ -403,6 +434,7 @@ class Model:
         out: NDArray[np.float64] | None = None,
         marker_noise: float | None = None,
         fit: bool | None = None,
+        detail_weight: float | None = None,
     ) -> Iterator[SolveResult]:
         """Solves `frames` (F, B, 3; a numpy memmap keeps a long take on disk) `chunk` frames
         at a time and yields each chunk's `SolveResult`, so memory stays flat however long
@@ -412,7 +444,9 @@ class Model:
         (chunk, V, 3) float64 buffer every chunk is written into (a yielded result's vertices
         are then overwritten by the next chunk: copy what you keep). Smoothing is not offered
         (it needs frames beyond the chunk); give poses as arrays by solving chunks with
-        `solve`. Other options as in `solve`."""
+        `solve`. Other options as in `solve` (`detail_weight` applied chunk by chunk: each
+        frame's blend is its own)."""
+        w = None if detail_weight is None else check_detail_weight(detail_weight)
         n = _lgi.check_count(chunk, "chunk")
         if n < 1:
             raise InputError(f"chunk must be >= 1 frames, got {n}")
@@ -437,7 +471,7 @@ class Model:
                     previous=state,
                 )
                 state = res.state if temporal else None
-                yield res
+                yield res if w is None or w == 1.0 else self._with_detail(res, part, w)
 
     def bundle_positions(self, meshes: ArrayLike) -> NDArray[np.float64]:
         """Marker surface positions (F, B, 3) on meshes (F, V, 3) or (V, 3) -> (B, 3)."""

@@ -20,6 +20,7 @@ import numpy as np
 
 from lgi._lgi import BuildConfig, SolveResult
 from lgi.dataset import Dataset
+from lgi.detail import estimate_detail_weight
 from lgi.diagnose import Finding, diagnose, diagnose_result, face_size, summary
 from lgi.errors import InputError, MarkerError
 from lgi.io import takes
@@ -37,6 +38,7 @@ __all__ = [
     "JAW_POSES",
     "build_file",
     "describe",
+    "detail_weight",
     "export_file",
     "frame_range",
     "marker_noise",
@@ -174,6 +176,26 @@ def frame_range(spec: str | None, count: int) -> slice:
             f"--frames {spec}: the take has frames 0:{count}; START must be < END within it"
         )
     return slice(a, b)
+
+
+def detail_weight(
+    spec: str | None, frames: np.ndarray, model: Model, sigma: float | None, jaw: str | None
+) -> float | None:
+    """`--detail-weight`: a weight in [0, 1], 'auto' (read from `frames` solved with `sigma`
+    and `jaw`, `lgi.estimate_detail_weight`) or 'none'/None (all of the dataset's detail)."""
+    if spec is None or spec == "none":
+        return None
+    if spec == "auto":
+        return estimate_detail_weight(frames, model, marker_noise=sigma, jaw=jaw)
+    try:
+        w = float(spec)
+    except ValueError:
+        raise InputError(
+            f"--detail-weight {spec!r}: expected a number in [0, 1], 'auto' or 'none'"
+        ) from None
+    if not 0.0 <= w <= 1.0:
+        raise InputError(f"--detail-weight {spec}: must be a number in [0, 1]")
+    return w
 
 
 def marker_noise(spec: str | None, frames: np.ndarray, model: Model | None) -> float | None:
@@ -618,6 +640,7 @@ def solve_file(
     out: str | os.PathLike[str],
     *,
     noise: str | None = None,
+    detail: str | None = None,
     frames: str | None = None,
     fps: float | None = None,
     allow_missing: bool = False,
@@ -635,7 +658,8 @@ def solve_file(
 ) -> tuple[Path, int]:
     """`lgi solve`: the take file solved with the model file, written by `out`'s suffix
     (`output_kind`). `noise` is `--marker-noise` (a number, 'auto' or 'none'; 'auto' looks at
-    the whole range), `frames` is `--frames A:B`. By default the range is solved in one
+    the whole range), `detail` `--detail-weight` (the same forms, `detail_weight`), `frames`
+    is `--frames A:B`. By default the range is solved in one
     `Model.solve` (frames prefer their predecessor's choices across the whole range), then
     written chunk by chunk; `chunk` (`--chunk N`) solves and writes N frames at a time into
     one reused buffer, so the solve's memory stays that of N frames (each chunk continues
@@ -687,16 +711,18 @@ def solve_file(
     rate = frame_rate(fps, t.fps, kind)
     sigma = marker_noise(noise, x, m)
     jaw_mode = None if m.jaw_rig is None or jaw == "rest" else jaw
+    weight = detail_weight(detail, x, m, sigma, jaw_mode)
     missing = np.isnan(x).any(axis=2)
     say(
         f"{x.shape[0]} frames of {x.shape[1]} markers "
         f"({100 * missing.mean():.1f}% samples missing)"
         + ("" if sigma is None else f", marker noise {sigma:.4g}")
+        + ("" if weight is None else f", detail weight {weight:.3f}")
     )
     topo = topology(m.dataset)
     start = t.first_frame + rng.start
     if chunk is None:
-        res = m.solve(x, jaw=jaw_mode, marker_noise=sigma, quiet=quiet)
+        res = m.solve(x, jaw=jaw_mode, marker_noise=sigma, quiet=quiet, detail_weight=weight)
         if curves_out is not None:
             _write_curves(
                 curves_out, res.fit_weights, res.jaw_theta, m, fps=rate, start=start, frame=frame
@@ -729,7 +755,15 @@ def solve_file(
     buf = np.empty((min(size, n), m.num_vertices, 3))
     # Each chunk continues the temporal solve from the last frame of the one before
     # (`Model.solve_iter`): the chunks together are one `solve` of the range.
-    chunks = m.solve_iter(x, chunk=size, jaw=jaw_mode, marker_noise=sigma, quiet=True, out=buf)
+    chunks = m.solve_iter(
+        x,
+        chunk=size,
+        jaw=jaw_mode,
+        marker_noise=sigma,
+        quiet=True,
+        out=buf,
+        detail_weight=weight,
+    )
     residuals: list[np.ndarray] = []
     absent: list[np.ndarray] = []
     fits: list[np.ndarray | None] = []

@@ -265,14 +265,28 @@ def default_methods(dataset: Dataset, markers: ArrayLike) -> dict[str, Solver]:
 
 class Recommended:
     """LGI's recommended path as a compared method: `model.solve(frames, marker_noise=sigma)`
-    on a model built with defaults (`sigma` None: the paper's exact mode)."""
+    on a model built with defaults (`sigma` None: the paper's exact mode). With `detail`
+    "auto", the frames' detail weight (`lgi.estimate_detail_weight`, read from the frames
+    solved, with the same sigma) is kept too, the call for a performer the dataset is not
+    (`last_detail_weight` says which)."""
 
-    def __init__(self, model: Model, marker_noise: float | None) -> None:
-        self.model, self.marker_noise = model, marker_noise
+    def __init__(self, model: Model, marker_noise: float | None, detail: str | None = None) -> None:
+        self.model, self.marker_noise, self.detail = model, marker_noise, detail
+        self.last_detail_weight: float | None = None
 
     def solve(self, frames: ArrayLike, *, temporal: bool = True, quiet: bool = True) -> SolveResult:
+        from lgi.detail import estimate_detail_weight
+
+        weight = None
+        if self.detail == "auto":
+            weight = estimate_detail_weight(frames, self.model, marker_noise=self.marker_noise)
+            self.last_detail_weight = weight
         return self.model.solve(
-            frames, temporal=temporal, quiet=quiet, marker_noise=self.marker_noise
+            frames,
+            temporal=temporal,
+            quiet=quiet,
+            marker_noise=self.marker_noise,
+            detail_weight=weight,
         )
 
 
@@ -490,7 +504,8 @@ def lomo_protocol(
     labels is retargeted onto `dataset` (`landmarks`: the 68 iBUG vertices; `face`: the
     triangles a marker may lie on), and `held_out` of its non-skull markers are left out one at
     a time; the methods are the capture protocol's (LGI's noise estimated from the whole take
-    at its capture rate, as `--marker-noise auto` does) and the neutral, each solving about
+    at its capture rate, as `--marker-noise auto` does), the neutral, and LGI with the detail
+    weight the frames it solves call for (`--detail-weight auto`), each solving about
     `frames` evenly spaced frames.
     Returns the rows ("take: method", `lomo.LOMO_COLUMNS`, then "all takes: method" over
     every held-out marker) and one row per take and held-out marker (each method's mean)."""
@@ -501,7 +516,13 @@ def lomo_protocol(
     marks = {name: int(lm[k]) for name, k in lomo.ANIMFACE_IBUG.items()}
 
     def methods_for(ds: Dataset, rest: F64, fr: F64) -> dict[str, Any]:
-        return {lomo.Rest.label: lomo.Rest(ds), **capture_methods(ds, rest, None, fr)}
+        methods: dict[str, Any] = {
+            lomo.Rest.label: lomo.Rest(ds),
+            **capture_methods(ds, rest, None, fr),
+        }
+        lgi = methods["LGI"]
+        methods["LGI + detail weight"] = Recommended(lgi.model, lgi.marker_noise, detail="auto")
+        return methods
 
     rows: list[Row] = []
     markers: list[Row] = []
