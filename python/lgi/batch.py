@@ -22,9 +22,9 @@ from typing import Any
 
 import numpy as np
 
-from lgi.errors import FileWriteError, InputError
+from lgi.errors import InputError
 from lgi.io import takes as take_files
-from lgi.io.atomic import atomic_path, check_writable
+from lgi.io.atomic import atomic_path, writable_folder
 from lgi.io.topology import topology
 from lgi.model import Model, estimate_marker_noise
 
@@ -424,11 +424,7 @@ def solve_shots(
                 f"takes: {name}'s take {take} is the file its output would replace; choose "
                 "another out_dir (nothing given is modified)"
             )
-    try:
-        out.mkdir(parents=True, exist_ok=True)
-    except OSError as e:
-        raise FileWriteError(f"out_dir {out}: cannot create the folder ({e})") from None
-    check_writable(out / MANIFEST, "out_dir")  # before any shot is solved, not after
+    writable_folder(out, "out_dir", MANIFEST)  # before any shot is solved, not after
     import lgi
 
     settings_hash = hashlib.sha256(

@@ -29,6 +29,7 @@ __all__ = [
     "replace_sequence",
     "sequence_staging",
     "temporary_beside",
+    "writable_folder",
     "write_text",
 ]
 
@@ -116,12 +117,18 @@ def ready_folder(out: Path, force: bool, what: str = "--out") -> Path:
                 f"entr{'y' if len(held) == 1 else 'ies'} ({shown}); use --force to write into "
                 "it (files of the same names are replaced) or give a new or empty folder"
             )
+    writable_folder(out, what)
+    return out
+
+
+def writable_folder(out: Path, what: str, probe: str = "probe") -> None:
+    """Creates folder `out` (and its parents) when missing and checks now that a file (named
+    like `probe`) can be written in it; FileWriteError naming `what` otherwise."""
     try:
         out.mkdir(parents=True, exist_ok=True)
     except OSError as e:
         raise FileWriteError(f"{what} {out}: cannot create the folder: {e.strerror or e}") from None
-    check_writable(out / "probe", what)
-    return out
+    check_writable(out / probe, what)
 
 
 def _frame_pattern(stem: str) -> re.Pattern[str]:
