@@ -22,6 +22,7 @@ from typing import Any
 
 import numpy as np
 
+from lgi.detail import check_detail_weight, estimate_detail_weight
 from lgi.errors import InputError
 from lgi.io import takes as take_files
 from lgi.io.atomic import atomic_path, writable_folder
@@ -135,6 +136,9 @@ def _check_options(options: dict[str, Any]) -> str:
         raise InputError(
             f"solve_shots: marker_noise must be a number, 'auto' or None, got {noise!r}"
         )
+    detail = options.get("detail_weight")
+    if detail is not None and detail != "auto":
+        check_detail_weight(detail)
     try:
         return json.dumps(options, sort_keys=True, allow_nan=False)
     except (TypeError, ValueError):
@@ -269,6 +273,10 @@ def solve_shot(
         opts = dict(options)
         if opts.get("marker_noise") == "auto":
             opts["marker_noise"] = estimate_marker_noise(x, m)
+        if opts.get("detail_weight") == "auto":
+            opts["detail_weight"] = estimate_detail_weight(
+                x, m, marker_noise=opts.get("marker_noise"), jaw=opts.get("jaw", "auto")
+            )
         if kind == "usd" and rate is None:
             raise InputError("the take has no frame rate; a USD point cache needs fps=")
         res = m.solve(x, quiet=True, **opts)
@@ -373,9 +381,10 @@ def solve_shots(
     (`lgi.set_num_threads`); default: the cores shared among the local workers, or the
     worker's own default on a given cluster.
 
-    `solve_options` go to `Model.solve` (`marker_noise` may also be "auto": estimated per
-    take); `fps` is the output's frame rate when the take has none (arrays); `allow_missing`
-    and `take_units` are `lgi.io.takes.read`'s.
+    `solve_options` go to `Model.solve` (`marker_noise` and `detail_weight` may also be
+    "auto": estimated per take, the detail weight with the take's noise); `fps` is the
+    output's frame rate when the take has none (arrays); `allow_missing` and `take_units` are
+    `lgi.io.takes.read`'s.
 
     A shot whose take cannot be read or solved fails alone: its error is in the manifest and
     the others go on. A rerun into the same folder skips shots that are done with the same

@@ -204,6 +204,8 @@ def _cmd_batch(args: argparse.Namespace) -> int:
     options: dict[str, Any] = {}
     if args.marker_noise is not None:
         options["marker_noise"] = args.marker_noise
+    if args.detail_weight is not None:
+        options["detail_weight"] = args.detail_weight
     if args.jaw != "auto":
         options["jaw"] = None if args.jaw == "rest" else args.jaw
     model = pipeline.existing_file(args.model, "MODEL")
@@ -230,6 +232,21 @@ def _cmd_batch(args: argparse.Namespace) -> int:
         why = "; ".join(f"{n}: {result.shots[n].error}" for n in failed)
         raise lgi.InputError(f"{len(failed)} of {len(result.shots)} shots failed ({why})")
     return 0
+
+
+def _detail_weight_option(text: str) -> float | str | None:
+    """`lgi batch --detail-weight`: a weight in [0, 1], 'auto' (per take) or 'none'."""
+    if text in ("auto", "none"):
+        return None if text == "none" else text
+    try:
+        w = float(text)
+    except ValueError:
+        w = float("nan")
+    if not 0.0 <= w <= 1.0:
+        raise argparse.ArgumentTypeError(
+            f"expected a number in [0, 1], 'auto' or 'none', got {text!r}"
+        )
+    return w
 
 
 def _marker_noise_option(text: str) -> float | str | None:
@@ -290,6 +307,13 @@ def _add_batch_command(sub: Any) -> None:
         default=None,
         metavar="SIGMA|auto|none",
         help="markers' noise sigma in model units (auto: estimated per take); default none",
+    )
+    b.add_argument(
+        "--detail-weight",
+        type=_detail_weight_option,
+        default=None,
+        metavar="W|auto|none",
+        help="as lgi solve --detail-weight (auto: read per take); default none",
     )
     b.add_argument(
         "--jaw",
