@@ -236,17 +236,16 @@ def _cmd_batch(args: argparse.Namespace) -> int:
 
 def _detail_weight_option(text: str) -> float | str | None:
     """`lgi batch --detail-weight`: a weight in [0, 1], 'auto' (per take) or 'none'."""
+    from lgi.detail import check_detail_weight
+
     if text in ("auto", "none"):
         return None if text == "none" else text
     try:
-        w = float(text)
-    except ValueError:
-        w = float("nan")
-    if not 0.0 <= w <= 1.0:
+        return check_detail_weight(text)
+    except lgi.InputError:
         raise argparse.ArgumentTypeError(
             f"expected a number in [0, 1], 'auto' or 'none', got {text!r}"
-        )
-    return w
+        ) from None
 
 
 def _marker_noise_option(text: str) -> float | str | None:
