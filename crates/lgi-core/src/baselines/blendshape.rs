@@ -200,8 +200,8 @@ impl BlendshapeSolver {
                             .borrow_mut()
                             .piece(clamped, rhs, self.l2, self.penalty)
                     },
-                    |d, w| frame.borrow().products(d, w),
-                    |w| frame.borrow().data_term(w, &atr) + self.box_terms(w),
+                    |d, w| frame.borrow_mut().products(d, w),
+                    |w| frame.borrow_mut().data_term(w, &atr) + self.box_terms(w),
                 )
             }
             None => self.solve_dense(target, &along, start),
@@ -504,6 +504,63 @@ mod tests {
                     }
                 }
                 assert!((got.objective - want.objective).abs() < 1e-9 * (1.0 + want.objective));
+            }
+        }
+    }
+
+    /// 240 shapes over 30 rows, every one a random positive mix of 6 (like scans of one face): most weights end
+    /// clamped by the box (a fit of many scans), and the first steps clamp and free many at
+    /// once, so the low-rank path sums its free weights' products afresh as well as updating
+    /// them one by one; it must still land on the dense path's minimum.
+    #[test]
+    fn a_fit_that_clamps_most_of_many_shapes_equals_the_dense_path() {
+        let (rows, base, shapes) = (30, 6, 240);
+        for seed in 0..3u64 {
+            let mut s = seed + 40;
+            let b: Vec<f64> = (0..rows * base).map(|_| rnd(&mut s)).collect();
+            let mix: Vec<f64> = (0..shapes * base).map(|_| rnd(&mut s) + 0.5).collect();
+            let a: Vec<f64> = (0..rows * shapes)
+                .map(|i| {
+                    let (r, k) = (i / shapes, i % shapes);
+                    (0..base).map(|j| b[r * base + j] * mix[k * base + j]).sum()
+                })
+                .collect();
+            let sol = BlendshapeSolver::new(a, rows, shapes, 1e-3, 10.0).unwrap();
+            assert_eq!(sol.low_rank(), Some(base), "seed {seed}");
+            let mut dense = sol.clone();
+            dense.low_rank = None;
+            let mut t: Vec<f64> = (0..rows).map(|_| 3.0 * rnd(&mut s)).collect();
+            let dirs: Vec<Vec<f64>> = vec![(0..rows).map(|_| rnd(&mut s)).collect()];
+            for missing in [vec![], vec![2, 9, 17]] {
+                for &m in &missing {
+                    t[m] = f64::NAN;
+                }
+                let (got, gd) = sol.solve_with_derivatives(&t, &dirs, None).unwrap();
+                let (want, wd) = dense.solve_with_derivatives(&t, &dirs, None).unwrap();
+                let clamped = want
+                    .weights
+                    .iter()
+                    .filter(|w| !(0.0..=1.0).contains(*w))
+                    .count();
+                assert!(2 * clamped > shapes, "seed {seed}: only {clamped} clamped");
+                assert!(
+                    got.iterations > 2,
+                    "seed {seed}: {} iterations",
+                    got.iterations
+                );
+                for (g, w) in got.weights.iter().zip(&want.weights) {
+                    assert!((g - w).abs() < 1e-9, "seed {seed} {missing:?}: {g} vs {w}");
+                }
+                for (g, w) in gd[0].iter().zip(&wd[0]) {
+                    assert!((g - w).abs() < 1e-7, "seed {seed} {missing:?}: {g} vs {w}");
+                }
+                let rel = (got.objective - want.objective).abs() / (1.0 + want.objective);
+                assert!(
+                    rel < 1e-9,
+                    "seed {seed}: {} vs {}",
+                    got.objective,
+                    want.objective
+                );
             }
         }
     }
