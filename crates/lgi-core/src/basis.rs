@@ -5,6 +5,7 @@
 //! shapes at a vertex instead of 300, with the same mesh to f32 round-off.
 
 use rayon::prelude::*;
+use std::cell::RefCell;
 
 /// A shape whose squared residual against the basis is at most this fraction of its own
 /// squared norm (relative rms 1e-6) counts as a combination of the basis.
@@ -41,49 +42,151 @@ fn dot(a: &[f64], b: &[f64]) -> f64 {
     ((acc[0] + acc[1]) + (acc[2] + acc[3])) + ((acc[4] + acc[5]) + (acc[6] + acc[7])) + tail
 }
 
-/// The lower triangle (j ≤ i) of the Gram matrix `G[i s + j] = Σ_v d_i(v) d_j(v)` of the `s`
-/// shapes of `n` values each in `displacements` (f64 sums; the upper triangle is zero).
-fn gram(displacements: &[f32], s: usize, n: usize) -> Vec<f64> {
-    // Blocks of coordinates small enough that every shape's rows of one stay in cache
-    // while all pairs are taken; contiguous groups of blocks are summed in parallel, each
-    // in order, and the groups in order: the same Gram matrix whatever the thread count
-    // (a parallel reduce's tree is not fixed).
+/// Sums `add(wide, len, part)` over the blocks of coordinates into a vector of `size` f64:
+/// `wide` holds every shape's values of one block widened to f64 (row k at `k * BLOCK`, `len`
+/// values). Contiguous groups of blocks are summed in parallel, each in order, and the groups
+/// in order: the same sums whatever the thread count (a parallel reduce's tree is not fixed).
+fn blockwise(
+    displacements: &[f32],
+    s: usize,
+    n: usize,
+    size: usize,
+    add: impl Fn(&[f64], usize, &mut [f64]) + Sync,
+) -> Vec<f64> {
     let blocks = n.div_ceil(BLOCK);
     let per_group = blocks.div_ceil(GROUPS).max(1);
     let groups: Vec<Vec<f64>> = (0..blocks.div_ceil(per_group))
         .into_par_iter()
         .map(|g| {
-            let mut gram = vec![0.0f64; s * s];
+            let mut part = vec![0.0f64; size];
             let mut wide = vec![0.0f64; s * BLOCK];
             for c in g * per_group..((g + 1) * per_group).min(blocks) {
                 let (lo, hi) = (c * BLOCK, ((c + 1) * BLOCK).min(n));
-                let len = hi - lo;
                 for k in 0..s {
                     let row = &displacements[k * n + lo..k * n + hi];
-                    for (w, x) in wide[k * BLOCK..k * BLOCK + len].iter_mut().zip(row) {
+                    for (w, x) in wide[k * BLOCK..k * BLOCK + hi - lo].iter_mut().zip(row) {
                         *w = *x as f64;
                     }
                 }
-                let row = |k: usize| &wide[k * BLOCK..k * BLOCK + len];
-                // Every pair j ≤ i once per block, in tiles of j: each pair's sum is the
-                // same whatever the order of the pairs.
-                for j0 in (0..s).step_by(TILE) {
-                    for i in j0..s {
-                        for j in j0..(j0 + TILE).min(i + 1) {
-                            gram[i * s + j] += dot(row(i), row(j));
-                        }
-                    }
-                }
+                add(&wide, hi - lo, &mut part);
             }
-            gram
+            part
         })
         .collect();
-    let mut gram = vec![0.0f64; s * s];
+    let mut sum = vec![0.0f64; size];
     for g in &groups {
-        gram.iter_mut().zip(g).for_each(|(x, y)| *x += y);
+        sum.iter_mut().zip(g).for_each(|(x, y)| *x += y);
     }
-    gram
+    sum
 }
+
+/// The lower triangle (j ≤ i) of the Gram matrix `G[i s + j] = Σ_v d_i(v) d_j(v)` of the `s`
+/// shapes of `n` values each in `displacements` (f64 sums; the upper triangle is zero).
+fn gram(displacements: &[f32], s: usize, n: usize) -> Vec<f64> {
+    blockwise(displacements, s, n, s * s, |wide, len, gram| {
+        let row = |k: usize| &wide[k * BLOCK..k * BLOCK + len];
+        // Every pair j ≤ i once per block, in tiles of j: each pair's sum is the same
+        // whatever the order of the pairs.
+        for j0 in (0..s).step_by(TILE) {
+            for i in j0..s {
+                for j in j0..(j0 + TILE).min(i + 1) {
+                    gram[i * s + j] += dot(row(i), row(j));
+                }
+            }
+        }
+    })
+}
+
+/// The Gram matrix's columns `cols` (`cols.len() × s`, column c's entry i at `c s + i`) and
+/// its diagonal (s), each entry the same sum, bit for bit, as [`gram`]'s (the product of two
+/// values commutes exactly, so pair (i, j) summed either way round is the same).
+fn gram_columns(displacements: &[f32], s: usize, n: usize, cols: &[usize]) -> Vec<f64> {
+    let m = cols.len();
+    blockwise(displacements, s, n, m * s, |wide, len, part| {
+        let row = |k: usize| &wide[k * BLOCK..k * BLOCK + len];
+        for (c, &p) in cols.iter().enumerate() {
+            for i in 0..s {
+                part[c * s + i] += dot(row(i), row(p));
+            }
+        }
+    })
+}
+
+/// The Gram matrix's diagonal, each entry [`gram`]'s sum bit for bit.
+fn gram_diagonal(displacements: &[f32], s: usize, n: usize) -> Vec<f64> {
+    blockwise(displacements, s, n, s, |wide, len, part| {
+        for (k, d) in part.iter_mut().enumerate() {
+            let row = &wide[k * BLOCK..k * BLOCK + len];
+            *d += dot(row, row);
+        }
+    })
+}
+
+/// A pivoted Cholesky of a Gram matrix given by its diagonal and a source of columns: the
+/// pivot is the shape least explained (relative to its own norm) by the pivots so far, or
+/// the least explained of those whose column is `made` already when that is within
+/// [`PREFER_MADE`] of it, and it stops when every shape is explained. Returns the pivots and
+/// the factor's columns (S each). `column(p, left, pivots)` is asked once per pivot, in
+/// pivot order.
+fn pivoted_cholesky(
+    norm: &[f64],
+    made: impl Fn(usize) -> bool,
+    mut column: impl FnMut(usize, &[f64], &[usize]) -> Vec<f64>,
+) -> (Vec<usize>, Vec<Vec<f64>>) {
+    let s = norm.len();
+    let mut left = norm.to_vec();
+    let mut factor: Vec<Vec<f64>> = Vec::new(); // columns of L, S each
+    let mut pivots = Vec::new();
+    loop {
+        let (p, worst) = (0..s)
+            .filter(|k| !pivots.contains(k))
+            .map(|k| (k, explained_left(&left, norm, k)))
+            .fold((usize::MAX, 0.0f64), |b, x| if x.1 > b.1 { x } else { b });
+        if p == usize::MAX || worst.is_nan() || worst <= COMBINATION_TOLERANCE {
+            break;
+        }
+        let (ready, ready_left) = (0..s)
+            .filter(|&k| made(k) && !pivots.contains(&k))
+            .map(|k| (k, explained_left(&left, norm, k)))
+            .fold((usize::MAX, 0.0f64), |b, x| if x.1 > b.1 { x } else { b });
+        let p = if !made(p) && ready != usize::MAX && ready_left >= PREFER_MADE * worst {
+            ready
+        } else {
+            p
+        };
+        let at_p = column(p, &left, &pivots);
+        let root = left[p].sqrt();
+        let col: Vec<f64> = (0..s)
+            .map(|i| (at_p[i] - factor.iter().map(|c| c[i] * c[p]).sum::<f64>()) / root)
+            .collect();
+        for (l, c) in left.iter_mut().zip(&col) {
+            *l -= c * c;
+        }
+        left[p] = 0.0;
+        factor.push(col);
+        pivots.push(p);
+    }
+    (pivots, factor)
+}
+
+/// What is left of shape k's squared norm once the pivots explain it, relative to the norm.
+fn explained_left(left: &[f64], norm: &[f64], k: usize) -> f64 {
+    if norm[k] > 0.0 {
+        left[k] / norm[k]
+    } else {
+        0.0
+    }
+}
+
+/// Blocks of coordinates, evenly spread, whose Gram matrix predicts the pivots (a few
+/// thousand coordinates: a 2,000-scan dataset's whole Gram matrix takes ~20 s, these ~1 s).
+const SAMPLE_BLOCKS: usize = 8;
+/// Columns made together when a pivot was not predicted: the shapes least explained so far.
+const MISS_BATCH: usize = 32;
+/// A shape whose column is made is taken as the pivot before the least explained one when
+/// what is left of it is at least this fraction of the worst (a pivot that far from the
+/// largest keeps the factor well conditioned).
+const PREFER_MADE: f64 = 0.1;
 
 /// The basis and every shape's coefficients over it.
 #[derive(Debug, Clone)]
@@ -103,48 +206,69 @@ impl ShapeBasis {
             return None;
         }
         let n = displacements.len() / s;
-        let gram = gram(displacements, s, n);
-        let at = |i: usize, j: usize| {
-            if j <= i {
-                gram[i * s + j]
-            } else {
-                gram[j * s + i]
+        // The pivots of a sample of the coordinates first: a shape that is a combination of
+        // others is one on any coordinates, so a sample where no shape is one (scans) settles
+        // it, and otherwise its pivots are the columns of the whole Gram matrix to make (one
+        // pass over the data for all of them, instead of the whole matrix's S² / 2 pairs).
+        let blocks = n.div_ceil(BLOCK);
+        let predicted = if blocks > 2 * SAMPLE_BLOCKS {
+            let mut sample = Vec::with_capacity(s * SAMPLE_BLOCKS * BLOCK);
+            for k in 0..s {
+                for b in 0..SAMPLE_BLOCKS {
+                    let lo = (b * blocks / SAMPLE_BLOCKS) * BLOCK;
+                    sample.extend_from_slice(&displacements[k * n + lo..k * n + lo + BLOCK]);
+                }
+            }
+            let m = SAMPLE_BLOCKS * BLOCK;
+            let g = gram(&sample, s, m);
+            let norm: Vec<f64> = (0..s).map(|k| g[k * s + k]).collect();
+            let at = |i: usize, j: usize| if j <= i { g[i * s + j] } else { g[j * s + i] };
+            let (pivots, _) = pivoted_cholesky(
+                &norm,
+                |_| true,
+                |p, _, _| (0..s).map(|i| at(i, p)).collect(),
+            );
+            if pivots.len() == s {
+                return None;
+            }
+            pivots
+        } else {
+            (0..s).collect()
+        };
+        let norm = gram_diagonal(displacements, s, n);
+        let made: RefCell<Vec<Option<Vec<f64>>>> = RefCell::new(vec![None; s]);
+        let make = |cols: &[usize]| {
+            let values = gram_columns(displacements, s, n, cols);
+            let mut made = made.borrow_mut();
+            for (c, &p) in cols.iter().enumerate() {
+                made[p] = Some(values[c * s..(c + 1) * s].to_vec());
             }
         };
-        // Pivoted Cholesky, the pivot the shape least explained (relative to its own norm) by
-        // the pivots so far; it stops when every shape is explained.
-        let norm: Vec<f64> = (0..s).map(|k| at(k, k)).collect();
-        let mut left = norm.clone();
-        let mut factor: Vec<Vec<f64>> = Vec::new(); // columns of L, S each
-        let mut pivots = Vec::new();
-        loop {
-            let (p, worst) = (0..s)
-                .filter(|k| !pivots.contains(k))
-                .map(|k| {
-                    (
-                        k,
-                        if norm[k] > 0.0 {
-                            left[k] / norm[k]
-                        } else {
-                            0.0
-                        },
-                    )
-                })
-                .fold((usize::MAX, 0.0f64), |b, x| if x.1 > b.1 { x } else { b });
-            if p == usize::MAX || worst.is_nan() || worst <= COMBINATION_TOLERANCE {
-                break;
+        make(&predicted);
+        let is_made = |k: usize| made.borrow()[k].is_some();
+        let (pivots, factor) = pivoted_cholesky(&norm, is_made, |p, left, pivots| {
+            if !is_made(p) {
+                let mut next: Vec<usize> = (0..s)
+                    .filter(|&k| !is_made(k) && !pivots.contains(&k))
+                    .collect();
+                next.sort_by(|&a, &b| {
+                    explained_left(left, &norm, b).total_cmp(&explained_left(left, &norm, a))
+                });
+                next.truncate(MISS_BATCH);
+                if !next.contains(&p) {
+                    next.push(p);
+                }
+                make(&next);
             }
-            let root = left[p].sqrt();
-            let col: Vec<f64> = (0..s)
-                .map(|i| (at(i, p) - factor.iter().map(|c| c[i] * c[p]).sum::<f64>()) / root)
-                .collect();
-            for (l, c) in left.iter_mut().zip(&col) {
-                *l -= c * c;
-            }
-            left[p] = 0.0;
-            factor.push(col);
-            pivots.push(p);
-        }
+            let taken = made.borrow_mut()[p].take();
+            taken.unwrap_or_else(|| gram_columns(displacements, s, n, &[p]))
+        });
+        Self::from_factor(pivots, &factor, s)
+    }
+
+    /// The basis of a pivoted Cholesky's pivots and factor columns, `None` when every one of
+    /// the `s` shapes is a pivot.
+    fn from_factor(pivots: Vec<usize>, factor: &[Vec<f64>], s: usize) -> Option<ShapeBasis> {
         let q = pivots.len();
         if q == s {
             return None;
@@ -257,6 +381,84 @@ mod tests {
         // Independent shapes have no basis smaller than themselves.
         let flat: Vec<f32> = base.iter().flatten().copied().collect();
         assert!(ShapeBasis::find(&flat, 3).is_none());
+    }
+
+    /// The basis found from a sample's pivots and the whole Gram matrix's columns made on
+    /// demand explains every shape, and here (the least explained shape always a pivot) has
+    /// the bits of the one found from the whole Gram matrix, also though the sample misses
+    /// shapes: shapes that move only coordinates between the sampled blocks.
+    #[test]
+    fn the_basis_from_sampled_pivots_explains_every_shape_and_equals_the_whole_gram_one() {
+        let n = 40 * BLOCK + 77;
+        let mut base = independent_shapes(6, n, 5, 0.0071);
+        // Local shapes: zero except in block 2 (not sampled: blocks 0, 5, 10, ... are).
+        for k in 0..3 {
+            base.push(
+                (0..n)
+                    .map(|i| {
+                        if (2 * BLOCK..3 * BLOCK).contains(&i) {
+                            ((i * (k + 2)) as f32 * 0.013).cos()
+                        } else {
+                            0.0
+                        }
+                    })
+                    .collect(),
+            );
+        }
+        let mut shapes = base.clone();
+        for (a, b, x) in [(0, 6, 0.5f32), (3, 7, -1.0), (1, 2, 0.25), (8, 5, 2.0)] {
+            shapes.push(
+                base[a]
+                    .iter()
+                    .zip(&base[b])
+                    .map(|(p, q)| p + x * q)
+                    .collect(),
+            );
+        }
+        let s = shapes.len();
+        let flat: Vec<f32> = shapes.iter().flatten().copied().collect();
+        let found = ShapeBasis::find(&flat, s).unwrap();
+        let g = gram(&flat, s, n);
+        let at = |i: usize, j: usize| if j <= i { g[i * s + j] } else { g[j * s + i] };
+        let norm: Vec<f64> = (0..s).map(|k| at(k, k)).collect();
+        assert_eq!(
+            norm.iter().map(|x| x.to_bits()).collect::<Vec<_>>(),
+            gram_diagonal(&flat, s, n)
+                .iter()
+                .map(|x| x.to_bits())
+                .collect::<Vec<_>>()
+        );
+        let (pivots, factor) = pivoted_cholesky(
+            &norm,
+            |_| true,
+            |p, _, _| (0..s).map(|i| at(i, p)).collect(),
+        );
+        let whole = ShapeBasis::from_factor(pivots, &factor, s).unwrap();
+        assert_eq!(found.shapes.len(), 9);
+        assert_eq!(found.shapes, whole.shapes);
+        let bits = |b: &ShapeBasis| {
+            b.coefficients
+                .iter()
+                .map(|c| c.to_bits())
+                .collect::<Vec<_>>()
+        };
+        assert_eq!(bits(&found), bits(&whole));
+        let q = found.shapes.len();
+        for (k, shape) in shapes.iter().enumerate() {
+            let c = &found.coefficients[k * q..(k + 1) * q];
+            let (mut err, mut norm) = (0.0f64, 0.0f64);
+            for (i, &x) in shape.iter().enumerate() {
+                let y: f64 = (0..q)
+                    .map(|j| c[j] * shapes[found.shapes[j]][i] as f64)
+                    .sum();
+                err += (y - x as f64).powi(2);
+                norm += (x as f64).powi(2);
+            }
+            assert!(err <= 1e-10 * norm, "shape {k}: {err} of {norm}");
+        }
+        // A sample where no shape is a combination of the others settles it: no basis.
+        let flat: Vec<f32> = base[..6].iter().flatten().copied().collect();
+        assert!(ShapeBasis::find(&flat, 6).is_none());
     }
 
     #[test]
