@@ -26,6 +26,7 @@ from lgi.detail import check_detail_weight, estimate_detail_weight
 from lgi.errors import InputError
 from lgi.io import takes as take_files
 from lgi.io.atomic import atomic_path, writable_folder
+from lgi.io.settings import SolveSettings
 from lgi.io.topology import topology
 from lgi.model import Model, estimate_marker_noise
 
@@ -283,7 +284,15 @@ def solve_shot(
         from lgi.pipeline import write_solved
 
         topo = topology(m.dataset)
-        written = write_solved(kind, Path(dest), topo, res, m, fps=rate, start=start, quiet=True)
+        settings = SolveSettings.of(
+            has_jaw_rig=m.jaw_rig is not None,
+            jaw=opts.get("jaw", "auto"),
+            marker_noise=opts.get("marker_noise"),
+            detail_weight=opts.get("detail_weight"),
+        )
+        written = write_solved(
+            kind, Path(dest), topo, res, m, fps=rate, start=start, quiet=True, settings=settings
+        )
         return {
             "status": "done",
             "frames": frames,

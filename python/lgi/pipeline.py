@@ -28,6 +28,7 @@ from lgi.io.atomic import check_writable, existing_sequence, refuse_existing
 from lgi.io.frame import DATASET_NPZ, OutputFrame, output_frame
 from lgi.io.paths import output_file
 from lgi.io.result import Result, read_result_npz
+from lgi.io.settings import SolveSettings
 from lgi.io.sink import FrameSink
 from lgi.io.topology import Topology, topology
 from lgi.model import Model, estimate_marker_noise
@@ -258,14 +259,26 @@ def write_output(
     markers: np.ndarray | None = None,
     frame: OutputFrame | None = None,
     quiet: bool = False,
+    settings: SolveSettings | None = None,
 ) -> Path:
     """Writes solved frames as `kind` (`output_kind`) to `out`, `CHUNK_FRAMES` at a time with
     a progress bar (the head transform, when known, beside them in a USD cache; the take's
-    `markers` in an npz); returns the path written (`NAME.NNNN.obj` for a sequence). Nothing
-    is left at `out` if it fails or is interrupted."""
+    `markers` and the `settings` it was solved with in an npz, the settings in a USD cache);
+    returns the path written (`NAME.NNNN.obj` for a sequence). Nothing is left at `out` if it
+    fails or is interrupted."""
     from tqdm import tqdm
 
-    sink = FrameSink(kind, out, topo, names=names, fps=fps, start=start, units=units, frame=frame)
+    sink = FrameSink(
+        kind,
+        out,
+        topo,
+        names=names,
+        fps=fps,
+        start=start,
+        units=units,
+        frame=frame,
+        settings=settings,
+    )
     n = vertices.shape[0]
     try:
         with tqdm(
@@ -301,6 +314,7 @@ def write_solved(
     markers: np.ndarray | None = None,
     frame: OutputFrame | None = None,
     quiet: bool = False,
+    settings: SolveSettings | None = None,
 ) -> Path:
     """`write_output` of a whole `SolveResult` of model `m` (its marker names and unit)."""
     return write_output(
@@ -319,6 +333,7 @@ def write_solved(
         markers=markers,
         frame=frame,
         quiet=quiet,
+        settings=settings,
     )
 
 
@@ -380,6 +395,8 @@ def describe(
                 f"  mesh: {r.vertices.shape[1]} vertices, {r.topology.num_faces} faces",
                 f"  markers: {len(r.marker_names)}",
                 f"  units: {r.units or 'not given'}",
+                "  solved with: "
+                + (r.settings.describe(r.units) if r.settings is not None else "not recorded"),
                 *(
                     f"  {line}"
                     for line in summary(
@@ -431,6 +448,10 @@ def describe(
                 counts = mesh.GetFaceVertexCountsAttr().Get()
                 samples = mesh.GetPointsAttr().GetNumTimeSamples()
                 lines.append(f"  mesh {prim.GetPath()}: {len(counts)} faces, {samples} samples")
+                solve = prim.GetAttribute("lgi:solveSettings")
+                if solve and solve.Get():
+                    s = SolveSettings.from_json(str(solve.Get()), f"{path}: lgi:solveSettings")
+                    lines.append(f"    solved with: {s.describe(None)}")
         return lines
     raise InputError(
         f"{path}: unknown file kind {suffix or '(no suffix)'!r}; lgi info reads .lgi models, "
@@ -479,9 +500,10 @@ def _write_solve_report(
     fps: float | None,
     start: int,
     source: Path,
+    settings: SolveSettings | None = None,
 ) -> None:
     """`lgi solve --report`: `lgi report`'s page of the solve just made, from memory, with
-    the findings the summary printed."""
+    the findings the summary printed and the settings it was solved with."""
     from lgi.io.atomic import atomic_path
     from lgi.io.result import Result
     from lgi.report import render_report
@@ -497,6 +519,7 @@ def _write_solve_report(
         topology=topo,
         jaw_theta=res.jaw_theta,
         markers=np.asarray(markers, dtype=np.float32),
+        settings=settings,
     )
     lines = [f.describe(start, m.units) for f in found]
     with atomic_path(page) as tmp:
@@ -712,6 +735,9 @@ def solve_file(
     sigma = marker_noise(noise, x, m)
     jaw_mode = None if m.jaw_rig is None or jaw == "rest" else jaw
     weight = detail_weight(detail, x, m, sigma, jaw_mode)
+    settings = SolveSettings.of(
+        has_jaw_rig=m.jaw_rig is not None, jaw=jaw, marker_noise=sigma, detail_weight=weight
+    )
     missing = np.isnan(x).any(axis=2)
     say(
         f"{x.shape[0]} frames of {x.shape[1]} markers "
@@ -740,17 +766,28 @@ def solve_file(
             markers=x,
             frame=frame,
             quiet=quiet,
+            settings=settings,
         )
         found = _say_findings(say, res.bundle_residuals, res.missing, x, res.vertices[0], m, start)
         if page is not None:
-            _write_solve_report(page, res, m, topo, x, found, fps=rate, start=start, source=dest)
+            _write_solve_report(
+                page, res, m, topo, x, found, fps=rate, start=start, source=dest, settings=settings
+            )
             say(f"wrote the report {page}")
         return written, int(x.shape[0])
     from tqdm import tqdm
 
     n, size = int(x.shape[0]), int(chunk)
     sink = FrameSink(
-        kind, dest, topo, names=m.marker_names, fps=rate, start=start, units=m.units, frame=frame
+        kind,
+        dest,
+        topo,
+        names=m.marker_names,
+        fps=rate,
+        start=start,
+        units=m.units,
+        frame=frame,
+        settings=settings,
     )
     buf = np.empty((min(size, n), m.num_vertices, 3))
     # Each chunk continues the temporal solve from the last frame of the one before
@@ -839,6 +876,7 @@ def export_file(
         markers=None if r.markers is None else r.markers[rng],
         frame=frame,
         quiet=quiet,
+        settings=r.settings,
     )
     return written, int(r.vertices[rng].shape[0])
 

@@ -395,6 +395,13 @@ def render_report(
         f"{solved.topology.num_faces} faces</td></tr>",
         f"<tr><th>markers</th><td>{nb}</td></tr>",
         f"<tr><th>units</th><td>{esc(u or 'not given')}</td></tr>",
+        "<tr><th>solved with</th><td>"
+        + esc(
+            solved.settings.describe(u)
+            if solved.settings is not None
+            else "not recorded (a file written before lgi kept it, or not by lgi solve)"
+        )
+        + "</td></tr>",
         f"<tr><th>missing samples</th><td>{int(solved.missing.sum())} of {nf * nb} "
         f"({100 * solved.missing.mean():.2f} %)</td></tr>",
         f"<tr><th>residual median / 95th percentile / max</th><td>{_fmt(med, u)} / "

@@ -18,6 +18,7 @@ from numpy.typing import NDArray
 from lgi.errors import InputError
 from lgi.io.atomic import atomic_path
 from lgi.io.paths import output_file
+from lgi.io.settings import SolveSettings
 from lgi.io.topology import Topology, vertex_frames
 
 F64 = NDArray[np.float64]
@@ -52,6 +53,7 @@ RESULT_NPZ_KEYS = (
     "uv_indices",
     "jaw_theta",
     "markers",
+    "solve_settings",
 )
 """Arrays of a solved take `.npz` (`write_result_npz`): `vertices` (F, V, 3) float32,
 `bundle_residuals` (F, B) float, `missing` (F, B) bool, `marker_names` (B,) str, `fps` (NaN
@@ -59,7 +61,10 @@ when unknown), `start` (time code of the first frame), `units` ('' when unknown)
 (`face_counts`, `face_indices`, and `uvs`/`uv_indices`, empty without UVs), and `jaw_theta`
 (F, 3; absent without a jaw), and `markers` (F, B, 3) float32, the take's marker positions
 in the model's units, NaN where missing (absent in files written before it was kept; `lgi
-view` draws them)."""
+view` draws them), and `solve_settings`, how the take was solved (`SolveSettings` as JSON
+text; absent in files written before it was kept)."""
+
+_OPTIONAL_KEYS = ("jaw_theta", "markers", "solve_settings")
 
 
 @dataclass(frozen=True)
@@ -76,6 +81,7 @@ class Result:
     topology: Topology
     jaw_theta: F64 | None = None
     markers: NDArray[np.float32] | None = None
+    settings: SolveSettings | None = None
 
 
 def write_result_npz(
@@ -91,6 +97,7 @@ def write_result_npz(
     units: str | None = None,
     jaw_theta: Any | None = None,
     markers: Any | None = None,
+    settings: SolveSettings | None = None,
 ) -> Path:
     """Writes a solved take (`RESULT_NPZ_KEYS`) that `read_result_npz` and `lgi export` read."""
     p = output_file(path, "npz output")
@@ -118,6 +125,8 @@ def write_result_npz(
                 f"{len(marker_names)}, 3), got {mk.shape}"
             )
         arrays["markers"] = mk
+    if settings is not None:
+        arrays["solve_settings"] = np.str_(settings.to_json())
     # A file object: numpy would append '.npz' to another suffix.
     with atomic_path(p) as tmp, open(tmp, "wb") as fh:
         np.savez_compressed(fh, **arrays)
@@ -205,7 +214,7 @@ def _arrays(p: str, *, with_vertices: bool) -> dict[str, Any]:
         with np.load(p, allow_pickle=False) as z:
             if not isinstance(z, np.lib.npyio.NpzFile):  # pragma: no cover - .npy given
                 raise InputError(f"{p}: not an .npz archive")
-            absent = [k for k in RESULT_NPZ_KEYS[:-2] if k not in z.files]
+            absent = [k for k in RESULT_NPZ_KEYS if k not in _OPTIONAL_KEYS and k not in z.files]
             if absent:
                 raise InputError(
                     f"{p}: not a solved take (written by lgi solve -o *.npz): missing {absent}"
@@ -250,6 +259,11 @@ def _assemble(p: str, a: dict[str, Any], v: Any) -> Result:
         topology=topo,
         jaw_theta=a.get("jaw_theta"),
         markers=_markers(p, a.get("markers"), v.shape[0], len(a["marker_names"])),
+        settings=(
+            None
+            if "solve_settings" not in a
+            else SolveSettings.from_json(str(a["solve_settings"]), f"{p}: 'solve_settings'")
+        ),
     )
 
 

@@ -14,6 +14,7 @@ from lgi.io.frame import OutputFrame
 from lgi.io.obj import write_obj_sequence
 from lgi.io.pointcache import PointCache
 from lgi.io.result import write_result_npz
+from lgi.io.settings import SolveSettings
 from lgi.io.takes import HeadMotion
 from lgi.io.topology import Topology
 from lgi.io.usd import UsdCache
@@ -41,6 +42,7 @@ class FrameSink:
         start: int,
         units: str | None,
         frame: OutputFrame | None = None,
+        settings: SolveSettings | None = None,
     ) -> None:
         if frame is not None:
             frame.check_writer(kind, f"--out {out}")
@@ -49,6 +51,7 @@ class FrameSink:
             units = self.frame.units
         self.kind, self.out, self.topo, self.names = kind, out, topo, names
         self.fps, self.start, self.units = fps, start, units
+        self.settings = settings
         self.next = start
         self.usd: UsdCache | None = None
         self.cache: PointCache | None = None
@@ -62,7 +65,14 @@ class FrameSink:
                 raise InputError("a USD point cache needs a frame rate (--fps)")
             up = "y" if self.frame is None else self.frame.up
             self.usd = UsdCache(
-                out, topo, fps=fps, units=units, start=start, up=up, marker_names=names
+                out,
+                topo,
+                fps=fps,
+                units=units,
+                start=start,
+                up=up,
+                marker_names=names,
+                settings=settings,
             )
         self.parts: list[
             tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None, np.ndarray | None]
@@ -128,6 +138,7 @@ class FrameSink:
             units=self.units,
             jaw_theta=np.concatenate(jaws) if len(jaws) == len(self.parts) else None,
             markers=np.concatenate(marks) if len(marks) == len(self.parts) else None,
+            settings=self.settings,
         )
 
     def abort(self) -> None:

@@ -16,6 +16,7 @@ from lgi.errors import FileWriteError, InputError
 from lgi.io.atomic import temporary_beside
 from lgi.io.paths import output_file
 from lgi.io.result import Result
+from lgi.io.settings import SolveSettings
 from lgi.io.topology import Topology, topology, vertex_frames
 from lgi.io.units import METERS_PER_UNIT, normalize_unit
 
@@ -113,6 +114,7 @@ class UsdCache:
         start: int = 0,
         up: str = "y",
         marker_names: list[str] | None = None,
+        settings: SolveSettings | None = None,
     ) -> None:
         try:
             from pxr import Gf, Sdf, Usd, UsdGeom, Vt
@@ -147,6 +149,10 @@ class UsdCache:
             mesh.GetPrim().CreateAttribute(
                 "lgi:markerNames", Sdf.ValueTypeNames.StringArray, custom=True
             ).Set(Vt.StringArray(list(marker_names)))
+        if settings is not None:  # how the take was solved (read_usd_cache, lgi report)
+            mesh.GetPrim().CreateAttribute(
+                "lgi:solveSettings", Sdf.ValueTypeNames.String, custom=True
+            ).Set(settings.to_json())
         self._extent = mesh.CreateExtentAttr()
         self._jaw = None
         self._residual = None
@@ -292,6 +298,12 @@ def read_usd_cache(path: str | os.PathLike[str]) -> Result:
         if jaw_attr and jaw_attr.GetTimeSamples()
         else None
     )
+    settings_attr = prim.GetAttribute("lgi:solveSettings")
+    settings = (
+        SolveSettings.from_json(str(settings_attr.Get()), f"{p}: lgi:solveSettings")
+        if settings_attr and settings_attr.Get()
+        else None
+    )
     mpu = UsdGeom.GetStageMetersPerUnit(stage)
     units = next((u for u, m in METERS_PER_UNIT.items() if abs(m - mpu) <= 1e-9 * m), None)
     if not stage.HasAuthoredMetadata("metersPerUnit"):
@@ -306,6 +318,7 @@ def read_usd_cache(path: str | os.PathLike[str]) -> Result:
         units=units,
         topology=Topology(vertices.shape[1], counts, indices, uvs, uv_idx),
         jaw_theta=jaw,
+        settings=settings,
     )
 
 

@@ -1,0 +1,107 @@
+"""How a take was solved, kept with what was written (`SolveSettings`): the marker noise, the
+jaw pose and the detail weight `lgi solve` used, and lgi's version. A solved `.npz` holds it as
+the JSON text `solve_settings`, a USD cache as the mesh's `lgi:solveSettings`; `lgi report`
+and `lgi info` show it, so a result says how it was made without its command line."""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass
+from typing import Any
+
+from lgi.errors import InputError
+
+__all__ = ["SolveSettings"]
+
+
+@dataclass(frozen=True)
+class SolveSettings:
+    """`marker_noise`: sigma per coordinate in the model's units (None: the exact
+    interpolation); `jaw`: the jaw pose mode ('fit', 'track', ...; None without a jaw rig);
+    `detail_weight`: the weight in [0, 1] (None: all of the dataset's detail); `version`:
+    lgi's version that solved."""
+
+    marker_noise: float | None
+    jaw: str | None
+    detail_weight: float | None
+    version: str
+
+    @staticmethod
+    def of(
+        *,
+        has_jaw_rig: bool,
+        jaw: object,
+        marker_noise: float | None,
+        detail_weight: float | None,
+    ) -> SolveSettings:
+        """The settings of a `Model.solve` call: `jaw` as passed (a pose array is recorded as
+        'given'; None for a model without a jaw rig), this lgi's version."""
+        from lgi._lgi import __version__
+
+        mode = None if not has_jaw_rig else jaw if isinstance(jaw, str) or jaw is None else "given"
+        return SolveSettings(
+            marker_noise=None if marker_noise is None else float(marker_noise),
+            jaw=mode,
+            detail_weight=None if detail_weight is None else float(detail_weight),
+            version=__version__,
+        )
+
+    def to_json(self) -> str:
+        return json.dumps(
+            {
+                "marker_noise": self.marker_noise,
+                "jaw": self.jaw,
+                "detail_weight": self.detail_weight,
+                "version": self.version,
+            },
+            sort_keys=True,
+        )
+
+    @staticmethod
+    def from_json(text: str, where: str) -> SolveSettings:
+        """The settings of `text`; `InputError` naming `where` (file and key) for anything but
+        what `to_json` writes."""
+        try:
+            d: Any = json.loads(text)
+        except ValueError:
+            raise InputError(f"{where}: not the JSON text lgi writes: {text[:60]!r}") from None
+        if not isinstance(d, dict) or set(d) != {"marker_noise", "jaw", "detail_weight", "version"}:
+            raise InputError(
+                f"{where}: expected the keys marker_noise, jaw, detail_weight and version"
+            )
+
+        def number(key: str) -> float | None:
+            x = d[key]
+            if x is None:
+                return None
+            if isinstance(x, bool) or not isinstance(x, int | float) or not math.isfinite(x):
+                raise InputError(f"{where}: {key} must be a finite number or null, got {x!r}")
+            return float(x)
+
+        for key in ("jaw", "version"):
+            if d[key] is not None and not isinstance(d[key], str):
+                raise InputError(f"{where}: {key} must be text or null, got {d[key]!r}")
+        return SolveSettings(
+            marker_noise=number("marker_noise"),
+            jaw=d["jaw"],
+            detail_weight=number("detail_weight"),
+            version=str(d["version"] or ""),
+        )
+
+    def describe(self, units: str | None) -> str:
+        """One line, e.g. 'marker noise 0.05 cm, jaw pose from the fit, detail weight 0.470
+        (lgi 0.1.0)'."""
+        unit = f" {units}" if units else ""
+        noise = (
+            "no marker noise (every marker interpolated as given)"
+            if self.marker_noise is None
+            else f"marker noise {self.marker_noise:.4g}{unit} per coordinate"
+        )
+        jaw = "no jaw rig" if self.jaw is None else f"jaw pose '{self.jaw}'"
+        detail = (
+            "all of the dataset's detail"
+            if self.detail_weight is None
+            else f"detail weight {self.detail_weight:.3f}"
+        )
+        return f"{noise}, {jaw}, {detail} (lgi {self.version or 'version unknown'})"

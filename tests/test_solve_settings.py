@@ -1,0 +1,150 @@
+"""How a take was solved travels with the result: `lgi solve` records its marker noise, jaw pose
+and detail weight (`SolveSettings`) in the solved `.npz` and the USD cache, `lgi export` carries
+them on, and `lgi info` / `lgi report` show them."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import lgi
+from lgi.errors import InputError
+from lgi.io.result import read_result_npz, write_result_npz
+from lgi.io.settings import SolveSettings
+from lgi.io.topology import topology
+
+
+@pytest.fixture(scope="module")
+def files(sample, tmp_path_factory):  # type: ignore[no-untyped-def]
+    from lgi import cli
+    from pipeline_files import write_actor, write_c3d
+
+    tmp = tmp_path_factory.mktemp("settings")
+    actor = write_actor(tmp, sample, num_shapes=8)
+    model = tmp / "actor.lgi"
+    argv = ["build", actor.neutral, actor.shapes, actor.markers, "-o", model, "--units", "cm"]
+    assert cli.main([str(a) for a in [*argv, "-q"]]) == 0
+    take = tmp / "take.c3d"
+    write_c3d(take, sample.performance[:12], actor.names, fps=60.0, units="cm")
+    return model, take
+
+
+def test_settings_round_trip_as_json_and_describe_themselves() -> None:
+    s = SolveSettings(marker_noise=0.05, jaw="fit", detail_weight=0.47, version="9.9")
+    assert SolveSettings.from_json(s.to_json(), "x") == s
+    assert s.describe("cm") == (
+        "marker noise 0.05 cm per coordinate, jaw pose 'fit', detail weight 0.470 (lgi 9.9)"
+    )
+    plain = SolveSettings(marker_noise=None, jaw=None, detail_weight=None, version="9.9")
+    assert SolveSettings.from_json(plain.to_json(), "x") == plain
+    assert "no marker noise" in plain.describe(None)
+    assert "all of the dataset's detail" in plain.describe(None)
+
+
+@pytest.mark.parametrize(
+    ("text", "message"),
+    [
+        ("{not json", "not the JSON text lgi writes"),
+        ('{"marker_noise": 0.1}', "expected the keys"),
+        (
+            '{"marker_noise": "a lot", "jaw": null, "detail_weight": null, "version": "1"}',
+            "marker_noise must be a finite number or null, got 'a lot'",
+        ),
+        (
+            '{"marker_noise": null, "jaw": 3, "detail_weight": null, "version": "1"}',
+            "jaw must be text or null, got 3",
+        ),
+        (
+            '{"marker_noise": null, "jaw": null, "detail_weight": NaN, "version": "1"}',
+            "detail_weight must be a finite number or null",
+        ),
+    ],
+)
+def test_damaged_settings_are_refused_naming_the_file_and_key(text: str, message: str) -> None:
+    with pytest.raises(InputError, match=r"f\.npz: 'solve_settings'") as e:
+        SolveSettings.from_json(text, "f.npz: 'solve_settings'")
+    assert message in str(e.value)
+
+
+def test_lgi_solve_records_its_settings_in_the_npz_and_info_and_report_show_them(
+    files, tmp_path: Path, capsys
+) -> None:  # type: ignore[no-untyped-def]
+    from lgi import cli
+
+    model, take = files
+    out = tmp_path / "o.npz"
+    argv = ["solve", model, take, "-o", out, "--marker-noise", "0.03", "--detail-weight", "0.4"]
+    assert cli.main([str(a) for a in [*argv, "-q"]]) == 0
+    got = read_result_npz(out).settings
+    has_jaw = lgi.Model.load(model).jaw_rig is not None
+    assert got == SolveSettings(
+        marker_noise=0.03,
+        jaw="auto" if has_jaw else None,
+        detail_weight=0.4,
+        version=lgi.__version__,
+    )
+    capsys.readouterr()
+    assert cli.main(["info", str(out)]) == 0
+    assert "solved with: marker noise 0.03 cm per coordinate" in capsys.readouterr().out
+    page = tmp_path / "r.html"
+    assert cli.main(["report", str(out), "-o", str(page)]) == 0
+    assert "detail weight 0.400" in page.read_text(encoding="utf-8")
+    # Without the options: the exact interpolation and all the detail, recorded as such.
+    plain = tmp_path / "p.npz"
+    assert cli.main(["solve", str(model), str(take), "-o", str(plain), "-q"]) == 0
+    s = read_result_npz(plain).settings
+    assert s is not None and s.marker_noise is None and s.detail_weight is None
+
+
+def test_the_usd_cache_keeps_the_settings_and_export_carries_them_on(files, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
+    from pxr import Usd
+
+    from lgi import cli
+    from lgi.io.usd import read_usd_cache
+
+    model, take = files
+    npz = tmp_path / "o.npz"
+    argv = ["solve", model, take, "-o", npz, "--detail-weight", "0.25", "-q"]
+    assert cli.main([str(a) for a in argv]) == 0
+    usd = tmp_path / "o.usda"
+    assert cli.main(["export", str(npz), "-o", str(usd), "-q"]) == 0
+    stage = Usd.Stage.Open(str(usd))
+    attr = stage.GetPrimAtPath("/Face/Mesh").GetAttribute("lgi:solveSettings")
+    assert json.loads(attr.Get())["detail_weight"] == 0.25
+    assert read_usd_cache(usd).settings == read_result_npz(npz).settings
+    direct = tmp_path / "d.usdc"
+    argv = ["solve", model, take, "-o", direct, "--detail-weight", "0.25", "-q"]
+    assert cli.main([str(a) for a in argv]) == 0
+    assert read_usd_cache(direct).settings == read_result_npz(npz).settings
+
+
+def test_a_result_written_before_settings_were_kept_reads_and_reports_not_recorded(
+    sample_dataset, tmp_path: Path
+) -> None:  # type: ignore[no-untyped-def]
+    from lgi.report import render_report
+
+    topo = topology(sample_dataset)
+    f, b = 2, 5
+    path = write_result_npz(
+        tmp_path / "old.npz",
+        topo,
+        np.zeros((f, topo.num_vertices, 3)),
+        np.zeros((f, b)),
+        np.zeros((f, b), dtype=bool),
+        [f"m{i}" for i in range(b)],
+        fps=30.0,
+    )
+    solved = read_result_npz(path)
+    assert solved.settings is None
+    assert "not recorded" in render_report(solved, source=str(path))
+    # A damaged record is refused by the reader, naming the file and the key.
+    with np.load(path) as z:
+        arrays = {k: z[k] for k in z.files}
+    arrays["solve_settings"] = np.str_("{oops")
+    bad = tmp_path / "bad.npz"
+    np.savez_compressed(bad, **arrays)
+    with pytest.raises(InputError, match=r"bad.npz: 'solve_settings': not the JSON text"):
+        read_result_npz(bad)
