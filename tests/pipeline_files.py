@@ -88,6 +88,18 @@ def write_actor(folder: Path, sample, num_shapes: int | None = None) -> ActorFil
     return ActorFiles(neutral, shapes, markers, len(faces), counts, list(sample.marker_names))
 
 
+def build_actor(folder: Path, sample, num_shapes: int = 8) -> tuple[ActorFiles, Path]:  # type: ignore[no-untyped-def]
+    """`write_actor`'s files in `folder` and their model `folder/actor.lgi`, built in cm
+    through the CLI (`lgi build ... --units cm`)."""
+    from lgi import cli
+
+    actor = write_actor(folder, sample, num_shapes=num_shapes)
+    model = folder / "actor.lgi"
+    argv = ["build", actor.neutral, actor.shapes, actor.markers, "-o", model, "--units", "cm"]
+    assert cli.main([str(a) for a in [*argv, "-q"]]) == 0
+    return actor, model
+
+
 def write_c3d(
     path: Path,
     frames: NDArray[np.float64],

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from lgi import cli
-from pipeline_files import write_actor, write_c3d
+from pipeline_files import build_actor, write_c3d
 
 
 def run(capsys: pytest.CaptureFixture[str], *argv: str | Path) -> tuple[int, str]:
@@ -34,10 +34,7 @@ def assert_user_error(capsys: pytest.CaptureFixture[str], match: str, *argv: str
 def files(tmp_path_factory, sample):  # type: ignore[no-untyped-def]
     """A small actor on disk (8 shapes), its model built through the CLI, and takes."""
     d = tmp_path_factory.mktemp("cli")
-    actor = write_actor(d, sample, num_shapes=8)
-    model = d / "actor.lgi"
-    argv = ["build", actor.neutral, actor.shapes, actor.markers, "-o", model, "--units", "cm"]
-    assert cli.main([str(x) for x in [*argv, "-q"]]) == 0
+    actor, model = build_actor(d, sample)
     c3d = d / "take.c3d"
     write_c3d(c3d, np.asarray(sample.performance[:5]), actor.names, 30.0, "cm")
     csv = d / "take.csv"

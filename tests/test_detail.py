@@ -111,12 +111,9 @@ def test_cli_solve_reads_the_detail_weight_from_the_take_or_takes_a_number(
     tmp_path: Path, sample, capsys
 ) -> None:  # type: ignore[no-untyped-def]
     from lgi import cli
-    from pipeline_files import write_actor, write_c3d
+    from pipeline_files import build_actor, write_c3d
 
-    actor = write_actor(tmp_path, sample, num_shapes=8)
-    model = tmp_path / "actor.lgi"
-    argv = ["build", actor.neutral, actor.shapes, actor.markers, "-o", model, "--units", "cm"]
-    assert cli.main([str(a) for a in [*argv, "-q"]]) == 0
+    actor, model = build_actor(tmp_path, sample)
     take = tmp_path / "take.c3d"
     write_c3d(take, sample.performance[:20], actor.names, fps=60.0, units="cm")
     out = tmp_path / "o.npz"

@@ -20,7 +20,7 @@ from lgi import cli
 from lgi.interrupt import deferred_interrupt
 from lgi.io import sink as sink_module
 from lgi.io.result import read_result_npz
-from pipeline_files import write_actor, write_c3d
+from pipeline_files import build_actor, write_c3d
 
 FRAMES = 120  # > 2 chunks of pipeline.CHUNK_FRAMES, so a write can be stopped mid-way
 
@@ -28,10 +28,7 @@ FRAMES = 120  # > 2 chunks of pipeline.CHUNK_FRAMES, so a write can be stopped m
 @pytest.fixture(scope="module")
 def files(tmp_path_factory, sample):  # type: ignore[no-untyped-def]
     d = tmp_path_factory.mktemp("outputs")
-    actor = write_actor(d, sample, num_shapes=8)
-    model = d / "actor.lgi"
-    argv = ["build", actor.neutral, actor.shapes, actor.markers, "-o", model, "--units", "cm"]
-    assert cli.main([str(x) for x in [*argv, "-q"]]) == 0
+    actor, model = build_actor(d, sample)
     take = d / "take.c3d"
     write_c3d(take, np.asarray(sample.performance[:FRAMES]), actor.names, 30.0, "cm")
     return {"model": model, "take": take}

@@ -15,7 +15,7 @@ from scipy.spatial.transform import Rotation
 from lgi import cli
 from lgi.errors import InputError
 from lgi.placement import SCALE_TOLERANCE, check_scale, take_scale
-from pipeline_files import write_actor, write_c3d
+from pipeline_files import build_actor, write_c3d
 
 
 def _posed(rest: np.ndarray, scale: float, seed: int, dropout: float) -> np.ndarray:
@@ -104,10 +104,7 @@ def test_the_tolerance_lies_between_real_faces_and_the_nearest_unit_mistake() ->
 @pytest.fixture(scope="module")
 def actor(tmp_path_factory, sample):  # type: ignore[no-untyped-def]
     d = tmp_path_factory.mktemp("placement")
-    a = write_actor(d, sample, num_shapes=8)
-    model = d / "actor.lgi"
-    argv = ["build", a.neutral, a.shapes, a.markers, "-o", model, "--units", "cm", "-q"]
-    assert cli.main([str(x) for x in argv]) == 0
+    a, model = build_actor(d, sample)
     return d, a, model
 
 

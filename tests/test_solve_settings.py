@@ -19,14 +19,10 @@ from lgi.io.topology import topology
 
 @pytest.fixture(scope="module")
 def files(sample, tmp_path_factory):  # type: ignore[no-untyped-def]
-    from lgi import cli
-    from pipeline_files import write_actor, write_c3d
+    from pipeline_files import build_actor, write_c3d
 
     tmp = tmp_path_factory.mktemp("settings")
-    actor = write_actor(tmp, sample, num_shapes=8)
-    model = tmp / "actor.lgi"
-    argv = ["build", actor.neutral, actor.shapes, actor.markers, "-o", model, "--units", "cm"]
-    assert cli.main([str(a) for a in [*argv, "-q"]]) == 0
+    actor, model = build_actor(tmp, sample)
     take = tmp / "take.c3d"
     write_c3d(take, sample.performance[:12], actor.names, fps=60.0, units="cm")
     return model, take
