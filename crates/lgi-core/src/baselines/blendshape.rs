@@ -40,6 +40,16 @@ pub struct BlendshapeSolver {
 
 const MAX_ITERATIONS: usize = 100;
 
+/// What the Newton iteration asks of a frame's normal equations (dense or low-rank): the
+/// minimiser of a quadratic piece, the line search's products, the objective, and word of
+/// each damped step (`BlendshapeSolver::newton`).
+struct Steps<Pc, Pr, Ob, St> {
+    piece: Pc,
+    products: Pr,
+    objective: Ob,
+    stepped: St,
+}
+
 impl BlendshapeSolver {
     /// `a` is row-major `rows × shapes`; `l2` and `penalty` are absolute, non-negative.
     pub fn new(a: Vec<f64>, rows: usize, shapes: usize, l2: f64, penalty: f64) -> Result<Self> {
@@ -195,13 +205,22 @@ impl BlendshapeSolver {
                     &atr,
                     &along,
                     start,
-                    |clamped, rhs, _| {
-                        frame
-                            .borrow_mut()
-                            .piece(clamped, rhs, self.l2, self.penalty)
+                    Steps {
+                        piece: |clamped: &[bool], rhs: &[f64], _| {
+                            frame
+                                .borrow_mut()
+                                .piece(clamped, rhs, self.l2, self.penalty)
+                        },
+                        products: |cand: &[f64], w: &[f64], d: &[f64]| {
+                            frame.borrow_mut().products(cand, w, d)
+                        },
+                        objective: |w: &[f64]| {
+                            frame.borrow_mut().data_term(w, &atr) + self.box_terms(w)
+                        },
+                        stepped: |from: &[f64], cand: &[f64], alpha, to: &[f64]| {
+                            frame.borrow_mut().stepped(from, cand, alpha, to)
+                        },
                     },
-                    |d, w| frame.borrow_mut().products(d, w),
-                    |w| frame.borrow_mut().data_term(w, &atr) + self.box_terms(w),
                 )
             }
             None => self.solve_dense(target, &along, start),
@@ -254,7 +273,7 @@ impl BlendshapeSolver {
             Ok(cholesky_solve(s, &cholesky(s, h)?, rhs))
         };
         // The data term's slope parts, (A d)·(A w − t) + d·Aᵀt and (A d)·(A d), from A's rows.
-        let products = |d: &[f64], w: &[f64]| -> (f64, f64) {
+        let products = |_: &[f64], w: &[f64], d: &[f64]| -> (f64, f64) {
             let (mut ad_aw, mut ad_ad) = (0.0, 0.0);
             for (r, _) in target.iter().enumerate().filter(|(_, t)| !t.is_nan()) {
                 let row = &self.a[r * s..(r + 1) * s];
@@ -265,15 +284,24 @@ impl BlendshapeSolver {
             }
             (ad_aw, ad_ad)
         };
-        self.newton(&atr, along, start, piece, products, |w| {
-            self.objective(w, target)
-        })
+        self.newton(
+            &atr,
+            along,
+            start,
+            Steps {
+                piece,
+                products,
+                objective: |w: &[f64]| self.objective(w, target),
+                stepped: |_: &[f64], _: &[f64], _, _: &[f64]| {},
+            },
+        )
     }
 
-    /// The active-set Newton iteration on the frame's normal equations: `piece(clamped, rhs,
+    /// The active-set Newton iteration on the frame's normal equations ([`Steps`]): `piece(clamped, rhs,
     /// first)` minimises the quadratic piece where `clamped` weights are out of the box,
-    /// `products(d, w)` gives `(dᵀ G w, dᵀ G d)` with G the data term's Hessian / 2, and
-    /// `objective(w)` the whole objective; `atr` is Aᵀt. The solution's piece also solves
+    /// `products(cand, w, d)` gives `(dᵀ G w, dᵀ G d)` for `d = cand − w` with G the data
+    /// term's Hessian / 2, `objective(w)` the whole objective, and `stepped(w, cand, α, to)`
+    /// hears of each damped step `to = w + α (cand − w)`; `atr` is Aᵀt. The solution's piece also solves
     /// for the right-hand sides `along` (the derivatives of [`solve_with_derivatives`]).
     ///
     /// [`solve_with_derivatives`]: Self::solve_with_derivatives
@@ -282,10 +310,19 @@ impl BlendshapeSolver {
         atr: &[f64],
         along: &[Vec<f64>],
         start: Option<&[f64]>,
-        mut piece: impl FnMut(&[bool], &[f64], bool) -> Result<Vec<f64>>,
-        products: impl Fn(&[f64], &[f64]) -> (f64, f64),
-        objective: impl Fn(&[f64]) -> f64,
+        steps: Steps<
+            impl FnMut(&[bool], &[f64], bool) -> Result<Vec<f64>>,
+            impl Fn(&[f64], &[f64], &[f64]) -> (f64, f64),
+            impl Fn(&[f64]) -> f64,
+            impl Fn(&[f64], &[f64], f64, &[f64]),
+        >,
     ) -> Result<(BlendshapeSolution, Vec<Vec<f64>>)> {
+        let Steps {
+            mut piece,
+            products,
+            objective,
+            stepped,
+        } = steps;
         let s = self.shapes;
         let sides =
             |v: &[f64]| -> Vec<(bool, bool)> { v.iter().map(|&x| (x < 0.0, x > 1.0)).collect() };
@@ -338,7 +375,7 @@ impl BlendshapeSolver {
             let d: Vec<f64> = cand.iter().zip(&w).map(|(c, x)| c - x).collect();
             // The slope d·∇f(w + αd): the data term's part is linear in α, from (A d)·(A w − t)
             // and (A d)·(A d) once per iteration; the ridge and box terms are per weight.
-            let (d_gw, ad_ad) = products(&d, &w);
+            let (d_gw, ad_ad) = products(&cand, &w, &d);
             let ad_r = d_gw - d.iter().zip(atr).map(|(a, b)| a * b).sum::<f64>();
             let slope = |alpha: f64| -> f64 {
                 let box_terms: f64 = w
@@ -375,7 +412,9 @@ impl BlendshapeSolver {
                 }
                 (lo, slo) = (hi, shi);
             }
-            w = w.iter().zip(&d).map(|(x, dx)| x + alpha * dx).collect();
+            let moved: Vec<f64> = w.iter().zip(&d).map(|(x, dx)| x + alpha * dx).collect();
+            stepped(&w, &cand, alpha, &moved);
+            w = moved;
             let fw = objective(&w);
             if fw >= f && alpha == 0.0 {
                 return Err(LgiError::Input(

@@ -471,6 +471,18 @@ impl Frame<'_> {
         Ok(cand)
     }
 
+    /// A damped step `to = from + α (cand − from)`: `Wᵀ to` from the two remembered ends
+    /// (no pass over the S shapes).
+    pub(super) fn stepped(&mut self, from: &[f64], cand: &[f64], alpha: f64, to: &[f64]) {
+        let (v, vc) = (self.project(from), self.project(cand));
+        let vt = v
+            .iter()
+            .zip(&vc)
+            .map(|(a, c)| a + alpha * (c - a))
+            .collect();
+        self.remember(to.to_vec(), vt);
+    }
+
     /// Keeps `Wᵀ w` of a recent `w` (the last two).
     fn remember(&mut self, w: Vec<f64>, v: Vec<f64>) {
         self.known.insert(0, (w, v));
@@ -487,9 +499,12 @@ impl Frame<'_> {
         v
     }
 
-    /// `(dᵀ G w, dᵀ G d)` with G the frame's `A_pᵀ A_p`.
-    pub(super) fn products(&mut self, d: &[f64], w: &[f64]) -> (f64, f64) {
-        let (u, v) = (wt_times(&self.w, self.rank, d), self.project(w));
+    /// `(dᵀ G w, dᵀ G d)` for `d = cand − w` with G the frame's `A_pᵀ A_p` (`Wᵀ d` from the
+    /// remembered `Wᵀ cand − Wᵀ w`).
+    pub(super) fn products(&mut self, cand: &[f64], w: &[f64], _d: &[f64]) -> (f64, f64) {
+        let v = self.project(w);
+        let vc = self.project(cand);
+        let u: Vec<f64> = vc.iter().zip(&v).map(|(a, b)| a - b).collect();
         let ku = self.k_times(&u);
         let dot = |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(x, y)| x * y).sum::<f64>();
         (dot(&ku, &v), dot(&ku, &u))
