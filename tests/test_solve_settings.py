@@ -95,7 +95,9 @@ def test_lgi_solve_records_its_settings_in_the_npz_and_info_and_report_show_them
     assert s is not None and s.marker_noise is None and s.detail_weight is None
 
 
-def test_the_usd_cache_keeps_the_settings_and_export_carries_them_on(files, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
+def test_the_usd_cache_keeps_the_settings_and_export_carries_them_on(
+    files, tmp_path: Path, capsys
+) -> None:  # type: ignore[no-untyped-def]
     from pxr import Usd
 
     from lgi import cli
@@ -115,6 +117,13 @@ def test_the_usd_cache_keeps_the_settings_and_export_carries_them_on(files, tmp_
     argv = ["solve", model, take, "-o", direct, "--detail-weight", "0.25", "-q"]
     assert cli.main([str(a) for a in argv]) == 0
     assert read_usd_cache(direct).settings == read_result_npz(npz).settings
+    # `lgi info` on a USD cache names the noise in the stage's unit.
+    noisy = tmp_path / "n.usda"
+    argv = ["solve", model, take, "-o", noisy, "--marker-noise", "0.02", "-q"]
+    assert cli.main([str(a) for a in argv]) == 0
+    capsys.readouterr()
+    assert cli.main(["info", str(noisy)]) == 0
+    assert "solved with: marker noise 0.02 cm per coordinate" in capsys.readouterr().out
 
 
 def test_a_result_written_before_settings_were_kept_reads_and_reports_not_recorded(

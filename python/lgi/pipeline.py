@@ -450,8 +450,10 @@ def describe(
                 lines.append(f"  mesh {prim.GetPath()}: {len(counts)} faces, {samples} samples")
                 solve = prim.GetAttribute("lgi:solveSettings")
                 if solve and solve.Get():
+                    from lgi.io.usd import stage_units
+
                     s = SolveSettings.from_json(str(solve.Get()), f"{path}: lgi:solveSettings")
-                    lines.append(f"    solved with: {s.describe(None)}")
+                    lines.append(f"    solved with: {s.describe(stage_units(stage))}")
         return lines
     raise InputError(
         f"{path}: unknown file kind {suffix or '(no suffix)'!r}; lgi info reads .lgi models, "

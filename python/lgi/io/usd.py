@@ -250,6 +250,17 @@ class UsdCache:
             self.discard()
 
 
+def stage_units(stage: Any) -> str | None:
+    """The unit name of a USD stage's authored `metersPerUnit` ('cm', 'mm', ...), None when it
+    is not authored or names no unit lgi knows."""
+    from pxr import UsdGeom
+
+    if not stage.HasAuthoredMetadata("metersPerUnit"):
+        return None
+    mpu = UsdGeom.GetStageMetersPerUnit(stage)
+    return next((u for u, m in METERS_PER_UNIT.items() if abs(m - mpu) <= 1e-9 * m), None)
+
+
 def read_usd_cache(path: str | os.PathLike[str]) -> Result:
     """A USD point cache `lgi solve` wrote, as a solved take (`lgi report`, `lgi view`): the
     mesh's time-sampled points, faces and UVs, `lgi:markerResidual` (which it must have),
@@ -304,10 +315,7 @@ def read_usd_cache(path: str | os.PathLike[str]) -> Result:
         if settings_attr and settings_attr.Get()
         else None
     )
-    mpu = UsdGeom.GetStageMetersPerUnit(stage)
-    units = next((u for u, m in METERS_PER_UNIT.items() if abs(m - mpu) <= 1e-9 * m), None)
-    if not stage.HasAuthoredMetadata("metersPerUnit"):
-        units = None
+    units = stage_units(stage)
     return Result(
         vertices=vertices,
         bundle_residuals=residuals,
