@@ -9,7 +9,7 @@
 //! `w = D⁻¹ (b − W y)` with `(I + K Wᵀ D⁻¹ W) y = K Wᵀ D⁻¹ b`.
 
 use crate::error::Result;
-use crate::linalg::{cholesky, cholesky_solve, Lu};
+use crate::linalg::{cholesky, cholesky_solve, dot_rows, Lu};
 use std::borrow::Cow;
 
 /// A rank below this fraction of the shape count takes the low-rank path (the dense path is
@@ -207,26 +207,17 @@ impl LowRank {
 }
 
 /// `W y` (S) of a row-major `S × r` matrix `w`: each entry one sum in order from −0.0 (as
-/// `Iterator::sum`), four rows side by side so that four independent sums run at once.
+/// `Iterator::sum`), eight rows side by side so that eight independent sums run at once.
 fn w_times(w: &[f64], r: usize, y: &[f64]) -> Vec<f64> {
+    const ROWS: usize = 8;
     let y = &y[..r];
     let mut out = Vec::with_capacity(w.len() / r.max(1));
-    let mut quads = w.chunks_exact(4 * r.max(1));
-    for quad in &mut quads {
-        let (a, rest) = quad.split_at(r);
-        let (b, rest) = rest.split_at(r);
-        let (c, e) = rest.split_at(r);
-        let mut s = [-0.0f64; 4];
-        for k in 0..r {
-            let yk = y[k];
-            s[0] += a[k] * yk;
-            s[1] += b[k] * yk;
-            s[2] += c[k] * yk;
-            s[3] += e[k] * yk;
-        }
-        out.extend_from_slice(&s);
+    let mut groups = w.chunks_exact(ROWS * r.max(1));
+    for group in &mut groups {
+        let rows: [&[f64]; ROWS] = std::array::from_fn(|l| &group[l * r..(l + 1) * r]);
+        out.extend_from_slice(&dot_rows(rows, y));
     }
-    for row in quads.remainder().chunks(r.max(1)) {
+    for row in groups.remainder().chunks(r.max(1)) {
         out.push(row.iter().zip(y).map(|(a, b)| a * b).sum());
     }
     out
