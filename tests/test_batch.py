@@ -203,6 +203,10 @@ def test_the_model_is_scattered_once_to_both_workers_and_every_task_uses_that_co
 
     many = {f"shot{k}": shots["sh040"] for k in range(4)}
     with Recording(client.scheduler.address) as rec:
+        # Both workers registered before the scatter, so that the broadcast reaches both (a
+        # worker that joins later fetches the model from a peer: right, but not what this
+        # test measures).
+        rec.wait_for_workers(2)
         result = batch.solve_shots(named_model, many, tmp_path, client=rec, quiet=True)
         models = [(f, kw) for f, kw in rec.scattered if f.type is lgi.Model]
         assert len(models) == 1 and models[0][1].get("broadcast") is True
