@@ -34,6 +34,12 @@ def test_settings_round_trip_as_json_and_describe_themselves() -> None:
     assert s.describe("cm") == (
         "marker noise 0.05 cm per coordinate, jaw pose 'fit', detail weight 0.470 (lgi 9.9)"
     )
+    # A model with a jaw rig solved with jaw=None is at the rest pose; a pose array is 'given'.
+    of = SolveSettings.of
+    assert of(has_jaw_rig=True, jaw=None, marker_noise=None, detail_weight=None).jaw == "rest"
+    given = of(has_jaw_rig=True, jaw=np.zeros((2, 3)), marker_noise=None, detail_weight=None)
+    assert given.jaw == "given"
+    assert of(has_jaw_rig=False, jaw="fit", marker_noise=None, detail_weight=None).jaw is None
     plain = SolveSettings(marker_noise=None, jaw=None, detail_weight=None, version="9.9")
     assert SolveSettings.from_json(plain.to_json(), "x") == plain
     assert "no marker noise" in plain.describe(None)

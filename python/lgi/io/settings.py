@@ -35,11 +35,17 @@ class SolveSettings:
         marker_noise: float | None,
         detail_weight: float | None,
     ) -> SolveSettings:
-        """The settings of a `Model.solve` call: `jaw` as passed (a pose array is recorded as
-        'given'; None for a model without a jaw rig), this lgi's version."""
+        """The settings of a `Model.solve` call: `jaw` as passed (None, the rest pose, is
+        recorded as 'rest' and a pose array as 'given'; None for a model without a jaw rig),
+        this lgi's version."""
         from lgi._lgi import __version__
 
-        mode = None if not has_jaw_rig else jaw if isinstance(jaw, str) or jaw is None else "given"
+        if not has_jaw_rig:
+            mode = None
+        elif jaw is None:
+            mode = "rest"
+        else:
+            mode = jaw if isinstance(jaw, str) else "given"
         return SolveSettings(
             marker_noise=None if marker_noise is None else float(marker_noise),
             jaw=mode,
