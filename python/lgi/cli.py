@@ -11,7 +11,7 @@ from __future__ import annotations
 import argparse
 import os
 import sys
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any, NoReturn
 
@@ -234,30 +234,31 @@ def _cmd_batch(args: argparse.Namespace) -> int:
     return 0
 
 
+def _number_auto_or_none(
+    text: str, number: Callable[[str], float], expected: str
+) -> float | str | None:
+    """A `lgi batch` option's value: 'auto' (per take), 'none' (None) or `number(text)`; an
+    ArgumentTypeError saying `expected` otherwise."""
+    if text in ("auto", "none"):
+        return None if text == "none" else text
+    try:
+        return number(text)
+    except (argparse.ArgumentTypeError, lgi.InputError):
+        raise argparse.ArgumentTypeError(
+            f"expected {expected}, 'auto' or 'none', got {text!r}"
+        ) from None
+
+
 def _detail_weight_option(text: str) -> float | str | None:
     """`lgi batch --detail-weight`: a weight in [0, 1], 'auto' (per take) or 'none'."""
     from lgi.detail import check_detail_weight
 
-    if text in ("auto", "none"):
-        return None if text == "none" else text
-    try:
-        return check_detail_weight(text)
-    except lgi.InputError:
-        raise argparse.ArgumentTypeError(
-            f"expected a number in [0, 1], 'auto' or 'none', got {text!r}"
-        ) from None
+    return _number_auto_or_none(text, check_detail_weight, "a number in [0, 1]")
 
 
 def _marker_noise_option(text: str) -> float | str | None:
     """`lgi batch --marker-noise`: a sigma >= 0, 'auto' (per take) or 'none'."""
-    if text in ("auto", "none"):
-        return None if text == "none" else text
-    try:
-        return _non_negative(text)
-    except argparse.ArgumentTypeError:
-        raise argparse.ArgumentTypeError(
-            f"expected a number >= 0 (model units), 'auto' or 'none', got {text!r}"
-        ) from None
+    return _number_auto_or_none(text, _non_negative, "a number >= 0 (model units)")
 
 
 def _add_batch_command(sub: Any) -> None:

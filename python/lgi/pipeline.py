@@ -448,11 +448,10 @@ def describe(
                 counts = mesh.GetFaceVertexCountsAttr().Get()
                 samples = mesh.GetPointsAttr().GetNumTimeSamples()
                 lines.append(f"  mesh {prim.GetPath()}: {len(counts)} faces, {samples} samples")
-                solve = prim.GetAttribute("lgi:solveSettings")
-                if solve and solve.Get():
-                    from lgi.io.usd import stage_units
+                from lgi.io.usd import solve_settings, stage_units
 
-                    s = SolveSettings.from_json(str(solve.Get()), f"{path}: lgi:solveSettings")
+                s = solve_settings(prim, str(path))
+                if s is not None:
                     lines.append(f"    solved with: {s.describe(stage_units(stage))}")
         return lines
     raise InputError(

@@ -250,6 +250,15 @@ class UsdCache:
             self.discard()
 
 
+def solve_settings(prim: Any, path: str) -> SolveSettings | None:
+    """The `lgi:solveSettings` a mesh prim of a cache `lgi solve` wrote keeps (None when it has
+    none); `InputError` naming `path` for a damaged record."""
+    attr = prim.GetAttribute("lgi:solveSettings")
+    if not attr or not attr.Get():
+        return None
+    return SolveSettings.from_json(str(attr.Get()), f"{path}: lgi:solveSettings")
+
+
 def stage_units(stage: Any) -> str | None:
     """The unit name of a USD stage's authored `metersPerUnit` ('cm', 'mm', ...), None when it
     is not authored or names no unit lgi knows."""
@@ -309,13 +318,6 @@ def read_usd_cache(path: str | os.PathLike[str]) -> Result:
         if jaw_attr and jaw_attr.GetTimeSamples()
         else None
     )
-    settings_attr = prim.GetAttribute("lgi:solveSettings")
-    settings = (
-        SolveSettings.from_json(str(settings_attr.Get()), f"{p}: lgi:solveSettings")
-        if settings_attr and settings_attr.Get()
-        else None
-    )
-    units = stage_units(stage)
     return Result(
         vertices=vertices,
         bundle_residuals=residuals,
@@ -323,10 +325,10 @@ def read_usd_cache(path: str | os.PathLike[str]) -> Result:
         marker_names=names,
         fps=float(stage.GetTimeCodesPerSecond()),
         start=int(times[0]),
-        units=units,
+        units=stage_units(stage),
         topology=Topology(vertices.shape[1], counts, indices, uvs, uv_idx),
         jaw_theta=jaw,
-        settings=settings,
+        settings=solve_settings(prim, p),
     )
 
 
