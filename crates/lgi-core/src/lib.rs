@@ -68,7 +68,7 @@ pub use io::model_file::{
 pub use io::obj::{parse_obj, read_obj, read_obj_polygons, read_obj_positions, write_obj};
 
 // The jaw (Eq. 2) and the baselines.
-pub use baselines::{BlendshapeSolution, BlendshapeSolver, RbfInterpolator};
+pub use baselines::{BlendshapeSolution, BlendshapeSolver, FitStart, RbfInterpolator};
 pub use jaw::{validate_frame, JawBins, JawParams, JawRig, VertexMap, FRAME_TOLERANCE};
 
 // The stages of build and solve, public for the benches, for tests against brute force and

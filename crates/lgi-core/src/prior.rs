@@ -4,7 +4,7 @@
 //! and it is what noise-aware solving measures markers against: noise is independent from
 //! marker to marker, while what the dataset cannot explain is shared by neighbouring markers.
 
-use crate::baselines::BlendshapeSolver;
+use crate::baselines::{BlendshapeSolver, FitStart};
 use crate::error::{LgiError, Result};
 use crate::linalg::{cholesky, cholesky_solve, Lu};
 use glam::DVec3;
@@ -25,6 +25,9 @@ pub struct FrameFit {
     pub weights: Vec<f64>,
     /// Every bundle's position under the fitted weights (B).
     pub positions: Vec<DVec3>,
+    /// `positions − targets` (B, NaN where a target is missing; empty when not known): where
+    /// the fit of a nearby target starts ([`FitPrior::fit_from`]).
+    pub residual: Vec<DVec3>,
 }
 
 /// What a fit and its residual smoothing need of one set of bundle clouds.
@@ -99,15 +102,23 @@ impl FitPrior {
         self.fit_from(targets, None)
     }
 
-    /// [`fit`](Self::fit) started at `start` (a nearby fit's weights, e.g. the previous step
-    /// of the jaw refinement's): the same minimum in fewer steps.
+    /// [`fit`](Self::fit) started at `start` (a nearby fit, e.g. the previous step of the jaw
+    /// refinement's): at its residual's dual point where it has one, else at its weights; the
+    /// same minimum in fewer steps.
     pub fn fit_from(&self, targets: &[DVec3], start: Option<&FrameFit>) -> Result<FrameFit> {
         let b = self.rest.len();
         let mut rhs = Vec::with_capacity(3 * b);
         for (t, r) in targets.iter().zip(&self.rest) {
             rhs.extend_from_slice(&(*t - *r).to_array());
         }
-        let from = start.and_then(|f| f.weights.get(1..));
+        let residual: Option<Vec<f64>> = start
+            .filter(|f| f.residual.len() == b)
+            .map(|f| f.residual.iter().flat_map(|r| r.to_array()).collect());
+        let from = match (&residual, start.and_then(|f| f.weights.get(1..))) {
+            (Some(y), _) => FitStart::Residual(y),
+            (None, Some(w)) => FitStart::Weights(w),
+            (None, None) => FitStart::Cold,
+        };
         let (solution, _) = self.solver.solve_with_derivatives(&rhs, &[], from)?;
         let mut positions = self.rest.clone();
         for (k, &x) in solution.weights.iter().enumerate() {
@@ -123,7 +134,16 @@ impl FitPrior {
         let mut weights = Vec::with_capacity(solution.weights.len() + 1);
         weights.push(0.0);
         weights.extend_from_slice(&solution.weights);
-        Ok(FrameFit { weights, positions })
+        let residual = positions
+            .iter()
+            .zip(targets)
+            .map(|(p, t)| *p - *t)
+            .collect();
+        Ok(FrameFit {
+            weights,
+            positions,
+            residual,
+        })
     }
 
     /// What of `targets` (B, NaN rows missing) the shapes `active` (0-based shape indices)

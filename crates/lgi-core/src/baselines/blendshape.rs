@@ -40,6 +40,20 @@ pub struct BlendshapeSolver {
 
 const MAX_ITERATIONS: usize = 100;
 
+/// Where a fit's iteration starts.
+#[derive(Debug, Clone, Copy, Default)]
+pub enum FitStart<'a> {
+    /// Inside the box (the primal iteration), or at the dual's 0 where the fit has a dual form
+    /// (every weight at 0).
+    #[default]
+    Cold,
+    /// At these weights (S, e.g. a nearby target's solution): the primal iteration.
+    Weights(&'a [f64]),
+    /// At the dual point of this residual `A w − t` of a nearby fit (R values, NaN where
+    /// missing), where the fit has a dual form; else as [`Cold`](Self::Cold).
+    Residual(&'a [f64]),
+}
+
 /// What the Newton iteration asks of a frame's normal equations (dense or low-rank): the
 /// minimiser of a quadratic piece, the line search's products, the objective, and word of
 /// each damped step (`BlendshapeSolver::newton`).
@@ -145,20 +159,20 @@ impl BlendshapeSolver {
     /// Errors: wrong length or infinite targets, a singular system, or no convergence within
     /// 100 iterations ([`LgiError::Input`]).
     pub fn solve(&self, target: &[f64]) -> Result<BlendshapeSolution> {
-        Ok(self.solve_with_derivatives(target, &[], None)?.0)
+        Ok(self.solve_with_derivatives(target, &[], FitStart::Cold)?.0)
     }
 
     /// [`solve`](Self::solve), and for each of `directions` (R values each, a change of the
     /// target; rows missing from `target` are ignored) the change of the weights per unit of
     /// it, on the solution's piece (its clamped set held): the fit's derivative with respect
     /// to its target, for callers that optimise something of which the fit is a part.
-    /// `start` (S weights, e.g. a nearby target's solution) starts the iteration there
-    /// instead of inside the box: the same minimum in fewer steps.
+    /// `start` says where the iteration starts ([`FitStart`]): the same minimum, in fewer
+    /// steps from a nearby one.
     pub fn solve_with_derivatives(
         &self,
         target: &[f64],
         directions: &[Vec<f64>],
-        start: Option<&[f64]>,
+        start: FitStart<'_>,
     ) -> Result<(BlendshapeSolution, Vec<Vec<f64>>)> {
         let rows = self.rows;
         if target.len() != rows {
@@ -170,11 +184,19 @@ impl BlendshapeSolver {
         if target.iter().any(|t| t.is_infinite()) {
             return Err(LgiError::Input("target has an infinite value".into()));
         }
-        if start.is_some_and(|w| w.len() != self.shapes || w.iter().any(|x| !x.is_finite())) {
-            return Err(LgiError::Input(format!(
-                "a start must be {} finite weights",
-                self.shapes
-            )));
+        match start {
+            FitStart::Weights(w) if w.len() != self.shapes || w.iter().any(|x| !x.is_finite()) => {
+                return Err(LgiError::Input(format!(
+                    "a start must be {} finite weights",
+                    self.shapes
+                )));
+            }
+            FitStart::Residual(y) if y.len() != rows || y.iter().any(|x| x.is_infinite()) => {
+                return Err(LgiError::Input(format!(
+                    "a start residual must be {rows} values, none infinite"
+                )));
+            }
+            _ => {}
         }
         if directions.iter().any(|d| d.len() != rows) {
             return Err(LgiError::Input(format!(
@@ -199,12 +221,24 @@ impl BlendshapeSolver {
             .collect();
         match &self.low_rank {
             Some(lr) => {
-                let (frame, atr) = lr.frame(target);
+                let (mut frame, atr) = lr.frame(target);
+                let dual = match start {
+                    FitStart::Cold => frame.dual(None, self.l2, self.penalty, MAX_ITERATIONS)?,
+                    FitStart::Residual(y) => {
+                        frame.dual(Some(y), self.l2, self.penalty, MAX_ITERATIONS)?
+                    }
+                    FitStart::Weights(_) => None,
+                };
+                let (from, dual_steps) = match (&dual, start) {
+                    (Some((w, n)), _) => (Some(w.as_slice()), *n),
+                    (None, FitStart::Weights(w)) => (Some(w), 0),
+                    (None, _) => (None, 0),
+                };
                 let frame = std::cell::RefCell::new(frame);
-                self.newton(
+                let (mut solution, derivatives) = self.newton(
                     &atr,
                     &along,
-                    start,
+                    from,
                     Steps {
                         piece: |clamped: &[bool], rhs: &[f64], _| {
                             frame
@@ -221,9 +255,17 @@ impl BlendshapeSolver {
                             frame.borrow_mut().stepped(from, cand, alpha, to)
                         },
                     },
-                )
+                )?;
+                solution.iterations += dual_steps;
+                Ok((solution, derivatives))
             }
-            None => self.solve_dense(target, &along, start),
+            None => {
+                let from = match start {
+                    FitStart::Weights(w) => Some(w),
+                    _ => None,
+                };
+                self.solve_dense(target, &along, from)
+            }
         }
     }
 
@@ -574,8 +616,12 @@ mod tests {
                 for &m in &missing {
                     t[m] = f64::NAN;
                 }
-                let (got, gd) = sol.solve_with_derivatives(&t, &dirs, None).unwrap();
-                let (want, wd) = dense.solve_with_derivatives(&t, &dirs, None).unwrap();
+                let (got, gd) = sol
+                    .solve_with_derivatives(&t, &dirs, FitStart::Cold)
+                    .unwrap();
+                let (want, wd) = dense
+                    .solve_with_derivatives(&t, &dirs, FitStart::Cold)
+                    .unwrap();
                 let clamped = want
                     .weights
                     .iter()
@@ -604,6 +650,74 @@ mod tests {
         }
     }
 
+    /// 240 positive mixes of 6 shapes over 30 rows (scans of one face: most weights end
+    /// clamped) and a target.
+    fn scans(seed: u64) -> (BlendshapeSolver, Vec<f64>) {
+        let (rows, base, shapes) = (30, 6, 240);
+        let mut s = seed + 40;
+        let b: Vec<f64> = (0..rows * base).map(|_| rnd(&mut s)).collect();
+        let mix: Vec<f64> = (0..shapes * base).map(|_| rnd(&mut s) + 0.5).collect();
+        let a: Vec<f64> = (0..rows * shapes)
+            .map(|i| {
+                let (r, k) = (i / shapes, i % shapes);
+                (0..base).map(|j| b[r * base + j] * mix[k * base + j]).sum()
+            })
+            .collect();
+        let t = (0..rows).map(|_| 3.0 * rnd(&mut s)).collect();
+        (
+            BlendshapeSolver::new(a, rows, shapes, 1e-3, 10.0).unwrap(),
+            t,
+        )
+    }
+
+    #[test]
+    fn the_dual_from_a_nearby_fits_residual_lands_on_the_dense_minimum() {
+        for seed in 0..3u64 {
+            let (sol, t) = scans(seed);
+            let mut dense = sol.clone();
+            dense.low_rank = None;
+            let mut s = seed + 7;
+            for missing in [vec![], vec![3, 11, 25]] {
+                let mut t = t.clone();
+                for &m in &missing {
+                    t[m] = f64::NAN;
+                }
+                // A nearby fit: the target moved by 5 % of its scale; its residual A w − t.
+                let near: Vec<f64> = t.iter().map(|x| x + 0.15 * rnd(&mut s)).collect();
+                let w = sol.solve(&near).unwrap().weights;
+                let residual: Vec<f64> = (0..sol.rows)
+                    .map(|r| {
+                        let row = &sol.a[r * sol.shapes..(r + 1) * sol.shapes];
+                        row.iter().zip(&w).map(|(a, x)| a * x).sum::<f64>() - near[r]
+                    })
+                    .collect();
+                let (got, _) = sol
+                    .solve_with_derivatives(&t, &[], FitStart::Residual(&residual))
+                    .unwrap();
+                let want = dense.solve(&t).unwrap();
+                let cold = sol.solve(&t).unwrap();
+                for ((g, c), w) in got.weights.iter().zip(&cold.weights).zip(&want.weights) {
+                    assert!((g - w).abs() < 1e-9, "seed {seed} {missing:?}: {g} vs {w}");
+                    assert!(
+                        (c - w).abs() < 1e-9,
+                        "seed {seed} {missing:?}: cold {c} vs {w}"
+                    );
+                }
+                // Started nearby it takes fewer steps than from 0.
+                assert!(
+                    got.iterations <= cold.iterations,
+                    "seed {seed} {missing:?}: {} vs {} from 0",
+                    got.iterations,
+                    cold.iterations
+                );
+                // A residual of the wrong length, or infinite, is refused.
+                assert!(sol
+                    .solve_with_derivatives(&t, &[], FitStart::Residual(&residual[1..]))
+                    .is_err());
+            }
+        }
+    }
+
     #[test]
     fn derivatives_equal_finite_differences_of_the_solution_on_both_paths() {
         for (a, rows, shapes) in [augmented(7), {
@@ -617,10 +731,12 @@ mod tests {
             let dirs: Vec<Vec<f64>> = (0..2)
                 .map(|_| (0..rows).map(|_| rnd(&mut s)).collect())
                 .collect();
-            let (base, dw) = sol.solve_with_derivatives(&t, &dirs, None).unwrap();
+            let (base, dw) = sol
+                .solve_with_derivatives(&t, &dirs, FitStart::Cold)
+                .unwrap();
             // Started at the solution, the iteration ends at once, on the same weights.
             let (again, _) = sol
-                .solve_with_derivatives(&t, &[], Some(&base.weights))
+                .solve_with_derivatives(&t, &[], FitStart::Weights(&base.weights))
                 .unwrap();
             assert_eq!(again.iterations, 1);
             for (a, b) in again.weights.iter().zip(&base.weights) {

@@ -6,5 +6,5 @@
 pub mod blendshape;
 pub mod rbf;
 
-pub use blendshape::{BlendshapeSolution, BlendshapeSolver};
+pub use blendshape::{BlendshapeSolution, BlendshapeSolver, FitStart};
 pub use rbf::RbfInterpolator;

@@ -298,6 +298,7 @@ impl Model {
             FrameFit {
                 weights,
                 positions: Vec::new(),
+                residual: Vec::new(),
             }
         });
         for _ in 0..JAW_ITERATIONS {

@@ -164,20 +164,37 @@ impl LowRank {
         // symmetric system by Cholesky (r³/6) instead of forming `K M` and factoring it by LU
         // (4r³/3), for O(S r²) once per fit. A K that is not positive definite (a direction
         // seen only by missing rows) keeps the general form.
-        let (w, wtw, k) = match k.as_ref().map(|k| cholesky(r, k.clone())) {
+        let (w, wtw, k, dual) = match k.as_ref().map(|k| cholesky(r, k.clone())) {
             None => (
                 Cow::Borrowed(&self.w[..]),
                 Cow::Borrowed(&self.wtw[..]),
                 None,
+                Some(Dual {
+                    tau: c,
+                    v: None,
+                    missing: Vec::new(),
+                }),
             ),
             Some(Ok(v)) => {
                 let wv = times_lower(&self.w, r, &v);
                 // (W V)ᵀ(W V) = Vᵀ (WᵀW) V: O(r³) rather than O(S r²).
                 let t = times_lower(&self.wtw, r, &v);
                 let wtw = lower_t_times(&v, r, &t);
-                (Cow::Owned(wv), Cow::Owned(wtw), None)
+                // Aᵀt = W c = (W V)(V⁻¹ c): the data term is ‖(W V)ᵀ w − V⁻¹ c‖² + const.
+                let tau = solve_lower(&v, r, &c);
+                let dual = Dual {
+                    tau,
+                    v: Some(v),
+                    missing,
+                };
+                (Cow::Owned(wv), Cow::Owned(wtw), None, Some(dual))
             }
-            Some(Err(_)) => (Cow::Borrowed(&self.w[..]), Cow::Borrowed(&self.wtw[..]), k),
+            Some(Err(_)) => (
+                Cow::Borrowed(&self.w[..]),
+                Cow::Borrowed(&self.wtw[..]),
+                k,
+                None,
+            ),
         };
         // Wᵀ Aᵀt once per fit: each step's right-hand side differs from Aᵀt only where a
         // weight is above the box (the penalty's pull), so its product with Wᵀ is this plus
@@ -187,6 +204,8 @@ impl LowRank {
         let frame = Frame {
             rank: r,
             shapes: self.shapes,
+            xt: &self.xt,
+            dual,
             w,
             wtw,
             k,
@@ -196,6 +215,7 @@ impl LowRank {
             known: Vec::new(),
             clamped: vec![false; self.shapes],
             sum_free,
+            factor: None,
         };
         (frame, atr)
     }
@@ -269,6 +289,16 @@ fn times_lower(w: &[f64], r: usize, v: &[f64]) -> Vec<f64> {
     out
 }
 
+/// `V⁻¹ c` of a lower-triangular `r × r` matrix `v` (forward substitution).
+fn solve_lower(v: &[f64], r: usize, c: &[f64]) -> Vec<f64> {
+    let mut out = vec![0.0; r];
+    for i in 0..r {
+        let done: f64 = (0..i).map(|k| v[i * r + k] * out[k]).sum();
+        out[i] = (c[i] - done) / v[i * r + i];
+    }
+    out
+}
+
 /// `m += sign x xᵀ` on and above the diagonal of the row-major `r × r` matrix `m`, each entry
 /// as `(sign x_a) x_b` (sign ±1). The entry below, `(sign x_b) x_a`, has the same bits (± and
 /// the product commute exactly), so [`mirror_upper`] completes the full update at half the
@@ -309,6 +339,16 @@ fn gram_of(m: &[f64], n: usize, r: usize) -> Vec<f64> {
     g
 }
 
+/// A frame's data term as `‖W'ᵀ w − τ‖²` plus a constant (W' = W, or W V with markers
+/// missing), what [`Frame::dual`] maximises over.
+struct Dual {
+    tau: Vec<f64>,
+    /// V of `K = V Vᵀ` with markers missing.
+    v: Option<Vec<f64>>,
+    /// The missing rows, ascending.
+    missing: Vec<usize>,
+}
+
 /// One frame's normal equations `W K Wᵀ` with the weights clamped by the box so far. The
 /// free weights' `Σ w_i w_iᵀ` is kept as the active set changes: by a rank-one update per
 /// change, or summed afresh over the free weights when there are fewer of them than changes
@@ -316,6 +356,10 @@ fn gram_of(m: &[f64], n: usize, r: usize) -> Vec<f64> {
 pub(super) struct Frame<'f> {
     rank: usize,
     shapes: usize,
+    /// The matrix's Xᵀ (R × r), to carry a residual into the frame's coordinates.
+    xt: &'f [f64],
+    /// The frame's dual form, when its `W K Wᵀ` is `W' W'ᵀ` ([`Frame::dual`]).
+    dual: Option<Dual>,
     /// The frame's W (the matrix's, or W V with markers missing) and its `WᵀW`.
     w: Cow<'f, [f64]>,
     wtw: Cow<'f, [f64]>,
@@ -332,6 +376,8 @@ pub(super) struct Frame<'f> {
     clamped: Vec<bool>,
     /// The weights not clamped's `Σ w_i w_iᵀ` (r × r, full).
     sum_free: Vec<f64>,
+    /// [`Frame::factor`]'s, while the clamped set stands.
+    factor: Option<Vec<f64>>,
 }
 
 impl Frame<'_> {
@@ -357,36 +403,12 @@ impl Frame<'_> {
         penalty: f64,
     ) -> Result<Vec<f64>> {
         let r = self.rank;
-        let changes: Vec<usize> = (0..self.shapes)
-            .filter(|&i| clamped[i] != self.clamped[i])
-            .collect();
-        for &i in &changes {
-            self.clamped[i] = clamped[i];
-        }
-        let now_free = self.clamped.iter().filter(|&&c| !c).count();
-        if !changes.is_empty() {
-            if now_free <= changes.len() {
-                self.sum_free.fill(0.0);
-                for i in (0..self.shapes).filter(|&i| !self.clamped[i]) {
-                    add_outer_upper(&mut self.sum_free, r, 1.0, &self.w[i * r..(i + 1) * r]);
-                }
-            } else {
-                for &i in &changes {
-                    let sign = if self.clamped[i] { -1.0 } else { 1.0 };
-                    add_outer_upper(&mut self.sum_free, r, sign, &self.w[i * r..(i + 1) * r]);
-                }
-            }
-            mirror_upper(&mut self.sum_free, r);
-        }
+        self.set_clamped(clamped);
         let (free, held) = (1.0 / l2, 1.0 / (l2 + penalty));
-        let dinv = |i: usize| if self.clamped[i] { held } else { free };
-        // M = Wᵀ D⁻¹ W = held WᵀW + (free − held) Σ_free w_i w_iᵀ.
-        let m: Vec<f64> = self
-            .wtw
-            .iter()
-            .zip(&self.sum_free)
-            .map(|(a, f)| a * held + f * (free - held))
-            .collect();
+        let m = match self.k {
+            None => Vec::new(),
+            Some(_) => self.weighted_gram(free, held),
+        };
         // g = Wᵀ D⁻¹ rhs = held Wᵀrhs + (free − held) Σ_free w_i rhs_i, with Wᵀrhs from the
         // fit's Wᵀ Aᵀt and the rows where rhs differs from Aᵀt (those above the box), or
         // summed whole for another right-hand side (a derivative's).
@@ -413,13 +435,7 @@ impl Frame<'_> {
             }
         }
         let y = match &self.k {
-            None => {
-                let mut n = m;
-                for i in 0..r {
-                    n[i * r + i] += 1.0;
-                }
-                cholesky_solve(r, &cholesky(r, n)?, &g)
-            }
+            None => cholesky_solve(r, self.factor(free, held)?, &g),
             Some(k) => {
                 let mut n = vec![0.0; r * r];
                 for i in 0..r {
@@ -441,6 +457,7 @@ impl Frame<'_> {
                     .collect()
             }
         };
+        let dinv = |i: usize| if self.clamped[i] { held } else { free };
         let wy = w_times(&self.w, r, &y);
         let cand: Vec<f64> = (0..self.shapes)
             .map(|i| dinv(i) * (rhs[i] - wy[i]))
@@ -460,6 +477,211 @@ impl Frame<'_> {
             .collect();
         self.remember(cand.clone(), v);
         Ok(cand)
+    }
+
+    /// Makes `clamped` the frame's clamped set, keeping the free weights' `Σ w_i w_iᵀ`.
+    fn set_clamped(&mut self, clamped: &[bool]) {
+        let r = self.rank;
+        let changes: Vec<usize> = (0..self.shapes)
+            .filter(|&i| clamped[i] != self.clamped[i])
+            .collect();
+        for &i in &changes {
+            self.clamped[i] = clamped[i];
+        }
+        let now_free = self.clamped.iter().filter(|&&c| !c).count();
+        if !changes.is_empty() {
+            if now_free <= changes.len() {
+                self.sum_free.fill(0.0);
+                for i in (0..self.shapes).filter(|&i| !self.clamped[i]) {
+                    add_outer_upper(&mut self.sum_free, r, 1.0, &self.w[i * r..(i + 1) * r]);
+                }
+            } else {
+                for &i in &changes {
+                    let sign = if self.clamped[i] { -1.0 } else { 1.0 };
+                    add_outer_upper(&mut self.sum_free, r, sign, &self.w[i * r..(i + 1) * r]);
+                }
+            }
+            mirror_upper(&mut self.sum_free, r);
+            self.factor = None;
+        }
+    }
+
+    /// The Cholesky factor of `I + Wᵀ D⁻¹ W` for the current clamped set (complete frames and
+    /// `W V` frames), made once per set: the dual's last step and the primal step that
+    /// confirms it share one.
+    fn factor(&mut self, free: f64, held: f64) -> Result<&[f64]> {
+        if self.factor.is_none() {
+            let r = self.rank;
+            let mut n = self.weighted_gram(free, held);
+            for i in 0..r {
+                n[i * r + i] += 1.0;
+            }
+            self.factor = Some(cholesky(r, n)?);
+        }
+        Ok(self.factor.as_deref().unwrap_or_default())
+    }
+
+    /// `Wᵀ D⁻¹ W = held WᵀW + (free − held) Σ_free w_i w_iᵀ` of the clamped set.
+    fn weighted_gram(&self, free: f64, held: f64) -> Vec<f64> {
+        self.wtw
+            .iter()
+            .zip(&self.sum_free)
+            .map(|(a, f)| a * held + f * (free - held))
+            .collect()
+    }
+
+    /// The weights where the dual of the fit is maximised ([`Dual`]), from the dual point of
+    /// `residual` (`A w − t` of a nearby fit, R values, NaN where missing) or from 0 (every
+    /// weight at 0): the start at which the primal iteration ends in one step. `None` when
+    /// the frame has no dual form, or the dual stalls or runs past `max_steps` (the primal
+    /// iteration then starts inside the box as before); with the number of dual steps.
+    ///
+    /// The dual of `min ‖W'ᵀw − τ‖² + Σ g(w_i)` (g the ridge and box penalty) is the concave,
+    /// C¹, piecewise quadratic `D(η) = −‖η‖²/4 − ηᵀτ − Σ g*(−(W'η)_i)` over r values, and each
+    /// weight is a piecewise linear function of `u = W'η`: `w_i = (−u_i)/(2 l2)` in the box,
+    /// `(−u_i)/(2 (l2 + penalty))` below it and that plus `penalty/(l2 + penalty)` above. Its
+    /// Newton step is the primal step's r × r system; a damped step moves every weight along
+    /// its own piecewise linear path (many weights change piece in one step, where the primal
+    /// line search stops at the first change that turns the slope): a cold fit of 2,000 scans
+    /// in ~20 steps instead of ~47.
+    pub(super) fn dual(
+        &mut self,
+        residual: Option<&[f64]>,
+        l2: f64,
+        penalty: f64,
+        max_steps: usize,
+    ) -> Result<Option<(Vec<f64>, usize)>> {
+        let Some(tau) = self.dual.as_ref().map(|d| d.tau.clone()) else {
+            return Ok(None);
+        };
+        let (r, s) = (self.rank, self.shapes);
+        let (free, held) = (1.0 / l2, 1.0 / (l2 + penalty));
+        let kappa = penalty / (l2 + penalty);
+        let top = 2.0 * l2;
+        // A weight's piece (0 below the box, 1 in it, 2 above) at `v = −u_i` moving by `dv`.
+        let side = |v: f64, dv: f64| -> u8 {
+            if v < 0.0 || (v == 0.0 && dv < 0.0) {
+                0
+            } else if v > top || (v == top && dv > 0.0) {
+                2
+            } else {
+                1
+            }
+        };
+        // The weight on piece p is `slope(p) (−u) + offset(p)`.
+        let slope = |p: u8| if p == 1 { 0.5 * free } else { 0.5 * held };
+        let offset = |p: u8| if p == 2 { kappa } else { 0.0 };
+        // From 0 (every weight free at 0) the first step's end is the unconstrained fit's
+        // dual point, taken whole: a step fewer than searching the line to it.
+        let cold = residual.is_none();
+        let mut eta = match residual {
+            Some(res) => self.dual_point(res),
+            None => vec![0.0; r],
+        };
+        let mut u = w_times(&self.w, r, &eta);
+        let mut pieces: Vec<u8> = u.iter().map(|&x| side(-x, 0.0)).collect();
+        for step in 1..=max_steps {
+            let clamped: Vec<bool> = pieces.iter().map(|&p| p != 1).collect();
+            self.set_clamped(&clamped);
+            // The piece's maximiser: (I + Wᵀ D⁻¹ W) η / 2 = κ Σ_above w_i − τ.
+            let mut rhs: Vec<f64> = tau.iter().map(|t| -t).collect();
+            for i in (0..s).filter(|&i| pieces[i] == 2) {
+                for (o, a) in rhs.iter_mut().zip(&self.w[i * r..(i + 1) * r]) {
+                    *o += kappa * a;
+                }
+            }
+            let target: Vec<f64> = cholesky_solve(r, self.factor(free, held)?, &rhs)
+                .iter()
+                .map(|x| 2.0 * x)
+                .collect();
+            let d: Vec<f64> = target.iter().zip(&eta).map(|(a, b)| a - b).collect();
+            let du = w_times(&self.w, r, &d);
+            if (0..s).all(|i| side(-(u[i] + du[i]), 0.0) == pieces[i]) {
+                let w = (0..s)
+                    .map(|i| {
+                        let p = pieces[i];
+                        slope(p) * -(u[i] + du[i]) + offset(p)
+                    })
+                    .collect();
+                return Ok(Some((w, step)));
+            }
+            // Exact line search: the slope of D along d is piecewise linear and decreasing,
+            // c0 + s0 − α (‖d‖²/2 + s1), with s0 and s1 summed over the weights' pieces and
+            // changing where a weight crosses 0 or 1.
+            let dd: f64 = d.iter().map(|x| x * x).sum();
+            let c0: f64 = (0..r).map(|j| d[j] * (-0.5 * eta[j] - tau[j])).sum();
+            let (mut s0, mut s1) = (0.0, 0.0);
+            let mut breaks: Vec<(f64, u32)> = Vec::new();
+            let mut along = vec![0u8; s];
+            for i in 0..s {
+                let (v, dv) = (-u[i], -du[i]);
+                let p = side(v, dv);
+                along[i] = p;
+                s0 += du[i] * (-slope(p) * u[i] + offset(p));
+                s1 += slope(p) * du[i] * du[i];
+                if dv != 0.0 {
+                    for edge in [0.0, top] {
+                        let a = (edge - v) / dv;
+                        if a > 0.0 && a < 1.0 {
+                            breaks.push((a, i as u32));
+                        }
+                    }
+                }
+            }
+            breaks.sort_unstable_by(|a, b| a.0.total_cmp(&b.0));
+            let mut alpha = 1.0;
+            let mut found = false;
+            for &(at, i) in &breaks {
+                if c0 + s0 - at * (0.5 * dd + s1) <= 0.0 {
+                    found = true;
+                    break;
+                }
+                let i = i as usize;
+                let old = along[i];
+                let new = if du[i] < 0.0 { old + 1 } else { old - 1 };
+                s0 += du[i] * (-(slope(new) - slope(old)) * u[i] + offset(new) - offset(old));
+                s1 += (slope(new) - slope(old)) * du[i] * du[i];
+                along[i] = new;
+            }
+            if (found || c0 + s0 - (0.5 * dd + s1) <= 0.0) && !(cold && step == 1) {
+                alpha = ((c0 + s0) / (0.5 * dd + s1)).min(1.0);
+            }
+            if alpha.is_nan() || alpha <= 0.0 {
+                return Ok(None);
+            }
+            for (e, x) in eta.iter_mut().zip(&d) {
+                *e += alpha * x;
+            }
+            for (ui, x) in u.iter_mut().zip(&du) {
+                *ui += alpha * x;
+            }
+            for (p, &x) in pieces.iter_mut().zip(&u) {
+                *p = side(-x, 0.0);
+            }
+        }
+        Ok(None)
+    }
+
+    /// The frame's dual point of a residual `A w − t` (R values, NaN where missing):
+    /// `η = 2 Qᵀ y` with Q the frame's orthonormal coordinates of the present rows.
+    fn dual_point(&self, residual: &[f64]) -> Vec<f64> {
+        let r = self.rank;
+        let Some(dual) = &self.dual else {
+            return vec![0.0; r];
+        };
+        let mut c = vec![0.0; r];
+        for (rho, &y) in residual.iter().enumerate() {
+            if y.is_nan() || dual.missing.binary_search(&rho).is_ok() {
+                continue;
+            }
+            for (ci, x) in c.iter_mut().zip(&self.xt[rho * r..(rho + 1) * r]) {
+                *ci += 2.0 * x * y;
+            }
+        }
+        match &dual.v {
+            None => c,
+            Some(v) => solve_lower(v, r, &c),
+        }
     }
 
     /// A damped step `to = from + α (cand − from)`: `Wᵀ to` from the two remembered ends
@@ -516,6 +738,78 @@ mod tests {
     use super::*;
     use proptest::prelude::*;
 
+    /// The dual's end, for a matrix of 200 positive mixes of 5 shapes over 24 rows, complete
+    /// and with rows missing: weights on the pieces of the minimum, so the primal step on
+    /// their piece lands on them (the one step the solver then takes), and within 1e-9 of
+    /// the dense normal equations' solution on that piece.
+    #[test]
+    fn the_dual_ends_on_the_minimums_pieces() {
+        let (rows, base, shapes) = (24, 5, 200);
+        let mut seed = 5u64;
+        let mut rnd = || {
+            seed = seed
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (seed >> 11) as f64 / (1u64 << 53) as f64 - 0.5
+        };
+        let b: Vec<f64> = (0..rows * base).map(|_| rnd()).collect();
+        let mix: Vec<f64> = (0..shapes * base).map(|_| rnd() + 0.5).collect();
+        let a: Vec<f64> = (0..rows * shapes)
+            .map(|i| {
+                let (r, k) = (i / shapes, i % shapes);
+                (0..base).map(|j| b[r * base + j] * mix[k * base + j]).sum()
+            })
+            .collect();
+        let mut gram = vec![0.0; shapes * shapes];
+        for r in 0..rows {
+            let row = &a[r * shapes..(r + 1) * shapes];
+            for i in 0..shapes {
+                for j in 0..shapes {
+                    gram[i * shapes + j] += row[i] * row[j];
+                }
+            }
+        }
+        let (l2, penalty) = (1e-3, 10.0);
+        let lr = LowRank::new(&a, rows, shapes, &gram, l2).unwrap().unwrap();
+        let t: Vec<f64> = (0..rows).map(|_| 3.0 * rnd()).collect();
+        for missing in [vec![], vec![1, 2, 20]] {
+            let mut t = t.clone();
+            for &m in &missing {
+                t[m] = f64::NAN;
+            }
+            let (mut frame, atr) = lr.frame(&t);
+            let (w, steps) = frame.dual(None, l2, penalty, 100).unwrap().unwrap();
+            assert!(steps >= 2, "{missing:?}: {steps} steps");
+            let clamped: Vec<bool> = w.iter().map(|x| !(0.0..=1.0).contains(x)).collect();
+            assert!(clamped.iter().filter(|&&c| c).count() > shapes / 2);
+            let mut rhs = atr.clone();
+            for (r, x) in rhs.iter_mut().zip(&w) {
+                if *x > 1.0 {
+                    *r += penalty;
+                }
+            }
+            let cand = frame.piece(&clamped, &rhs, l2, penalty).unwrap();
+            // The dense normal equations on that piece over the present rows.
+            let mut m = vec![0.0; shapes * shapes];
+            for r in (0..rows).filter(|&r| !t[r].is_nan()) {
+                let row = &a[r * shapes..(r + 1) * shapes];
+                for i in 0..shapes {
+                    for j in 0..shapes {
+                        m[i * shapes + j] += row[i] * row[j];
+                    }
+                }
+            }
+            for i in 0..shapes {
+                m[i * shapes + i] += l2 + if clamped[i] { penalty } else { 0.0 };
+            }
+            let dense = cholesky_solve(shapes, &cholesky(shapes, m).unwrap(), &rhs);
+            for ((x, c), d) in w.iter().zip(&cand).zip(&dense) {
+                assert_eq!(!(0.0..=1.0).contains(c), !(0.0..=1.0).contains(x));
+                assert!((x - d).abs() < 1e-9 && (c - d).abs() < 1e-9, "{x} {c} {d}");
+            }
+        }
+    }
+
     proptest! {
         /// Rank-one updates made on and above the diagonal and then mirrored equal the same
         /// updates made on every entry, bit for bit (what the frame's K and clamped sum rely on).
@@ -539,8 +833,8 @@ mod tests {
                 }
                 add_outer_upper(&mut upper, r, sign, x);
             }
-            mirror_upper(&mut upper, r);
             let bits = |m: &[f64]| m.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+            mirror_upper(&mut upper, r);
             prop_assert_eq!(bits(&upper), bits(&full));
         }
     }
