@@ -339,6 +339,17 @@ fn gram_of(m: &[f64], n: usize, r: usize) -> Vec<f64> {
     g
 }
 
+/// Where [`Frame::dual`] starts.
+#[derive(Debug, Clone, Copy)]
+pub(super) enum DualStart<'a> {
+    /// At 0: every weight at 0.
+    Zero,
+    /// At the dual point of a nearby fit's residual `A w − t` (R values, NaN where missing).
+    Residual(&'a [f64]),
+    /// At the dual point nearest these weights (S).
+    Weights(&'a [f64]),
+}
+
 /// A frame's data term as `‖W'ᵀ w − τ‖²` plus a constant (W' = W, or W V with markers
 /// missing), what [`Frame::dual`] maximises over.
 struct Dual {
@@ -546,7 +557,7 @@ impl Frame<'_> {
     /// in ~20 steps instead of ~47.
     pub(super) fn dual(
         &mut self,
-        residual: Option<&[f64]>,
+        start: DualStart<'_>,
         l2: f64,
         penalty: f64,
         max_steps: usize,
@@ -573,10 +584,11 @@ impl Frame<'_> {
         let offset = |p: u8| if p == 2 { kappa } else { 0.0 };
         // From 0 (every weight free at 0) the first step's end is the unconstrained fit's
         // dual point, taken whole: a step fewer than searching the line to it.
-        let cold = residual.is_none();
-        let mut eta = match residual {
-            Some(res) => self.dual_point(res),
-            None => vec![0.0; r],
+        let cold = matches!(start, DualStart::Zero);
+        let mut eta = match start {
+            DualStart::Zero => vec![0.0; r],
+            DualStart::Residual(res) => self.dual_point(res),
+            DualStart::Weights(w) => self.dual_point_of_weights(w, l2, penalty)?,
         };
         let mut u = w_times(&self.w, r, &eta);
         let mut pieces: Vec<u8> = u.iter().map(|&x| side(-x, 0.0)).collect();
@@ -660,6 +672,35 @@ impl Frame<'_> {
             }
         }
         Ok(None)
+    }
+
+    /// The frame's dual point nearest to weights `w` (S): each weight's `u_i` on its piece
+    /// (`w_i = −u_i/(2 l2)` in the box, `−u_i/(2 (l2 + penalty))` below it, that plus
+    /// `penalty/(l2 + penalty)` above), and η the least-squares fit of `W'η = u`, ridged by
+    /// `l2`. At a fit's own minimum it is that fit's dual point.
+    fn dual_point_of_weights(&self, w: &[f64], l2: f64, penalty: f64) -> Result<Vec<f64>> {
+        let r = self.rank;
+        let u: Vec<f64> = w
+            .iter()
+            .map(|&x| {
+                if x < 0.0 {
+                    -2.0 * (l2 + penalty) * x
+                } else if x <= 1.0 {
+                    -2.0 * l2 * x
+                } else {
+                    2.0 * penalty - 2.0 * (l2 + penalty) * x
+                }
+            })
+            .collect();
+        let mut g = self.wtw.to_vec();
+        for i in 0..r {
+            g[i * r + i] += l2;
+        }
+        Ok(cholesky_solve(
+            r,
+            &cholesky(r, g)?,
+            &wt_times(&self.w, r, &u),
+        ))
     }
 
     /// The frame's dual point of a residual `A w − t` (R values, NaN where missing):
@@ -778,7 +819,10 @@ mod tests {
                 t[m] = f64::NAN;
             }
             let (mut frame, atr) = lr.frame(&t);
-            let (w, steps) = frame.dual(None, l2, penalty, 100).unwrap().unwrap();
+            let (w, steps) = frame
+                .dual(DualStart::Zero, l2, penalty, 100)
+                .unwrap()
+                .unwrap();
             assert!(steps >= 2, "{missing:?}: {steps} steps");
             let clamped: Vec<bool> = w.iter().map(|x| !(0.0..=1.0).contains(x)).collect();
             assert!(clamped.iter().filter(|&&c| c).count() > shapes / 2);
