@@ -11,6 +11,7 @@
 use crate::error::Result;
 use crate::linalg::{cholesky, cholesky_solve, dot_rows, Lu};
 use std::borrow::Cow;
+use std::sync::OnceLock;
 
 /// A rank below this fraction of the shape count takes the low-rank path (the dense path is
 /// cheaper near full rank).
@@ -31,6 +32,27 @@ pub(super) struct LowRank {
     xt: Vec<f64>,
     /// WᵀW, `r × r`.
     wtw: Vec<f64>,
+    /// The complete frames' [`Whitened`] form, made on first use.
+    whitened: OnceLock<Whitened>,
+}
+
+/// `B = I + held WᵀW` (the Newton matrix of the dual with every weight held) as its Cholesky
+/// factor L, and every weight's row whitened by it, `z_i = L⁻¹ w_i` (S × r): then
+/// `w_iᵀ B⁻¹ w_j = z_iᵀ z_j`, what [`Frame::solve_few_free`] needs. The complete frames' is
+/// made once per matrix; a frame with markers missing whitens its rows as they are needed.
+#[derive(Debug, Clone)]
+struct Whitened {
+    l: Vec<f64>,
+    z: Vec<f64>,
+}
+
+/// The Cholesky factor of `I + held WᵀW`.
+fn held_factor(wtw: &[f64], r: usize, held: f64) -> Result<Vec<f64>> {
+    let mut b: Vec<f64> = wtw.iter().map(|x| x * held).collect();
+    for i in 0..r {
+        b[i * r + i] += 1.0;
+    }
+    cholesky(r, b)
 }
 
 impl LowRank {
@@ -121,6 +143,7 @@ impl LowRank {
             w: wl,
             xt,
             wtw,
+            whitened: OnceLock::new(),
         }))
     }
 
@@ -205,6 +228,10 @@ impl LowRank {
             rank: r,
             shapes: self.shapes,
             xt: &self.xt,
+            whitened: dual
+                .as_ref()
+                .is_some_and(|d| d.v.is_none())
+                .then_some(&self.whitened),
             dual,
             w,
             wtw,
@@ -299,6 +326,16 @@ fn solve_lower(v: &[f64], r: usize, c: &[f64]) -> Vec<f64> {
     out
 }
 
+/// `L⁻ᵀ c` of a lower-triangular `r × r` matrix `l` (back substitution).
+fn solve_lower_t(l: &[f64], r: usize, c: &[f64]) -> Vec<f64> {
+    let mut out = vec![0.0; r];
+    for i in (0..r).rev() {
+        let done: f64 = (i + 1..r).map(|k| l[k * r + i] * out[k]).sum();
+        out[i] = (c[i] - done) / l[i * r + i];
+    }
+    out
+}
+
 /// `m += sign x xᵀ` on and above the diagonal of the row-major `r × r` matrix `m`, each entry
 /// as `(sign x_a) x_b` (sign ±1). The entry below, `(sign x_b) x_a`, has the same bits (± and
 /// the product commute exactly), so [`mirror_upper`] completes the full update at half the
@@ -339,6 +376,15 @@ fn gram_of(m: &[f64], n: usize, r: usize) -> Vec<f64> {
     g
 }
 
+/// What [`Frame::solve_few_free`] keeps between a dual's steps of a frame with markers
+/// missing: the Cholesky factor of `I + held WᵀW` and the whitened row `L⁻¹ w_i` of each
+/// weight that has been in the box (empty until then).
+#[derive(Default)]
+struct SmallFree {
+    l: Vec<f64>,
+    z: Vec<Vec<f64>>,
+}
+
 /// Where [`Frame::dual`] starts.
 #[derive(Debug, Clone, Copy)]
 pub(super) enum DualStart<'a> {
@@ -371,6 +417,8 @@ pub(super) struct Frame<'f> {
     xt: &'f [f64],
     /// The frame's dual form, when its `W K Wᵀ` is `W' W'ᵀ` ([`Frame::dual`]).
     dual: Option<Dual>,
+    /// The matrix's [`Whitened`] rows, for a complete frame.
+    whitened: Option<&'f OnceLock<Whitened>>,
     /// The frame's W (the matrix's, or W V with markers missing) and its `WᵀW`.
     w: Cow<'f, [f64]>,
     wtw: Cow<'f, [f64]>,
@@ -592,9 +640,12 @@ impl Frame<'_> {
         };
         let mut u = w_times(&self.w, r, &eta);
         let mut pieces: Vec<u8> = u.iter().map(|&x| side(-x, 0.0)).collect();
+        // With few weights in the box the Newton matrix is `B + (free − held) F Fᵀ`, B =
+        // I + held WᵀW the same for every step and F the free weights' rows: solved through
+        // B's factor and the free weights' own small system (Woodbury) instead of factoring
+        // r × r on every step. `B⁻¹ w_i` of each weight is made when it is first free.
+        let mut small = SmallFree::default();
         for step in 1..=max_steps {
-            let clamped: Vec<bool> = pieces.iter().map(|&p| p != 1).collect();
-            self.set_clamped(&clamped);
             // The piece's maximiser: (I + Wᵀ D⁻¹ W) η / 2 = κ Σ_above w_i − τ.
             let mut rhs: Vec<f64> = tau.iter().map(|t| -t).collect();
             for i in (0..s).filter(|&i| pieces[i] == 2) {
@@ -602,10 +653,17 @@ impl Frame<'_> {
                     *o += kappa * a;
                 }
             }
-            let target: Vec<f64> = cholesky_solve(r, self.factor(free, held)?, &rhs)
-                .iter()
-                .map(|x| 2.0 * x)
-                .collect();
+            let in_box: Vec<usize> = (0..s).filter(|&i| pieces[i] == 1).collect();
+            // Woodbury costs ~n² r / 2 + n³ / 6 for n free against r³ / 6 (and the free sum's
+            // updates): it pays below n ≈ r / √3.
+            let solved = if 3 * in_box.len() * in_box.len() < r * r {
+                self.solve_few_free(&in_box, &rhs, held, free - held, &mut small)?
+            } else {
+                let clamped: Vec<bool> = pieces.iter().map(|&p| p != 1).collect();
+                self.set_clamped(&clamped);
+                cholesky_solve(r, self.factor(free, held)?, &rhs)
+            };
+            let target: Vec<f64> = solved.iter().map(|x| 2.0 * x).collect();
             let d: Vec<f64> = target.iter().zip(&eta).map(|(a, b)| a - b).collect();
             let du = w_times(&self.w, r, &d);
             if (0..s).all(|i| side(-(u[i] + du[i]), 0.0) == pieces[i]) {
@@ -672,6 +730,75 @@ impl Frame<'_> {
             }
         }
         Ok(None)
+    }
+
+    /// `(B + c Σ_{i ∈ in_box} w_i w_iᵀ)⁻¹ rhs` with `B = I + held WᵀW`, by the Woodbury
+    /// identity over the weights `in_box` in B's whitened coordinates ([`Whitened`]):
+    /// `(I/c + Zᵀ Z) y = Zᵀ L⁻¹ rhs`, then `x = L⁻ᵀ (L⁻¹ rhs − Z y)` ([`Frame::dual`]).
+    fn solve_few_free(
+        &self,
+        in_box: &[usize],
+        rhs: &[f64],
+        held: f64,
+        c: f64,
+        small: &mut SmallFree,
+    ) -> Result<Vec<f64>> {
+        let r = self.rank;
+        let row = |i: usize| &self.w[i * r..(i + 1) * r];
+        let whole = match self.whitened {
+            Some(cell) => {
+                if cell.get().is_none() {
+                    let l = held_factor(&self.wtw, r, held)?;
+                    let mut z = vec![0.0; self.w.len()];
+                    for i in 0..self.shapes {
+                        z[i * r..(i + 1) * r].copy_from_slice(&solve_lower(&l, r, row(i)));
+                    }
+                    let _ = cell.set(Whitened { l, z });
+                }
+                cell.get()
+            }
+            None => None,
+        };
+        if whole.is_none() && small.l.is_empty() {
+            small.l = held_factor(&self.wtw, r, held)?;
+            small.z = vec![Vec::new(); self.shapes];
+        }
+        let l = whole.map_or(small.l.as_slice(), |w| w.l.as_slice());
+        if whole.is_none() {
+            for &i in in_box {
+                if small.z[i].is_empty() {
+                    small.z[i] = solve_lower(l, r, row(i));
+                }
+            }
+        }
+        let z = |i: usize| -> &[f64] {
+            match whole {
+                Some(w) => &w.z[i * r..(i + 1) * r],
+                None => &small.z[i],
+            }
+        };
+        let mut x = solve_lower(l, r, rhs);
+        let n = in_box.len();
+        if n > 0 {
+            let dot = |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(p, q)| p * q).sum::<f64>();
+            let mut m = vec![0.0; n * n];
+            for (a, &i) in in_box.iter().enumerate() {
+                for (b, &j) in in_box.iter().enumerate().skip(a) {
+                    let v = dot(z(i), z(j));
+                    m[a * n + b] = v;
+                    m[b * n + a] = v;
+                }
+                m[a * n + a] += 1.0 / c;
+            }
+            let g: Vec<f64> = in_box.iter().map(|&i| dot(z(i), &x)).collect();
+            let y = cholesky_solve(n, &cholesky(n, m)?, &g);
+            for (&i, yi) in in_box.iter().zip(&y) {
+                for (o, p) in x.iter_mut().zip(z(i)) {
+                    *o -= yi * p;
+                }
+            }
+        }
+        Ok(solve_lower_t(l, r, &x))
     }
 
     /// The frame's dual point nearest to weights `w` (S): each weight's `u_i` on its piece
@@ -778,6 +905,78 @@ impl Frame<'_> {
 mod tests {
     use super::*;
     use proptest::prelude::*;
+
+    /// The Woodbury solve over a few free weights equals the r × r system it stands for,
+    /// `(I + held WᵀW + c Σ_free w_i w_iᵀ) x = rhs`, on a complete frame (rows whitened once
+    /// for the matrix) and on one with rows missing (whitened as needed), twice each (the
+    /// second time from what the first kept).
+    #[test]
+    fn the_few_free_solve_equals_the_whole_system() {
+        let (rows, shapes) = (40, 60);
+        let mut seed = 9u64;
+        let mut rnd = || {
+            seed = seed
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (seed >> 11) as f64 / (1u64 << 53) as f64 - 0.5
+        };
+        // 60 shapes mixing 12: rank 12 < 30, the low-rank form.
+        let b: Vec<f64> = (0..rows * 12).map(|_| rnd()).collect();
+        let mix: Vec<f64> = (0..shapes * 12).map(|_| rnd()).collect();
+        let a: Vec<f64> = (0..rows * shapes)
+            .map(|i| {
+                let (r, k) = (i / shapes, i % shapes);
+                (0..12).map(|j| b[r * 12 + j] * mix[k * 12 + j]).sum()
+            })
+            .collect();
+        let mut gram = vec![0.0; shapes * shapes];
+        for r in 0..rows {
+            for i in 0..shapes {
+                for j in 0..shapes {
+                    gram[i * shapes + j] += a[r * shapes + i] * a[r * shapes + j];
+                }
+            }
+        }
+        let lr = LowRank::new(&a, rows, shapes, &gram, 1e-3)
+            .unwrap()
+            .unwrap();
+        let r = lr.rank();
+        assert_eq!(r, 12);
+        let (held, c) = (0.05, 900.0);
+        let mut t: Vec<f64> = (0..rows).map(|_| rnd()).collect();
+        for missing in [vec![], vec![0, 13, 27]] {
+            for &m in &missing {
+                t[m] = f64::NAN;
+            }
+            let (frame, _) = lr.frame(&t);
+            let mut small = SmallFree::default();
+            for in_box in [vec![3usize, 17, 40, 41], vec![3, 8, 17, 59]] {
+                let rhs: Vec<f64> = (0..r).map(|_| rnd()).collect();
+                let got = frame
+                    .solve_few_free(&in_box, &rhs, held, c, &mut small)
+                    .unwrap();
+                let mut n: Vec<f64> = frame.wtw.iter().map(|x| x * held).collect();
+                for i in 0..r {
+                    n[i * r + i] += 1.0;
+                }
+                for &k in &in_box {
+                    let w = &frame.w[k * r..(k + 1) * r];
+                    for i in 0..r {
+                        for j in 0..r {
+                            n[i * r + j] += c * w[i] * w[j];
+                        }
+                    }
+                }
+                let want = cholesky_solve(r, &cholesky(r, n).unwrap(), &rhs);
+                for (g, w) in got.iter().zip(&want) {
+                    assert!(
+                        (g - w).abs() < 1e-9 * (1.0 + w.abs()),
+                        "{missing:?}: {g} vs {w}"
+                    );
+                }
+            }
+        }
+    }
 
     /// The dual's end, for a matrix of 200 positive mixes of 5 shapes over 24 rows, complete
     /// and with rows missing: weights on the pieces of the minimum, so the primal step on
