@@ -114,10 +114,10 @@ impl FitPrior {
         let residual: Option<Vec<f64>> = start
             .filter(|f| f.residual.len() == b)
             .map(|f| f.residual.iter().flat_map(|r| r.to_array()).collect());
-        let from = match (&residual, start.and_then(|f| f.weights.get(1..))) {
-            (Some(y), _) => FitStart::Residual(y),
-            (None, Some(w)) => FitStart::Weights(w),
-            (None, None) => FitStart::Cold,
+        let from = match (start.and_then(|f| f.weights.get(1..)), &residual) {
+            (Some(weights), Some(residual)) => FitStart::Nearby { weights, residual },
+            (Some(w), None) => FitStart::Weights(w),
+            (None, _) => FitStart::Cold,
         };
         let (solution, _) = self.solver.solve_with_derivatives(&rhs, &[], from)?;
         let mut positions = self.rest.clone();

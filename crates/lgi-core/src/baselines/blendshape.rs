@@ -51,9 +51,15 @@ pub enum FitStart<'a> {
     /// at the dual point nearest them (at a fit's own minimum, its dual point); else the
     /// primal iteration from them.
     Weights(&'a [f64]),
-    /// At the dual point of this residual `A w − t` of a nearby fit (R values, NaN where
-    /// missing), where the fit has a dual form; else as [`Cold`](Self::Cold).
-    Residual(&'a [f64]),
+    /// A nearby fit (e.g. the jaw refinement's previous step): where the fit has a dual form,
+    /// at the dual point of its residual `A w − t` (R values, NaN where missing); else the
+    /// primal iteration from its weights (S).
+    Nearby {
+        /// Its weights (S).
+        weights: &'a [f64],
+        /// Its residual `A w − t` (R).
+        residual: &'a [f64],
+    },
 }
 
 /// What the Newton iteration asks of a frame's normal equations (dense or low-rank): the
@@ -186,19 +192,23 @@ impl BlendshapeSolver {
         if target.iter().any(|t| t.is_infinite()) {
             return Err(LgiError::Input("target has an infinite value".into()));
         }
-        match start {
-            FitStart::Weights(w) if w.len() != self.shapes || w.iter().any(|x| !x.is_finite()) => {
-                return Err(LgiError::Input(format!(
-                    "a start must be {} finite weights",
-                    self.shapes
-                )));
-            }
-            FitStart::Residual(y) if y.len() != rows || y.iter().any(|x| x.is_infinite()) => {
+        let start_weights = match start {
+            FitStart::Cold => None,
+            FitStart::Weights(w) | FitStart::Nearby { weights: w, .. } => Some(w),
+        };
+        if start_weights.is_some_and(|w| w.len() != self.shapes || w.iter().any(|x| !x.is_finite()))
+        {
+            return Err(LgiError::Input(format!(
+                "a start must be {} finite weights",
+                self.shapes
+            )));
+        }
+        if let FitStart::Nearby { residual: y, .. } = start {
+            if y.len() != rows || y.iter().any(|x| x.is_infinite()) {
                 return Err(LgiError::Input(format!(
                     "a start residual must be {rows} values, none infinite"
                 )));
             }
-            _ => {}
         }
         if directions.iter().any(|d| d.len() != rows) {
             return Err(LgiError::Input(format!(
@@ -226,14 +236,13 @@ impl BlendshapeSolver {
                 let (mut frame, atr) = lr.frame(target);
                 let at = match start {
                     FitStart::Cold => DualStart::Zero,
-                    FitStart::Residual(y) => DualStart::Residual(y),
+                    FitStart::Nearby { residual, .. } => DualStart::Residual(residual),
                     FitStart::Weights(w) => DualStart::Weights(w),
                 };
                 let dual = frame.dual(at, self.l2, self.penalty, MAX_ITERATIONS)?;
-                let (from, dual_steps) = match (&dual, start) {
-                    (Some((w, n)), _) => (Some(w.as_slice()), *n),
-                    (None, FitStart::Weights(w)) => (Some(w), 0),
-                    (None, _) => (None, 0),
+                let (from, dual_steps) = match &dual {
+                    Some((w, n)) => (Some(w.as_slice()), *n),
+                    None => (start_weights, 0),
                 };
                 let frame = std::cell::RefCell::new(frame);
                 let (mut solution, derivatives) = self.newton(
@@ -260,13 +269,7 @@ impl BlendshapeSolver {
                 solution.iterations += dual_steps;
                 Ok((solution, derivatives))
             }
-            None => {
-                let from = match start {
-                    FitStart::Weights(w) => Some(w),
-                    _ => None,
-                };
-                self.solve_dense(target, &along, from)
-            }
+            None => self.solve_dense(target, &along, start_weights),
         }
     }
 
@@ -693,7 +696,14 @@ mod tests {
                     })
                     .collect();
                 let (got, _) = sol
-                    .solve_with_derivatives(&t, &[], FitStart::Residual(&residual))
+                    .solve_with_derivatives(
+                        &t,
+                        &[],
+                        FitStart::Nearby {
+                            weights: &w,
+                            residual: &residual,
+                        },
+                    )
                     .unwrap();
                 let want = dense.solve(&t).unwrap();
                 let cold = sol.solve(&t).unwrap();
@@ -713,7 +723,14 @@ mod tests {
                 );
                 // A residual of the wrong length, or infinite, is refused.
                 assert!(sol
-                    .solve_with_derivatives(&t, &[], FitStart::Residual(&residual[1..]))
+                    .solve_with_derivatives(
+                        &t,
+                        &[],
+                        FitStart::Nearby {
+                            weights: &w,
+                            residual: &residual[1..],
+                        },
+                    )
                     .is_err());
             }
         }
