@@ -25,9 +25,9 @@ pub struct FrameFit {
     pub weights: Vec<f64>,
     /// Every bundle's position under the fitted weights (B).
     pub positions: Vec<DVec3>,
-    /// `positions − targets` (B, NaN where a target is missing; empty when not known): where
-    /// the fit of a nearby target starts ([`FitPrior::fit_from`]).
-    pub residual: Vec<DVec3>,
+    /// The fit's dual point where its solver found it that way (empty otherwise): where the
+    /// fit of a nearby target of the same frame starts ([`FitPrior::fit_from`]).
+    pub dual: Vec<f64>,
 }
 
 /// What a fit and its residual smoothing need of one set of bundle clouds.
@@ -102,26 +102,43 @@ impl FitPrior {
         self.fit_from(targets, None)
     }
 
-    /// [`fit`](Self::fit) started at `start` (a nearby fit, e.g. the previous step of the jaw
-    /// refinement's): at its residual's dual point where it has one, else at its weights; the
-    /// same minimum in fewer steps.
+    /// [`fit`](Self::fit) started at `start` (the fit of a nearby target of the same frame,
+    /// e.g. the previous step of the jaw refinement's): at its dual point where it has one,
+    /// else at its weights; the same minimum in fewer steps.
     pub fn fit_from(&self, targets: &[DVec3], start: Option<&FrameFit>) -> Result<FrameFit> {
-        let b = self.rest.len();
-        let mut rhs = Vec::with_capacity(3 * b);
+        let mut fit = self.weights_from(targets, start)?;
+        self.place(&mut fit);
+        Ok(fit)
+    }
+
+    /// [`fit_from`](Self::fit_from) without the bundles' positions (empty; [`place`](Self::place)
+    /// adds them): for fits that only lead to another.
+    pub fn weights_from(&self, targets: &[DVec3], start: Option<&FrameFit>) -> Result<FrameFit> {
+        let mut rhs = Vec::with_capacity(3 * self.rest.len());
         for (t, r) in targets.iter().zip(&self.rest) {
             rhs.extend_from_slice(&(*t - *r).to_array());
         }
-        let residual: Option<Vec<f64>> = start
-            .filter(|f| f.residual.len() == b)
-            .map(|f| f.residual.iter().flat_map(|r| r.to_array()).collect());
-        let from = match (start.and_then(|f| f.weights.get(1..)), &residual) {
-            (Some(weights), Some(residual)) => FitStart::Nearby { weights, residual },
-            (Some(w), None) => FitStart::Weights(w),
-            (None, _) => FitStart::Cold,
+        let from = match start.and_then(|f| f.weights.get(1..).map(|w| (w, &f.dual))) {
+            Some((weights, dual)) if !dual.is_empty() => FitStart::Nearby { weights, dual },
+            Some((w, _)) => FitStart::Weights(w),
+            None => FitStart::Cold,
         };
         let (solution, _) = self.solver.solve_with_derivatives(&rhs, &[], from)?;
+        let mut weights = Vec::with_capacity(solution.weights.len() + 1);
+        weights.push(0.0);
+        weights.extend_from_slice(&solution.weights);
+        Ok(FrameFit {
+            weights,
+            positions: Vec::new(),
+            dual: solution.dual,
+        })
+    }
+
+    /// Every bundle's position under `fit`'s weights, into `fit.positions`.
+    pub fn place(&self, fit: &mut FrameFit) {
+        let b = self.rest.len();
         let mut positions = self.rest.clone();
-        for (k, &x) in solution.weights.iter().enumerate() {
+        for (k, &x) in fit.weights.iter().skip(1).enumerate() {
             if x != 0.0 {
                 for (p, d) in positions
                     .iter_mut()
@@ -131,19 +148,7 @@ impl FitPrior {
                 }
             }
         }
-        let mut weights = Vec::with_capacity(solution.weights.len() + 1);
-        weights.push(0.0);
-        weights.extend_from_slice(&solution.weights);
-        let residual = positions
-            .iter()
-            .zip(targets)
-            .map(|(p, t)| *p - *t)
-            .collect();
-        Ok(FrameFit {
-            weights,
-            positions,
-            residual,
-        })
+        fit.positions = positions;
     }
 
     /// What of `targets` (B, NaN rows missing) the shapes `active` (0-based shape indices)

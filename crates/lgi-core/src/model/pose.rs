@@ -298,7 +298,7 @@ impl Model {
             FrameFit {
                 weights,
                 positions: Vec::new(),
-                residual: Vec::new(),
+                dual: Vec::new(),
             }
         });
         for _ in 0..JAW_ITERATIONS {
@@ -323,7 +323,8 @@ impl Model {
                         .collect::<Vec<_>>(),
                 );
             }
-            let fit = prior.fit_from(&u, last.as_ref())?;
+            // Only the fit the frame is solved with needs the bundles' positions (below).
+            let fit = prior.weights_from(&u, last.as_ref())?;
             // The residual of the fit's active shapes without its ridge: zero at a dataset
             // shape's own pose, so the refinement is not pulled off it by the ridge.
             let active: Vec<usize> = (1..fit.weights.len())
@@ -368,9 +369,10 @@ impl Model {
                 break;
             }
         }
-        let Some((_, pose, fit)) = best else {
+        let Some((_, pose, mut fit)) = best else {
             return Ok(None);
         };
+        prior.place(&mut fit);
         let pose = JawParams::from_array(pose);
         if pose.validate().is_err() {
             return Ok(None);

@@ -192,11 +192,7 @@ impl LowRank {
                 Cow::Borrowed(&self.w[..]),
                 Cow::Borrowed(&self.wtw[..]),
                 None,
-                Some(Dual {
-                    tau: c,
-                    v: None,
-                    missing: Vec::new(),
-                }),
+                Some(Dual { tau: c, v: None }),
             ),
             Some(Ok(v)) => {
                 let wv = times_lower(&self.w, r, &v);
@@ -205,11 +201,7 @@ impl LowRank {
                 let wtw = lower_t_times(&v, r, &t);
                 // Aᵀt = W c = (W V)(V⁻¹ c): the data term is ‖(W V)ᵀ w − V⁻¹ c‖² + const.
                 let tau = solve_lower(&v, r, &c);
-                let dual = Dual {
-                    tau,
-                    v: Some(v),
-                    missing,
-                };
+                let dual = Dual { tau, v: Some(v) };
                 (Cow::Owned(wv), Cow::Owned(wtw), None, Some(dual))
             }
             Some(Err(_)) => (
@@ -227,7 +219,6 @@ impl LowRank {
         let frame = Frame {
             rank: r,
             shapes: self.shapes,
-            xt: &self.xt,
             whitened: dual
                 .as_ref()
                 .is_some_and(|d| d.v.is_none())
@@ -376,6 +367,15 @@ fn gram_of(m: &[f64], n: usize, r: usize) -> Vec<f64> {
     g
 }
 
+/// Where [`Frame::dual`] ended: the weights on the minimum's pieces, the steps taken, and the
+/// dual point (r values, the frame's coordinates), where a fit of a nearby target of the same
+/// frame can start ([`DualStart::Point`]).
+pub(super) struct DualEnd {
+    pub(super) weights: Vec<f64>,
+    pub(super) steps: usize,
+    pub(super) point: Vec<f64>,
+}
+
 /// What [`Frame::solve_few_free`] keeps between a dual's steps of a frame with markers
 /// missing: the Cholesky factor of `I + held WᵀW` and the whitened row `L⁻¹ w_i` of each
 /// weight that has been in the box (empty until then).
@@ -390,8 +390,9 @@ struct SmallFree {
 pub(super) enum DualStart<'a> {
     /// At 0: every weight at 0.
     Zero,
-    /// At the dual point of a nearby fit's residual `A w − t` (R values, NaN where missing).
-    Residual(&'a [f64]),
+    /// At a dual point of the same frame's fit of a nearby target ([`DualEnd::point`]: the
+    /// same markers missing, so the same coordinates); from 0 if it is not r finite values.
+    Point(&'a [f64]),
     /// At the dual point nearest these weights (S).
     Weights(&'a [f64]),
 }
@@ -402,8 +403,6 @@ struct Dual {
     tau: Vec<f64>,
     /// V of `K = V Vᵀ` with markers missing.
     v: Option<Vec<f64>>,
-    /// The missing rows, ascending.
-    missing: Vec<usize>,
 }
 
 /// One frame's normal equations `W K Wᵀ` with the weights clamped by the box so far. The
@@ -413,8 +412,6 @@ struct Dual {
 pub(super) struct Frame<'f> {
     rank: usize,
     shapes: usize,
-    /// The matrix's Xᵀ (R × r), to carry a residual into the frame's coordinates.
-    xt: &'f [f64],
     /// The frame's dual form, when its `W K Wᵀ` is `W' W'ᵀ` ([`Frame::dual`]).
     dual: Option<Dual>,
     /// The matrix's [`Whitened`] rows, for a complete frame.
@@ -589,11 +586,10 @@ impl Frame<'_> {
             .collect()
     }
 
-    /// The weights where the dual of the fit is maximised ([`Dual`]), from the dual point of
-    /// `residual` (`A w − t` of a nearby fit, R values, NaN where missing) or from 0 (every
-    /// weight at 0): the start at which the primal iteration ends in one step. `None` when
-    /// the frame has no dual form, or the dual stalls or runs past `max_steps` (the primal
-    /// iteration then starts inside the box as before); with the number of dual steps.
+    /// Where the dual of the fit is maximised ([`Dual`]), from `start` ([`DualStart`]): the
+    /// weights there (the start at which the primal iteration ends in one step), the steps
+    /// taken and the dual point. `None` when the frame has no dual form, or the dual stalls or
+    /// runs past `max_steps` (the primal iteration then starts as it would without it).
     ///
     /// The dual of `min ‖W'ᵀw − τ‖² + Σ g(w_i)` (g the ridge and box penalty) is the concave,
     /// C¹, piecewise quadratic `D(η) = −‖η‖²/4 − ηᵀτ − Σ g*(−(W'η)_i)` over r values, and each
@@ -609,7 +605,7 @@ impl Frame<'_> {
         l2: f64,
         penalty: f64,
         max_steps: usize,
-    ) -> Result<Option<(Vec<f64>, usize)>> {
+    ) -> Result<Option<DualEnd>> {
         let Some(tau) = self.dual.as_ref().map(|d| d.tau.clone()) else {
             return Ok(None);
         };
@@ -635,7 +631,8 @@ impl Frame<'_> {
         let cold = matches!(start, DualStart::Zero);
         let mut eta = match start {
             DualStart::Zero => vec![0.0; r],
-            DualStart::Residual(res) => self.dual_point(res),
+            DualStart::Point(p) if p.len() == r && p.iter().all(|x| x.is_finite()) => p.to_vec(),
+            DualStart::Point(_) => vec![0.0; r],
             DualStart::Weights(w) => self.dual_point_of_weights(w, l2, penalty)?,
         };
         let mut u = w_times(&self.w, r, &eta);
@@ -673,7 +670,11 @@ impl Frame<'_> {
                         slope(p) * -(u[i] + du[i]) + offset(p)
                     })
                     .collect();
-                return Ok(Some((w, step)));
+                return Ok(Some(DualEnd {
+                    weights: w,
+                    steps: step,
+                    point: target,
+                }));
             }
             // Exact line search: the slope of D along d is piecewise linear and decreasing,
             // c0 + s0 − α (‖d‖²/2 + s1), with s0 and s1 summed over the weights' pieces and
@@ -828,28 +829,6 @@ impl Frame<'_> {
             &cholesky(r, g)?,
             &wt_times(&self.w, r, &u),
         ))
-    }
-
-    /// The frame's dual point of a residual `A w − t` (R values, NaN where missing):
-    /// `η = 2 Qᵀ y` with Q the frame's orthonormal coordinates of the present rows.
-    fn dual_point(&self, residual: &[f64]) -> Vec<f64> {
-        let r = self.rank;
-        let Some(dual) = &self.dual else {
-            return vec![0.0; r];
-        };
-        let mut c = vec![0.0; r];
-        for (rho, &y) in residual.iter().enumerate() {
-            if y.is_nan() || dual.missing.binary_search(&rho).is_ok() {
-                continue;
-            }
-            for (ci, x) in c.iter_mut().zip(&self.xt[rho * r..(rho + 1) * r]) {
-                *ci += 2.0 * x * y;
-            }
-        }
-        match &dual.v {
-            None => c,
-            Some(v) => solve_lower(v, r, &c),
-        }
     }
 
     /// A damped step `to = from + α (cand − from)`: `Wᵀ to` from the two remembered ends
@@ -1019,10 +998,11 @@ mod tests {
                 t[m] = f64::NAN;
             }
             let (mut frame, atr) = lr.frame(&t);
-            let (w, steps) = frame
+            let end = frame
                 .dual(DualStart::Zero, l2, penalty, 100)
                 .unwrap()
                 .unwrap();
+            let (w, steps) = (end.weights, end.steps);
             assert!(steps >= 2, "{missing:?}: {steps} steps");
             let clamped: Vec<bool> = w.iter().map(|x| !(0.0..=1.0).contains(x)).collect();
             assert!(clamped.iter().filter(|&&c| c).count() > shapes / 2);
