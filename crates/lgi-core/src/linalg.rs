@@ -143,6 +143,12 @@ pub(crate) fn dot_rows<const N: usize>(rows: [&[f64]; N], x: &[f64]) -> [f64; N]
 
 /// Solves `L Lᵀ x = b` with `l` from [`cholesky`].
 pub fn cholesky_solve(n: usize, l: &[f64], b: &[f64]) -> Vec<f64> {
+    lower_t_solve(n, l, &lower_solve(n, l, b))
+}
+
+/// `L⁻¹ b` of a lower-triangular row-major `n × n` matrix `l` (forward substitution, each
+/// inner product one sum in order).
+pub(crate) fn lower_solve(n: usize, l: &[f64], b: &[f64]) -> Vec<f64> {
     let mut y = b.to_vec();
     for i in 0..n {
         let s: f64 = l[i * n..i * n + i]
@@ -152,6 +158,12 @@ pub fn cholesky_solve(n: usize, l: &[f64], b: &[f64]) -> Vec<f64> {
             .sum();
         y[i] = (y[i] - s) / l[i * n + i];
     }
+    y
+}
+
+/// `L⁻ᵀ b` of a lower-triangular row-major `n × n` matrix `l` (back substitution).
+pub(crate) fn lower_t_solve(n: usize, l: &[f64], b: &[f64]) -> Vec<f64> {
+    let mut y = b.to_vec();
     for i in (0..n).rev() {
         let s: f64 = ((i + 1)..n).map(|k| l[k * n + i] * y[k]).sum();
         y[i] = (y[i] - s) / l[i * n + i];

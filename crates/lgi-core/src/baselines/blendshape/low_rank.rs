@@ -9,7 +9,7 @@
 //! `w = D⁻¹ (b − W y)` with `(I + K Wᵀ D⁻¹ W) y = K Wᵀ D⁻¹ b`.
 
 use crate::error::Result;
-use crate::linalg::{cholesky, cholesky_solve, dot_rows, Lu};
+use crate::linalg::{cholesky, cholesky_solve, dot_rows, lower_solve, lower_t_solve, Lu};
 use std::borrow::Cow;
 use std::sync::OnceLock;
 
@@ -187,12 +187,15 @@ impl LowRank {
         // symmetric system by Cholesky (r³/6) instead of forming `K M` and factoring it by LU
         // (4r³/3), for O(S r²) once per fit. A K that is not positive definite (a direction
         // seen only by missing rows) keeps the general form.
-        let (w, wtw, k, dual) = match k.as_ref().map(|k| cholesky(r, k.clone())) {
+        // The last two: the data term's τ where the frame has a dual form (‖W'ᵀ w − τ‖² +
+        // const, [`Frame::dual`]), and the matrix's whitened rows for a complete frame.
+        let (w, wtw, k, tau, whitened) = match k.as_ref().map(|k| cholesky(r, k.clone())) {
             None => (
                 Cow::Borrowed(&self.w[..]),
                 Cow::Borrowed(&self.wtw[..]),
                 None,
-                Some(Dual { tau: c, v: None }),
+                Some(c),
+                Some(&self.whitened),
             ),
             Some(Ok(v)) => {
                 let wv = times_lower(&self.w, r, &v);
@@ -200,14 +203,14 @@ impl LowRank {
                 let t = times_lower(&self.wtw, r, &v);
                 let wtw = lower_t_times(&v, r, &t);
                 // Aᵀt = W c = (W V)(V⁻¹ c): the data term is ‖(W V)ᵀ w − V⁻¹ c‖² + const.
-                let tau = solve_lower(&v, r, &c);
-                let dual = Dual { tau, v: Some(v) };
-                (Cow::Owned(wv), Cow::Owned(wtw), None, Some(dual))
+                let tau = lower_solve(r, &v, &c);
+                (Cow::Owned(wv), Cow::Owned(wtw), None, Some(tau), None)
             }
             Some(Err(_)) => (
                 Cow::Borrowed(&self.w[..]),
                 Cow::Borrowed(&self.wtw[..]),
                 k,
+                None,
                 None,
             ),
         };
@@ -219,11 +222,8 @@ impl LowRank {
         let frame = Frame {
             rank: r,
             shapes: self.shapes,
-            whitened: dual
-                .as_ref()
-                .is_some_and(|d| d.v.is_none())
-                .then_some(&self.whitened),
-            dual,
+            tau,
+            whitened,
             w,
             wtw,
             k,
@@ -307,26 +307,6 @@ fn times_lower(w: &[f64], r: usize, v: &[f64]) -> Vec<f64> {
     out
 }
 
-/// `V⁻¹ c` of a lower-triangular `r × r` matrix `v` (forward substitution).
-fn solve_lower(v: &[f64], r: usize, c: &[f64]) -> Vec<f64> {
-    let mut out = vec![0.0; r];
-    for i in 0..r {
-        let done: f64 = (0..i).map(|k| v[i * r + k] * out[k]).sum();
-        out[i] = (c[i] - done) / v[i * r + i];
-    }
-    out
-}
-
-/// `L⁻ᵀ c` of a lower-triangular `r × r` matrix `l` (back substitution).
-fn solve_lower_t(l: &[f64], r: usize, c: &[f64]) -> Vec<f64> {
-    let mut out = vec![0.0; r];
-    for i in (0..r).rev() {
-        let done: f64 = (i + 1..r).map(|k| l[k * r + i] * out[k]).sum();
-        out[i] = (c[i] - done) / l[i * r + i];
-    }
-    out
-}
-
 /// `m += sign x xᵀ` on and above the diagonal of the row-major `r × r` matrix `m`, each entry
 /// as `(sign x_a) x_b` (sign ±1). The entry below, `(sign x_b) x_a`, has the same bits (± and
 /// the product commute exactly), so [`mirror_upper`] completes the full update at half the
@@ -397,14 +377,6 @@ pub(super) enum DualStart<'a> {
     Weights(&'a [f64]),
 }
 
-/// A frame's data term as `‖W'ᵀ w − τ‖²` plus a constant (W' = W, or W V with markers
-/// missing), what [`Frame::dual`] maximises over.
-struct Dual {
-    tau: Vec<f64>,
-    /// V of `K = V Vᵀ` with markers missing.
-    v: Option<Vec<f64>>,
-}
-
 /// One frame's normal equations `W K Wᵀ` with the weights clamped by the box so far. The
 /// free weights' `Σ w_i w_iᵀ` is kept as the active set changes: by a rank-one update per
 /// change, or summed afresh over the free weights when there are fewer of them than changes
@@ -412,8 +384,9 @@ struct Dual {
 pub(super) struct Frame<'f> {
     rank: usize,
     shapes: usize,
-    /// The frame's dual form, when its `W K Wᵀ` is `W' W'ᵀ` ([`Frame::dual`]).
-    dual: Option<Dual>,
+    /// τ of the frame's data term as `‖W'ᵀ w − τ‖²` plus a constant (W' = W, or W V with
+    /// markers missing), when its `W K Wᵀ` is `W' W'ᵀ`: what [`Frame::dual`] maximises over.
+    tau: Option<Vec<f64>>,
     /// The matrix's [`Whitened`] rows, for a complete frame.
     whitened: Option<&'f OnceLock<Whitened>>,
     /// The frame's W (the matrix's, or W V with markers missing) and its `WᵀW`.
@@ -586,7 +559,7 @@ impl Frame<'_> {
             .collect()
     }
 
-    /// Where the dual of the fit is maximised ([`Dual`]), from `start` ([`DualStart`]): the
+    /// Where the dual of the fit is maximised, from `start` ([`DualStart`]): the
     /// weights there (the start at which the primal iteration ends in one step), the steps
     /// taken and the dual point. `None` when the frame has no dual form, or the dual stalls or
     /// runs past `max_steps` (the primal iteration then starts as it would without it).
@@ -606,7 +579,7 @@ impl Frame<'_> {
         penalty: f64,
         max_steps: usize,
     ) -> Result<Option<DualEnd>> {
-        let Some(tau) = self.dual.as_ref().map(|d| d.tau.clone()) else {
+        let Some(tau) = self.tau.clone() else {
             return Ok(None);
         };
         let (r, s) = (self.rank, self.shapes);
@@ -752,7 +725,7 @@ impl Frame<'_> {
                     let l = held_factor(&self.wtw, r, held)?;
                     let mut z = vec![0.0; self.w.len()];
                     for i in 0..self.shapes {
-                        z[i * r..(i + 1) * r].copy_from_slice(&solve_lower(&l, r, row(i)));
+                        z[i * r..(i + 1) * r].copy_from_slice(&lower_solve(r, &l, row(i)));
                     }
                     let _ = cell.set(Whitened { l, z });
                 }
@@ -768,7 +741,7 @@ impl Frame<'_> {
         if whole.is_none() {
             for &i in in_box {
                 if small.z[i].is_empty() {
-                    small.z[i] = solve_lower(l, r, row(i));
+                    small.z[i] = lower_solve(r, l, row(i));
                 }
             }
         }
@@ -778,7 +751,7 @@ impl Frame<'_> {
                 None => &small.z[i],
             }
         };
-        let mut x = solve_lower(l, r, rhs);
+        let mut x = lower_solve(r, l, rhs);
         let n = in_box.len();
         if n > 0 {
             let dot = |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(p, q)| p * q).sum::<f64>();
@@ -799,7 +772,7 @@ impl Frame<'_> {
                 }
             }
         }
-        Ok(solve_lower_t(l, r, &x))
+        Ok(lower_t_solve(r, l, &x))
     }
 
     /// The frame's dual point nearest to weights `w` (S): each weight's `u_i` on its piece
