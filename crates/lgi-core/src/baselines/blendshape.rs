@@ -487,7 +487,7 @@ impl BlendshapeSolver {
 mod tests {
     use super::*;
 
-    fn rnd(seed: &mut u64) -> f64 {
+    pub(super) fn rnd(seed: &mut u64) -> f64 {
         *seed = seed
             .wrapping_mul(6364136223846793005)
             .wrapping_add(1442695040888963407);
@@ -646,19 +646,32 @@ mod tests {
         }
     }
 
+    /// A `rows × shapes` matrix (row-major) whose columns mix `base` random columns, the
+    /// mixing weights drawn (by [`rnd`] from `seed`) plus `offset` (0.5: positive mixes, like
+    /// scans of one face).
+    pub(super) fn mixes(
+        rows: usize,
+        base: usize,
+        shapes: usize,
+        offset: f64,
+        seed: &mut u64,
+    ) -> Vec<f64> {
+        let b: Vec<f64> = (0..rows * base).map(|_| rnd(seed)).collect();
+        let mix: Vec<f64> = (0..shapes * base).map(|_| rnd(seed) + offset).collect();
+        (0..rows * shapes)
+            .map(|i| {
+                let (r, k) = (i / shapes, i % shapes);
+                (0..base).map(|j| b[r * base + j] * mix[k * base + j]).sum()
+            })
+            .collect()
+    }
+
     /// 240 positive mixes of 6 shapes over 30 rows (scans of one face: most weights end
     /// clamped) and a target.
     fn scans(seed: u64) -> (BlendshapeSolver, Vec<f64>) {
         let (rows, base, shapes) = (30, 6, 240);
         let mut s = seed + 40;
-        let b: Vec<f64> = (0..rows * base).map(|_| rnd(&mut s)).collect();
-        let mix: Vec<f64> = (0..shapes * base).map(|_| rnd(&mut s) + 0.5).collect();
-        let a: Vec<f64> = (0..rows * shapes)
-            .map(|i| {
-                let (r, k) = (i / shapes, i % shapes);
-                (0..base).map(|j| b[r * base + j] * mix[k * base + j]).sum()
-            })
-            .collect();
+        let a = mixes(rows, base, shapes, 0.5, &mut s);
         let t = (0..rows).map(|_| 3.0 * rnd(&mut s)).collect();
         (
             BlendshapeSolver::new(a, rows, shapes, 1e-3, 10.0).unwrap(),

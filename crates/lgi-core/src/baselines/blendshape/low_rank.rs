@@ -855,51 +855,9 @@ impl Frame<'_> {
 
 #[cfg(test)]
 mod tests {
+    use super::super::tests::{mixes, rnd};
     use super::*;
     use proptest::prelude::*;
-
-    /// Uniform draws in [−0.5, 0.5) from a seed (a linear congruential generator).
-    fn lcg(seed: u64) -> impl FnMut() -> f64 {
-        let mut seed = seed;
-        move || {
-            seed = seed
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            (seed >> 11) as f64 / (1u64 << 53) as f64 - 0.5
-        }
-    }
-
-    /// A `rows × shapes` matrix (row-major) whose columns mix `base` random columns, the
-    /// mixing weights drawn plus `offset` (0.5: positive mixes, like scans of one face).
-    fn mixes(
-        rows: usize,
-        base: usize,
-        shapes: usize,
-        offset: f64,
-        rnd: &mut impl FnMut() -> f64,
-    ) -> Vec<f64> {
-        let b: Vec<f64> = (0..rows * base).map(|_| rnd()).collect();
-        let mix: Vec<f64> = (0..shapes * base).map(|_| rnd() + offset).collect();
-        (0..rows * shapes)
-            .map(|i| {
-                let (r, k) = (i / shapes, i % shapes);
-                (0..base).map(|j| b[r * base + j] * mix[k * base + j]).sum()
-            })
-            .collect()
-    }
-
-    /// `AᵀA` of a row-major `rows × shapes` matrix.
-    fn gram_of_rows(a: &[f64], rows: usize, shapes: usize) -> Vec<f64> {
-        let mut gram = vec![0.0; shapes * shapes];
-        for row in a.chunks(shapes).take(rows) {
-            for i in 0..shapes {
-                for j in 0..shapes {
-                    gram[i * shapes + j] += row[i] * row[j];
-                }
-            }
-        }
-        gram
-    }
 
     /// The Woodbury solve over a few free weights equals the r × r system it stands for,
     /// `(I + held WᵀW + c Σ_free w_i w_iᵀ) x = rhs`, on a complete frame (rows whitened once
@@ -908,10 +866,11 @@ mod tests {
     #[test]
     fn the_few_free_solve_equals_the_whole_system() {
         let (rows, shapes) = (40, 60);
-        let mut rnd = lcg(9);
+        let mut seed = 9u64;
         // 60 shapes mixing 12: rank 12 < 30, the low-rank form.
-        let a = mixes(rows, 12, shapes, 0.0, &mut rnd);
-        let lr = LowRank::new(&a, rows, shapes, &gram_of_rows(&a, rows, shapes), 1e-3)
+        let a = mixes(rows, 12, shapes, 0.0, &mut seed);
+        let mut rnd = || rnd(&mut seed);
+        let lr = LowRank::new(&a, rows, shapes, &gram_of(&a, rows, shapes), 1e-3)
             .unwrap()
             .unwrap();
         let r = lr.rank();
@@ -959,9 +918,10 @@ mod tests {
     #[test]
     fn the_dual_ends_on_the_minimums_pieces() {
         let (rows, base, shapes) = (24, 5, 200);
-        let mut rnd = lcg(5);
-        let a = mixes(rows, base, shapes, 0.5, &mut rnd);
-        let gram = gram_of_rows(&a, rows, shapes);
+        let mut seed = 5u64;
+        let a = mixes(rows, base, shapes, 0.5, &mut seed);
+        let mut rnd = || rnd(&mut seed);
+        let gram = gram_of(&a, rows, shapes);
         let (l2, penalty) = (1e-3, 10.0);
         let lr = LowRank::new(&a, rows, shapes, &gram, l2).unwrap().unwrap();
         let t: Vec<f64> = (0..rows).map(|_| 3.0 * rnd()).collect();
