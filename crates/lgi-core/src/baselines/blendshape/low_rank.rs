@@ -9,7 +9,7 @@
 //! `w = D⁻¹ (b − W y)` with `(I + K Wᵀ D⁻¹ W) y = K Wᵀ D⁻¹ b`.
 
 use crate::error::Result;
-use crate::linalg::{cholesky, cholesky_solve, dot_rows, lower_solve, lower_t_solve, Lu};
+use crate::linalg::{cholesky, cholesky_solve, lower_solve, lower_t_solve, Lu};
 use std::borrow::Cow;
 use std::sync::OnceLock;
 
@@ -28,6 +28,8 @@ pub(super) struct LowRank {
     rank: usize,
     /// W, `S × r` row-major.
     w: Vec<f64>,
+    /// Wᵀ, `r × S` row-major: what [`columns_times`] reads.
+    wt: Vec<f64>,
     /// Xᵀ, `R × r` row-major: row ρ of it is what row ρ of A contributes.
     xt: Vec<f64>,
     /// WᵀW, `r × r`.
@@ -140,6 +142,7 @@ impl LowRank {
         Ok(Some(LowRank {
             shapes: s,
             rank: r,
+            wt: transposed(&wl, r),
             w: wl,
             xt,
             wtw,
@@ -175,9 +178,11 @@ impl LowRank {
             for i in 0..r {
                 k[i * r + i] = 1.0;
             }
-            for &rho in &missing {
-                add_outer_upper(&mut k, r, -1.0, &self.xt[rho * r..(rho + 1) * r]);
-            }
+            let terms: Vec<(f64, &[f64])> = missing
+                .iter()
+                .map(|&rho| (-1.0, &self.xt[rho * r..(rho + 1) * r]))
+                .collect();
+            add_outer_products(&mut k, r, &terms);
             mirror_upper(&mut k, r);
             k
         });
@@ -189,9 +194,10 @@ impl LowRank {
         // seen only by missing rows) keeps the general form.
         // The last two: the data term's τ where the frame has a dual form (‖W'ᵀ w − τ‖² +
         // const, [`Frame::dual`]), and the matrix's whitened rows for a complete frame.
-        let (w, wtw, k, tau, whitened) = match k.as_ref().map(|k| cholesky(r, k.clone())) {
+        let (w, wt, wtw, k, tau, whitened) = match k.as_ref().map(|k| cholesky(r, k.clone())) {
             None => (
                 Cow::Borrowed(&self.w[..]),
+                Cow::Borrowed(&self.wt[..]),
                 Cow::Borrowed(&self.wtw[..]),
                 None,
                 Some(c),
@@ -204,10 +210,19 @@ impl LowRank {
                 let wtw = lower_t_times(&v, r, &t);
                 // Aᵀt = W c = (W V)(V⁻¹ c): the data term is ‖(W V)ᵀ w − V⁻¹ c‖² + const.
                 let tau = lower_solve(r, &v, &c);
-                (Cow::Owned(wv), Cow::Owned(wtw), None, Some(tau), None)
+                let wvt = transposed(&wv, r);
+                (
+                    Cow::Owned(wv),
+                    Cow::Owned(wvt),
+                    Cow::Owned(wtw),
+                    None,
+                    Some(tau),
+                    None,
+                )
             }
             Some(Err(_)) => (
                 Cow::Borrowed(&self.w[..]),
+                Cow::Borrowed(&self.wt[..]),
                 Cow::Borrowed(&self.wtw[..]),
                 k,
                 None,
@@ -225,6 +240,7 @@ impl LowRank {
             tau,
             whitened,
             w,
+            wt,
             wtw,
             k,
             tt,
@@ -240,25 +256,35 @@ impl LowRank {
 
     /// W y (S).
     fn w_times(&self, y: &[f64]) -> Vec<f64> {
-        w_times(&self.w, self.rank, y)
+        columns_times(&self.wt, self.shapes, y)
     }
 }
 
-/// `W y` (S) of a row-major `S × r` matrix `w`: each entry one sum in order from −0.0 (as
-/// `Iterator::sum`), eight rows side by side so that eight independent sums run at once.
-fn w_times(w: &[f64], r: usize, y: &[f64]) -> Vec<f64> {
-    const ROWS: usize = 8;
-    let y = &y[..r];
-    let mut out = Vec::with_capacity(w.len() / r.max(1));
-    let mut groups = w.chunks_exact(ROWS * r.max(1));
-    for group in &mut groups {
-        let rows: [&[f64]; ROWS] = std::array::from_fn(|l| &group[l * r..(l + 1) * r]);
-        out.extend_from_slice(&dot_rows(rows, y));
-    }
-    for row in groups.remainder().chunks(r.max(1)) {
-        out.push(row.iter().zip(y).map(|(a, b)| a * b).sum());
+/// `M y` (n) of a matrix given as its transpose `mt` (row-major, `y.len() × n`): each entry
+/// one sum in order from −0.0 over y (the bits of an inner product per row of M, as
+/// `Iterator::sum` adds it), taken a column of M at a time: a contiguous pass per value of y
+/// that vectorises, twice as fast as the rows' inner products (2,000 scans at rank 135:
+/// 56 µs against 115 µs).
+fn columns_times(mt: &[f64], n: usize, y: &[f64]) -> Vec<f64> {
+    let mut out = vec![-0.0; n];
+    for (column, &yj) in mt.chunks_exact(n.max(1)).zip(y) {
+        for (o, a) in out.iter_mut().zip(column) {
+            *o += a * yj;
+        }
     }
     out
+}
+
+/// The transpose (`r × n`) of a row-major `n × r` matrix.
+fn transposed(m: &[f64], r: usize) -> Vec<f64> {
+    let n = m.len() / r.max(1);
+    let mut t = vec![0.0; m.len()];
+    for (i, row) in m.chunks_exact(r.max(1)).enumerate() {
+        for (j, &x) in row.iter().enumerate() {
+            t[j * n + i] = x;
+        }
+    }
+    t
 }
 
 /// `Wᵀ v` (r) of a row-major `S × r` matrix `w`.
@@ -307,15 +333,55 @@ fn times_lower(w: &[f64], r: usize, v: &[f64]) -> Vec<f64> {
     out
 }
 
-/// `m += sign x xᵀ` on and above the diagonal of the row-major `r × r` matrix `m`, each entry
-/// as `(sign x_a) x_b` (sign ±1). The entry below, `(sign x_b) x_a`, has the same bits (± and
-/// the product commute exactly), so [`mirror_upper`] completes the full update at half the
-/// cost: a frame's fit makes ~250 such updates of rank 55 on ICT-300.
-fn add_outer_upper(m: &mut [f64], r: usize, sign: f64, x: &[f64]) {
-    for a in 0..r {
-        let s = sign * x[a];
-        for (e, xb) in m[a * r + a..(a + 1) * r].iter_mut().zip(&x[a..r]) {
-            *e += s * xb;
+/// `m += Σ_k sign_k x_k x_kᵀ` on and above the diagonal of the row-major `r × r` matrix `m`
+/// (`terms`: each `(sign_k, x_k)`, sign ±1), each entry updated by the terms in order as
+/// `+= (sign_k x_k[a]) x_k[b]`: the bits of one rank-one update after another. The entry
+/// below, `(sign x_b) x_a`, has the same bits (± and the product commute exactly), so
+/// [`mirror_upper`] completes the full update at half the cost; entries below the diagonal
+/// in the diagonal's tiles are changed too and must be mirrored over.
+///
+/// Taken a 4 × 4 tile of `m` at a time over 32 terms, the tile held in registers: one rank-one
+/// update at a time reads and writes the whole matrix per term (a fit of 2,000 scans makes
+/// hundreds of them at rank 135 a frame), bound by the cache, not the arithmetic.
+fn add_outer_products(m: &mut [f64], r: usize, terms: &[(f64, &[f64])]) {
+    const TILE: usize = 4;
+    const CHUNK: usize = 32;
+    for chunk in terms.chunks(CHUNK) {
+        for a0 in (0..r).step_by(TILE) {
+            let a1 = (a0 + TILE).min(r);
+            for b0 in (a0..r).step_by(TILE) {
+                let b1 = (b0 + TILE).min(r);
+                if a1 - a0 < TILE || b1 - b0 < TILE {
+                    for a in a0..a1 {
+                        for b in b0.max(a)..b1 {
+                            // Summed in a local: the terms' rows could alias `m` as far as
+                            // the compiler knows, which would store the entry every term.
+                            let mut e = m[a * r + b];
+                            for &(sign, x) in chunk {
+                                e += (sign * x[a]) * x[b];
+                            }
+                            m[a * r + b] = e;
+                        }
+                    }
+                    continue;
+                }
+                // Fixed-size arrays: the tile's loops unroll and it stays in registers.
+                let tile_of = |v: &[f64]| -> [f64; TILE] { std::array::from_fn(|q| v[q]) };
+                let mut acc: [[f64; TILE]; TILE] =
+                    std::array::from_fn(|p| tile_of(&m[(a0 + p) * r + b0..]));
+                for &(sign, x) in chunk {
+                    let (xa, xb) = (tile_of(&x[a0..]), tile_of(&x[b0..]));
+                    for p in 0..TILE {
+                        let t = sign * xa[p];
+                        for q in 0..TILE {
+                            acc[p][q] += t * xb[q];
+                        }
+                    }
+                }
+                for (p, row) in acc.iter().enumerate() {
+                    m[(a0 + p) * r + b0..(a0 + p) * r + b1].copy_from_slice(row);
+                }
+            }
         }
     }
 }
@@ -389,8 +455,9 @@ pub(super) struct Frame<'f> {
     tau: Option<Vec<f64>>,
     /// The matrix's [`Whitened`] rows, for a complete frame.
     whitened: Option<&'f OnceLock<Whitened>>,
-    /// The frame's W (the matrix's, or W V with markers missing) and its `WᵀW`.
+    /// The frame's W (the matrix's, or W V with markers missing), its transpose and `WᵀW`.
     w: Cow<'f, [f64]>,
+    wt: Cow<'f, [f64]>,
     wtw: Cow<'f, [f64]>,
     /// K when it is kept in the general form (not positive definite), else None for I.
     k: Option<Vec<f64>>,
@@ -487,7 +554,7 @@ impl Frame<'_> {
             }
         };
         let dinv = |i: usize| if self.clamped[i] { held } else { free };
-        let wy = w_times(&self.w, r, &y);
+        let wy = columns_times(&self.wt, self.shapes, &y);
         let cand: Vec<f64> = (0..self.shapes)
             .map(|i| dinv(i) * (rhs[i] - wy[i]))
             .collect();
@@ -500,7 +567,12 @@ impl Frame<'_> {
                 *o += a * cand[i];
             }
         }
-        let wtw_y = w_times(&self.wtw, r, &y);
+        // Row by row: a frame's `Vᵀ (WᵀW) V` need not be symmetric to the last bit.
+        let wtw_y: Vec<f64> = self
+            .wtw
+            .chunks_exact(r)
+            .map(|row| row.iter().zip(&y).map(|(a, b)| a * b).sum())
+            .collect();
         let v = (0..r)
             .map(|j| sum[j] + held * (wt_rhs[j] - wtw_y[j] - l2 * sum[j]))
             .collect();
@@ -519,17 +591,20 @@ impl Frame<'_> {
         }
         let now_free = self.clamped.iter().filter(|&&c| !c).count();
         if !changes.is_empty() {
-            if now_free <= changes.len() {
+            let row = |i: usize| &self.w[i * r..(i + 1) * r];
+            let terms: Vec<(f64, &[f64])> = if now_free <= changes.len() {
                 self.sum_free.fill(0.0);
-                for i in (0..self.shapes).filter(|&i| !self.clamped[i]) {
-                    add_outer_upper(&mut self.sum_free, r, 1.0, &self.w[i * r..(i + 1) * r]);
-                }
+                (0..self.shapes)
+                    .filter(|&i| !self.clamped[i])
+                    .map(|i| (1.0, row(i)))
+                    .collect()
             } else {
-                for &i in &changes {
-                    let sign = if self.clamped[i] { -1.0 } else { 1.0 };
-                    add_outer_upper(&mut self.sum_free, r, sign, &self.w[i * r..(i + 1) * r]);
-                }
-            }
+                changes
+                    .iter()
+                    .map(|&i| (if self.clamped[i] { -1.0 } else { 1.0 }, row(i)))
+                    .collect()
+            };
+            add_outer_products(&mut self.sum_free, r, &terms);
             mirror_upper(&mut self.sum_free, r);
             self.factor = None;
         }
@@ -608,7 +683,7 @@ impl Frame<'_> {
             DualStart::Point(_) => vec![0.0; r],
             DualStart::Weights(w) => self.dual_point_of_weights(w, l2, penalty)?,
         };
-        let mut u = w_times(&self.w, r, &eta);
+        let mut u = columns_times(&self.wt, s, &eta);
         let mut pieces: Vec<u8> = u.iter().map(|&x| side(-x, 0.0)).collect();
         // With few weights in the box the Newton matrix is `B + (free − held) F Fᵀ`, B =
         // I + held WᵀW the same for every step and F the free weights' rows: solved through
@@ -635,7 +710,7 @@ impl Frame<'_> {
             };
             let target: Vec<f64> = solved.iter().map(|x| 2.0 * x).collect();
             let d: Vec<f64> = target.iter().zip(&eta).map(|(a, b)| a - b).collect();
-            let du = w_times(&self.w, r, &d);
+            let du = columns_times(&self.wt, s, &d);
             if (0..s).all(|i| side(-(u[i] + du[i]), 0.0) == pieces[i]) {
                 let w = (0..s)
                     .map(|i| {
@@ -973,7 +1048,7 @@ mod tests {
         #[test]
         fn upper_updates_mirrored_equal_full_updates_bit_for_bit(
             r in 1usize..40,
-            updates in proptest::collection::vec((proptest::bool::ANY, proptest::collection::vec(-3.0f64..3.0, 40)), 1..12),
+            updates in proptest::collection::vec((proptest::bool::ANY, proptest::collection::vec(-3.0f64..3.0, 40)), 1..80),
         ) {
             let mut full = vec![0.0f64; r * r];
             for i in 0..r {
@@ -988,8 +1063,12 @@ mod tests {
                         full[a * r + b] += sign * x[a] * x[b];
                     }
                 }
-                add_outer_upper(&mut upper, r, sign, x);
             }
+            let terms: Vec<(f64, &[f64])> = updates
+                .iter()
+                .map(|(plus, x)| (if *plus { 1.0 } else { -1.0 }, &x[..r]))
+                .collect();
+            add_outer_products(&mut upper, r, &terms);
             let bits = |m: &[f64]| m.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
             mirror_upper(&mut upper, r);
             prop_assert_eq!(bits(&upper), bits(&full));
