@@ -35,6 +35,7 @@ mod prefetch;
 mod prior;
 mod sew;
 mod sibson;
+mod simd;
 mod smooth;
 mod sparse;
 mod tet_index;

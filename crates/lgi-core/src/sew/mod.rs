@@ -9,6 +9,7 @@ use crate::error::Result;
 use crate::geom::interpolate3;
 use crate::linalg::Lu;
 use crate::mesh::SurfacePoint;
+use crate::simd::with_avx2;
 use crate::sparse::{BlockColumns, SparseWeights, WeightRows};
 use glam::DVec3;
 use rayon::prelude::*;
@@ -146,6 +147,7 @@ fn blend_with(input: &BlendInput<'_>, columns: Option<&BlockColumns>, out: &mut 
         });
 }
 
+with_avx2! {
 /// `f += a s` over the entries of vertices `lo..hi` (as many as both have).
 fn add_scaled(f: &mut [f64], s: &[f32], a: f64, lo: usize, hi: usize) {
     if let (Some(f), Some(s)) = (f.get_mut(3 * lo..3 * hi), s.get(3 * lo..3 * hi)) {
@@ -153,6 +155,17 @@ fn add_scaled(f: &mut [f64], s: &[f32], a: f64, lo: usize, hi: usize) {
             *f += a * *s as f64;
         }
     }
+}
+}
+
+with_avx2! {
+/// `f += a₀ s₀ + a₁ s₁ + a₂ s₂ + a₃ s₃`, each entry adding the four in order (the bits of four
+/// [`add_scaled`] passes), loaded and stored once.
+fn add_four_scaled(f: &mut [f64], s: [&[f32]; 4], a: [f64; 4]) {
+    for ((((f, x0), x1), x2), x3) in f.iter_mut().zip(s[0]).zip(s[1]).zip(s[2]).zip(s[3]) {
+        *f = *f + a[0] * *x0 as f64 + a[1] * *x1 as f64 + a[2] * *x2 as f64 + a[3] * *x3 as f64;
+    }
+}
 }
 
 /// What the blend of one frame reads (see [`blend`]), with each bundle's piece flattened to
@@ -274,20 +287,11 @@ impl<'a> BlendInput<'a> {
                 let moving = t.iter().filter(|t| t.2 < t.3);
                 let lo = moving.clone().map(|t| t.2).min().unwrap_or(0);
                 let hi = moving.map(|t| t.3).max().unwrap_or(0);
-                let (a0, a1, a2, a3) = (t[0].1, t[1].1, t[2].1, t[3].1);
                 let part = |s: &'a [f32]| s.get(3 * lo..3 * hi);
                 match (part(t[0].0), part(t[1].0), part(t[2].0), part(t[3].0)) {
                     (Some(s0), Some(s1), Some(s2), Some(s3)) => {
-                        let f = &mut fit[3 * lo..3 * hi];
-                        for ((((f, x0), x1), x2), x3) in
-                            f.iter_mut().zip(s0).zip(s1).zip(s2).zip(s3)
-                        {
-                            *f = *f
-                                + a0 * *x0 as f64
-                                + a1 * *x1 as f64
-                                + a2 * *x2 as f64
-                                + a3 * *x3 as f64;
-                        }
+                        let a = [t[0].1, t[1].1, t[2].1, t[3].1];
+                        add_four_scaled(&mut fit[3 * lo..3 * hi], [s0, s1, s2, s3], a);
                     }
                     _ => {
                         for (s, a, lo, hi) in t {

@@ -10,6 +10,7 @@
 
 use crate::error::Result;
 use crate::linalg::{cholesky, cholesky_solve, lower_solve, lower_t_solve, Lu};
+use crate::simd::with_avx2;
 use std::borrow::Cow;
 use std::sync::OnceLock;
 
@@ -284,6 +285,7 @@ impl LowRank {
     }
 }
 
+with_avx2! {
 /// `M y` (n) of a matrix given as its transpose `mt` (row-major, `y.len() × n`): each entry
 /// one sum in order from −0.0 over y (the bits of an inner product per row of M, as
 /// `Iterator::sum` adds it), taken a column of M at a time: a contiguous pass per value of y
@@ -298,7 +300,9 @@ fn columns_times(mt: &[f64], n: usize, y: &[f64]) -> Vec<f64> {
     }
     out
 }
+}
 
+with_avx2! {
 /// [`columns_times`] of a transpose kept in single precision: half the bytes of a pass that
 /// is bound by memory (2,000 scans at rank 135: 2.2 MB in double precision, more than a
 /// core's 2 MiB L2), each product widened to double and summed as there.
@@ -310,6 +314,7 @@ fn columns_times_single(mt: &[f32], n: usize, y: &[f64]) -> Vec<f64> {
         }
     }
     out
+}
 }
 
 /// `m` rounded to single precision.
@@ -375,6 +380,7 @@ fn times_lower(w: &[f64], r: usize, v: &[f64]) -> Vec<f64> {
     out
 }
 
+with_avx2! {
 /// `m += Σ_k sign_k x_k x_kᵀ` on and above the diagonal of the row-major `r × r` matrix `m`
 /// (`terms`: each `(sign_k, x_k)`, sign ±1), each entry updated by the terms in order as
 /// `+= (sign_k x_k[a]) x_k[b]`: the bits of one rank-one update after another. The entry
@@ -426,6 +432,7 @@ fn add_outer_products(m: &mut [f64], r: usize, terms: &[(f64, &[f64])]) {
             }
         }
     }
+}
 }
 
 /// Copies the entries above the diagonal of the row-major `r × r` matrix `m` below it.
