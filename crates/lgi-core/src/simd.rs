@@ -24,7 +24,7 @@ macro_rules! with_avx2 {
                 fn avx2($($arg: $ty),*) $(-> $ret)? {
                     body($($arg),*)
                 }
-                if std::arch::is_x86_feature_detected!("avx2") {
+                if std::arch::is_x86_feature_detected!("avx2") && !$crate::simd::baseline_only() {
                     // SAFETY: the processor has AVX2, checked just above.
                     return unsafe { avx2($($arg),*) };
                 }
@@ -35,3 +35,29 @@ macro_rules! with_avx2 {
 }
 
 pub(crate) use with_avx2;
+
+/// Tests set this to take the baseline builds on any processor (and compare the bits).
+#[cfg(test)]
+pub(crate) static BASELINE_ONLY: std::sync::atomic::AtomicBool =
+    std::sync::atomic::AtomicBool::new(false);
+
+/// Whether the baseline builds are asked for: never outside tests.
+#[inline(always)]
+pub(crate) fn baseline_only() -> bool {
+    #[cfg(test)]
+    return BASELINE_ONLY.load(std::sync::atomic::Ordering::Relaxed);
+    #[cfg(not(test))]
+    false
+}
+
+/// `f` run with the AVX2 builds (where the processor has them) and with the baseline builds.
+#[cfg(test)]
+pub(crate) fn both_builds<T>(mut f: impl FnMut() -> T) -> (T, T) {
+    use std::sync::atomic::Ordering;
+    BASELINE_ONLY.store(false, Ordering::Relaxed);
+    let fast = f();
+    BASELINE_ONLY.store(true, Ordering::Relaxed);
+    let baseline = f();
+    BASELINE_ONLY.store(false, Ordering::Relaxed);
+    (fast, baseline)
+}

@@ -206,3 +206,27 @@ proptest! {
         }
     }
 }
+
+/// The fit blend's kernels give the same bits from their AVX2 builds as from the baseline ones
+/// (no multiply-add fusion either way), over lengths with and without a vector remainder.
+#[test]
+fn the_fit_blends_kernels_take_the_same_bits_with_or_without_avx2() {
+    for len in [1usize, 5, 512, 1001] {
+        let rows: Vec<Vec<f32>> = (0..4)
+            .map(|k| {
+                (0..3 * len)
+                    .map(|i| ((i * 7 + k * 13) % 17) as f32 * 0.37 - 2.9)
+                    .collect()
+            })
+            .collect();
+        let a = [0.3, -1.7, 2.2e-3, 0.9];
+        let bits = |v: Vec<f64>| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+        let (fast, baseline) = crate::simd::both_builds(|| {
+            let mut f: Vec<f64> = (0..3 * len).map(|i| i as f64 * 0.1).collect();
+            add_four_scaled(&mut f, [&rows[0], &rows[1], &rows[2], &rows[3]], a);
+            add_scaled(&mut f, &rows[1], -0.61, 0, len);
+            bits(f)
+        });
+        assert_eq!(fast, baseline);
+    }
+}

@@ -1115,6 +1115,36 @@ mod tests {
         }
     }
 
+    /// The fit's kernels give the same bits from their AVX2 builds as from the baseline ones
+    /// (no multiply-add fusion either way), on sizes with and without a vector remainder.
+    #[test]
+    fn the_fits_kernels_take_the_same_bits_with_or_without_avx2() {
+        let mut seed = 11u64;
+        for (n, r) in [(2000, 135), (301, 55), (7, 3)] {
+            let m: Vec<f64> = (0..n * r).map(|_| rnd(&mut seed)).collect();
+            let y: Vec<f64> = (0..r).map(|_| rnd(&mut seed)).collect();
+            let single_m = single(&m);
+            let bits = |v: Vec<f64>| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+            let (fast, baseline) = crate::simd::both_builds(|| bits(columns_times(&m, n, &y)));
+            assert_eq!(fast, baseline);
+            let (fast, baseline) =
+                crate::simd::both_builds(|| bits(columns_times_single(&single_m, n, &y)));
+            assert_eq!(fast, baseline);
+            let terms: Vec<(f64, &[f64])> = m
+                .chunks_exact(r)
+                .take(70)
+                .enumerate()
+                .map(|(i, x)| (if i % 3 == 0 { -1.0 } else { 1.0 }, x))
+                .collect();
+            let (fast, baseline) = crate::simd::both_builds(|| {
+                let mut sum = vec![0.5; r * r];
+                add_outer_products(&mut sum, r, &terms);
+                bits(sum)
+            });
+            assert_eq!(fast, baseline);
+        }
+    }
+
     proptest! {
         /// Rank-one updates made on and above the diagonal and then mirrored equal the same
         /// updates made on every entry, bit for bit (what the frame's K and clamped sum rely on).
