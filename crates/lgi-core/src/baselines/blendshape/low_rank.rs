@@ -150,11 +150,12 @@ impl LowRank {
             }
         }
         let wtw = gram_of(&wl, s, r);
+        let wt = transposed(&wl, r);
         Ok(Some(LowRank {
             shapes: s,
             rank: r,
-            wt32: (8 * wl.len() > SINGLE_PASSES_ABOVE).then(|| single(&transposed(&wl, r))),
-            wt: transposed(&wl, r),
+            wt32: (8 * wt.len() > SINGLE_PASSES_ABOVE).then(|| single(&wt)),
+            wt,
             w: wl,
             xt,
             wtw,
@@ -289,8 +290,9 @@ with_avx2! {
 /// `M y` (n) of a matrix given as its transpose `mt` (row-major, `y.len() × n`): each entry
 /// one sum in order from −0.0 over y (the bits of an inner product per row of M, as
 /// `Iterator::sum` adds it), taken a column of M at a time: a contiguous pass per value of y
-/// that vectorises, twice as fast as the rows' inner products (2,000 scans at rank 135:
-/// 56 µs against 115 µs).
+/// that vectorises: twice as fast as the rows' inner products where W stays in cache (2,000
+/// scans at rank 135, alone: 56 µs against 115 µs); in a solve a W that large waits on memory
+/// either way ([`columns_times_single`]).
 fn columns_times(mt: &[f64], n: usize, y: &[f64]) -> Vec<f64> {
     let mut out = vec![-0.0; n];
     for (column, &yj) in mt.chunks_exact(n.max(1)).zip(y) {
