@@ -744,7 +744,12 @@ impl Frame<'_> {
             DualStart::Point(_) => vec![0.0; r],
             DualStart::Weights(w) => self.dual_point_of_weights(w, l2, penalty)?,
         };
-        let mut u = self.dual_pass(&eta);
+        // At 0, `W'η` is 0 without a pass over the shapes.
+        let mut u = if cold {
+            vec![0.0; s]
+        } else {
+            self.dual_pass(&eta)
+        };
         let mut pieces: Vec<u8> = u.iter().map(|&x| side(-x, 0.0)).collect();
         // With few weights in the box the Newton matrix is `B + (free − held) F Fᵀ`, B =
         // I + held WᵀW the same for every step and F the free weights' rows: solved through
