@@ -44,6 +44,7 @@ def by_recording(rows: list[dict[str, Any]]) -> dict[str, dict[str, dict[str, An
     return out
 
 
-def peer_ratio(means: dict[str, Any]) -> float:
-    """LGI's mean error over the better of the two peers' (fit + jaw, and its corrective)."""
-    return float(means["LGI"] / min(means["fit + jaw"], means["fit + jaw + residual"]))
+def peer_ratio(means: dict[str, Any], method: str = "LGI") -> float:
+    """`method`'s mean error over the better of the two peers' (fit + jaw, and its
+    corrective)."""
+    return float(means[method] / min(means["fit + jaw"], means["fit + jaw + residual"]))

@@ -23,13 +23,14 @@ import numpy as np
 
 from lgi.lab import evaluate, ict
 from lgi.lab.capture import random_layout
+from lgi.lab.evaluate import LOCAL_FITS
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import ict_captures
 
 ICT = "../shared/data/ict-facekit"
 RECORDINGS = [f"../shared/data/livelinkface/{r}.csv" for r in ("alex_rom_4", "jmtechart_myslate_3")]
-METHODS = ("blendshape fit", "fit + jaw", "fit + jaw + residual", "LGI (paper)", "LGI")
+METHODS = ("blendshape fit", "fit + jaw", "fit + jaw + residual", "LGI (paper)", "LGI", LOCAL_FITS)
 
 
 def layout(name: str, dataset: object) -> np.ndarray:
@@ -49,8 +50,9 @@ def main() -> None:
     warnings.filterwarnings("ignore")
     d = ict.load_dataset(ICT)
     print("| performance | layout | K | sigma (cm) | " + " | ".join(METHODS), end="")
-    print(" | LGI bundles on the fit | LGI / best peer | truth from linear | seconds |")
-    print("|---" * (len(METHODS) + 8) + "|")
+    print(" | LGI bundles on the fit | LGI / best peer | local fits / best peer", end="")
+    print(" | truth from linear | seconds |")
+    print("|---" * (len(METHODS) + 9) + "|")
     for name in args.layouts:
         markers = layout(name, d)
         for k in args.scans:
@@ -75,6 +77,7 @@ def main() -> None:
                     print(
                         f"| {rec} | {name} | {k} | {sigma} | {cells} "
                         f"| {lgi_row['bundles_fit']:.0%} | {ict_captures.peer_ratio(m):.3f} "
+                        f"| {ict_captures.peer_ratio(m, LOCAL_FITS):.3f} "
                         f"| {lgi_row['truth_departure']:.4f} | {took:.0f} |",
                         flush=True,
                     )

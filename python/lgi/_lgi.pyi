@@ -15,6 +15,7 @@ __all__ = [
     "MAX_THREADS",
     "MIN_PRESENT_MARKERS",
     "BlendshapeSolver",
+    "LocalFits",
     "BuildConfig",
     "Choices",
     "Dataset",
@@ -463,6 +464,23 @@ class RbfInterpolator:
     def centres(self) -> NDArray[np.float64]: ...
     def interpolate(self, values: ArrayLike) -> NDArray[np.float64]:
         """(F, B, 3) values (NaN rows missing) -> (F, V, 3)."""
+
+@final
+class LocalFits:
+    """Each bundle's box-penalised blendshape fit of the markers in its Gaussian window
+    (`lgi.local`)."""
+
+    def __new__(cls, a: ArrayLike, rest: ArrayLike, l2: float, penalty: float) -> LocalFits: ...
+    @property
+    def num_bundles(self) -> int: ...
+    @property
+    def num_shapes(self) -> int: ...
+    @property
+    def window_sizes(self) -> NDArray[np.int64]:
+        """How many markers each bundle's window holds (B,)."""
+    def solve(self, targets: ArrayLike, starts: ArrayLike) -> tuple[NDArray[np.float64], int]:
+        """(F, B, 3) displacements (NaN rows missing) and (F, S) starts -> weights (F, B, S) and
+        how many fits kept their start."""
 
 @final
 class BlendshapeSolver:

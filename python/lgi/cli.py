@@ -90,6 +90,7 @@ def _cmd_solve(args: argparse.Namespace) -> int:
         args.out,
         noise=args.marker_noise,
         detail=args.detail_weight,
+        local_fits=args.local_fits,
         frames=args.frames,
         fps=args.fps,
         allow_missing=args.allow_missing,
@@ -430,6 +431,12 @@ def _add_pipeline_commands(sub: Any) -> None:
         help="how much of the dataset's detail between the markers to keep, 0..1 (auto: read "
         "from the take's markers left out one at a time; for a performer the dataset is not); "
         "default none: all of it",
+    )
+    s.add_argument(
+        "--local-fits",
+        action="store_true",
+        help="each bundle's piece is the blendshape fit of the markers around it (needs "
+        "--marker-noise; the most accurate with a dataset of whole-face scans, docs/results.md)",
     )
     s.add_argument("--frames", default=None, metavar="A:B", help="take frames A..B-1 (0-based)")
     s.add_argument("--fps", type=float, default=None, help="frame rate (default: the take's)")

@@ -21,6 +21,7 @@ from lgi.dataset import Dataset
 from lgi.detail import blend_detail, check_detail_weight
 from lgi.errors import InputError, LgiWarning
 from lgi.jaw import JawRig, estimate_rig
+from lgi.local import local_pieces
 
 
 def _bin_edges(jaw_bins: int | ArrayLike, shape_theta: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -341,6 +342,7 @@ class Model:
         marker_noise: float | None = None,
         fit: bool | None = None,
         detail_weight: float | None = None,
+        local_fits: bool = False,
     ) -> SolveResult:
         """Solves frames (F, B, 3) of marker positions (a single (B, 3) frame gives F = 1).
         NaN rows are missing markers. With `temporal` (a performance), frames are solved in
@@ -382,8 +384,16 @@ class Model:
         `detail_weight` in [0, 1]: how much of the dataset's detail between the markers to keep
         (`lgi.detail`; `lgi.estimate_detail_weight` reads it from a take): the result is
         `w * solved + (1 - w) * smooth`, the smooth part the biharmonic interpolation of the
-        solve's own present marker positions. None or 1 (default): the solve as it is."""
+        solve's own present marker positions. None or 1 (default): the solve as it is.
+
+        `local_fits`: each bundle's piece is the blendshape fit of the markers around it
+        (`lgi.local`) instead of one of its tets or the frame's global fit; the pieces' blend is
+        put through the solve's targets by a biharmonic corrective. Needs `marker_noise` (its
+        targets, poses and global fits) and a model without jaw bins. With a dataset of
+        whole-face scans it is the most accurate path measured (docs/results.md); it costs a
+        fit per bundle and frame (docs/performance.md)."""
         w = None if detail_weight is None else check_detail_weight(detail_weight)
+        self._check_local(local_fits, marker_noise, fit)
         arr = np.asarray(frames)
         if arr.ndim == 2:
             arr = arr[None]
@@ -399,14 +409,47 @@ class Model:
                 fit=fit,
                 marker_noise=marker_noise,
             )
-        return res if w is None or w == 1.0 else self._with_detail(res, arr, w)
+        return self._finish(res, arr, w, local_fits)
 
-    def _with_detail(self, res: SolveResult, frames: NDArray[Any], weight: float) -> SolveResult:
-        """`res` with `weight` of its detail kept (`lgi.detail.blend_detail`, in place in its
-        vertices, so an `out` buffer receives the result), its marker positions and residuals
-        measured again on the blended surface."""
+    def _check_local(self, local_fits: bool, marker_noise: float | None, fit: bool | None) -> None:
+        """InputError where `local_fits` cannot be given (before any solving)."""
+        if not isinstance(local_fits, (bool, np.bool_)):
+            raise InputError(f"local_fits: expected True or False, got {local_fits!r}")
+        if not local_fits:
+            return
+        if marker_noise is None:
+            raise InputError(
+                "local_fits needs marker_noise (the noise-aware solve's targets and global fits; "
+                "marker_noise=0 for clean markers)"
+            )
+        if fit is False:
+            raise InputError("local_fits needs the global fit: do not pass fit=False")
+        if self.jaw_bins is not None:
+            raise InputError(
+                "local_fits: the model has jaw bins (each bin fits its own re-posed shapes); "
+                "build it without jaw_bins"
+            )
+
+    def _finish(
+        self, res: SolveResult, frames: NDArray[Any], weight: float | None, local_fits: bool
+    ) -> SolveResult:
+        """`res` with its local fits' surface (`local_fits`) and then `weight` of its detail."""
+        if local_fits:
+            res = self._with_local(res, frames)
+        return res if weight is None or weight == 1.0 else self._with_detail(res, frames, weight)
+
+    def _with_local(self, res: SolveResult, frames: NDArray[Any]) -> SolveResult:
+        """`res` with the local fits' surface (`lgi.local`) in place in its vertices (an `out`
+        buffer receives it), its marker positions and residuals measured again."""
+        v = np.asarray(res.vertices)
+        local_pieces(self).surface(res, out=v)
+        return self._remeasured(res, v, frames)
+
+    def _remeasured(
+        self, res: SolveResult, v: NDArray[np.float64], frames: NDArray[Any]
+    ) -> SolveResult:
+        """`res` with vertices `v`, its marker positions and residuals measured on them."""
         missing = np.asarray(res.missing)
-        v = blend_detail(self, res.vertices, np.asarray(res.bundle_positions), missing, weight)
         pos = self.bundle_positions(v)
         given = np.asarray(frames, dtype=np.float64)
         residuals = np.where(missing, 0.0, np.linalg.norm(np.nan_to_num(given - pos), axis=2))
@@ -423,6 +466,14 @@ class Model:
             state=res.state,
         )
 
+    def _with_detail(self, res: SolveResult, frames: NDArray[Any], weight: float) -> SolveResult:
+        """`res` with `weight` of its detail kept (`lgi.detail.blend_detail`, in place in its
+        vertices, so an `out` buffer receives the result), its marker positions and residuals
+        measured again on the blended surface."""
+        missing = np.asarray(res.missing)
+        v = blend_detail(self, res.vertices, np.asarray(res.bundle_positions), missing, weight)
+        return self._remeasured(res, v, frames)
+
     def solve_iter(
         self,
         frames: ArrayLike,
@@ -435,6 +486,7 @@ class Model:
         marker_noise: float | None = None,
         fit: bool | None = None,
         detail_weight: float | None = None,
+        local_fits: bool = False,
     ) -> Iterator[SolveResult]:
         """Solves `frames` (F, B, 3; a numpy memmap keeps a long take on disk) `chunk` frames
         at a time and yields each chunk's `SolveResult`, so memory stays flat however long
@@ -445,8 +497,9 @@ class Model:
         are then overwritten by the next chunk: copy what you keep). Smoothing is not offered
         (it needs frames beyond the chunk); give poses as arrays by solving chunks with
         `solve`. Other options as in `solve` (`detail_weight` applied chunk by chunk: each
-        frame's blend is its own)."""
+        frame's blend is its own, and `local_fits` too)."""
         w = None if detail_weight is None else check_detail_weight(detail_weight)
+        self._check_local(local_fits, marker_noise, fit)
         n = _lgi.check_count(chunk, "chunk")
         if n < 1:
             raise InputError(f"chunk must be >= 1 frames, got {n}")
@@ -471,7 +524,7 @@ class Model:
                     previous=state,
                 )
                 state = res.state if temporal else None
-                yield res if w is None or w == 1.0 else self._with_detail(res, part, w)
+                yield self._finish(res, part, w, local_fits)
 
     def bundle_positions(self, meshes: ArrayLike) -> NDArray[np.float64]:
         """Marker surface positions (F, B, 3) on meshes (F, V, 3) or (V, 3) -> (B, 3)."""

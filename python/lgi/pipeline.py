@@ -679,11 +679,13 @@ def solve_file(
     up: str = "y",
     quiet: bool = False,
     say: Say = _silent,
+    local_fits: bool = False,
 ) -> tuple[Path, int]:
     """`lgi solve`: the take file solved with the model file, written by `out`'s suffix
     (`output_kind`). `noise` is `--marker-noise` (a number, 'auto' or 'none'; 'auto' looks at
-    the whole range), `detail` `--detail-weight` (the same forms, `detail_weight`), `frames`
-    is `--frames A:B`. By default the range is solved in one
+    the whole range), `detail` `--detail-weight` (the same forms, `detail_weight`),
+    `local_fits` `--local-fits` (`Model.solve(local_fits=True)`), `frames` is `--frames A:B`.
+    By default the range is solved in one
     `Model.solve` (frames prefer their predecessor's choices across the whole range), then
     written chunk by chunk; `chunk` (`--chunk N`) solves and writes N frames at a time into
     one reused buffer, so the solve's memory stays that of N frames (each chunk continues
@@ -734,10 +736,21 @@ def solve_file(
     head = None if t.head is None else t.head[rng]
     rate = frame_rate(fps, t.fps, kind)
     sigma = marker_noise(noise, x, m)
+    if local_fits and sigma is None:
+        raise InputError(
+            "--local-fits needs --marker-noise (SIGMA or auto; 0 for clean markers): the local "
+            "fits fit the noise-aware targets"
+        )
+    if local_fits and m.jaw_bins is not None:
+        raise InputError(f"--local-fits: the model {model} has jaw bins; build it without them")
     jaw_mode = None if m.jaw_rig is None or jaw == "rest" else jaw
     weight = detail_weight(detail, x, m, sigma, jaw_mode)
     settings = SolveSettings.of(
-        has_jaw_rig=m.jaw_rig is not None, jaw=jaw, marker_noise=sigma, detail_weight=weight
+        has_jaw_rig=m.jaw_rig is not None,
+        jaw=jaw,
+        marker_noise=sigma,
+        detail_weight=weight,
+        local_fits=local_fits,
     )
     missing = np.isnan(x).any(axis=2)
     say(
@@ -745,11 +758,19 @@ def solve_file(
         f"({100 * missing.mean():.1f}% samples missing)"
         + ("" if sigma is None else f", marker noise {sigma:.4g}")
         + ("" if weight is None else f", detail weight {weight:.3f}")
+        + (", local fits" if local_fits else "")
     )
     topo = topology(m.dataset)
     start = t.first_frame + rng.start
     if chunk is None:
-        res = m.solve(x, jaw=jaw_mode, marker_noise=sigma, quiet=quiet, detail_weight=weight)
+        res = m.solve(
+            x,
+            jaw=jaw_mode,
+            marker_noise=sigma,
+            quiet=quiet,
+            detail_weight=weight,
+            local_fits=local_fits,
+        )
         if curves_out is not None:
             _write_curves(
                 curves_out, res.fit_weights, res.jaw_theta, m, fps=rate, start=start, frame=frame
@@ -801,6 +822,7 @@ def solve_file(
         quiet=True,
         out=buf,
         detail_weight=weight,
+        local_fits=local_fits,
     )
     residuals: list[np.ndarray] = []
     absent: list[np.ndarray] = []

@@ -27,6 +27,7 @@ mod hash;
 mod io;
 mod jaw;
 mod linalg;
+mod local_fit;
 mod magnitude;
 mod mesh;
 mod model;
@@ -47,6 +48,7 @@ mod uvspace;
 pub use augment::{augment, recipes, Recipe};
 pub use dataset::Dataset;
 pub use error::{LgiError, Result};
+pub use local_fit::{LocalFits, LocalWeights, WINDOW_REACH};
 pub use magnitude::{
     check_dataset, Extent, Naming, MAGNITUDE_LIMIT, MAX_COORDINATE, MIN_PRESENT_MARKERS,
 };

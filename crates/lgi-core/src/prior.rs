@@ -74,7 +74,7 @@ impl FitPrior {
                 }
             }
         }
-        let scale = (a.iter().map(|x| x * x).sum::<f64>() / s as f64).max(f64::MIN_POSITIVE);
+        let scale = fit_scale(&a, s);
         let solver = BlendshapeSolver::new(a, 3 * b, s, FIT_L2 * scale, FIT_PENALTY * scale)?;
         let correlation = correlation(&rest);
         Ok(Some(FitPrior {
@@ -322,9 +322,15 @@ impl GramCache {
     }
 }
 
+/// What [`FIT_L2`] and [`FIT_PENALTY`] are relative to: the mean squared column norm of a fit's
+/// matrix (row-major, `cols` columns), at least the smallest positive double.
+pub(crate) fn fit_scale(a: &[f64], cols: usize) -> f64 {
+    (a.iter().map(|x| x * x).sum::<f64>() / cols as f64).max(f64::MIN_POSITIVE)
+}
+
 /// Gaussian correlation of the bundles' rest positions with length [`RESIDUAL_LENGTH`] times
 /// the median nearest-neighbour distance (B × B, unit diagonal).
-fn correlation(rest: &[DVec3]) -> Vec<f64> {
+pub(crate) fn correlation(rest: &[DVec3]) -> Vec<f64> {
     let b = rest.len();
     let mut nearest: Vec<f64> = rest
         .iter()

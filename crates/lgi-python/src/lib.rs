@@ -8,6 +8,7 @@ mod convert;
 mod dataset;
 mod error;
 mod jaw;
+mod local_fit;
 mod model;
 mod result;
 mod solve_args;
@@ -34,6 +35,7 @@ fn _lgi(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<result::SolveState>()?;
     m.add_class::<baselines::RbfInterpolator>()?;
     m.add_class::<baselines::BlendshapeSolver>()?;
+    m.add_class::<local_fit::LocalFits>()?;
     m.add_function(wrap_pyfunction!(baselines::check_marker_frames, m)?)?;
     m.add_function(wrap_pyfunction!(convert::check_count, m)?)?;
     m.add_function(wrap_pyfunction!(surface::closest_surface_points, m)?)?;

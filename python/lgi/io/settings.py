@@ -1,5 +1,6 @@
 """How a take was solved, kept with what was written (`SolveSettings`): the marker noise, the
-jaw pose and the detail weight `lgi solve` used, and lgi's version. A solved `.npz` holds it as
+jaw pose, the detail weight and whether local fits made the pieces, as `lgi solve` used them,
+and lgi's version. A solved `.npz` holds it as
 the JSON text `solve_settings`, a USD cache as the mesh's `lgi:solveSettings`; `lgi report`
 and `lgi info` show it, so a result says how it was made without its command line."""
 
@@ -20,12 +21,14 @@ class SolveSettings:
     """`marker_noise`: sigma per coordinate in the model's units (None: the exact
     interpolation); `jaw`: the jaw pose mode ('fit', 'track', ...; None without a jaw rig);
     `detail_weight`: the weight in [0, 1] (None: all of the dataset's detail); `version`:
-    lgi's version that solved."""
+    lgi's version that solved; `local_fits`: the pieces were local fits (`lgi.local`; files
+    written before it was recorded read as False)."""
 
     marker_noise: float | None
     jaw: str | None
     detail_weight: float | None
     version: str
+    local_fits: bool = False
 
     @staticmethod
     def of(
@@ -34,6 +37,7 @@ class SolveSettings:
         jaw: object,
         marker_noise: float | None,
         detail_weight: float | None,
+        local_fits: bool = False,
     ) -> SolveSettings:
         """The settings of a `Model.solve` call: `jaw` as passed (None, the rest pose, is
         recorded as 'rest' and a pose array as 'given'; None for a model without a jaw rig),
@@ -51,6 +55,7 @@ class SolveSettings:
             jaw=mode,
             detail_weight=None if detail_weight is None else float(detail_weight),
             version=__version__,
+            local_fits=bool(local_fits),
         )
 
     def to_json(self) -> str:
@@ -60,6 +65,7 @@ class SolveSettings:
                 "jaw": self.jaw,
                 "detail_weight": self.detail_weight,
                 "version": self.version,
+                "local_fits": self.local_fits,
             },
             sort_keys=True,
         )
@@ -72,10 +78,15 @@ class SolveSettings:
             d: Any = json.loads(text)
         except ValueError:
             raise InputError(f"{where}: not the JSON text lgi writes: {text[:60]!r}") from None
-        if not isinstance(d, dict) or set(d) != {"marker_noise", "jaw", "detail_weight", "version"}:
+        keys = {"marker_noise", "jaw", "detail_weight", "version"}
+        if not isinstance(d, dict) or not keys <= set(d) <= keys | {"local_fits"}:
             raise InputError(
-                f"{where}: expected the keys marker_noise, jaw, detail_weight and version"
+                f"{where}: expected the keys marker_noise, jaw, detail_weight, version and "
+                "(optionally) local_fits"
             )
+        local = d.get("local_fits", False)
+        if not isinstance(local, bool):
+            raise InputError(f"{where}: local_fits must be true or false, got {local!r}")
 
         def number(key: str) -> float | None:
             x = d[key]
@@ -93,6 +104,7 @@ class SolveSettings:
             jaw=d["jaw"],
             detail_weight=number("detail_weight"),
             version=str(d["version"] or ""),
+            local_fits=local,
         )
 
     def describe(self, units: str | None) -> str:
@@ -110,4 +122,5 @@ class SolveSettings:
             if self.detail_weight is None
             else f"detail weight {self.detail_weight:.3f}"
         )
-        return f"{noise}, {jaw}, {detail} (lgi {self.version or 'version unknown'})"
+        pieces = ", local fits" if self.local_fits else ""
+        return f"{noise}, {jaw}, {detail}{pieces} (lgi {self.version or 'version unknown'})"

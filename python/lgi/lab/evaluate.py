@@ -268,10 +268,18 @@ class Recommended:
     on a model built with defaults (`sigma` None: the paper's exact mode). With `detail`
     "auto", the frames' detail weight (`lgi.estimate_detail_weight`, read from the frames
     solved, with the same sigma) is kept too, the call for a performer the dataset is not
-    (`last_detail_weight` says which)."""
+    (`last_detail_weight` says which); with `local_fits`, the pieces are local fits
+    (`lgi.local`)."""
 
-    def __init__(self, model: Model, marker_noise: float | None, detail: str | None = None) -> None:
+    def __init__(
+        self,
+        model: Model,
+        marker_noise: float | None,
+        detail: str | None = None,
+        local_fits: bool = False,
+    ) -> None:
         self.model, self.marker_noise, self.detail = model, marker_noise, detail
+        self.local_fits = local_fits
         self.last_detail_weight: float | None = None
 
     def solve(self, frames: ArrayLike, *, temporal: bool = True, quiet: bool = True) -> SolveResult:
@@ -287,7 +295,12 @@ class Recommended:
             quiet=quiet,
             marker_noise=self.marker_noise,
             detail_weight=weight,
+            local_fits=self.local_fits,
         )
+
+
+#: The name of LGI with local fits (`Model.solve(local_fits=True)`) among compared methods.
+LOCAL_FITS = "LGI + local fits"
 
 
 def capture_methods(
@@ -301,9 +314,10 @@ def capture_methods(
     """The methods of the capture protocol: the two baselines, the fit with the jaw as a joint
     (`FitJaw`, the production rig solve, where the dataset gives a jaw rig) and the same with
     its residual corrective (`FitJawResidual`), LGI in the paper's
-    exact mode (no jaw rig, no fit: tets only) and LGI's recommended path (defaults,
+    exact mode (no jaw rig, no fit: tets only), LGI's recommended path (defaults,
     `marker_noise` = `sigma`; None: estimated from `frames` with the model, as
-    `--marker-noise auto` does). `jaw`: the rig and each shape's pose for a dataset without
+    `--marker-noise auto` does) and the same with local fits (`LOCAL_FITS`,
+    `lgi.local`). `jaw`: the rig and each shape's pose for a dataset without
     ICT's jaw shapes (None: the rig `Model.build` finds, if any)."""
     from lgi.baselines import BlendshapeFit, DisplacementInterpolation, FitJaw, FitJawResidual
 
@@ -325,6 +339,8 @@ def capture_methods(
         methods[FitJawResidual.label] = FitJawResidual(peer)
     methods["LGI (paper)"] = Recommended(Model.build(dataset, markers, jaw=None), None)
     methods["LGI"] = Recommended(recommended, sigma)
+    if recommended.jaw_bins is None:
+        methods[LOCAL_FITS] = Recommended(recommended, sigma, local_fits=True)
     return methods
 
 

@@ -1,0 +1,194 @@
+use super::*;
+use crate::{FIT_L2, FIT_PENALTY};
+
+/// Markers on a line one unit apart, two groups `gap` apart: the median spacing is 1, so a
+/// window reaches 3 units.
+fn two_groups(per_group: usize, gap: f64) -> Vec<DVec3> {
+    (0..2 * per_group)
+        .map(|i| {
+            let x = (i % per_group) as f64 + if i < per_group { 0.0 } else { gap };
+            DVec3::new(x, 0.0, 0.0)
+        })
+        .collect()
+}
+
+/// Row-major 3B × S matrix from per-shape, per-marker displacements.
+fn matrix(displacements: &[Vec<DVec3>]) -> Vec<f64> {
+    let (s, b) = (displacements.len(), displacements[0].len());
+    let mut a = vec![0.0; 3 * b * s];
+    for (k, shape) in displacements.iter().enumerate() {
+        for (n, d) in shape.iter().enumerate() {
+            for (c, v) in d.to_array().iter().enumerate() {
+                a[(3 * n + c) * s + k] = *v;
+            }
+        }
+    }
+    a
+}
+
+#[test]
+fn a_window_holds_exactly_the_markers_within_three_lengths() {
+    let rest: Vec<DVec3> = (0..12).map(|i| DVec3::new(i as f64, 0.0, 0.0)).collect();
+    let a = matrix(&[rest.iter().map(|_| DVec3::Z).collect()]);
+    let fits = LocalFits::new(&a, 1, &rest, FIT_L2, FIT_PENALTY).unwrap();
+    // Median nearest distance 1, so the window is every marker within 3 units (brute force).
+    let want: Vec<usize> = (0..12)
+        .map(|b| {
+            (0..12)
+                .filter(|&m| rest[b].distance(rest[m]) <= 3.0 + 1e-12)
+                .count()
+        })
+        .collect();
+    assert_eq!(fits.window_sizes(), want);
+}
+
+#[test]
+fn a_whole_face_scan_split_by_local_fits_matches_each_side_where_the_global_fit_compromises() {
+    // One scan moves both groups by 1 in z; the frame has the left group at 1, the right at 0.2.
+    let rest = two_groups(5, 100.0);
+    let scan: Vec<DVec3> = rest.iter().map(|_| DVec3::Z).collect();
+    let a = matrix(&[scan]);
+    let fits = LocalFits::new(&a, 1, &rest, FIT_L2, FIT_PENALTY).unwrap();
+    let target: Vec<f64> = (0..10)
+        .flat_map(|i| [0.0, 0.0, if i < 5 { 1.0 } else { 0.2 }])
+        .collect();
+    let got = fits.solve(&target, &[0.5]).unwrap();
+    assert_eq!(got.kept_start, 0);
+    // Closed form of a one-shape ridge fit inside the box, the window's own scale:
+    // w = Σ g t / (Σ g (1 + l2)), the window's mean squared column norm being Σ g.
+    let weights = correlation(&rest);
+    for b in 0..10 {
+        let (mut num, mut den) = (0.0, 0.0);
+        for m in 0..10 {
+            let g = weights[b * 10 + m];
+            if g >= (-4.5f64).exp() {
+                num += g * target[3 * m + 2];
+                den += g;
+            }
+        }
+        let want = num / (den * (1.0 + FIT_L2));
+        assert!(
+            (got.weights[b] - want).abs() < 1e-12,
+            "bundle {b}: {} vs {want}",
+            got.weights[b]
+        );
+    }
+    assert!((got.weights[0] - 1.0).abs() < 1e-3 && (got.weights[9] - 0.2).abs() < 1e-3);
+    // The global fit of the same frame compromises at the mean, 0.6.
+    let global = BlendshapeSolver::new(a.clone(), 30, 1, FIT_L2 * 10.0, FIT_PENALTY * 10.0)
+        .unwrap()
+        .solve(&target)
+        .unwrap();
+    assert!((global.weights[0] - 0.6).abs() < 1e-3);
+}
+
+#[test]
+fn local_fits_equal_the_weighted_normal_equations_inside_the_box() {
+    // Three shapes, twelve markers on a line: every window's minimum is inside [0, 1], where
+    // it solves (AᵀGA + l2 I) w = AᵀG t (solved here by Gaussian elimination).
+    let rest: Vec<DVec3> = (0..12).map(|i| DVec3::new(i as f64, 0.0, 0.0)).collect();
+    let shapes: Vec<Vec<DVec3>> = (0..3i32)
+        .map(|k| {
+            rest.iter()
+                .map(|p| {
+                    let x = p.x / 11.0;
+                    DVec3::new(
+                        (x * f64::from(k + 1)).sin(),
+                        x.powi(k + 1),
+                        0.3 * f64::from(k) + x,
+                    )
+                })
+                .collect()
+        })
+        .collect();
+    let a = matrix(&shapes);
+    let fits = LocalFits::new(&a, 3, &rest, FIT_L2, FIT_PENALTY).unwrap();
+    let truth = [0.3, 0.5, 0.2];
+    let target: Vec<f64> = (0..36)
+        .map(|r| {
+            (0..3).map(|k| a[r * 3 + k] * truth[k]).sum::<f64>() + 1e-3 * ((r * 7 % 5) as f64 - 2.0)
+        })
+        .collect();
+    let got = fits.solve(&target, &[0.0; 3]).unwrap();
+    let weights = correlation(&rest);
+    for b in 0..12 {
+        let mut m = [[0.0f64; 4]; 3];
+        let mut scale = 0.0;
+        for n in 0..12 {
+            let g = weights[b * 12 + n];
+            if g < (-4.5f64).exp() {
+                continue;
+            }
+            for c in 0..3 {
+                let r = 3 * n + c;
+                for i in 0..3 {
+                    scale += g * a[r * 3 + i] * a[r * 3 + i] / 3.0;
+                    for j in 0..3 {
+                        m[i][j] += g * a[r * 3 + i] * a[r * 3 + j];
+                    }
+                    m[i][3] += g * a[r * 3 + i] * target[r];
+                }
+            }
+        }
+        for (i, row) in m.iter_mut().enumerate() {
+            row[i] += FIT_L2 * scale;
+        }
+        for p in 0..3 {
+            for r in p + 1..3 {
+                let f = m[r][p] / m[p][p];
+                let pivot = m[p];
+                for (x, y) in m[r][p..].iter_mut().zip(&pivot[p..]) {
+                    *x -= f * y;
+                }
+            }
+        }
+        let mut w = [0.0; 3];
+        for i in (0..3).rev() {
+            w[i] = (m[i][3] - (i + 1..3).map(|j| m[i][j] * w[j]).sum::<f64>()) / m[i][i];
+        }
+        for (k, &want) in w.iter().enumerate() {
+            assert!(want > 0.0 && want < 1.0);
+            let x = got.weights[b * 3 + k];
+            assert!(
+                (x - want).abs() < 1e-9,
+                "bundle {b} shape {k}: {x} vs {want}"
+            );
+        }
+    }
+}
+
+#[test]
+fn a_window_without_a_present_marker_keeps_its_start_and_says_so() {
+    let rest = two_groups(4, 100.0);
+    let a = matrix(&[rest.iter().map(|_| DVec3::Z).collect()]);
+    let fits = LocalFits::new(&a, 1, &rest, FIT_L2, FIT_PENALTY).unwrap();
+    // The right group missing in frame 0; everything present in frame 1.
+    let mut target = vec![0.5; 48];
+    for v in &mut target[12..24] {
+        *v = f64::NAN;
+    }
+    let got = fits.solve(&target, &[0.25, 0.25]).unwrap();
+    assert_eq!(got.kept_start, 4);
+    assert!(got.weights[4..8].iter().all(|&w| w == 0.25));
+    // A window with some markers missing fits the present ones: the left group's own.
+    assert!((got.weights[0] - got.weights[8]).abs() < 1e-12);
+}
+
+#[test]
+fn wrong_sizes_and_non_finite_input_are_errors_that_say_what() {
+    let rest = two_groups(3, 10.0);
+    let a = matrix(&[rest.iter().map(|_| DVec3::Z).collect()]);
+    let e = LocalFits::new(&a[1..], 1, &rest, FIT_L2, FIT_PENALTY).unwrap_err();
+    assert!(e.to_string().contains("18×1"), "{e}");
+    let fits = LocalFits::new(&a, 1, &rest, FIT_L2, FIT_PENALTY).unwrap();
+    let e = fits.solve(&[0.0; 17], &[0.0]).unwrap_err();
+    assert!(e.to_string().contains("6 markers"), "{e}");
+    let e = fits.solve(&[0.0; 18], &[0.0, 0.0]).unwrap_err();
+    assert!(e.to_string().contains("start"), "{e}");
+    let mut bad = vec![0.0; 18];
+    bad[4] = f64::INFINITY;
+    assert!(fits.solve(&bad, &[0.0]).is_err());
+    let mut nan_rest = rest.clone();
+    nan_rest[0].x = f64::NAN;
+    assert!(LocalFits::new(&a, 1, &nan_rest, FIT_L2, FIT_PENALTY).is_err());
+}

@@ -1,0 +1,83 @@
+//! `lgi._lgi.LocalFits`: each bundle's blendshape fit of the markers around it
+//! (`lgi_core::LocalFits`); python/lgi/local.py blends the pieces over the mesh.
+
+use crate::convert::{flat_to_array, float_array, points as read_points};
+use crate::error::PyLgiError;
+use crate::threads;
+use lgi_core::LocalFits as CoreLocal;
+use numpy::PyArrayDyn;
+use pyo3::prelude::*;
+
+/// Local fits of one marker layout (immutable; the fits run in parallel).
+#[pyclass(frozen, module = "lgi._lgi")]
+pub struct LocalFits {
+    inner: CoreLocal,
+}
+
+#[pymethods]
+impl LocalFits {
+    /// `a` (3B, S): the shapes' displacements at the markers (marker b's x, y, z in rows
+    /// 3b..3b+3); `rest` (B, 3); `l2` and `penalty` relative to each window's mean squared
+    /// column norm.
+    #[new]
+    fn new(
+        py: Python<'_>,
+        a: &Bound<'_, PyAny>,
+        rest: &Bound<'_, PyAny>,
+        l2: f64,
+        penalty: f64,
+    ) -> PyResult<Self> {
+        let rest = read_points(rest, "rest", None, false)?;
+        let m = float_array(a, "a", &[Some(3 * rest.len()), None])?;
+        let s = m.shape()[1];
+        let flat: Vec<f64> = m.iter().copied().collect();
+        let inner = threads::detach(py, || CoreLocal::new(&flat, s, &rest, l2, penalty))
+            .map_err(PyLgiError)?;
+        Ok(LocalFits { inner })
+    }
+
+    /// Number of bundles B.
+    #[getter]
+    fn num_bundles(&self) -> usize {
+        self.inner.num_bundles()
+    }
+
+    /// Number of shapes S.
+    #[getter]
+    fn num_shapes(&self) -> usize {
+        self.inner.num_shapes()
+    }
+
+    /// How many markers each bundle's window holds (B,).
+    #[getter]
+    fn window_sizes<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArrayDyn<i64>>> {
+        let sizes: Vec<i64> = self
+            .inner
+            .window_sizes()
+            .iter()
+            .map(|&n| n as i64)
+            .collect();
+        let n = sizes.len();
+        flat_to_array(py, sizes, &[n])
+    }
+
+    /// `targets` (F, B, 3) displacements from rest (NaN rows: missing markers) and `starts`
+    /// (F, S) -> weights (F, B, S) and how many fits kept their start (no marker of the
+    /// window present, or no convergence).
+    fn solve<'py>(
+        &self,
+        py: Python<'py>,
+        targets: &Bound<'py, PyAny>,
+        starts: &Bound<'py, PyAny>,
+    ) -> PyResult<(Bound<'py, PyArrayDyn<f64>>, usize)> {
+        let (b, s) = (self.inner.num_bundles(), self.inner.num_shapes());
+        let t = float_array(targets, "targets", &[None, Some(b), Some(3)])?;
+        let f = t.shape()[0];
+        let st = float_array(starts, "starts", &[Some(f), Some(s)])?;
+        let t: Vec<f64> = t.iter().copied().collect();
+        let st: Vec<f64> = st.iter().copied().collect();
+        let inner = &self.inner;
+        let got = threads::detach(py, || inner.solve(&t, &st)).map_err(PyLgiError)?;
+        Ok((flat_to_array(py, got.weights, &[f, b, s])?, got.kept_start))
+    }
+}

@@ -1,0 +1,135 @@
+"""Local fits (beyond the paper): each bundle's piece is the blendshape fit of the markers
+around it instead of one of its tets or the frame's global fit.
+
+A dataset of whole-face scans rarely holds the whole frame being solved, but around one marker
+some blend of the scans usually matches: the global fit has to trade the mouth against the
+brows, a fit of one neighbourhood does not. Bundle b's piece is the box-penalised fit (the
+global fit's ridge and penalty, relative to its own matrix) of the markers weighted by the
+Gaussian of their rest distance from b, with the length the noise-aware targets use
+(`RESIDUAL_LENGTH` median marker spacings; markers beyond `WINDOW_REACH` lengths left out).
+It fits the solve's noise-aware targets in the jaw's unskinned space, starting from the
+frame's global fit. The pieces' weights are blended over the mesh by the sewing weights (a
+vertex's weights are its bundles' weights, weighted like their pieces), the blend is skinned
+by the frame's jaw pose, and what it misses at the present markers is interpolated
+biharmonically (phi(r) = r with a linear polynomial, the residual corrective's rule), so the
+surface passes through every present target. docs/concepts.md explains it; docs/results.md
+measures it against the strongest peers."""
+
+from __future__ import annotations
+
+import warnings
+import weakref
+from typing import TYPE_CHECKING
+
+import numpy as np
+import scipy.sparse as sp
+from numpy.typing import NDArray
+
+import lgi._lgi as _lgi
+from lgi.errors import InputError
+
+if TYPE_CHECKING:
+    from lgi.model import Model
+    from lgi.result import SolveResult
+
+F64 = NDArray[np.float64]
+
+__all__ = ["LocalPieces", "local_pieces"]
+
+
+class LocalPieces:
+    """A model's local fits and what blends them over its mesh (made once per model by
+    `local_pieces`)."""
+
+    def __init__(self, model: Model) -> None:
+        if model.jaw_bins is not None:
+            raise InputError(
+                "local fits: the model has jaw bins (each bin fits its own re-posed shapes); "
+                "build it without jaw_bins"
+            )
+        data = model.dataset
+        self.neutral = np.asarray(data.neutral, dtype=np.float64)
+        shapes = np.asarray(data.shapes)
+        self.rig = model.jaw_rig
+        self.bundle_jaw: F64 | None = None
+        jaw = model.core.jaw()
+        if self.rig is not None and jaw is not None:
+            theta = np.asarray(jaw["shape_theta"], dtype=np.float64)
+            rig = self.rig
+            unposed = [
+                rig.unskin_displacements(self.neutral, shapes[k], theta[k])
+                for k in range(len(shapes))
+            ]
+            self.bundle_jaw = np.asarray(jaw["bundle_weights"], dtype=np.float64)
+        else:
+            unposed = list(shapes)
+        # (V, 3, S) float32 like the dataset, each shape without its own jaw pose: a vertex's
+        # blend reads its S weights against contiguous memory (4x faster than (S, V, 3)).
+        self.shapes = np.empty((self.neutral.shape[0], 3, len(unposed)), dtype=np.float32)
+        for k, u in enumerate(unposed):
+            self.shapes[:, :, k] = u
+        surf = model.core.bundle_surface_points()
+        tris = np.asarray(data.triangles, dtype=np.int64)[np.asarray(surf["triangles"])]
+        bary = np.asarray(surf["barycentrics"], dtype=np.float64)
+        self._tris, self._bary = tris, bary
+        self.rest = self._sample(self.neutral[None])[0]
+        at = np.einsum("bjds,bj->bds", self.shapes[tris], bary, dtype=np.float64)
+        a = at.reshape(3 * model.num_bundles, self.shapes.shape[2])
+        self.fits = _lgi.LocalFits(a, self.rest, _lgi.FIT_L2, _lgi.FIT_PENALTY)
+        sw = model.core.sew_weights()
+        v, b = self.neutral.shape[0], model.num_bundles
+        self.sewing = sp.csr_matrix((sw["data"], sw["indices"], sw["indptr"]), shape=(v, b))
+        self.corrective = _lgi.RbfInterpolator(self.neutral, tris, bary)
+
+    def _sample(self, meshes: F64) -> F64:
+        """The bundles' positions (F, B, 3) on meshes (F, V, 3)."""
+        return np.einsum("fbjd,bj->fbd", meshes[:, self._tris], self._bary)
+
+    def surface(self, res: SolveResult, out: F64 | None = None) -> F64:
+        """The local fits' surface (F, V, 3) of a noise-aware solve `res` (its targets, jaw
+        poses and global fits), into `out` when given."""
+        if res.fit_weights is None:
+            raise InputError("local fits need the solve's global fit: solve with marker_noise")
+        missing = np.asarray(res.missing)
+        targets = np.where(missing[..., None], np.nan, np.asarray(res.bundle_positions))
+        theta = None if res.jaw_theta is None else np.asarray(res.jaw_theta, dtype=np.float64)
+        unskinned = targets
+        if self.rig is not None and theta is not None:
+            unskinned = self.rig.unskin(np.nan_to_num(targets), theta, weights=self.bundle_jaw)
+            unskinned[missing] = np.nan
+        starts = np.asarray(res.fit_weights, dtype=np.float64)
+        weights, kept = self.fits.solve(unskinned - self.rest[None], starts)
+        if kept:
+            warnings.warn(
+                f"local fits: {kept} of {weights.shape[0] * weights.shape[1]} bundle fits had no "
+                "marker of their window present or did not converge, and kept the frame's "
+                "global fit",
+                stacklevel=3,
+            )
+        frames = weights.shape[0]
+        blend = np.empty((frames, *self.neutral.shape))
+        for f in range(frames):
+            per_vertex = self.sewing @ weights[f]
+            blend[f] = self.neutral + np.einsum(
+                "vs,vds->vd", per_vertex, self.shapes, dtype=np.float64
+            )
+        posed = blend if theta is None or self.rig is None else self.rig.skin(blend, theta)
+        misses = targets - self._sample(posed)
+        result = posed + self.corrective.interpolate(misses)
+        if out is None:
+            return np.asarray(result, dtype=np.float64)
+        out[...] = result
+        return out
+
+
+# Per model (made on first use, dropped with the model).
+_PIECES: weakref.WeakKeyDictionary[Model, LocalPieces] = weakref.WeakKeyDictionary()
+
+
+def local_pieces(model: Model) -> LocalPieces:
+    """The model's `LocalPieces` (made on first use, kept while the model lives)."""
+    made = _PIECES.get(model)
+    if made is None:
+        made = LocalPieces(model)
+        _PIECES[model] = made
+    return made
