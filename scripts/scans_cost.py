@@ -4,8 +4,9 @@ alex_rom_4, ICT's jaw rig), solving 100 frames of the other recording with the r
 (`marker_noise=0.02`), the paper's exact mode on the same build (`fit=False`, jaw from the
 fit), and the stages: the global fit with its jaw pose alone (`fit_residuals`); first_extra_s
 is what the model's first recommended call takes beyond the best one (done once: the fit's
-shape basis). Each K runs in its own process so its peak RSS (the process's, its own arrays
-included) is its own.
+shape basis); then the recommended call with local fits (`local_fits=True`: local_build_s,
+once per model, and local_ms per frame, the whole call). Each K runs in its own process so its
+peak RSS (the process's, its own arrays included) is its own.
 
 Usage: python scripts/scans_cost.py [--scans 120 400 1000 2000] [--frames 100]
 (from the checkout, ../shared beside it; RAYON_NUM_THREADS sets the threads, default 2)
@@ -66,6 +67,17 @@ def one(k: int, frames: int) -> dict[str, float]:
         if name == "recommended_ms":
             # What the model's first solve does once (the fit's shape basis per jaw bin).
             out["first_extra_s"] = times[0] - min(times)
+    from lgi.local import local_pieces
+
+    t0 = time.perf_counter()
+    local_pieces(model)
+    out["local_build_s"] = time.perf_counter() - t0
+    times = []
+    for _ in range(2):
+        t0 = time.perf_counter()
+        model.solve(take.frames, marker_noise=0.02, quiet=True, local_fits=True)
+        times.append(time.perf_counter() - t0)
+    out["local_ms"] = 1e3 * min(times) / len(take.frames)
     out["peak_rss_gib"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2**20
     return out
 
@@ -88,6 +100,8 @@ def main() -> None:
         "recommended_ms",
         "paper_ms",
         "fit_ms",
+        "local_build_s",
+        "local_ms",
         "peak_rss_gib",
     ]
     print("| " + " | ".join(cols) + " |")

@@ -34,8 +34,9 @@ pub struct BlendshapeSolver {
     shapes: usize,
     l2: f64,
     penalty: f64,
-    // AᵀA + l2 I over all rows (every complete frame's Hessian before the box terms) and, on
-    // the dense path only, its Cholesky factor (the first step of every complete frame).
+    // On the dense path only (empty where `low_rank` is used): AᵀA + l2 I over all rows
+    // (every complete frame's Hessian before the box terms) and its Cholesky factor (the
+    // first step of every complete frame).
     full_gram: Vec<f64>,
     full: Vec<f64>,
     /// The same equations in the span of A's rows, when its rank is low (`low_rank`).
@@ -105,15 +106,17 @@ impl BlendshapeSolver {
             full: Vec::new(),
             low_rank: None,
         };
-        me.full_gram = me.gram(&vec![true; rows]);
-        let mut plain = me.full_gram.clone();
+        let gram = me.gram(&vec![true; rows]);
+        let mut plain = gram.clone();
         for i in 0..shapes {
             plain[i * shapes + i] -= l2;
         }
         me.low_rank = LowRank::new(&me.a, rows, shapes, &plain, l2)?;
-        // The dense factor serves only the dense path (S³/3 flops: 2.7e9 at 2,000 shapes).
+        // The Gram matrix and its factor serve only the dense path (S² doubles, 32 MB, and
+        // S³/3 flops at 2,000 shapes; the local fits keep one solver per bundle).
         if me.low_rank.is_none() {
-            me.full = cholesky(shapes, me.full_gram.clone())?;
+            me.full = cholesky(shapes, gram.clone())?;
+            me.full_gram = gram;
         }
         Ok(me)
     }
@@ -486,6 +489,7 @@ impl BlendshapeSolver {
     fn dense_only(&self) -> Self {
         let mut dense = self.clone();
         dense.low_rank = None;
+        dense.full_gram = dense.gram(&vec![true; dense.rows]);
         dense.full = cholesky(dense.shapes, dense.full_gram.clone()).expect("positive definite");
         dense
     }
