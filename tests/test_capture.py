@@ -265,6 +265,7 @@ def test_capture_protocol_recommended_lgi_beats_both_baselines_on_a_short_real_t
         "fit + jaw + residual",
         "LGI (paper)",
         "LGI",
+        "LGI + local fits",
     }
     assert all(np.isfinite(r["mean"]) and np.isfinite(r["open_mean"]) for r in rows)
     best = min(by["displacement interpolation"]["mean"], by["blendshape fit"]["mean"])

@@ -165,11 +165,16 @@ impl LocalFits {
         if target.iter().all(|t| t.is_nan()) {
             return (start.to_vec(), true);
         }
-        match window
-            .solver
-            .solve_with_derivatives(&target, &[], FitStart::Weights(start))
-        {
-            Ok((sol, _)) => (sol.weights, false),
+        let fit = |solver: &BlendshapeSolver| {
+            solver
+                .solve_with_derivatives(&target, &[], FitStart::Weights(start))
+                .map(|(sol, _)| sol.weights)
+        };
+        // The low-rank path can circle without finishing where a window's present rows miss
+        // some of its directions (seen on ICT with one marker of nine missing); the dense path
+        // then solves the same objective.
+        match fit(&window.solver).or_else(|_| window.solver.dense_only().and_then(|d| fit(&d))) {
+            Ok(weights) => (weights, false),
             Err(_) => (start.to_vec(), true),
         }
     }

@@ -483,15 +483,15 @@ impl BlendshapeSolver {
 }
 
 impl BlendshapeSolver {
-    /// The same solver on the dense path (its factor made, the low-rank form dropped): the
-    /// reference the tests compare the low-rank path with.
-    #[cfg(test)]
-    fn dense_only(&self) -> Self {
+    /// The same solver on the dense path (its Gram matrix and factor made, the low-rank form
+    /// dropped): the reference the tests compare the low-rank path with, and where a fit the
+    /// low-rank path does not finish is solved again ([`crate::LocalFits`]).
+    pub(crate) fn dense_only(&self) -> Result<Self> {
         let mut dense = self.clone();
         dense.low_rank = None;
         dense.full_gram = dense.gram(&vec![true; dense.rows]);
-        dense.full = cholesky(dense.shapes, dense.full_gram.clone()).expect("positive definite");
-        dense
+        dense.full = cholesky(dense.shapes, dense.full_gram.clone())?;
+        Ok(dense)
     }
 
     /// [`BlendshapeSolver::solve`] for many frames, in parallel; the first error wins.
@@ -584,7 +584,7 @@ mod tests {
             let (a, rows, shapes) = augmented(seed);
             let sol = BlendshapeSolver::new(a, rows, shapes, 1e-2, 5.0).unwrap();
             assert_eq!(sol.low_rank(), Some(3), "seed {seed}");
-            let dense = sol.dense_only();
+            let dense = sol.dense_only().unwrap();
             let mut s = seed + 100;
             let mut t: Vec<f64> = (0..rows).map(|_| 2.0 * rnd(&mut s)).collect();
             for missing in [vec![], vec![4, 5, 6], vec![0, 1, 2, 27, 28, 29]] {
@@ -620,7 +620,7 @@ mod tests {
         for seed in 0..3u64 {
             let (sol, mut t) = scans(seed);
             assert_eq!(sol.low_rank(), Some(6), "seed {seed}");
-            let dense = sol.dense_only();
+            let dense = sol.dense_only().unwrap();
             let mut s = seed + 90;
             let dirs: Vec<Vec<f64>> = vec![(0..rows).map(|_| rnd(&mut s)).collect()];
             for missing in [vec![], vec![2, 9, 17]] {
@@ -698,7 +698,7 @@ mod tests {
     fn the_dual_from_a_nearby_fits_dual_point_lands_on_the_dense_minimum() {
         for seed in 0..3u64 {
             let (sol, t) = scans(seed);
-            let dense = sol.dense_only();
+            let dense = sol.dense_only().unwrap();
             let mut s = seed + 7;
             for missing in [vec![], vec![3, 11, 25]] {
                 let mut t = t.clone();
