@@ -130,6 +130,12 @@ def test_chunks_and_an_out_buffer_receive_the_same_local_surface(solved) -> None
     )
 
 
+def test_no_frames_give_no_meshes_with_local_fits(solved) -> None:  # type: ignore[no-untyped-def]
+    _, model, _, sigma = solved
+    got = model.solve(np.zeros((0, model.num_bundles, 3)), marker_noise=sigma, local_fits=True)
+    assert got.vertices.shape == (0, model.num_vertices, 3)
+
+
 def test_local_fits_without_marker_noise_or_with_jaw_bins_are_input_errors(solved, sample) -> None:  # type: ignore[no-untyped-def]
     data, model, frames, _ = solved
     with pytest.raises(InputError, match="local_fits needs marker_noise"):
@@ -184,3 +190,44 @@ def test_cli_local_fits_needs_marker_noise_and_writes_what_model_solve_gives(
     x = (frames * 10.0).astype(np.float32).astype(np.float64) / 10.0
     want = model.solve(x, marker_noise=0.01, quiet=True, local_fits=True)
     np.testing.assert_allclose(got, want.vertices, rtol=0, atol=1e-6 * model.diagonal)
+
+
+def test_ctrl_c_during_the_local_fits_stops_them_within_a_chunk(solved) -> None:  # type: ignore[no-untyped-def]
+    import os
+    import signal
+    import time
+
+    from interrupts import python_sigint_handler
+    from lgi.local import FITS_CHUNK, LocalPieces
+
+    _, model, frames, sigma = solved
+    res = model.solve(frames, marker_noise=sigma, quiet=True)
+    pieces = LocalPieces(model)
+    real = pieces.fits
+    calls: list[int] = []
+
+    class Counting:
+        """The core's fits, sending a real SIGINT after the second chunk."""
+
+        def solve(self, targets, starts):  # type: ignore[no-untyped-def]
+            got = real.solve(targets, starts)
+            calls.append(len(targets))
+            if len(calls) == 2:
+                os.kill(os.getpid(), signal.SIGINT)
+                time.sleep(0.05)
+            return got
+
+    pieces.fits = Counting()  # type: ignore[assignment]
+    many = type(res)(
+        vertices=np.repeat(np.asarray(res.vertices), 4, axis=0),
+        bundle_residuals=np.repeat(np.asarray(res.bundle_residuals), 4, axis=0),
+        bundle_positions=np.repeat(np.asarray(res.bundle_positions), 4, axis=0),
+        missing=np.repeat(np.asarray(res.missing), 4, axis=0),
+        choices=res.choices,
+        jaw_theta=None if res.jaw_theta is None else np.repeat(res.jaw_theta, 4, axis=0),
+        fit_weights=np.repeat(np.asarray(res.fit_weights), 4, axis=0),
+    )
+    total = -(-many.vertices.shape[0] // FITS_CHUNK)
+    with python_sigint_handler(), pytest.raises(KeyboardInterrupt):
+        pieces.surface(many)
+    assert 2 <= len(calls) <= 3 < total

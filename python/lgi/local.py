@@ -34,7 +34,11 @@ if TYPE_CHECKING:
 
 F64 = NDArray[np.float64]
 
-__all__ = ["LocalPieces", "local_pieces"]
+__all__ = ["FITS_CHUNK", "LocalPieces", "local_pieces"]
+
+FITS_CHUNK = 16
+"""Frames whose local fits one call to the core solves (a few hundred ms at most: Ctrl-C is
+seen between calls)."""
 
 
 class LocalPieces:
@@ -98,7 +102,16 @@ class LocalPieces:
             unskinned = self.rig.unskin(np.nan_to_num(targets), theta, weights=self.bundle_jaw)
             unskinned[missing] = np.nan
         starts = np.asarray(res.fit_weights, dtype=np.float64)
-        weights, kept = self.fits.solve(unskinned - self.rest[None], starts)
+        disp = unskinned - self.rest[None]
+        if disp.shape[0] == 0:
+            return np.asarray(res.vertices, dtype=np.float64) if out is None else out
+        # A chunk of frames per call, so Ctrl-C (seen between calls) stops a long take at once.
+        parts = [
+            self.fits.solve(disp[a : a + FITS_CHUNK], starts[a : a + FITS_CHUNK])
+            for a in range(0, disp.shape[0], FITS_CHUNK)
+        ]
+        weights = np.concatenate([w for w, _ in parts])
+        kept = sum(k for _, k in parts)
         if kept:
             warnings.warn(
                 f"local fits: {kept} of {weights.shape[0] * weights.shape[1]} bundle fits had no "
