@@ -6,7 +6,8 @@ use criterion::{criterion_group, criterion_main, Criterion, Throughput};
 use glam::DVec3;
 use lgi_benches::{build_model, load_workload, make_frames, solve_frame, Workload};
 use lgi_core::{
-    blend, blend_by_columns, Choice, FrameState, Model, Pieces, Scratch, SibsonWeights, BLEND_BLOCK,
+    blend, blend_by_columns, Choice, FrameState, LocalFits, Model, Pieces, Scratch, SibsonWeights,
+    BLEND_BLOCK, FIT_L2, FIT_PENALTY,
 };
 use std::hint::black_box;
 use std::time::{Duration, Instant};
@@ -220,5 +221,60 @@ fn stages(c: &mut Criterion) {
     g.finish();
 }
 
-criterion_group!(benches, stages);
+/// The local fits (`solve(local_fits=True)`): their build (a solver per bundle's window) and
+/// one frame's fits, every bundle's, of the workload's shapes at the bundles (no jaw).
+fn local_fits(c: &mut Criterion) {
+    let f = fixture();
+    let data = f.model.dataset();
+    let neutral = &data.neutral().positions;
+    let rest = f
+        .model
+        .bundle_positions(neutral)
+        .unwrap_or_else(|e| panic!("{e}"));
+    let (b, s) = (rest.len(), data.num_shapes());
+    let mut a = vec![0.0; 3 * b * s];
+    for k in 0..s {
+        let moved: Vec<DVec3> = (0..neutral.len())
+            .map(|v| neutral[v] + data.displacement(k, v))
+            .collect();
+        let at = f
+            .model
+            .bundle_positions(&moved)
+            .unwrap_or_else(|e| panic!("{e}"));
+        for n in 0..b {
+            for (d, x) in (at[n] - rest[n]).to_array().iter().enumerate() {
+                a[(3 * n + d) * s + k] = *x;
+            }
+        }
+    }
+    let fits = LocalFits::new(&a, s, &rest, FIT_L2, FIT_PENALTY).unwrap_or_else(|e| panic!("{e}"));
+    // The frames' markers as displacements from rest; each frame's fits start at 0.
+    let targets: Vec<Vec<f64>> = f
+        .frames
+        .iter()
+        .map(|fr| {
+            fr.iter()
+                .zip(&rest)
+                .flat_map(|(p, r)| (*p - *r).to_array())
+                .collect()
+        })
+        .collect();
+    let starts = vec![0.0; s];
+    let mut g = c.benchmark_group("local_fits");
+    g.sample_size(10);
+    g.bench_function("local_fits_build", |bench| {
+        bench.iter(|| black_box(LocalFits::new(&a, s, &rest, FIT_L2, FIT_PENALTY)));
+    });
+    g.throughput(Throughput::Elements(b as u64));
+    let mut i = 0;
+    g.bench_function("local_fits_frame", |bench| {
+        bench.iter(|| {
+            i = (i + 1) % targets.len();
+            black_box(fits.solve(&targets[i], &starts))
+        });
+    });
+    g.finish();
+}
+
+criterion_group!(benches, stages, local_fits);
 criterion_main!(benches);
