@@ -34,11 +34,14 @@ if TYPE_CHECKING:
 
 F64 = NDArray[np.float64]
 
-__all__ = ["FITS_CHUNK", "LocalPieces", "local_pieces"]
+__all__ = ["BLEND_ROWS", "FITS_CHUNK", "LocalPieces", "local_pieces"]
 
 FITS_CHUNK = 16
 """Frames whose local fits one call to the core solves (a few hundred ms at most: Ctrl-C is
 seen between calls)."""
+
+BLEND_ROWS = 4096
+"""Vertices whose blended weights are held at once (4096 x S doubles: 66 MB at 2,000 scans)."""
 
 
 class LocalPieces:
@@ -57,21 +60,22 @@ class LocalPieces:
         self.rig = model.jaw_rig
         self.bundle_jaw: F64 | None = None
         jaw = model.core.jaw()
+        theta = None
         if self.rig is not None and jaw is not None:
             theta = np.asarray(jaw["shape_theta"], dtype=np.float64)
-            rig = self.rig
-            unposed = [
-                rig.unskin_displacements(self.neutral, shapes[k], theta[k])
-                for k in range(len(shapes))
-            ]
             self.bundle_jaw = np.asarray(jaw["bundle_weights"], dtype=np.float64)
-        else:
-            unposed = list(shapes)
         # (V, 3, S) float32 like the dataset, each shape without its own jaw pose: a vertex's
         # blend reads its S weights against contiguous memory (4x faster than (S, V, 3)).
-        self.shapes = np.empty((self.neutral.shape[0], 3, len(unposed)), dtype=np.float32)
-        for k, u in enumerate(unposed):
-            self.shapes[:, :, k] = u
+        # Filled shape by shape: no second copy of every shape at once.
+        self.shapes = np.empty((self.neutral.shape[0], 3, len(shapes)), dtype=np.float32)
+        for k in range(len(shapes)):
+            if self.rig is not None and theta is not None:
+                self.shapes[:, :, k] = self.rig.unskin_displacements(
+                    self.neutral, shapes[k], theta[k]
+                )
+            else:
+                self.shapes[:, :, k] = shapes[k]
+        del shapes
         surf = model.core.bundle_surface_points()
         tris = np.asarray(data.triangles, dtype=np.int64)[np.asarray(surf["triangles"])]
         bary = np.asarray(surf["barycentrics"], dtype=np.float64)
@@ -121,11 +125,15 @@ class LocalPieces:
             )
         frames = weights.shape[0]
         blend = np.empty((frames, *self.neutral.shape))
+        v = self.neutral.shape[0]
         for f in range(frames):
-            per_vertex = self.sewing @ weights[f]
-            blend[f] = self.neutral + np.einsum(
-                "vs,vds->vd", per_vertex, self.shapes, dtype=np.float64
-            )
+            # Blocks of vertices bound the (vertices, S) weights: 400 MB a frame at 2,000 scans.
+            for a in range(0, v, BLEND_ROWS):
+                rows = slice(a, min(a + BLEND_ROWS, v))
+                per_vertex = self.sewing[rows] @ weights[f]
+                blend[f, rows] = self.neutral[rows] + np.einsum(
+                    "vs,vds->vd", per_vertex, self.shapes[rows], dtype=np.float64
+                )
         posed = blend if theta is None or self.rig is None else self.rig.skin(blend, theta)
         misses = targets - self._sample(posed)
         result = posed + self.corrective.interpolate(misses)
