@@ -10,6 +10,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from scipy.optimize import minimize
 
 import lgi
@@ -231,3 +233,21 @@ def test_ctrl_c_during_the_local_fits_stops_them_within_a_chunk(solved) -> None:
     with python_sigint_handler(), pytest.raises(KeyboardInterrupt):
         pieces.surface(many)
     assert 2 <= len(calls) <= 3 < total
+
+
+@settings(max_examples=25, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), b=st.integers(4, 24), s=st.integers(1, 8))
+def test_local_fits_follow_the_markers_when_they_are_relabelled(seed: int, b: int, s: int) -> None:
+    rng = np.random.default_rng(seed)
+    rest = rng.uniform(-3, 3, size=(b, 3))
+    a = rng.standard_normal((3 * b, s))
+    target = rng.standard_normal((2, b, 3))
+    target[1, rng.integers(b)] = np.nan
+    starts = rng.uniform(0, 1, size=(2, s))
+    got, kept = _lgi.LocalFits(a, rest, _lgi.FIT_L2, _lgi.FIT_PENALTY).solve(target, starts)
+    order = rng.permutation(b)
+    rows = (3 * order[:, None] + np.arange(3)).ravel()
+    fits = _lgi.LocalFits(a[rows], rest[order], _lgi.FIT_L2, _lgi.FIT_PENALTY)
+    again, kept_again = fits.solve(target[:, order], starts)
+    assert kept == kept_again
+    np.testing.assert_allclose(again, got[:, order], rtol=0, atol=1e-9)
