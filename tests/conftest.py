@@ -71,3 +71,13 @@ def sample_model(sample, sample_dataset):  # type: ignore[no-untyped-def]
     import lgi
 
     return lgi.Model.build(sample_dataset, sample.markers_rest, jaw=None)
+
+
+@pytest.fixture(scope="session")
+def noise_aware_sample(sample, sample_dataset):  # type: ignore[no-untyped-def]
+    """The sample's default build (with its jaw rig) and its performance's marker noise: the
+    recommended call's model and sigma."""
+    import lgi
+
+    model = lgi.Model.build(sample_dataset, sample.markers_rest)
+    return model, lgi.estimate_marker_noise(sample.performance, model)

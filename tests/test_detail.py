@@ -14,16 +14,12 @@ import pytest
 import lgi
 from lgi.baselines import DisplacementInterpolation
 from lgi.errors import InputError
-from lgi.lab.sample import sample_dataset
 
 
 @pytest.fixture(scope="module")
-def solved(sample):  # type: ignore[no-untyped-def]
-    data = sample_dataset(sample)
-    model = lgi.Model.build(data, sample.markers_rest)
-    frames = sample.performance[:40]
-    sigma = lgi.estimate_marker_noise(sample.performance, model)
-    return data, model, frames, sigma
+def solved(sample, sample_dataset, noise_aware_sample):  # type: ignore[no-untyped-def]
+    model, sigma = noise_aware_sample
+    return sample_dataset, model, sample.performance[:40], sigma
 
 
 def test_weight_zero_is_the_biharmonic_interpolation_of_the_solved_markers(solved, sample) -> None:  # type: ignore[no-untyped-def]

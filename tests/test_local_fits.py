@@ -18,17 +18,13 @@ import lgi
 from lgi import _lgi
 from lgi.errors import InputError
 from lgi.io.settings import SolveSettings
-from lgi.lab.sample import sample_dataset
 from lgi.local import local_pieces
 
 
 @pytest.fixture(scope="module")
-def solved(sample):  # type: ignore[no-untyped-def]
-    data = sample_dataset(sample)
-    model = lgi.Model.build(data, sample.markers_rest)
-    frames = sample.performance[:24]
-    sigma = lgi.estimate_marker_noise(sample.performance, model)
-    return data, model, frames, sigma
+def solved(sample, sample_dataset, noise_aware_sample):  # type: ignore[no-untyped-def]
+    model, sigma = noise_aware_sample
+    return sample_dataset, model, sample.performance[:24], sigma
 
 
 def _window(rest: np.ndarray, b: int) -> tuple[np.ndarray, np.ndarray]:

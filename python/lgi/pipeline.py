@@ -15,6 +15,7 @@ import re
 import time
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -762,15 +763,15 @@ def solve_file(
     )
     topo = topology(m.dataset)
     start = t.first_frame + rng.start
+    # What both ways of solving (one call, or chunk by chunk) are given.
+    how: dict[str, Any] = {
+        "jaw": jaw_mode,
+        "marker_noise": sigma,
+        "detail_weight": weight,
+        "local_fits": local_fits,
+    }
     if chunk is None:
-        res = m.solve(
-            x,
-            jaw=jaw_mode,
-            marker_noise=sigma,
-            quiet=quiet,
-            detail_weight=weight,
-            local_fits=local_fits,
-        )
+        res = m.solve(x, quiet=quiet, **how)
         if curves_out is not None:
             _write_curves(
                 curves_out, res.fit_weights, res.jaw_theta, m, fps=rate, start=start, frame=frame
@@ -814,16 +815,7 @@ def solve_file(
     buf = np.empty((min(size, n), m.num_vertices, 3))
     # Each chunk continues the temporal solve from the last frame of the one before
     # (`Model.solve_iter`): the chunks together are one `solve` of the range.
-    chunks = m.solve_iter(
-        x,
-        chunk=size,
-        jaw=jaw_mode,
-        marker_noise=sigma,
-        quiet=True,
-        out=buf,
-        detail_weight=weight,
-        local_fits=local_fits,
-    )
+    chunks = m.solve_iter(x, chunk=size, quiet=True, out=buf, **how)
     residuals: list[np.ndarray] = []
     absent: list[np.ndarray] = []
     fits: list[np.ndarray | None] = []
