@@ -86,7 +86,12 @@ class LocalPieces:
         self.fits = _lgi.LocalFits(a, self.rest, _lgi.FIT_L2, _lgi.FIT_PENALTY)
         sw = model.core.sew_weights()
         v, b = self.neutral.shape[0], model.num_bundles
-        self.sewing = sp.csr_matrix((sw["data"], sw["indices"], sw["indptr"]), shape=(v, b))
+        sewing = sp.csr_matrix((sw["data"], sw["indices"], sw["indptr"]), shape=(v, b))
+        # Blocks of vertices bound the (vertices, S) weights: 400 MB a frame at 2,000 scans.
+        self.blocks = [
+            (slice(a, min(a + BLEND_ROWS, v)), sewing[a : a + BLEND_ROWS])
+            for a in range(0, v, BLEND_ROWS)
+        ]
         self.corrective = _lgi.RbfInterpolator(self.neutral, tris, bary)
 
     def _sample(self, meshes: F64) -> F64:
@@ -125,12 +130,9 @@ class LocalPieces:
             )
         frames = weights.shape[0]
         blend = np.empty((frames, *self.neutral.shape))
-        v = self.neutral.shape[0]
         for f in range(frames):
-            # Blocks of vertices bound the (vertices, S) weights: 400 MB a frame at 2,000 scans.
-            for a in range(0, v, BLEND_ROWS):
-                rows = slice(a, min(a + BLEND_ROWS, v))
-                per_vertex = self.sewing[rows] @ weights[f]
+            for rows, sewing in self.blocks:
+                per_vertex = sewing @ weights[f]
                 blend[f, rows] = self.neutral[rows] + np.einsum(
                     "vs,vds->vd", per_vertex, self.shapes[rows], dtype=np.float64
                 )
