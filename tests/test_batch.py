@@ -323,6 +323,27 @@ def test_a_batch_detail_weight_auto_is_the_takes_own_estimate(client, named_mode
     assert np.array_equal(written.vertices, ref.vertices.astype(np.float32))
 
 
+def test_a_batch_with_local_fits_writes_what_model_solve_gives_and_says_so(
+    client, named_model, shots, tmp_path
+):  # type: ignore[no-untyped-def]
+    take = shots["sh040"]
+    result = batch.solve_shots(
+        named_model,
+        {"sh040": take},
+        tmp_path / "o",
+        client=client,
+        quiet=True,
+        marker_noise=0.01,
+        local_fits=True,
+    )
+    shot = result.shots["sh040"]
+    assert shot.status == "done", shot.error
+    ref = named_model.solve(take, quiet=True, marker_noise=0.01, local_fits=True)
+    written = lgi.io.result.read_result_npz(shot.output)
+    assert np.array_equal(written.vertices, ref.vertices.astype(np.float32))
+    assert written.settings is not None and written.settings.local_fits
+
+
 def test_solve_shots_refuses_bad_arguments_before_starting_anything(named_model, tmp_path):  # type: ignore[no-untyped-def]
     take = np.zeros((2, named_model.num_bundles, 3))
     cases = [
@@ -335,6 +356,8 @@ def test_solve_shots_refuses_bad_arguments_before_starting_anything(named_model,
         ({"marker_noise": "loud"}, "marker_noise"),
         ({"detail_weight": 1.5}, "detail_weight: expected a number in"),
         ({"detail_weight": "some"}, "detail_weight: expected a number in"),
+        ({"local_fits": True}, "local_fits needs marker_noise"),
+        ({"local_fits": 1, "marker_noise": 0.01}, "local_fits must be True or False"),
         ({"model": tmp_path / "none.lgi"}, "no such model file"),
         ({"client": 3}, "client: expected"),
         ({"client": "tcp://127.0.0.1:8786", "workers": 2}, "workers sizes the embedded"),
@@ -378,6 +401,7 @@ def test_lgi_batch_solves_takes_on_its_own_cluster_and_fails_with_exit_2_on_a_ba
         (["DUP"], "two takes named 'sh010'"),
         (["--marker-noise", "loud"], "--marker-noise"),
         (["--detail-weight", "1.5"], "--detail-weight"),
+        (["--local-fits"], "--local-fits needs --marker-noise"),
     ],
 )
 def test_lgi_batch_mistakes_are_lgi_error_exit_2(named_model, shots, tmp_path, extra, message):  # type: ignore[no-untyped-def]

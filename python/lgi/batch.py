@@ -140,6 +140,14 @@ def _check_options(options: dict[str, Any]) -> str:
     detail = options.get("detail_weight")
     if detail is not None and detail != "auto":
         check_detail_weight(detail)
+    local = options.get("local_fits", False)
+    if not isinstance(local, bool):
+        raise InputError(f"solve_shots: local_fits must be True or False, got {local!r}")
+    if local and noise is None:
+        raise InputError(
+            "solve_shots: local_fits needs marker_noise (a number, 'auto', or 0 for clean "
+            "markers): the local fits fit the noise-aware targets"
+        )
     try:
         return json.dumps(options, sort_keys=True, allow_nan=False)
     except (TypeError, ValueError):
@@ -289,6 +297,7 @@ def solve_shot(
             jaw=opts.get("jaw", "auto"),
             marker_noise=opts.get("marker_noise"),
             detail_weight=opts.get("detail_weight"),
+            local_fits=bool(opts.get("local_fits", False)),
         )
         written = write_solved(
             kind, Path(dest), topo, res, m, fps=rate, start=start, quiet=True, settings=settings

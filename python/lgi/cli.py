@@ -207,6 +207,13 @@ def _cmd_batch(args: argparse.Namespace) -> int:
         options["marker_noise"] = args.marker_noise
     if args.detail_weight is not None:
         options["detail_weight"] = args.detail_weight
+    if args.local_fits:
+        if args.marker_noise is None:
+            raise lgi.InputError(
+                "--local-fits needs --marker-noise (SIGMA or auto; 0 for clean markers): the "
+                "local fits fit the noise-aware targets"
+            )
+        options["local_fits"] = True
     if args.jaw != "auto":
         options["jaw"] = None if args.jaw == "rest" else args.jaw
     model = pipeline.existing_file(args.model, "MODEL")
@@ -315,6 +322,11 @@ def _add_batch_command(sub: Any) -> None:
         default=None,
         metavar="W|auto|none",
         help="as lgi solve --detail-weight (auto: read per take); default none",
+    )
+    b.add_argument(
+        "--local-fits",
+        action="store_true",
+        help="as lgi solve --local-fits (needs --marker-noise)",
     )
     b.add_argument(
         "--jaw",
