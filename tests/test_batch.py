@@ -304,22 +304,22 @@ def test_a_scheduler_address_runs_the_batch_on_that_cluster(client, named_model,
     assert np.array_equal(written.vertices, ref.vertices.astype(np.float32))
 
 
+def _one_shot(client, model, take, out, **options):  # type: ignore[no-untyped-def]
+    """`take` solved as shot sh040 by the batch with `options`: what it wrote (it must be done)."""
+    shot = batch.solve_shots(
+        model, {"sh040": take}, out, client=client, quiet=True, **options
+    ).shots["sh040"]
+    assert shot.status == "done", shot.error
+    return lgi.io.result.read_result_npz(shot.output)
+
+
 def test_a_batch_detail_weight_auto_is_the_takes_own_estimate(client, named_model, shots, tmp_path):  # type: ignore[no-untyped-def]
     take = shots["sh040"]
-    result = batch.solve_shots(
-        named_model,
-        {"sh040": take},
-        tmp_path / "o",
-        client=client,
-        quiet=True,
-        marker_noise=0.01,
-        detail_weight="auto",
+    written = _one_shot(
+        client, named_model, take, tmp_path / "o", marker_noise=0.01, detail_weight="auto"
     )
-    shot = result.shots["sh040"]
-    assert shot.status == "done", shot.error
     w = lgi.estimate_detail_weight(take, named_model, marker_noise=0.01)
     ref = named_model.solve(take, quiet=True, marker_noise=0.01, detail_weight=w)
-    written = lgi.io.result.read_result_npz(shot.output)
     assert np.array_equal(written.vertices, ref.vertices.astype(np.float32))
 
 
@@ -327,19 +327,10 @@ def test_a_batch_with_local_fits_writes_what_model_solve_gives_and_says_so(
     client, named_model, shots, tmp_path
 ):  # type: ignore[no-untyped-def]
     take = shots["sh040"]
-    result = batch.solve_shots(
-        named_model,
-        {"sh040": take},
-        tmp_path / "o",
-        client=client,
-        quiet=True,
-        marker_noise=0.01,
-        local_fits=True,
+    written = _one_shot(
+        client, named_model, take, tmp_path / "o", marker_noise=0.01, local_fits=True
     )
-    shot = result.shots["sh040"]
-    assert shot.status == "done", shot.error
     ref = named_model.solve(take, quiet=True, marker_noise=0.01, local_fits=True)
-    written = lgi.io.result.read_result_npz(shot.output)
     assert np.array_equal(written.vertices, ref.vertices.astype(np.float32))
     assert written.settings is not None and written.settings.local_fits
 
