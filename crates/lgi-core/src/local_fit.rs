@@ -39,7 +39,8 @@ pub struct LocalFits {
 pub struct LocalWeights {
     /// Every frame's weights per bundle (F × B × S, row-major).
     pub weights: Vec<f64>,
-    /// How many (frame, bundle) fits did not converge and kept their start instead.
+    /// How many (frame, bundle) fits kept their start instead: no marker of the window
+    /// present, or neither the low-rank nor the dense path finished.
     pub kept_start: usize,
 }
 
@@ -145,7 +146,7 @@ impl LocalFits {
                 let (f, k) = (job / b, job % b);
                 let start = &starts[f * s..(f + 1) * s];
                 let frame = &targets[f * 3 * b..(f + 1) * 3 * b];
-                self.fit_window(&self.windows[k], frame, start)
+                self.windows[k].fit(frame, start)
             })
             .collect();
         let kept_start = fits.iter().filter(|(_, kept)| *kept).count();
@@ -155,11 +156,13 @@ impl LocalFits {
             kept_start,
         })
     }
+}
 
+impl Window {
     /// One window's fit of one frame, and whether it kept its start.
-    fn fit_window(&self, window: &Window, frame: &[f64], start: &[f64]) -> (Vec<f64>, bool) {
-        let mut target = Vec::with_capacity(3 * window.markers.len());
-        for (&m, &g) in window.markers.iter().zip(&window.root_weights) {
+    fn fit(&self, frame: &[f64], start: &[f64]) -> (Vec<f64>, bool) {
+        let mut target = Vec::with_capacity(3 * self.markers.len());
+        for (&m, &g) in self.markers.iter().zip(&self.root_weights) {
             target.extend(frame[3 * m..3 * m + 3].iter().map(|t| t * g));
         }
         if target.iter().all(|t| t.is_nan()) {
@@ -173,7 +176,7 @@ impl LocalFits {
         // The low-rank path can circle without finishing where a window's present rows miss
         // some of its directions (seen on ICT with one marker of nine missing); the dense path
         // then solves the same objective.
-        match fit(&window.solver).or_else(|_| window.solver.dense_only().and_then(|d| fit(&d))) {
+        match fit(&self.solver).or_else(|_| self.solver.dense_only().and_then(|d| fit(&d))) {
             Ok(weights) => (weights, false),
             Err(_) => (start.to_vec(), true),
         }

@@ -115,10 +115,16 @@ impl BlendshapeSolver {
         // The Gram matrix and its factor serve only the dense path (S² doubles, 32 MB, and
         // S³/3 flops at 2,000 shapes; the local fits keep one solver per bundle).
         if me.low_rank.is_none() {
-            me.full = cholesky(shapes, gram.clone())?;
-            me.full_gram = gram;
+            me.keep_dense(gram)?;
         }
         Ok(me)
+    }
+
+    /// Keeps `gram` (AᵀA + l2 I over all rows) and its Cholesky factor for the dense path.
+    fn keep_dense(&mut self, gram: Vec<f64>) -> Result<()> {
+        self.full = cholesky(self.shapes, gram.clone())?;
+        self.full_gram = gram;
+        Ok(())
     }
 
     /// Number of shapes S.
@@ -489,8 +495,7 @@ impl BlendshapeSolver {
     pub(crate) fn dense_only(&self) -> Result<Self> {
         let mut dense = self.clone();
         dense.low_rank = None;
-        dense.full_gram = dense.gram(&vec![true; dense.rows]);
-        dense.full = cholesky(dense.shapes, dense.full_gram.clone())?;
+        dense.keep_dense(dense.gram(&vec![true; dense.rows]))?;
         Ok(dense)
     }
 
