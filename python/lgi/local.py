@@ -79,8 +79,10 @@ class LocalPieces:
         surf = model.core.bundle_surface_points()
         tris = np.asarray(data.triangles, dtype=np.int64)[np.asarray(surf["triangles"])]
         bary = np.asarray(surf["barycentrics"], dtype=np.float64)
-        self._tris, self._bary = tris, bary
-        self.rest = self._sample(self.neutral[None])[0]
+        # The bundles' positions on meshes (F, V, 3): the core's one definition, which the
+        # result's marker positions are measured with too.
+        self._bundle_positions = model.core.bundle_positions
+        self.rest = self._bundle_positions(self.neutral[None])[0]
         at = np.einsum("bjds,bj->bds", self.shapes[tris], bary, dtype=np.float64)
         a = at.reshape(3 * model.num_bundles, self.shapes.shape[2])
         self.fits = _lgi.LocalFits(a, self.rest, _lgi.FIT_L2, _lgi.FIT_PENALTY)
@@ -93,10 +95,6 @@ class LocalPieces:
             for a in range(0, v, BLEND_ROWS)
         ]
         self.corrective = _lgi.RbfInterpolator(self.neutral, tris, bary)
-
-    def _sample(self, meshes: F64) -> F64:
-        """The bundles' positions (F, B, 3) on meshes (F, V, 3)."""
-        return np.einsum("fbjd,bj->fbd", meshes[:, self._tris], self._bary)
 
     def surface(self, res: SolveResult, out: F64 | None = None) -> F64:
         """The local fits' surface (F, V, 3) of a noise-aware solve `res` (its targets, jaw
@@ -137,7 +135,7 @@ class LocalPieces:
                     "vs,vds->vd", per_vertex, self.shapes[rows], dtype=np.float64
                 )
         posed = blend if theta is None or self.rig is None else self.rig.skin(blend, theta)
-        misses = targets - self._sample(posed)
+        misses = targets - self._bundle_positions(posed)
         result = posed + self.corrective.interpolate(misses)
         if out is None:
             return np.asarray(result, dtype=np.float64)
