@@ -296,6 +296,12 @@ impl ShapeBasis {
         })
     }
 
+    /// Every shape's coefficients over the basis shapes (S × q, row-major, shape k's row:
+    /// `Σ_j c[k q + j] · shapes[j]` is shape k).
+    pub fn coefficients(&self) -> &[f64] {
+        &self.coefficients
+    }
+
     /// Weights over every shape (S) as weights over the basis shapes (S, zero elsewhere): the
     /// same combination of displacements.
     pub fn map(&self, weights: &[f64]) -> Vec<f64> {

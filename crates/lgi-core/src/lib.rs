@@ -46,6 +46,7 @@ mod uvspace;
 
 // Data in and the model: what the binding and most users need.
 pub use augment::{augment, recipes, Recipe};
+pub use basis::ShapeBasis;
 pub use dataset::Dataset;
 pub use error::{LgiError, Result};
 pub use local_fit::{LocalFits, LocalWeights, WINDOW_REACH};

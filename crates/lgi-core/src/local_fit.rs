@@ -6,7 +6,7 @@
 //! blended over the mesh by the sewing weights and the surface is put through the markers by
 //! the caller (`lgi.local`); docs/concepts.md says why and docs/results.md what it measures.
 
-use crate::baselines::{BlendshapeSolver, FitStart};
+use crate::baselines::{BlendshapeSolution, BlendshapeSolver, FitStart};
 use crate::error::{LgiError, Result};
 use crate::prior::{correlation, fit_scale};
 use glam::DVec3;
@@ -118,9 +118,11 @@ impl LocalFits {
     }
 
     /// Each frame's local fits: `targets` F × 3B (displacements from rest; NaN: a missing
-    /// marker, its rows dropped), `starts` F × S (where each frame's fits start, e.g. its
-    /// global fit; a window with no marker present, or whose fit does not converge, keeps its
-    /// start, counted in [`LocalWeights::kept_start`]).
+    /// marker, its rows dropped), `starts` F × S (e.g. each frame's global fit: where the
+    /// first frame's fits start, and a window's after one that kept its start; the others
+    /// start at the window's fit of the frame before, the same minimum in fewer steps; a
+    /// window with no marker present, or whose fit does not converge, keeps its start,
+    /// counted in [`LocalWeights::kept_start`]). Pass a take's frames in order.
     pub fn solve(&self, targets: &[f64], starts: &[f64]) -> Result<LocalWeights> {
         let (b, s) = (self.bundles, self.shapes);
         if targets.len() % (3 * b) != 0 {
@@ -140,17 +142,35 @@ impl LocalFits {
         if targets.iter().any(|t| t.is_infinite()) {
             return Err(LgiError::Input("local fits: a target is infinite".into()));
         }
-        let fits: Vec<(Vec<f64>, bool)> = (0..frames * b)
+        // Bundles in parallel, each bundle's frames in order: a frame's fit starts at the
+        // previous frame's (the same window, a nearby target: a few steps), the first at
+        // its own start. The minimum is unique, so the start changes only the steps taken.
+        let per_bundle: Vec<Vec<(Vec<f64>, bool)>> = (0..b)
             .into_par_iter()
-            .map(|job| {
-                let (f, k) = (job / b, job % b);
-                let start = &starts[f * s..(f + 1) * s];
-                let frame = &targets[f * 3 * b..(f + 1) * 3 * b];
-                self.windows[k].fit(frame, start)
+            .map(|k| {
+                let window = &self.windows[k];
+                let mut previous: Option<Fitted> = None;
+                (0..frames)
+                    .map(|f| {
+                        let frame = &targets[f * 3 * b..(f + 1) * 3 * b];
+                        let start = &starts[f * s..(f + 1) * s];
+                        previous = window.fit(frame, start, previous.as_ref());
+                        match &previous {
+                            Some(done) => (done.solution.weights.clone(), false),
+                            None => (start.to_vec(), true),
+                        }
+                    })
+                    .collect()
             })
             .collect();
-        let kept_start = fits.iter().filter(|(_, kept)| *kept).count();
-        let weights = fits.into_iter().flat_map(|(w, _)| w).collect();
+        let mut weights = vec![0.0; frames * b * s];
+        let mut kept_start = 0;
+        for (k, fits) in per_bundle.into_iter().enumerate() {
+            for (f, (w, kept)) in fits.into_iter().enumerate() {
+                weights[(f * b + k) * s..(f * b + k + 1) * s].copy_from_slice(&w);
+                kept_start += usize::from(kept);
+            }
+        }
         Ok(LocalWeights {
             weights,
             kept_start,
@@ -158,28 +178,47 @@ impl LocalFits {
     }
 }
 
+/// A window's fit of one frame and which of its rows were missing (where the next frame's
+/// fit starts).
+struct Fitted {
+    solution: BlendshapeSolution,
+    missing: Vec<bool>,
+}
+
 impl Window {
-    /// One window's fit of one frame, and whether it kept its start.
-    fn fit(&self, frame: &[f64], start: &[f64]) -> (Vec<f64>, bool) {
+    /// One window's fit of one frame, or `None` where it keeps `start` (no marker of the
+    /// window present, or neither path finished). It starts at `previous` (the last frame's
+    /// fit: a nearby target, a few steps; at its dual point when the same rows are missing),
+    /// else at `start`.
+    fn fit(&self, frame: &[f64], start: &[f64], previous: Option<&Fitted>) -> Option<Fitted> {
         let mut target = Vec::with_capacity(3 * self.markers.len());
         for (&m, &g) in self.markers.iter().zip(&self.root_weights) {
             target.extend(frame[3 * m..3 * m + 3].iter().map(|t| t * g));
         }
-        if target.iter().all(|t| t.is_nan()) {
-            return (start.to_vec(), true);
+        let missing: Vec<bool> = target.iter().map(|t| t.is_nan()).collect();
+        if missing.iter().all(|&m| m) {
+            return None;
         }
+        let from = match previous {
+            Some(p) if p.missing == missing => FitStart::Nearby {
+                weights: &p.solution.weights,
+                dual: &p.solution.dual,
+            },
+            Some(p) => FitStart::Weights(&p.solution.weights),
+            None => FitStart::Weights(start),
+        };
         let fit = |solver: &BlendshapeSolver| {
             solver
-                .solve_with_derivatives(&target, &[], FitStart::Weights(start))
-                .map(|(sol, _)| sol.weights)
+                .solve_with_derivatives(&target, &[], from)
+                .map(|(solution, _)| solution)
         };
         // The low-rank path can circle without finishing where a window's present rows miss
         // some of its directions (seen on ICT with one marker of nine missing); the dense path
         // then solves the same objective.
-        match fit(&self.solver).or_else(|_| self.solver.dense_only().and_then(|d| fit(&d))) {
-            Ok(weights) => (weights, false),
-            Err(_) => (start.to_vec(), true),
-        }
+        let solution = fit(&self.solver)
+            .or_else(|_| self.solver.dense_only().and_then(|d| fit(&d)))
+            .ok()?;
+        Some(Fitted { solution, missing })
     }
 }
 

@@ -4,12 +4,14 @@
 
 use crate::convert::{any_numbers, flat_to_array, float_array, point_sets, points};
 use crate::error::{input_error, internal_error, PyLgiError};
+use crate::threads;
 use glam::{DMat3, DVec3};
 use lgi_core::LgiError;
 use lgi_core::{JawParams, JawRig as CoreRig};
 use numpy::{PyArrayDyn, PyArrayMethods};
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyType};
+use rayon::prelude::*;
 
 type Array<'py> = Bound<'py, PyArrayDyn<f64>>;
 
@@ -120,19 +122,23 @@ impl JawRig {
             )));
         }
         let rig = &self.inner;
-        let out = py.detach(|| -> Result<Vec<f64>, LgiError> {
-            let mut flat = Vec::with_capacity(sets.len() * n * 3);
-            let mut buf = vec![DVec3::ZERO; n];
-            for (set, &pose) in sets.iter().zip(&poses) {
-                match (&w, inverse) {
-                    (None, false) => rig.skin(set, pose, &mut buf)?,
-                    (None, true) => rig.unskin(set, pose, &mut buf)?,
-                    (Some(w), false) => rig.skin_weighted(set, w, pose, &mut buf)?,
-                    (Some(w), true) => rig.unskin_weighted(set, w, pose, &mut buf)?,
-                }
-                flat.extend(buf.iter().flat_map(|p| [p.x, p.y, p.z]));
-            }
-            Ok(flat)
+        // Frames in parallel (each its own buffer: the same bits as one after another).
+        let out = threads::detach(py, || -> Result<Vec<f64>, LgiError> {
+            let per_frame: Vec<Vec<f64>> = sets
+                .par_iter()
+                .zip(&poses)
+                .map(|(set, &pose)| {
+                    let mut buf = vec![DVec3::ZERO; n];
+                    match (&w, inverse) {
+                        (None, false) => rig.skin(set, pose, &mut buf)?,
+                        (None, true) => rig.unskin(set, pose, &mut buf)?,
+                        (Some(w), false) => rig.skin_weighted(set, w, pose, &mut buf)?,
+                        (Some(w), true) => rig.unskin_weighted(set, w, pose, &mut buf)?,
+                    }
+                    Ok(buf.iter().flat_map(|p| [p.x, p.y, p.z]).collect())
+                })
+                .collect::<Result<_, LgiError>>()?;
+            Ok(per_frame.concat())
         });
         let out = out.map_err(PyLgiError)?;
         if batched {

@@ -5,7 +5,7 @@ use crate::convert::{flat_to_array, float_array, points as read_points};
 use crate::error::PyLgiError;
 use crate::threads;
 use lgi_core::LocalFits as CoreLocal;
-use numpy::PyArrayDyn;
+use numpy::{PyArrayDyn, PyReadonlyArray2, PyUntypedArrayMethods};
 use pyo3::prelude::*;
 
 /// Local fits of one marker layout (immutable; the fits run in parallel).
@@ -80,4 +80,34 @@ impl LocalFits {
         let got = threads::detach(py, || inner.solve(&t, &st)).map_err(PyLgiError)?;
         Ok((flat_to_array(py, got.weights, &[f, b, s])?, got.kept_start))
     }
+}
+
+/// A shape basis: the basis shapes' indices (q,) and every shape's coefficients (S, q).
+type Basis<'py> = (Bound<'py, PyArrayDyn<i64>>, Bound<'py, PyArrayDyn<f64>>);
+
+/// `shapes` (S, N) float32, C-contiguous: None when no shape is a combination of the others,
+/// else the basis shapes' indices (q,) and every shape's coefficients over them (S, q)
+/// (`lgi_core::ShapeBasis`: a shape counts as a combination to a relative rms of 1e-6).
+#[pyfunction]
+pub fn shape_basis<'py>(
+    py: Python<'py>,
+    shapes: PyReadonlyArray2<'py, f32>,
+) -> PyResult<Option<Basis<'py>>> {
+    let s = shapes.shape()[0];
+    let not_c =
+        || pyo3::exceptions::PyValueError::new_err("shape_basis: shapes must be C-contiguous");
+    // `as_slice` takes Fortran order too, whose slice is not shape-major.
+    if !shapes.is_c_contiguous() {
+        return Err(not_c());
+    }
+    let flat = shapes.as_slice().map_err(|_| not_c())?;
+    let Some(basis) = threads::detach(py, || lgi_core::ShapeBasis::find(flat, s)) else {
+        return Ok(None);
+    };
+    let q = basis.shapes.len();
+    let pivots: Vec<i64> = basis.shapes.iter().map(|&k| k as i64).collect();
+    Ok(Some((
+        flat_to_array(py, pivots, &[q])?,
+        flat_to_array(py, basis.coefficients().to_vec(), &[s, q])?,
+    )))
 }

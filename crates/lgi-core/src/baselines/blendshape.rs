@@ -106,18 +106,54 @@ impl BlendshapeSolver {
             full: Vec::new(),
             low_rank: None,
         };
-        let gram = me.gram(&vec![true; rows]);
-        let mut plain = gram.clone();
-        for i in 0..shapes {
-            plain[i * shapes + i] -= l2;
-        }
-        me.low_rank = LowRank::new(&me.a, rows, shapes, &plain, l2)?;
-        // The Gram matrix and its factor serve only the dense path (S² doubles, 32 MB, and
-        // S³/3 flops at 2,000 shapes; the local fits keep one solver per bundle).
+        me.low_rank = LowRank::new(
+            &me.a,
+            rows,
+            shapes,
+            &me.plain_gram_diagonal(),
+            |p| me.plain_gram_column(p),
+            l2,
+        )?;
+        // The whole Gram matrix and its factor serve only the dense path (S² doubles, 32 MB,
+        // and S³/3 flops at 2,000 shapes; the local fits keep one solver per bundle).
         if me.low_rank.is_none() {
+            let gram = me.gram(&vec![true; rows]);
             me.keep_dense(gram)?;
         }
         Ok(me)
+    }
+
+    /// The diagonal of AᵀA (all rows), each entry the bits `gram`'s diagonal less the ridge
+    /// had: (Σ + l2) − l2.
+    fn plain_gram_diagonal(&self) -> Vec<f64> {
+        let s = self.shapes;
+        let mut d = vec![0.0; s];
+        for row in self.a.chunks_exact(s) {
+            for (x, a) in d.iter_mut().zip(row) {
+                *x += a * a;
+            }
+        }
+        d.iter().map(|x| (x + self.l2) - self.l2).collect()
+    }
+
+    /// Column p of AᵀA (all rows), each entry the bits of `gram`'s (the rows summed in the
+    /// same order; a product commutes exactly), its diagonal entry as
+    /// [`plain_gram_diagonal`](Self::plain_gram_diagonal)'s.
+    fn plain_gram_column(&self, p: usize) -> Vec<f64> {
+        let s = self.shapes;
+        let mut c = vec![0.0; s];
+        for row in self.a.chunks_exact(s) {
+            let ap = row[p];
+            for (x, a) in c.iter_mut().zip(row) {
+                *x += a * ap;
+            }
+        }
+        let mut own = 0.0;
+        for row in self.a.chunks_exact(s) {
+            own += row[p] * row[p];
+        }
+        c[p] = (own + self.l2) - self.l2;
+        c
     }
 
     /// Keeps `gram` (AᵀA + l2 I over all rows) and its Cholesky factor for the dense path.
@@ -684,6 +720,33 @@ mod tests {
                 (0..base).map(|j| b[r * base + j] * mix[k * base + j]).sum()
             })
             .collect()
+    }
+
+    #[test]
+    fn the_low_rank_forms_gram_columns_are_the_whole_gram_matrixs_bits_less_the_ridge() {
+        let (rows, shapes) = (17, 40);
+        let mut seed = 11u64;
+        let a = mixes(rows, 5, shapes, 0.3, &mut seed);
+        let l2 = 1e-3 * 0.37;
+        let sol = BlendshapeSolver::new(a, rows, shapes, l2, 10.0).unwrap();
+        assert!(
+            sol.low_rank().is_some(),
+            "a rank-5 matrix takes the low-rank form"
+        );
+        let gram = sol.gram(&vec![true; rows]);
+        let diag = sol.plain_gram_diagonal();
+        for p in 0..shapes {
+            let col = sol.plain_gram_column(p);
+            for i in 0..shapes {
+                let want = if i == p {
+                    gram[i * shapes + p] - l2
+                } else {
+                    gram[i * shapes + p]
+                };
+                assert_eq!(col[i].to_bits(), want.to_bits(), "column {p}, row {i}");
+            }
+            assert_eq!(diag[p].to_bits(), (gram[p * shapes + p] - l2).to_bits());
+        }
     }
 
     /// 240 positive mixes of 6 shapes over 30 rows (scans of one face: most weights end

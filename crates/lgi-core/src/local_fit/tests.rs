@@ -158,6 +158,82 @@ fn local_fits_equal_the_weighted_normal_equations_inside_the_box() {
 }
 
 #[test]
+fn frames_fitted_in_order_from_the_last_frames_fit_equal_each_frame_fitted_alone() {
+    // 60 scans mixing 4 directions over 12 markers (the low-rank form with its dual), six
+    // frames moving smoothly and far enough that weights reach both ends of the box; frame 3
+    // misses a marker (its start: the last fit's weights), frame 4 the same one (its start:
+    // the last fit's dual point).
+    let rest: Vec<DVec3> = (0..12).map(|i| DVec3::new(i as f64, 0.0, 0.0)).collect();
+    let (shapes, base) = (60, 4);
+    let dirs: Vec<Vec<DVec3>> = (0..base)
+        .map(|j| {
+            rest.iter()
+                .map(|p| {
+                    let x = p.x / 11.0 + j as f64;
+                    DVec3::new((3.0 * x).sin(), (2.0 * x).cos(), x * x - 1.0)
+                })
+                .collect()
+        })
+        .collect();
+    let scans: Vec<Vec<DVec3>> = (0..shapes)
+        .map(|k| {
+            (0..12)
+                .map(|n| {
+                    (0..base)
+                        .map(|j| dirs[j][n] * (((k * 7 + j * 3) % 11) as f64 / 10.0))
+                        .sum()
+                })
+                .collect()
+        })
+        .collect();
+    let a = matrix(&scans);
+    let fits = LocalFits::new(&a, shapes, &rest, FIT_L2, FIT_PENALTY).unwrap();
+    assert!(fits.windows.iter().all(|w| w.solver.low_rank().is_some()));
+    let frames = 6;
+    let mut targets = Vec::new();
+    for f in 0..frames {
+        for r in 0..36 {
+            let pose = 6.0 * (f as f64 - 2.0);
+            targets.push(pose * (a[r * shapes + f] + a[r * shapes + 30]) + 0.05 * (r as f64).sin());
+        }
+    }
+    for f in [3, 4] {
+        for c in 0..3 {
+            targets[f * 36 + 15 + c] = f64::NAN;
+        }
+    }
+    let starts = vec![0.1; frames * shapes];
+    let together = fits.solve(&targets, &starts).unwrap();
+    assert_eq!(together.kept_start, 0);
+    let (mut low, mut high) = (false, false);
+    for f in 0..frames {
+        let alone = fits
+            .solve(&targets[f * 36..(f + 1) * 36], &starts[..shapes])
+            .unwrap();
+        let got = &together.weights[f * 12 * shapes..(f + 1) * 12 * shapes];
+        for (x, y) in got.iter().zip(&alone.weights) {
+            assert!((x - y).abs() < 1e-8, "frame {f}: {x} vs {y}");
+            low |= *y < 0.0;
+            high |= *y > 1.0;
+        }
+    }
+    let lo = together
+        .weights
+        .iter()
+        .cloned()
+        .fold(f64::INFINITY, f64::min);
+    let hi = together
+        .weights
+        .iter()
+        .cloned()
+        .fold(f64::NEG_INFINITY, f64::max);
+    assert!(
+        low && high,
+        "the frames reach both ends of the box: {lo} {hi}"
+    );
+}
+
+#[test]
 fn a_window_without_a_present_marker_keeps_its_start_and_says_so() {
     let rest = two_groups(4, 100.0);
     let a = matrix(&[rest.iter().map(|_| DVec3::Z).collect()]);
