@@ -296,3 +296,96 @@ def test_local_fits_over_a_shape_basis_give_the_surface_of_every_shape(  # type:
     assert every.basis_map is None and every.shapes.shape[2] == len(shapes) + 3
     motion = np.abs(shapes).max()
     np.testing.assert_allclose(basis.surface(res), every.surface(res), rtol=0, atol=1e-5 * motion)
+
+
+def test_local_fits_at_the_bundles_are_the_surface_sampled_there(solved) -> None:  # type: ignore[no-untyped-def]
+    _, model, frames, sigma = solved
+    given = frames.copy()
+    given[2, 3] = np.nan
+    res = model.solve(given, marker_noise=sigma, quiet=True)
+    pieces = local_pieces(model)
+    np.testing.assert_allclose(
+        pieces.at_bundles(res),
+        model.bundle_positions(pieces.surface(res)),
+        rtol=0,
+        atol=1e-12 * model.diagonal,
+    )
+
+
+def test_the_local_fits_estimate_is_the_left_out_markers_distance_both_ways(solved) -> None:  # type: ignore[no-untyped-def]
+    from lgi.detail import SIGNIFICANCE
+    from lgi.local import LEFT_OUT_PER_FRAME
+
+    _, model, frames, sigma = solved
+    got = lgi.estimate_local_fits(frames, model, marker_noise=sigma, frames_used=4)
+    # Brute force: each left-out row solved on its own, the local fits' whole surface.
+    present = np.isfinite(frames).all(axis=2)
+    picked = np.unique(np.linspace(0, len(frames) - 1, 4).round().astype(int))
+    per_frame, d_without, d_with = [], [], []
+    for ordinal, f in enumerate(picked):
+        markers = np.flatnonzero(present[f])
+        n, step = markers.size, markers.size / LEFT_OUT_PER_FRAME
+        shift = int(ordinal * step / len(picked))
+        chosen = markers[(np.floor(np.arange(LEFT_OUT_PER_FRAME) * step).astype(int) + shift) % n]
+        saved = []
+        for i in chosen:
+            x = frames[f : f + 1].copy()
+            x[0, i] = np.nan
+            plain = model.solve(x, marker_noise=sigma, quiet=True, temporal=False)
+            local = model.solve(x, marker_noise=sigma, quiet=True, temporal=False, local_fits=True)
+            a = np.linalg.norm(np.asarray(plain.bundle_positions)[0, i] - frames[f, i])
+            b = np.linalg.norm(np.asarray(local.bundle_positions)[0, i] - frames[f, i])
+            d_without.append(a)
+            d_with.append(b)
+            saved.append(a - b)
+        per_frame.append(np.mean(saved))
+    assert got.frames == len(picked) and got.left_out == len(picked) * LEFT_OUT_PER_FRAME
+    np.testing.assert_allclose(got.error_without, np.mean(d_without), rtol=1e-9)
+    np.testing.assert_allclose(got.error_with, np.mean(d_with), rtol=1e-6)
+    s = np.asarray(per_frame)
+    assert got.use == bool(s.mean() > SIGNIFICANCE * s.std(ddof=1) / np.sqrt(s.size))
+
+
+def test_the_local_fits_estimate_says_what_it_cannot_read() -> None:
+    from lgi.leave_out import leave_markers_out
+
+    x = np.zeros((3, 5, 3))
+    with pytest.raises(InputError, match="local fits: no frame has more than"):
+        leave_markers_out(np.full((3, 5, 3), np.nan), 4, what="local fits")
+    with pytest.raises(InputError, match="frames_used must be >= 1"):
+        leave_markers_out(x, 0)
+    rows = leave_markers_out(np.zeros((10, 40, 3)), 3, per_frame=8)
+    # 3 frames, 8 different markers each, shifted from frame to frame.
+    assert rows.frames.shape == (24, 40, 3) and np.isnan(rows.frames).any(axis=2).sum() == 24
+    sets = [set(rows.marker[rows.frame == f].tolist()) for f in rows.picked]
+    assert all(len(s) == 8 for s in sets) and sets[0] != sets[1]
+
+
+def test_cli_local_fits_auto_says_its_choice_and_records_it(
+    tmp_path: Path,
+    sample,
+    capsys,  # type: ignore[no-untyped-def]
+) -> None:
+    from lgi import cli
+    from pipeline_files import build_actor, write_c3d
+
+    actor, model_path = build_actor(tmp_path, sample)
+    frames = np.asarray(sample.performance[:12], dtype=np.float64)
+    take = tmp_path / "take.c3d"
+    write_c3d(take, frames * 10.0, list(actor.names), 60.0, "mm")
+    out = tmp_path / "o.npz"
+    argv = ["solve", str(model_path), str(take), "-o", str(out), "--local-fits", "auto"]
+    assert cli.main([*argv, "--marker-noise", "0.01"]) == 0
+    err = capsys.readouterr().err
+    line = next(ln for ln in err.splitlines() if "local fits" in ln and "left out" in ln)
+    used = "local fits used" in line
+    with np.load(out) as z:
+        settings = SolveSettings.from_json(str(z["solve_settings"]), "o.npz")
+    model = lgi.Model.load(model_path)
+    x = (frames * 10.0).astype(np.float32).astype(np.float64) / 10.0
+    assert settings.local_fits is lgi.estimate_local_fits(x, model, marker_noise=0.01).use is used
+    with pytest.raises(SystemExit) as stop:  # argparse's own errors
+        cli.main(["solve", str(model_path), str(take), "-o", str(out), "--local-fits", "maybe"])
+    err = capsys.readouterr().err
+    assert stop.value.code == 2 and "lgi: error:" in err, err
+    assert "--local-fits: expected no value or 'auto', got 'maybe'" in err, err

@@ -273,6 +273,19 @@ fn local_fits(c: &mut Criterion) {
             black_box(fits.solve(&targets[i], &starts))
         });
     });
+    // 16 consecutive frames in one call (`lgi.local`'s chunk): every frame but the first
+    // starts at the window's fit of the frame before.
+    const CHUNK: usize = 16;
+    let chunks: Vec<Vec<f64>> = targets.chunks_exact(CHUNK).map(|c| c.concat()).collect();
+    let chunk_starts = vec![0.0; CHUNK * s];
+    g.throughput(Throughput::Elements((CHUNK * b) as u64));
+    let mut j = 0;
+    g.bench_function("local_fits_16_frames", |bench| {
+        bench.iter(|| {
+            j = (j + 1) % chunks.len();
+            black_box(fits.solve(&chunks[j], &chunk_starts))
+        });
+    });
     g.finish();
 }
 

@@ -29,6 +29,7 @@ from lgi.errors import (
     MarkerError,
     ModelFormatError,
 )
+from lgi.local import LocalFitsEstimate, estimate_local_fits
 from lgi.model import BuildConfig, Model, estimate_marker_noise
 
 __all__ = [
@@ -41,6 +42,7 @@ __all__ = [
     "InputError",
     "LgiError",
     "LgiWarning",
+    "LocalFitsEstimate",
     "MarkerError",
     "Model",
     "ModelFormatError",
@@ -48,6 +50,7 @@ __all__ = [
     "__version__",
     "capture",
     "estimate_detail_weight",
+    "estimate_local_fits",
     "estimate_marker_noise",
     "get_num_threads",
     "io",

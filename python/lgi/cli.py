@@ -213,7 +213,7 @@ def _cmd_batch(args: argparse.Namespace) -> int:
                 "--local-fits needs --marker-noise (SIGMA or auto; 0 for clean markers): the "
                 "local fits fit the noise-aware targets"
             )
-        options["local_fits"] = True
+        options["local_fits"] = args.local_fits
     if args.jaw != "auto":
         options["jaw"] = None if args.jaw == "rest" else args.jaw
     model = pipeline.existing_file(args.model, "MODEL")
@@ -262,6 +262,13 @@ def _detail_weight_option(text: str) -> float | str | None:
     from lgi.detail import check_detail_weight
 
     return _number_auto_or_none(text, check_detail_weight, "a number in [0, 1]")
+
+
+def _local_fits_option(text: str) -> str:
+    """`--local-fits auto` (the flag alone is True)."""
+    if text != "auto":
+        raise argparse.ArgumentTypeError(f"expected no value or 'auto', got {text!r}")
+    return text
 
 
 def _marker_noise_option(text: str) -> float | str | None:
@@ -325,8 +332,12 @@ def _add_batch_command(sub: Any) -> None:
     )
     b.add_argument(
         "--local-fits",
-        action="store_true",
-        help="as lgi solve --local-fits (needs --marker-noise)",
+        nargs="?",
+        const=True,
+        default=False,
+        type=_local_fits_option,
+        metavar="auto",
+        help="as lgi solve --local-fits (needs --marker-noise; auto: chosen per take)",
     )
     b.add_argument(
         "--jaw",
@@ -446,9 +457,14 @@ def _add_pipeline_commands(sub: Any) -> None:
     )
     s.add_argument(
         "--local-fits",
-        action="store_true",
+        nargs="?",
+        const=True,
+        default=False,
+        type=_local_fits_option,
+        metavar="auto",
         help="each bundle's piece is the blendshape fit of the markers around it (needs "
-        "--marker-noise; the most accurate with a dataset of whole-face scans, docs/results.md)",
+        "--marker-noise; the most accurate with a dataset of whole-face scans, docs/results.md); "
+        "auto: used when they predict the take's own markers, left out one at a time, better",
     )
     s.add_argument("--frames", default=None, metavar="A:B", help="take frames A..B-1 (0-based)")
     s.add_argument("--fps", type=float, default=None, help="frame rate (default: the take's)")

@@ -28,6 +28,7 @@ from numpy.typing import ArrayLike, NDArray
 
 import lgi._lgi as _lgi
 from lgi.errors import InputError
+from lgi.leave_out import leave_markers_out
 
 if TYPE_CHECKING:
     from lgi.model import Model
@@ -134,32 +135,18 @@ def estimate_detail_weight(
     b = model.num_bundles
     if arr.ndim != 3 or arr.shape[0] == 0 or arr.shape[1:] != (b, 3):
         raise InputError(f"frames: expected shape (F, {b}, 3) with F >= 1, got {arr.shape}")
-    if frames_used < 1:
-        raise InputError(f"frames_used must be >= 1, got {frames_used}")
-    present: NDArray[np.bool_] = np.asarray(np.isfinite(arr).all(axis=2))
-    usable = np.flatnonzero(present.sum(axis=1) > _lgi.MIN_PRESENT_MARKERS)
-    if usable.size == 0:
-        raise InputError(
-            f"detail weight: no frame has more than {_lgi.MIN_PRESENT_MARKERS} markers "
-            "present, so none can be left out"
-        )
-    at = np.unique(np.linspace(0, usable.size - 1, frames_used).round().astype(int))
-    pick = usable[at]
-    rows = [(f, i) for f in pick for i in np.flatnonzero(present[f])]
-    batch = np.repeat(arr[pick], present[pick].sum(axis=1), axis=0)
-    left = np.array([i for _, i in rows])
-    batch[np.arange(len(rows)), left] = np.nan
+    out = leave_markers_out(arr, frames_used, what="detail weight")
+    pick, batch, left = out.picked, out.frames, out.marker
     solved = model.solve(batch, temporal=False, jaw=jaw, marker_noise=marker_noise, quiet=True)
     pos = np.asarray(solved.bundle_positions)
     rest = _rest(model)
-    gone = ~np.isfinite(batch).all(axis=2)
+    gone = np.asarray(~np.isfinite(batch).all(axis=2))
     values = np.where(gone[..., None], np.nan, pos - rest[None])
     smooth = _bundle_interpolator(model).interpolate(values)
-    k = np.arange(len(rows))
+    k = np.arange(len(left))
     by_solve = pos[k, left]
     by_smooth = rest[left] + smooth[k, left]
-    of = np.array([f for f, _ in rows])
-    truth = arr[of, left]
+    of, truth = out.frame, out.given
     d = by_solve - by_smooth
     dd = float((d * d).sum())
     if dd == 0.0 or pick.size < 2:

@@ -7,26 +7,31 @@ brows, a fit of one neighbourhood does not. Bundle b's piece is the box-penalise
 global fit's ridge and penalty, relative to its own matrix) of the markers weighted by the
 Gaussian of their rest distance from b, with the length the noise-aware targets use
 (`RESIDUAL_LENGTH` median marker spacings; markers beyond `WINDOW_REACH` lengths left out).
-It fits the solve's noise-aware targets in the jaw's unskinned space, starting from the
-frame's global fit. The pieces' weights are blended over the mesh by the sewing weights (a
-vertex's weights are its bundles' weights, weighted like their pieces), the blend is skinned
-by the frame's jaw pose, and what it misses at the present markers is interpolated
-biharmonically (phi(r) = r with a linear polynomial, the residual corrective's rule), so the
-surface passes through every present target. docs/concepts.md explains it; docs/results.md
-measures it against the strongest peers."""
+It fits the solve's noise-aware targets in the jaw's unskinned space, each window starting
+from its fit of the frame before (a call's first frame: the frame's global fit). The pieces'
+weights are blended over the mesh by the sewing weights (a vertex's weights are its bundles'
+weights, weighted like their pieces; mapped onto the scans' shape basis where there is one),
+the blend is skinned by the frame's jaw pose, and what it misses at the present markers is
+interpolated biharmonically (phi(r) = r with a linear polynomial, the residual corrective's
+rule), so the surface passes through every present target. `estimate_local_fits` reads from a
+take's own markers whether to use them. docs/concepts.md explains it; docs/results.md measures
+it against the strongest peers."""
 
 from __future__ import annotations
 
 import warnings
 import weakref
+from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
 import scipy.sparse as sp
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
 import lgi._lgi as _lgi
+from lgi.detail import DETAIL_FRAMES, SIGNIFICANCE
 from lgi.errors import InputError
+from lgi.leave_out import leave_markers_out
 
 if TYPE_CHECKING:
     from lgi.model import Model
@@ -34,11 +39,23 @@ if TYPE_CHECKING:
 
 F64 = NDArray[np.float64]
 
-__all__ = ["BLEND_ROWS", "FITS_CHUNK", "LocalPieces", "local_pieces"]
+__all__ = [
+    "BLEND_ROWS",
+    "FITS_CHUNK",
+    "LEFT_OUT_PER_FRAME",
+    "LocalFitsEstimate",
+    "LocalPieces",
+    "estimate_local_fits",
+    "local_pieces",
+]
 
 FITS_CHUNK = 16
 """Frames whose local fits one call to the core solves (a few hundred ms at most: Ctrl-C is
 seen between calls)."""
+
+LEFT_OUT_PER_FRAME = 30
+"""Markers `estimate_local_fits` leaves out, one at a time, on each frame it reads (spread over
+the face; every present one where a frame has fewer)."""
 
 BLEND_ROWS = 4096
 """Vertices whose blended weights are held at once (4096 x S doubles: 66 MB at 2,000 scans
@@ -109,10 +126,23 @@ class LocalPieces:
             for a in range(0, v, BLEND_ROWS)
         ]
         self.corrective = _lgi.RbfInterpolator(self.neutral, tris, bary)
+        # The same surface at the bundles only (`at_bundles`): the vertices of their triangles,
+        # their sewing rows and shapes, and the corrective over them (its centres and samples
+        # are these vertices', so it is the same interpolant evaluated at fewer points).
+        corners = np.unique(tris)
+        self._corners = corners
+        self._corner_tris = np.searchsorted(corners, tris)
+        self._corner_bary = bary
+        self._corner_sewing = sewing[corners]
+        self._corner_shapes = np.ascontiguousarray(self.shapes[corners])
+        self._corner_jaw = None if self.rig is None else np.asarray(self.rig.weights)[corners]
+        self._corner_corrective = _lgi.RbfInterpolator(
+            self.neutral[corners], self._corner_tris, bary
+        )
 
-    def surface(self, res: SolveResult, out: F64 | None = None) -> F64:
-        """The local fits' surface (F, V, 3) of a noise-aware solve `res` (its targets, jaw
-        poses and global fits), into `out` when given."""
+    def _fits(self, res: SolveResult) -> tuple[F64, F64, F64 | None]:
+        """The solve's targets (F, B, 3; NaN: missing), each frame's local weights per bundle
+        (F, B, q: over the shape basis where there is one) and the jaw poses."""
         if res.fit_weights is None:
             raise InputError("local fits need the solve's global fit: solve with marker_noise")
         missing = np.asarray(res.missing)
@@ -124,8 +154,6 @@ class LocalPieces:
             unskinned[missing] = np.nan
         starts = np.asarray(res.fit_weights, dtype=np.float64)
         disp = unskinned - self.rest[None]
-        if disp.shape[0] == 0:
-            return np.asarray(res.vertices, dtype=np.float64) if out is None else out
         # A chunk of frames per call, so Ctrl-C (seen between calls) stops a long take at once.
         parts = [
             self.fits.solve(disp[a : a + FITS_CHUNK], starts[a : a + FITS_CHUNK])
@@ -138,11 +166,26 @@ class LocalPieces:
                 f"local fits: {kept} of {weights.shape[0] * weights.shape[1]} bundle fits had no "
                 "marker of their window present or did not converge, and kept the frame's "
                 "global fit",
-                stacklevel=3,
+                stacklevel=4,
             )
-        frames = weights.shape[0]
         if self.basis_map is not None:
             weights = weights @ self.basis_map
+        return targets, weights, theta
+
+    def _posed(self, blend: F64, theta: F64 | None, jaw: F64 | None) -> F64:
+        """`blend` (F, N, 3) skinned by the frames' jaw poses (`jaw`: the N points' weights,
+        None: every vertex's)."""
+        if theta is None or self.rig is None:
+            return blend
+        return self.rig.skin(blend, theta, weights=jaw)
+
+    def surface(self, res: SolveResult, out: F64 | None = None) -> F64:
+        """The local fits' surface (F, V, 3) of a noise-aware solve `res` (its targets, jaw
+        poses and global fits), into `out` when given."""
+        if np.asarray(res.missing).shape[0] == 0:
+            return np.asarray(res.vertices, dtype=np.float64) if out is None else out
+        targets, weights, theta = self._fits(res)
+        frames = weights.shape[0]
         blend = np.empty((frames, *self.neutral.shape))
         for f in range(frames):
             for rows, sewing in self.blocks:
@@ -150,13 +193,36 @@ class LocalPieces:
                 blend[f, rows] = self.neutral[rows] + np.einsum(
                     "vs,vds->vd", per_vertex, self.shapes[rows], dtype=np.float64
                 )
-        posed = blend if theta is None or self.rig is None else self.rig.skin(blend, theta)
+        posed = self._posed(blend, theta, None)
         misses = targets - self._bundle_positions(posed)
         result = posed + self.corrective.interpolate(misses)
         if out is None:
             return np.asarray(result, dtype=np.float64)
         out[...] = result
         return out
+
+    def at_bundles(self, res: SolveResult) -> F64:
+        """Every bundle's position (F, B, 3) on the local fits' surface of `res`: the same
+        values as `surface` sampled at the bundles (to round-off), made on the bundles'
+        triangles' vertices only (what `estimate_local_fits` compares)."""
+        b = self.rest.shape[0]
+        if np.asarray(res.missing).shape[0] == 0:
+            return np.empty((0, b, 3))
+        targets, weights, theta = self._fits(res)
+        frames = weights.shape[0]
+        blend = np.empty((frames, self._corners.size, 3))
+        for f in range(frames):
+            per_vertex = self._corner_sewing @ weights[f]
+            blend[f] = self.neutral[self._corners] + np.einsum(
+                "vs,vds->vd", per_vertex, self._corner_shapes, dtype=np.float64
+            )
+        posed = self._posed(blend, theta, self._corner_jaw)
+
+        def sampled(values: F64) -> F64:
+            return np.einsum("fbjd,bj->fbd", values[:, self._corner_tris], self._corner_bary)
+
+        on_blend = sampled(posed)
+        return on_blend + sampled(self._corner_corrective.interpolate(targets - on_blend))
 
 
 # Per model (made on first use, dropped with the model).
@@ -170,3 +236,66 @@ def local_pieces(model: Model) -> LocalPieces:
         made = LocalPieces(model)
         _PIECES[model] = made
     return made
+
+
+@dataclass(frozen=True)
+class LocalFitsEstimate:
+    """Whether local fits predict a take's left-out markers better (`estimate_local_fits`)."""
+
+    use: bool
+    """Local fits saved left-out error by more than `SIGNIFICANCE` standard errors."""
+    error_without: float
+    """Mean distance (data units) of the left-out markers from the recommended solve's surface
+    without them."""
+    error_with: float
+    """The same with local fits."""
+    left_out: int
+    """Markers left out (one per solved frame)."""
+    frames: int
+    """Take frames they were left out of."""
+
+
+def estimate_local_fits(
+    frames: ArrayLike,
+    model: Model,
+    *,
+    marker_noise: float,
+    jaw: str | None = "auto",
+    frames_used: int = DETAIL_FRAMES,
+) -> LocalFitsEstimate:
+    """Whether local fits suit a take (F, B, 3; NaN rows missing) and `model`, read from the
+    take's own markers: on up to `frames_used` frames spread over the take, up to
+    `LEFT_OUT_PER_FRAME` present markers each left out in turn, predicted by the solve with
+    `marker_noise` and `jaw` without them, and by the same solve with local fits. Local fits
+    are used when the left-out distance they save, averaged per frame, averages more than
+    `SIGNIFICANCE` standard errors of that mean over the frames (with fewer than 2 frames:
+    not). With the performer's own scans they usually save it; with a generic dataset driven
+    by another face they usually cost it (docs/results.md). One solve of about
+    `frames_used` x 30 frames, with their local fits (not their meshes)."""
+    arr = np.asarray(frames, dtype=np.float64)
+    b = model.num_bundles
+    if arr.ndim != 3 or arr.shape[0] == 0 or arr.shape[1:] != (b, 3):
+        raise InputError(f"frames: expected shape (F, {b}, 3) with F >= 1, got {arr.shape}")
+    if marker_noise is None:
+        raise InputError("estimate_local_fits needs marker_noise (0 for clean markers)")
+    out = leave_markers_out(arr, frames_used, LEFT_OUT_PER_FRAME, what="local fits")
+    solved = model.solve(out.frames, temporal=False, jaw=jaw, marker_noise=marker_noise, quiet=True)
+    k = np.arange(out.marker.size)
+    without = np.asarray(solved.bundle_positions)[k, out.marker]
+    with_local = local_pieces(model).at_bundles(solved)[k, out.marker]
+    # Distances, as the results report errors: squared ones let a few markers (the lips', whose
+    # left-out errors are the largest) decide the choice.
+    err_without = np.linalg.norm(without - out.given, axis=1)
+    err_with = np.linalg.norm(with_local - out.given, axis=1)
+    saved = np.array([(err_without - err_with)[out.frame == f].mean() for f in out.picked])
+    use = False
+    if saved.size >= 2:
+        spread = saved.std(ddof=1) / np.sqrt(saved.size)
+        use = bool(saved.mean() > SIGNIFICANCE * spread)
+    return LocalFitsEstimate(
+        use=use,
+        error_without=float(err_without.mean()),
+        error_with=float(err_with.mean()),
+        left_out=int(k.size),
+        frames=int(out.picked.size),
+    )

@@ -32,6 +32,7 @@ from lgi.io.result import Result, read_result_npz
 from lgi.io.settings import SolveSettings
 from lgi.io.sink import FrameSink
 from lgi.io.topology import Topology, topology
+from lgi.local import estimate_local_fits
 from lgi.model import Model, estimate_marker_noise
 from lgi.placement import ScaleFit, check_scale, describe_scale
 
@@ -178,6 +179,34 @@ def frame_range(spec: str | None, count: int) -> slice:
             f"--frames {spec}: the take has frames 0:{count}; START must be < END within it"
         )
     return slice(a, b)
+
+
+def local_fits_choice(
+    spec: bool | str,
+    frames: np.ndarray,
+    model: Model,
+    sigma: float | None,
+    jaw: str | None,
+    say: Say,
+) -> bool:
+    """`--local-fits`: True, False, or 'auto' (read from the take's own markers left out,
+    `lgi.estimate_local_fits`, and said with its numbers)."""
+    if spec is True or spec is False:
+        return spec
+    if spec != "auto":
+        raise InputError(f"--local-fits {spec!r}: expected no value or 'auto'")
+    if sigma is None:
+        raise InputError(
+            "--local-fits needs --marker-noise (SIGMA or auto; 0 for clean markers): the local "
+            "fits fit the noise-aware targets"
+        )
+    est = estimate_local_fits(frames, model, marker_noise=sigma, jaw=jaw)
+    say(
+        f"local fits {'used' if est.use else 'not used'}: {est.left_out} markers left out one "
+        f"at a time on {est.frames} frames are {est.error_with:.4g} {model.units or 'model units'} "
+        f"from the surface with them, {est.error_without:.4g} without"
+    )
+    return est.use
 
 
 def detail_weight(
@@ -680,13 +709,13 @@ def solve_file(
     up: str = "y",
     quiet: bool = False,
     say: Say = _silent,
-    local_fits: bool = False,
+    local_fits: bool | str = False,
 ) -> tuple[Path, int]:
     """`lgi solve`: the take file solved with the model file, written by `out`'s suffix
     (`output_kind`). `noise` is `--marker-noise` (a number, 'auto' or 'none'; 'auto' looks at
     the whole range), `detail` `--detail-weight` (the same forms, `detail_weight`),
-    `local_fits` `--local-fits` (`Model.solve(local_fits=True)`), `frames` is `--frames A:B`.
-    By default the range is solved in one
+    `local_fits` `--local-fits` (`Model.solve(local_fits=True)`; 'auto': `local_fits_choice`),
+    `frames` is `--frames A:B`. By default the range is solved in one
     `Model.solve` (frames prefer their predecessor's choices across the whole range), then
     written chunk by chunk; `chunk` (`--chunk N`) solves and writes N frames at a time into
     one reused buffer, so the solve's memory stays that of N frames (each chunk continues
@@ -745,6 +774,7 @@ def solve_file(
     if local_fits and m.jaw_bins is not None:
         raise InputError(f"--local-fits: the model {model} has jaw bins; build it without them")
     jaw_mode = None if m.jaw_rig is None or jaw == "rest" else jaw
+    local_fits = local_fits_choice(local_fits, x, m, sigma, jaw_mode, say)
     weight = detail_weight(detail, x, m, sigma, jaw_mode)
     settings = SolveSettings.of(
         has_jaw_rig=m.jaw_rig is not None,
