@@ -335,6 +335,19 @@ def test_a_batch_with_local_fits_writes_what_model_solve_gives_and_says_so(
     assert written.settings is not None and written.settings.local_fits
 
 
+def test_a_batch_with_local_fits_auto_records_the_takes_own_choice(
+    client, named_model, shots, tmp_path
+):  # type: ignore[no-untyped-def]
+    take = shots["sh040"]
+    written = _one_shot(
+        client, named_model, take, tmp_path / "o", marker_noise=0.01, local_fits="auto"
+    )
+    use = lgi.estimate_local_fits(take, named_model, marker_noise=0.01).use
+    ref = named_model.solve(take, quiet=True, marker_noise=0.01, local_fits=use)
+    assert np.array_equal(written.vertices, ref.vertices.astype(np.float32))
+    assert written.settings is not None and written.settings.local_fits is use
+
+
 def test_solve_shots_refuses_bad_arguments_before_starting_anything(named_model, tmp_path):  # type: ignore[no-untyped-def]
     take = np.zeros((2, named_model.num_bundles, 3))
     cases = [

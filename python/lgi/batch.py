@@ -404,8 +404,9 @@ def solve_shots(
     (`lgi.set_num_threads`); default: the cores shared among the local workers, or the
     worker's own default on a given cluster.
 
-    `solve_options` go to `Model.solve` (`marker_noise` and `detail_weight` may also be
-    "auto": estimated per take, the detail weight with the take's noise); `fps` is the
+    `solve_options` go to `Model.solve` (`marker_noise`, `detail_weight` and `local_fits` may
+    also be "auto": estimated per take, the detail weight and the local fits' choice,
+    `lgi.estimate_local_fits`, with the take's noise); `fps` is the
     output's frame rate when the take has none (arrays); `allow_missing` and `take_units` are
     `lgi.io.takes.read`'s.
 
