@@ -496,7 +496,10 @@ fn solve_watching<T: Send>(
             })
         })
     }));
-    match (solved, stopped) {
+    // A Ctrl-C the watcher caught after the work's last progress call was never taken by
+    // it: raise it now rather than drop it (its signal is consumed).
+    let caught = interrupt.into_inner().unwrap_or_else(|e| e.into_inner());
+    match (solved, stopped.or(caught)) {
         (_, Some(e)) => Err(e),
         (Ok(r), None) => Ok(r.map_err(PyLgiError)?),
         (Err(panic), None) => std::panic::resume_unwind(panic),
