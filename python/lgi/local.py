@@ -41,6 +41,7 @@ F64 = NDArray[np.float64]
 
 __all__ = [
     "BLEND_ROWS",
+    "ESTIMATE_ROWS",
     "FITS_CHUNK",
     "LEFT_OUT_PER_FRAME",
     "LocalFitsEstimate",
@@ -56,6 +57,9 @@ seen between calls)."""
 LEFT_OUT_PER_FRAME = 30
 """Markers `estimate_local_fits` leaves out, one at a time, on each frame it reads (spread over
 the face; every present one where a frame has fewer)."""
+
+ESTIMATE_ROWS = 32
+"""Left-out rows `estimate_local_fits` solves at a time (their meshes dropped between)."""
 
 BLEND_ROWS = 4096
 """Vertices whose blended weights are held at once (4096 x S doubles: 66 MB at 2,000 scans
@@ -279,10 +283,19 @@ def estimate_local_fits(
     if marker_noise is None:
         raise InputError("estimate_local_fits needs marker_noise (0 for clean markers)")
     out = leave_markers_out(arr, frames_used, LEFT_OUT_PER_FRAME, what="local fits")
-    solved = model.solve(out.frames, temporal=False, jaw=jaw, marker_noise=marker_noise, quiet=True)
-    k = np.arange(out.marker.size)
-    without = np.asarray(solved.bundle_positions)[k, out.marker]
-    with_local = local_pieces(model).at_bundles(solved)[k, out.marker]
+    pieces = local_pieces(model)
+    without = np.empty((out.marker.size, 3))
+    with_local = np.empty((out.marker.size, 3))
+    # Rows a solve at a time: their meshes are not kept (240 of ICT's would take 154 MB).
+    for a in range(0, out.marker.size, ESTIMATE_ROWS):
+        rows = slice(a, a + ESTIMATE_ROWS)
+        solved = model.solve(
+            out.frames[rows], temporal=False, jaw=jaw, marker_noise=marker_noise, quiet=True
+        )
+        k = np.arange(solved.missing.shape[0])
+        left = out.marker[rows]
+        without[rows] = np.asarray(solved.bundle_positions)[k, left]
+        with_local[rows] = pieces.at_bundles(solved)[k, left]
     # Distances, as the results report errors: squared ones let a few markers (the lips', whose
     # left-out errors are the largest) decide the choice.
     err_without = np.linalg.norm(without - out.given, axis=1)
@@ -296,6 +309,6 @@ def estimate_local_fits(
         use=use,
         error_without=float(err_without.mean()),
         error_with=float(err_with.mean()),
-        left_out=int(k.size),
+        left_out=int(out.marker.size),
         frames=int(out.picked.size),
     )
