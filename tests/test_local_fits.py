@@ -163,19 +163,26 @@ def test_solve_settings_record_local_fits_and_older_files_read_as_without() -> N
         SolveSettings.from_json(old[:-1] + ', "local_fits": 1}', "x.npz")
 
 
-def test_cli_local_fits_needs_marker_noise_and_writes_what_model_solve_gives(
-    tmp_path: Path,
-    sample,
-    capsys,  # type: ignore[no-untyped-def]
-) -> None:
-    from lgi import cli
+def _c3d_take(tmp_path: Path, sample) -> tuple[Path, Path, Path, np.ndarray]:  # type: ignore[no-untyped-def]
+    """The sample actor's model file, 12 frames of its performance as a C3D take in mm, the
+    output path, and the frames (cm)."""
     from pipeline_files import build_actor, write_c3d
 
     actor, model_path = build_actor(tmp_path, sample)
     frames = np.asarray(sample.performance[:12], dtype=np.float64)
     take = tmp_path / "take.c3d"
     write_c3d(take, frames * 10.0, list(actor.names), 60.0, "mm")
-    out = tmp_path / "o.npz"
+    return model_path, take, tmp_path / "o.npz", frames
+
+
+def test_cli_local_fits_needs_marker_noise_and_writes_what_model_solve_gives(
+    tmp_path: Path,
+    sample,
+    capsys,  # type: ignore[no-untyped-def]
+) -> None:
+    from lgi import cli
+
+    model_path, take, out, frames = _c3d_take(tmp_path, sample)
     rc = cli.main(["solve", str(model_path), str(take), "-o", str(out), "--local-fits", "-q"])
     err = capsys.readouterr().err
     assert rc == 2 and err.startswith("lgi: error: --local-fits needs --marker-noise"), err
@@ -367,13 +374,8 @@ def test_cli_local_fits_auto_says_its_choice_and_records_it(
     capsys,  # type: ignore[no-untyped-def]
 ) -> None:
     from lgi import cli
-    from pipeline_files import build_actor, write_c3d
 
-    actor, model_path = build_actor(tmp_path, sample)
-    frames = np.asarray(sample.performance[:12], dtype=np.float64)
-    take = tmp_path / "take.c3d"
-    write_c3d(take, frames * 10.0, list(actor.names), 60.0, "mm")
-    out = tmp_path / "o.npz"
+    model_path, take, out, frames = _c3d_take(tmp_path, sample)
     argv = ["solve", str(model_path), str(take), "-o", str(out), "--local-fits", "auto"]
     assert cli.main([*argv, "--marker-noise", "0.01"]) == 0
     err = capsys.readouterr().err

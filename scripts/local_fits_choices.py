@@ -1,0 +1,104 @@
+"""What `--local-fits auto` chooses (`lgi.estimate_local_fits`, issue 34) on the protocols'
+own takes: the scans protocol's (K = 120 scans from the other recording, 200 frames, 2 %
+dropouts, seed 3), the capture protocol's with a quarter of ICT's shapes held out, and the
+lomo protocol's real takes (AnimFace, retargeted; their noise estimated). Each line: the take,
+whether local fits are chosen, and the left-out markers' mean distance (cm) from the surface
+with and without them; docs/results.md puts the choices beside the protocols' errors.
+
+Usage: python scripts/local_fits_choices.py [--layouts markers_120 random:160:1 random:140:7]
+[--sigma 0 0.02 0.05] (from the checkout, ../shared beside it)
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+import lgi
+from lgi.io.livelink import read_livelinkface
+from lgi.io.takes import read_raw
+from lgi.lab import ict, lomo
+from lgi.lab.capture import HingeJaw, random_layout
+from lgi.lab.evaluate import _performance, capture_methods
+from lgi.lab.scans import scan_session
+from lgi.model import _auto_rig
+
+ICT = "../shared/data/ict-facekit"
+NAMES = ("alex_rom_4", "jmtechart_myslate_3")
+RECORDINGS = [f"../shared/data/livelinkface/{r}.csv" for r in NAMES]
+
+
+def layout(name: str, dataset: lgi.Dataset) -> np.ndarray:
+    if name == "markers_120":
+        return ict.load_layout(ICT).positions
+    _, count, seed = name.split(":")
+    return random_layout(dataset, int(count), int(seed), np.arange(ict.NARROW_FACE))  # type: ignore[arg-type]
+
+
+def line(what: str, est: lgi.LocalFitsEstimate, seconds: float) -> None:
+    print(
+        f"| {what} | {'yes' if est.use else 'no'} | {est.error_with:.4f} | "
+        f"{est.error_without:.4f} | {seconds:.1f} |",
+        flush=True,
+    )
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--layouts", nargs="+", default=["markers_120", "random:160:1", "random:140:7"])
+    ap.add_argument("--sigma", type=float, nargs="+", default=[0.0, 0.02, 0.05])
+    args = ap.parse_args()
+    warnings.filterwarnings("ignore")
+    d = ict.load_dataset(ICT)
+    region = ict.skin()
+    hinge = HingeJaw.fit(d, ict.lower_teeth())
+    rig, theta = _auto_rig(d)
+    curves = [read_livelinkface(r).for_dataset(d.names) for r in RECORDINGS]
+    print("| take | local fits chosen | left out, with (cm) | without (cm) | seconds |")
+    print("|---|---|---|---|---|")
+    for held in (0.0, 0.25):
+        for name in args.layouts if held == 0.0 else ["markers_120"]:
+            markers = layout(name, d)
+            for i, perf in enumerate(curves):
+                session = None
+                if held == 0.0:
+                    source = np.concatenate([c for k, c in enumerate(curves) if k != i])
+                    session = scan_session(d, source, 120, hinge, theta, nonlinear=None)
+                for sigma in args.sigma if held == 0.0 else [s for s in args.sigma if s > 0]:
+                    take, _ = _performance(
+                        d, perf, markers, frames=200, sigma=sigma, dropout=0.02,
+                        holdout=held, seed=3, hinge=hinge, truth=None, region=region,
+                    )  # fmt: skip
+                    if session is not None:
+                        methods = capture_methods(
+                            session.dataset, markers, sigma, jaw=(rig, session.theta)
+                        )
+                    else:
+                        methods = capture_methods(take.dataset, markers, sigma)
+                    t0 = time.perf_counter()
+                    est = lgi.estimate_local_fits(
+                        take.frames, methods["LGI"].model, marker_noise=sigma
+                    )
+                    kind = "scans K=120" if held == 0.0 else "capture, 25 % held out"
+                    line(
+                        f"{kind}, {name}, {NAMES[i]}, sigma {sigma}", est, time.perf_counter() - t0
+                    )
+    lm = np.asarray(ict.load_landmarks(ICT), dtype=np.int64)
+    marks = {n: int(lm[k]) for n, k in lomo.ANIMFACE_IBUG.items()}
+    face = ict.face_triangles(d)
+    for path in ict.animface(Path(ICT).parent):
+        real = lomo.retarget(read_raw(path), d.neutral, face, marks)
+        frames = real.frames[:: max(1, real.frames.shape[0] // 250)]
+        model = capture_methods(d, real.rest, None, frames)["LGI"]
+        t0 = time.perf_counter()
+        est = lgi.estimate_local_fits(frames, model.model, marker_noise=model.marker_noise)
+        line(f"lomo, {Path(path).stem}", est, time.perf_counter() - t0)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
