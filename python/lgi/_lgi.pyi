@@ -25,6 +25,7 @@ __all__ = [
     "SolveResult",
     "SolveState",
     "__version__",
+    "blend_local",
     "check_count",
     "check_marker_frames",
     "closest_surface_points",
@@ -49,6 +50,19 @@ def get_num_threads() -> int:
 
 def check_count(value: object, name: str) -> int:
     """`value` as a count (an int >= 0); else `lgi.InputError` naming `name`."""
+
+def blend_local(
+    neutral: ArrayLike,
+    shapes: NDArray[np.float32],
+    indptr: NDArray[np.int64],
+    indices: NDArray[np.int64],
+    data: NDArray[np.float64],
+    weights: ArrayLike,
+) -> NDArray[np.float64]:
+    """The local fits' blend (F, V, 3): vertex v of frame f is ``neutral[v] + sum_j (sum_b
+    s_vb weights[f, b, j]) shapes[v, :, j]``, s the sewing weights as CSR rows (``indptr``
+    (V+1,), ``indices``, ``data``), ``shapes`` (V, 3, q) float32 C-contiguous, ``weights``
+    (F, B, q)."""
 
 def shape_basis(
     shapes: NDArray[np.float32],

@@ -40,7 +40,6 @@ if TYPE_CHECKING:
 F64 = NDArray[np.float64]
 
 __all__ = [
-    "BLEND_ROWS",
     "ESTIMATE_ROWS",
     "FITS_CHUNK",
     "LEFT_OUT_PER_FRAME",
@@ -51,8 +50,8 @@ __all__ = [
 ]
 
 FITS_CHUNK = 16
-"""Frames whose local fits one call to the core solves (a few hundred ms at most: Ctrl-C is
-seen between calls)."""
+"""Frames whose local fits (and then whose blend) one call to the core makes (a few hundred
+ms at most: Ctrl-C is seen between calls)."""
 
 LEFT_OUT_PER_FRAME = 30
 """Markers `estimate_local_fits` leaves out, one at a time, on each frame it reads (spread over
@@ -60,10 +59,6 @@ the face; every present one where a frame has fewer)."""
 
 ESTIMATE_ROWS = 32
 """Left-out rows `estimate_local_fits` solves at a time (their meshes dropped between)."""
-
-BLEND_ROWS = 4096
-"""Vertices whose blended weights are held at once (4096 x S doubles: 66 MB at 2,000 scans
-without a shape basis)."""
 
 
 class LocalPieces:
@@ -124,11 +119,12 @@ class LocalPieces:
         sw = model.core.sew_weights()
         v, b = self.neutral.shape[0], model.num_bundles
         sewing = sp.csr_matrix((sw["data"], sw["indices"], sw["indptr"]), shape=(v, b))
-        # Blocks of vertices bound the (vertices, S) weights: 400 MB a frame at 2,000 scans.
-        self.blocks = [
-            (slice(a, min(a + BLEND_ROWS, v)), sewing[a : a + BLEND_ROWS])
-            for a in range(0, v, BLEND_ROWS)
-        ]
+        # The sewing weights as the core's blend reads them (CSR rows, int64 indices).
+        self._sew_rows = (
+            np.ascontiguousarray(sewing.indptr, dtype=np.int64),
+            np.ascontiguousarray(sewing.indices, dtype=np.int64),
+            np.ascontiguousarray(sewing.data, dtype=np.float64),
+        )
         self.corrective = _lgi.RbfInterpolator(self.neutral, tris, bary)
         # The same surface at the bundles only (`at_bundles`): the vertices of their triangles,
         # their sewing rows and shapes, and the corrective over them (its centres and samples
@@ -191,12 +187,11 @@ class LocalPieces:
         targets, weights, theta = self._fits(res)
         frames = weights.shape[0]
         blend = np.empty((frames, *self.neutral.shape))
-        for f in range(frames):
-            for rows, sewing in self.blocks:
-                per_vertex = sewing @ weights[f]
-                blend[f, rows] = self.neutral[rows] + np.einsum(
-                    "vs,vds->vd", per_vertex, self.shapes[rows], dtype=np.float64
-                )
+        # The core's blend, a chunk of frames per call (Ctrl-C is seen between calls).
+        for a in range(0, frames, FITS_CHUNK):
+            blend[a : a + FITS_CHUNK] = _lgi.blend_local(
+                self.neutral, self.shapes, *self._sew_rows, weights[a : a + FITS_CHUNK]
+            )
         posed = self._posed(blend, theta, None)
         misses = targets - self._bundle_positions(posed)
         result = posed + self.corrective.interpolate(misses)

@@ -178,6 +178,97 @@ impl LocalFits {
     }
 }
 
+/// Vertices per parallel task of [`blend_local`].
+const BLEND_VERTICES: usize = 512;
+
+/// The sewing weights as compressed rows: vertex v's bundles `indices[indptr[v]..indptr[v+1]]`
+/// with weights `data[..]` (scipy's CSR layout).
+#[derive(Debug, Clone, Copy)]
+pub struct SewingRows<'a> {
+    /// V + 1 offsets into `indices` and `data`.
+    pub indptr: &'a [usize],
+    /// Bundle of each entry.
+    pub indices: &'a [usize],
+    /// Sewing weight of each entry.
+    pub data: &'a [f64],
+}
+
+/// One frame's blend of the local fits over the mesh: vertex v is
+/// `neutral[v] + Σ_j (Σ_b s_vb w_bj) shapes[v][·][j]`, s the sewing weights, `weights` the
+/// bundles' weights (B × q, over the q blended shapes), `shapes` V × 3 × q vertex-major (a
+/// vertex's three rows of q values contiguous). Vertices in parallel.
+pub fn blend_local(
+    neutral: &[DVec3],
+    shapes: &[f32],
+    sewing: SewingRows<'_>,
+    weights: &[f64],
+    out: &mut [DVec3],
+) -> Result<()> {
+    let v = neutral.len();
+    let q = shapes.len().checked_div(3 * v).unwrap_or(0);
+    let bundles = weights.len().checked_div(q).unwrap_or(0);
+    let bad = |what: String| Err(LgiError::Input(format!("local fits' blend: {what}")));
+    if v == 0 || q == 0 || shapes.len() != 3 * v * q || out.len() != v {
+        return bad(format!(
+            "expected {v} vertices' shapes (V × 3 × q) and output, got {} values and {} outputs",
+            shapes.len(),
+            out.len()
+        ));
+    }
+    if weights.len() != bundles * q || bundles == 0 {
+        return bad(format!("{} weights are not bundles × {q}", weights.len()));
+    }
+    let nnz = sewing.indices.len();
+    if sewing.indptr.len() != v + 1
+        || sewing.data.len() != nnz
+        || sewing.indptr[v] != nnz
+        || sewing.indptr.windows(2).any(|w| w[0] > w[1])
+        || sewing.indices.iter().any(|&b| b >= bundles)
+    {
+        return bad(format!(
+            "the sewing rows are not {v} vertices' entries over {bundles} bundles"
+        ));
+    }
+    out.par_chunks_mut(BLEND_VERTICES)
+        .enumerate()
+        .for_each(|(c, chunk)| {
+            let mut mixed = vec![0.0f64; q];
+            for (k, o) in chunk.iter_mut().enumerate() {
+                let vert = c * BLEND_VERTICES + k;
+                mixed.iter_mut().for_each(|m| *m = 0.0);
+                for e in sewing.indptr[vert]..sewing.indptr[vert + 1] {
+                    let (b, s) = (sewing.indices[e], sewing.data[e]);
+                    for (m, w) in mixed.iter_mut().zip(&weights[b * q..(b + 1) * q]) {
+                        *m += s * w;
+                    }
+                }
+                let rows = &shapes[3 * vert * q..3 * (vert + 1) * q];
+                let dot = |d: usize| dot_wide(&rows[d * q..(d + 1) * q], &mixed);
+                *o = neutral[vert] + DVec3::new(dot(0), dot(1), dot(2));
+            }
+        });
+    Ok(())
+}
+
+/// `Σ a_i b_i` with the f32 values widened, in eight independent partial sums (one running sum
+/// is a chain of dependent additions, several times slower).
+fn dot_wide(a: &[f32], b: &[f64]) -> f64 {
+    let mut acc = [0.0f64; 8];
+    let (ca, cb) = (a.chunks_exact(8), b.chunks_exact(8));
+    let tail: f64 = ca
+        .remainder()
+        .iter()
+        .zip(cb.remainder())
+        .map(|(&x, y)| f64::from(x) * y)
+        .sum();
+    for (x, y) in ca.zip(cb) {
+        for l in 0..8 {
+            acc[l] += f64::from(x[l]) * y[l];
+        }
+    }
+    ((acc[0] + acc[1]) + (acc[2] + acc[3])) + ((acc[4] + acc[5]) + (acc[6] + acc[7])) + tail
+}
+
 /// A window's fit of one frame and which of its rows were missing (where the next frame's
 /// fit starts).
 struct Fitted {

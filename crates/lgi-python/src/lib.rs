@@ -39,6 +39,7 @@ fn _lgi(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(baselines::check_marker_frames, m)?)?;
     m.add_function(wrap_pyfunction!(convert::check_count, m)?)?;
     m.add_function(wrap_pyfunction!(local_fit::shape_basis, m)?)?;
+    m.add_function(wrap_pyfunction!(local_fit::blend_local, m)?)?;
     m.add_function(wrap_pyfunction!(surface::closest_surface_points, m)?)?;
     m.add_function(wrap_pyfunction!(threads::set_num_threads, m)?)?;
     m.add_function(wrap_pyfunction!(threads::get_num_threads, m)?)?;

@@ -5,7 +5,9 @@ use crate::convert::{flat_to_array, float_array, points as read_points};
 use crate::error::PyLgiError;
 use crate::threads;
 use lgi_core::LocalFits as CoreLocal;
-use numpy::{PyArrayDyn, PyReadonlyArray2, PyUntypedArrayMethods};
+use numpy::{
+    PyArrayDyn, PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArray3, PyUntypedArrayMethods,
+};
 use pyo3::prelude::*;
 
 /// Local fits of one marker layout (immutable; the fits run in parallel).
@@ -110,4 +112,67 @@ pub fn shape_basis<'py>(
         flat_to_array(py, pivots, &[q])?,
         flat_to_array(py, basis.coefficients().to_vec(), &[s, q])?,
     )))
+}
+
+/// The local fits' blend over the mesh, frame by frame (`lgi_core::blend_local`): `neutral`
+/// (V, 3), `shapes` (V, 3, q) float32 C-contiguous (read in place), the sewing weights as CSR
+/// rows (`indptr` (V+1,), `indices`, `data`; int64, int64, float64) and `weights` (F, B, q)
+/// -> (F, V, 3).
+#[pyfunction]
+pub fn blend_local<'py>(
+    py: Python<'py>,
+    neutral: &Bound<'py, PyAny>,
+    shapes: PyReadonlyArray3<'py, f32>,
+    indptr: PyReadonlyArray1<'py, i64>,
+    indices: PyReadonlyArray1<'py, i64>,
+    data: PyReadonlyArray1<'py, f64>,
+    weights: &Bound<'py, PyAny>,
+) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
+    let x0 = read_points(neutral, "neutral", None, false)?;
+    let v = x0.len();
+    let q = shapes.shape()[2];
+    if shapes.shape()[..2] != [v, 3] || !shapes.is_c_contiguous() {
+        return Err(crate::error::input_error(format!(
+            "blend_local: shapes must be C-contiguous ({v}, 3, q) float32, got {:?}",
+            shapes.shape()
+        )));
+    }
+    let flat = shapes
+        .as_slice()
+        .map_err(|_| crate::error::input_error("blend_local: shapes must be C-contiguous"))?;
+    let to_usize = |a: &PyReadonlyArray1<'py, i64>, name: &str| -> PyResult<Vec<usize>> {
+        a.as_array()
+            .iter()
+            .map(|&i| usize::try_from(i))
+            .collect::<Result<_, _>>()
+            .map_err(|_| crate::error::input_error(format!("blend_local: negative {name}")))
+    };
+    let indptr = to_usize(&indptr, "indptr")?;
+    let indices = to_usize(&indices, "indices")?;
+    let data: Vec<f64> = data.as_array().iter().copied().collect();
+    let w = float_array(weights, "weights", &[None, None, Some(q)])?;
+    let (f, b) = (w.shape()[0], w.shape()[1]);
+    let w: Vec<f64> = w.iter().copied().collect();
+    let sewing = lgi_core::SewingRows {
+        indptr: &indptr,
+        indices: &indices,
+        data: &data,
+    };
+    let out = threads::detach(py, || -> lgi_core::Result<Vec<f64>> {
+        let mut all = Vec::with_capacity(f * v * 3);
+        let mut frame = vec![glam::DVec3::ZERO; v];
+        for k in 0..f {
+            lgi_core::blend_local(
+                &x0,
+                flat,
+                sewing,
+                &w[k * b * q..(k + 1) * b * q],
+                &mut frame,
+            )?;
+            all.extend(frame.iter().flat_map(|p| [p.x, p.y, p.z]));
+        }
+        Ok(all)
+    })
+    .map_err(PyLgiError)?;
+    flat_to_array(py, out, &[f, v, 3])
 }

@@ -268,3 +268,55 @@ fn wrong_sizes_and_non_finite_input_are_errors_that_say_what() {
     nan_rest[0].x = f64::NAN;
     assert!(LocalFits::new(&a, 1, &nan_rest, FIT_L2, FIT_PENALTY).is_err());
 }
+
+#[test]
+fn the_blend_of_local_fits_is_each_vertexs_sewn_weights_on_its_shapes_by_brute_force() {
+    // 700 vertices (two parallel tasks), 5 bundles, 11 shapes; each vertex sewn to 1–3 bundles.
+    let (v, b, q) = (700usize, 5usize, 11usize);
+    let value = |i: usize, k: usize| ((i * 31 + k * 17) % 97) as f64 / 97.0 - 0.5;
+    let neutral: Vec<DVec3> = (0..v)
+        .map(|i| DVec3::new(value(i, 1), value(i, 2), value(i, 3)))
+        .collect();
+    let shapes: Vec<f32> = (0..3 * v * q).map(|i| value(i, 5) as f32).collect();
+    let weights: Vec<f64> = (0..b * q).map(|i| value(i, 7)).collect();
+    let (mut indptr, mut indices, mut data) = (vec![0usize], Vec::new(), Vec::new());
+    for i in 0..v {
+        for e in 0..1 + i % 3 {
+            indices.push((i + 2 * e) % b);
+            data.push(0.2 + 0.1 * e as f64);
+        }
+        indptr.push(indices.len());
+    }
+    let sewing = SewingRows {
+        indptr: &indptr,
+        indices: &indices,
+        data: &data,
+    };
+    let mut out = vec![DVec3::ZERO; v];
+    blend_local(&neutral, &shapes, sewing, &weights, &mut out).unwrap();
+    for i in 0..v {
+        let mut want = neutral[i];
+        for e in indptr[i]..indptr[i + 1] {
+            for j in 0..q {
+                let w = data[e] * weights[indices[e] * q + j];
+                let at = |d: usize| f64::from(shapes[(3 * i + d) * q + j]);
+                want += w * DVec3::new(at(0), at(1), at(2));
+            }
+        }
+        assert!((out[i] - want).length() < 1e-12, "vertex {i}");
+    }
+    // Sizes that do not fit, and a bundle out of range, are errors that say so.
+    let short = SewingRows {
+        indptr: &indptr[..v],
+        ..sewing
+    };
+    let e = blend_local(&neutral, &shapes, short, &weights, &mut out).unwrap_err();
+    assert!(e.to_string().contains("sewing rows"), "{e}");
+    let e = blend_local(&neutral, &shapes, sewing, &weights[1..], &mut out).unwrap_err();
+    assert!(e.to_string().contains("bundles"), "{e}");
+    let e = blend_local(&neutral, &shapes[1..], sewing, &weights, &mut out).unwrap_err();
+    assert!(e.to_string().contains("vertices"), "{e}");
+    let few = &weights[..3 * q];
+    let e = blend_local(&neutral, &shapes, sewing, few, &mut out).unwrap_err();
+    assert!(e.to_string().contains("sewing rows"), "{e}");
+}
