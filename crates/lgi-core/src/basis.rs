@@ -22,25 +22,9 @@ const GROUPS: usize = 32;
 /// cache while every later row `i` meets them.
 const TILE: usize = 32;
 
-/// `Σ a_i b_i` in f64 with eight independent partial sums: a single running sum is one
-/// dependent chain of additions, ~4× slower (the Gram of ICT-300 took seconds). The inputs
-/// are f32 values widened to f64 once per block (exact), not once per pair.
-fn dot(a: &[f64], b: &[f64]) -> f64 {
-    let mut acc = [0.0f64; 8];
-    let (ca, cb) = (a.chunks_exact(8), b.chunks_exact(8));
-    let tail: f64 = ca
-        .remainder()
-        .iter()
-        .zip(cb.remainder())
-        .map(|(x, y)| x * y)
-        .sum();
-    for (x, y) in ca.zip(cb) {
-        for l in 0..8 {
-            acc[l] += x[l] * y[l];
-        }
-    }
-    ((acc[0] + acc[1]) + (acc[2] + acc[3])) + ((acc[4] + acc[5]) + (acc[6] + acc[7])) + tail
-}
+/// The pairs' sums ([`crate::linalg::dot8`]): the inputs are f32 values widened to f64 once
+/// per block (exact), not once per pair (the Gram of ICT-300 took seconds with one chain).
+use crate::linalg::dot8 as dot;
 
 /// Sums `add(wide, len, part)` over the blocks of coordinates into a vector of `size` f64:
 /// `wide` holds every shape's values of one block widened to f64 (row k at `k * BLOCK`, `len`

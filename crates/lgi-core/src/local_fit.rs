@@ -8,6 +8,7 @@
 
 use crate::baselines::{BlendshapeSolution, BlendshapeSolver, FitStart};
 use crate::error::{LgiError, Result};
+use crate::linalg::dot8;
 use crate::prior::{correlation, fit_scale};
 use glam::DVec3;
 use rayon::prelude::*;
@@ -243,30 +244,11 @@ pub fn blend_local(
                     }
                 }
                 let rows = &shapes[3 * vert * q..3 * (vert + 1) * q];
-                let dot = |d: usize| dot_wide(&rows[d * q..(d + 1) * q], &mixed);
+                let dot = |d: usize| dot8(&rows[d * q..(d + 1) * q], &mixed);
                 *o = neutral[vert] + DVec3::new(dot(0), dot(1), dot(2));
             }
         });
     Ok(())
-}
-
-/// `Σ a_i b_i` with the f32 values widened, in eight independent partial sums (one running sum
-/// is a chain of dependent additions, several times slower).
-fn dot_wide(a: &[f32], b: &[f64]) -> f64 {
-    let mut acc = [0.0f64; 8];
-    let (ca, cb) = (a.chunks_exact(8), b.chunks_exact(8));
-    let tail: f64 = ca
-        .remainder()
-        .iter()
-        .zip(cb.remainder())
-        .map(|(&x, y)| f64::from(x) * y)
-        .sum();
-    for (x, y) in ca.zip(cb) {
-        for l in 0..8 {
-            acc[l] += f64::from(x[l]) * y[l];
-        }
-    }
-    ((acc[0] + acc[1]) + (acc[2] + acc[3])) + ((acc[4] + acc[5]) + (acc[6] + acc[7])) + tail
 }
 
 /// A window's fit of one frame and which of its rows were missing (where the next frame's
