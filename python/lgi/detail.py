@@ -28,7 +28,7 @@ from numpy.typing import ArrayLike, NDArray
 
 import lgi._lgi as _lgi
 from lgi.errors import InputError
-from lgi.leave_out import leave_markers_out
+from lgi.leave_out import leave_markers_out, solved_in_chunks
 
 if TYPE_CHECKING:
     from lgi.model import Model
@@ -137,8 +137,9 @@ def estimate_detail_weight(
         raise InputError(f"frames: expected shape (F, {b}, 3) with F >= 1, got {arr.shape}")
     out = leave_markers_out(arr, frames_used, what="detail weight")
     pick, batch, left = out.picked, out.frames, out.marker
-    solved = model.solve(batch, temporal=False, jaw=jaw, marker_noise=marker_noise, quiet=True)
-    pos = np.asarray(solved.bundle_positions)
+    pos = np.empty(batch.shape)
+    for rows, solved in solved_in_chunks(model, out, jaw=jaw, marker_noise=marker_noise):
+        pos[rows] = np.asarray(solved.bundle_positions)
     rest = _rest(model)
     gone = np.asarray(~np.isfinite(batch).all(axis=2))
     values = np.where(gone[..., None], np.nan, pos - rest[None])

@@ -31,16 +31,15 @@ from numpy.typing import ArrayLike, NDArray
 import lgi._lgi as _lgi
 from lgi.detail import DETAIL_FRAMES, SIGNIFICANCE
 from lgi.errors import InputError
-from lgi.leave_out import leave_markers_out
+from lgi.leave_out import leave_markers_out, solved_in_chunks
 
 if TYPE_CHECKING:
+    from lgi._lgi import SolveResult
     from lgi.model import Model
-    from lgi.result import SolveResult
 
 F64 = NDArray[np.float64]
 
 __all__ = [
-    "ESTIMATE_ROWS",
     "FITS_CHUNK",
     "LEFT_OUT_PER_FRAME",
     "LocalFitsEstimate",
@@ -56,9 +55,6 @@ ms at most: Ctrl-C is seen between calls)."""
 LEFT_OUT_PER_FRAME = 30
 """Markers `estimate_local_fits` leaves out, one at a time, on each frame it reads (spread over
 the face; every present one where a frame has fewer)."""
-
-ESTIMATE_ROWS = 32
-"""Left-out rows `estimate_local_fits` solves at a time (their meshes dropped between)."""
 
 
 class LocalPieces:
@@ -281,12 +277,7 @@ def estimate_local_fits(
     pieces = local_pieces(model)
     without = np.empty((out.marker.size, 3))
     with_local = np.empty((out.marker.size, 3))
-    # Rows a solve at a time: their meshes are not kept (240 of ICT's would take 154 MB).
-    for a in range(0, out.marker.size, ESTIMATE_ROWS):
-        rows = slice(a, a + ESTIMATE_ROWS)
-        solved = model.solve(
-            out.frames[rows], temporal=False, jaw=jaw, marker_noise=marker_noise, quiet=True
-        )
+    for rows, solved in solved_in_chunks(model, out, jaw=jaw, marker_noise=marker_noise):
         k = np.arange(solved.missing.shape[0])
         left = out.marker[rows]
         without[rows] = np.asarray(solved.bundle_positions)[k, left]
