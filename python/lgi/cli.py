@@ -208,11 +208,7 @@ def _cmd_batch(args: argparse.Namespace) -> int:
     if args.detail_weight is not None:
         options["detail_weight"] = args.detail_weight
     if args.local_fits:
-        if args.marker_noise is None:
-            raise lgi.InputError(
-                "--local-fits needs --marker-noise (SIGMA or auto; 0 for clean markers): the "
-                "local fits fit the noise-aware targets"
-            )
+        pipeline.check_local_fits_noise(args.local_fits, args.marker_noise)
         options["local_fits"] = args.local_fits
     if args.jaw != "auto":
         options["jaw"] = None if args.jaw == "rest" else args.jaw
@@ -269,6 +265,19 @@ def _local_fits_option(text: str) -> str:
     if text != "auto":
         raise argparse.ArgumentTypeError(f"expected no value or 'auto', got {text!r}")
     return text
+
+
+def _add_local_fits_argument(parser: argparse.ArgumentParser, help: str) -> None:
+    """`--local-fits [auto]` (`lgi solve`, `lgi batch`): False, True, or 'auto'."""
+    parser.add_argument(
+        "--local-fits",
+        nargs="?",
+        const=True,
+        default=False,
+        type=_local_fits_option,
+        metavar="auto",
+        help=help,
+    )
 
 
 def _marker_noise_option(text: str) -> float | str | None:
@@ -330,14 +339,8 @@ def _add_batch_command(sub: Any) -> None:
         metavar="W|auto|none",
         help="as lgi solve --detail-weight (auto: read per take); default none",
     )
-    b.add_argument(
-        "--local-fits",
-        nargs="?",
-        const=True,
-        default=False,
-        type=_local_fits_option,
-        metavar="auto",
-        help="as lgi solve --local-fits (needs --marker-noise; auto: chosen per take)",
+    _add_local_fits_argument(
+        b, "as lgi solve --local-fits (needs --marker-noise; auto: chosen per take)"
     )
     b.add_argument(
         "--jaw",
@@ -455,14 +458,9 @@ def _add_pipeline_commands(sub: Any) -> None:
         "from the take's markers left out one at a time; for a performer the dataset is not); "
         "default none: all of it",
     )
-    s.add_argument(
-        "--local-fits",
-        nargs="?",
-        const=True,
-        default=False,
-        type=_local_fits_option,
-        metavar="auto",
-        help="each bundle's piece is the blendshape fit of the markers around it (needs "
+    _add_local_fits_argument(
+        s,
+        "each bundle's piece is the blendshape fit of the markers around it (needs "
         "--marker-noise; the most accurate with a dataset of whole-face scans, docs/results.md); "
         "auto: used when they predict the take's own markers, left out one at a time, better",
     )

@@ -181,6 +181,15 @@ def frame_range(spec: str | None, count: int) -> slice:
     return slice(a, b)
 
 
+def check_local_fits_noise(spec: bool | str, sigma: float | str | None) -> None:
+    """`--local-fits` (on or 'auto') without `--marker-noise`: an InputError saying why."""
+    if spec and sigma is None:
+        raise InputError(
+            "--local-fits needs --marker-noise (SIGMA or auto; 0 for clean markers): the local "
+            "fits fit the noise-aware targets"
+        )
+
+
 def local_fits_choice(
     spec: bool | str,
     frames: np.ndarray,
@@ -191,15 +200,12 @@ def local_fits_choice(
 ) -> bool:
     """`--local-fits`: True, False, or 'auto' (read from the take's own markers left out,
     `lgi.estimate_local_fits`, and said with its numbers)."""
+    check_local_fits_noise(spec, sigma)
     if spec is True or spec is False:
         return spec
     if spec != "auto":
         raise InputError(f"--local-fits {spec!r}: expected no value or 'auto'")
-    if sigma is None:
-        raise InputError(
-            "--local-fits needs --marker-noise (SIGMA or auto; 0 for clean markers): the local "
-            "fits fit the noise-aware targets"
-        )
+    assert sigma is not None  # checked above
     est = estimate_local_fits(frames, model, marker_noise=sigma, jaw=jaw)
     say(
         f"local fits {'used' if est.use else 'not used'}: {est.left_out} markers left out one "
@@ -766,11 +772,7 @@ def solve_file(
     head = None if t.head is None else t.head[rng]
     rate = frame_rate(fps, t.fps, kind)
     sigma = marker_noise(noise, x, m)
-    if local_fits and sigma is None:
-        raise InputError(
-            "--local-fits needs --marker-noise (SIGMA or auto; 0 for clean markers): the local "
-            "fits fit the noise-aware targets"
-        )
+    check_local_fits_noise(local_fits, sigma)
     if local_fits and m.jaw_bins is not None:
         raise InputError(f"--local-fits: the model {model} has jaw bins; build it without them")
     jaw_mode = None if m.jaw_rig is None or jaw == "rest" else jaw
