@@ -115,12 +115,7 @@ class LocalPieces:
         sw = model.core.sew_weights()
         v, b = self.neutral.shape[0], model.num_bundles
         sewing = sp.csr_matrix((sw["data"], sw["indices"], sw["indptr"]), shape=(v, b))
-        # The sewing weights as the core's blend reads them (CSR rows, int64 indices).
-        self._sew_rows = (
-            np.ascontiguousarray(sewing.indptr, dtype=np.int64),
-            np.ascontiguousarray(sewing.indices, dtype=np.int64),
-            np.ascontiguousarray(sewing.data, dtype=np.float64),
-        )
+        self._sew_rows = _csr_rows(sewing)
         self.corrective = _lgi.RbfInterpolator(self.neutral, tris, bary)
         # The same surface at the bundles only (`at_bundles`): the vertices of their triangles,
         # their sewing rows and shapes, and the corrective over them (its centres and samples
@@ -129,7 +124,7 @@ class LocalPieces:
         self._corners = corners
         self._corner_tris = np.searchsorted(corners, tris)
         self._corner_bary = bary
-        self._corner_sewing = sewing[corners]
+        self._corner_sew_rows = _csr_rows(sewing[corners])
         self._corner_shapes = np.ascontiguousarray(self.shapes[corners])
         self._corner_jaw = None if self.rig is None else np.asarray(self.rig.weights)[corners]
         self._corner_corrective = _lgi.RbfInterpolator(
@@ -181,13 +176,7 @@ class LocalPieces:
         if np.asarray(res.missing).shape[0] == 0:
             return np.asarray(res.vertices, dtype=np.float64) if out is None else out
         targets, weights, theta = self._fits(res)
-        frames = weights.shape[0]
-        blend = np.empty((frames, *self.neutral.shape))
-        # The core's blend, a chunk of frames per call (Ctrl-C is seen between calls).
-        for a in range(0, frames, FITS_CHUNK):
-            blend[a : a + FITS_CHUNK] = _lgi.blend_local(
-                self.neutral, self.shapes, *self._sew_rows, weights[a : a + FITS_CHUNK]
-            )
+        blend = _blend(self.neutral, self.shapes, self._sew_rows, weights)
         posed = self._posed(blend, theta, None)
         misses = targets - self._bundle_positions(posed)
         result = posed + self.corrective.interpolate(misses)
@@ -204,13 +193,8 @@ class LocalPieces:
         if np.asarray(res.missing).shape[0] == 0:
             return np.empty((0, b, 3))
         targets, weights, theta = self._fits(res)
-        frames = weights.shape[0]
-        blend = np.empty((frames, self._corners.size, 3))
-        for f in range(frames):
-            per_vertex = self._corner_sewing @ weights[f]
-            blend[f] = self.neutral[self._corners] + np.einsum(
-                "vs,vds->vd", per_vertex, self._corner_shapes, dtype=np.float64
-            )
+        neutral = self.neutral[self._corners]
+        blend = _blend(neutral, self._corner_shapes, self._corner_sew_rows, weights)
         posed = self._posed(blend, theta, self._corner_jaw)
 
         def sampled(values: F64) -> F64:
@@ -218,6 +202,31 @@ class LocalPieces:
 
         on_blend = sampled(posed)
         return on_blend + sampled(self._corner_corrective.interpolate(targets - on_blend))
+
+
+def _csr_rows(sewing: sp.csr_matrix) -> tuple[NDArray[np.int64], NDArray[np.int64], F64]:
+    """Sewing weights as the core's blend reads them: CSR rows, int64 indices."""
+    return (
+        np.ascontiguousarray(sewing.indptr, dtype=np.int64),
+        np.ascontiguousarray(sewing.indices, dtype=np.int64),
+        np.ascontiguousarray(sewing.data, dtype=np.float64),
+    )
+
+
+def _blend(
+    neutral: F64,
+    shapes: NDArray[np.float32],
+    rows: tuple[NDArray[np.int64], NDArray[np.int64], F64],
+    weights: F64,
+) -> F64:
+    """The core's blend (`_lgi.blend_local`) of `weights` (F, B, q) over `neutral`'s vertices,
+    a chunk of frames per call (Ctrl-C is seen between calls)."""
+    blend = np.empty((weights.shape[0], *neutral.shape))
+    for a in range(0, weights.shape[0], FITS_CHUNK):
+        blend[a : a + FITS_CHUNK] = _lgi.blend_local(
+            neutral, shapes, *rows, weights[a : a + FITS_CHUNK]
+        )
+    return blend
 
 
 # Per model (made on first use, dropped with the model).
