@@ -285,14 +285,10 @@ impl Window {
                 .solve_with_derivatives(&target, &[], from)
                 .map(|(solution, _)| solution)
         };
-        // From a start made for other rows (the frame before missing other markers, or the
-        // global fit) the low-rank path can circle without finishing where the window's
-        // present rows miss some of its directions (seen on ICT with one marker of nine
-        // missing, and at 2,000 scans with one marker left out: 5 of 28,800 fits); from the
-        // dual's 0 it finished in every case seen. The dense path is the last resort (S³/3
-        // flops a step: seconds at 2,000 scans).
+        // A warm start that does not finish is solved again from cold inside the solver
+        // (`solve_with_derivatives`); the dense path is the last resort (S³/3 flops a step:
+        // seconds at 2,000 scans).
         let solution = fit(&self.solver, from)
-            .or_else(|_| fit(&self.solver, FitStart::Cold))
             .or_else(|_| self.solver.dense_only().and_then(|d| fit(&d, from)))
             .ok()?;
         Some(Fitted { solution, missing })
