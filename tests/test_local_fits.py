@@ -320,37 +320,60 @@ def test_local_fits_at_the_bundles_are_the_surface_sampled_there(solved) -> None
 
 
 def test_the_local_fits_estimate_is_the_left_out_markers_distance_both_ways(solved) -> None:  # type: ignore[no-untyped-def]
-    from lgi.detail import SIGNIFICANCE
-    from lgi.local import LEFT_OUT_PER_FRAME
+    from lgi.local import LEFT_OUT_PER_FRAME, LOOK_SIGNIFICANCE, LOOKS
 
     _, model, frames, sigma = solved
-    got = lgi.estimate_local_fits(frames, model, marker_noise=sigma, frames_used=4)
+    per_look = 2
+    got = lgi.estimate_local_fits(frames, model, marker_noise=sigma, frames_used=per_look)
     # Brute force: each left-out row solved on its own, the local fits' whole surface.
     present = np.isfinite(frames).all(axis=2)
-    picked = np.unique(np.linspace(0, len(frames) - 1, 4).round().astype(int))
-    per_frame, d_without, d_with = [], [], []
+    picked = np.unique(np.linspace(0, len(frames) - 1, LOOKS * per_look).round().astype(int))
+    saved_at, d_without, d_with = {}, {}, {}
     for ordinal, f in enumerate(picked):
         markers = np.flatnonzero(present[f])
         n, step = markers.size, markers.size / LEFT_OUT_PER_FRAME
         shift = int(ordinal * step / len(picked))
         chosen = markers[(np.floor(np.arange(LEFT_OUT_PER_FRAME) * step).astype(int) + shift) % n]
-        saved = []
+        a_f, b_f = [], []
         for i in chosen:
             x = frames[f : f + 1].copy()
             x[0, i] = np.nan
             plain = model.solve(x, marker_noise=sigma, quiet=True, temporal=False)
             local = model.solve(x, marker_noise=sigma, quiet=True, temporal=False, local_fits=True)
-            a = np.linalg.norm(np.asarray(plain.bundle_positions)[0, i] - frames[f, i])
-            b = np.linalg.norm(np.asarray(local.bundle_positions)[0, i] - frames[f, i])
-            d_without.append(a)
-            d_with.append(b)
-            saved.append(a - b)
-        per_frame.append(np.mean(saved))
-    assert got.frames == len(picked) and got.left_out == len(picked) * LEFT_OUT_PER_FRAME
-    np.testing.assert_allclose(got.error_without, np.mean(d_without), rtol=1e-9)
-    np.testing.assert_allclose(got.error_with, np.mean(d_with), rtol=1e-6)
-    s = np.asarray(per_frame)
-    assert got.use == bool(s.mean() > SIGNIFICANCE * s.std(ddof=1) / np.sqrt(s.size))
+            a_f.append(np.linalg.norm(np.asarray(plain.bundle_positions)[0, i] - frames[f, i]))
+            b_f.append(np.linalg.norm(np.asarray(local.bundle_positions)[0, i] - frames[f, i]))
+        d_without[ordinal], d_with[ordinal] = a_f, b_f
+        saved_at[ordinal] = np.mean(a_f) - np.mean(b_f)
+    # The looks: every LOOKS-th picked frame joins at its look; stop when significant or < 0.
+    use, read = False, []
+    for look in range(LOOKS):
+        read += [o for o in range(len(picked)) if o % LOOKS == look]
+        s = np.array([saved_at[o] for o in read])
+        if s.mean() > LOOK_SIGNIFICANCE * s.std(ddof=1) / np.sqrt(s.size):
+            use = True
+            break
+        if s.mean() < 0:
+            break
+    assert got.use is use
+    assert got.frames == len(read) and got.left_out == len(read) * LEFT_OUT_PER_FRAME
+    np.testing.assert_allclose(got.error_without, np.mean([d_without[o] for o in read]), rtol=1e-9)
+    np.testing.assert_allclose(got.error_with, np.mean([d_with[o] for o in read]), rtol=1e-6)
+
+
+def test_the_looks_boundary_is_crossed_by_chance_as_often_as_one_look_at_significance() -> None:
+    from scipy.stats import norm
+
+    from lgi.detail import SIGNIFICANCE
+    from lgi.local import LOOK_SIGNIFICANCE, LOOKS
+
+    # With no saving, the looks' cumulative means are a random walk's scaled partial sums.
+    steps = np.random.default_rng(5).standard_normal((1_000_000, LOOKS))
+    z = np.cumsum(steps, axis=1) / np.sqrt(np.arange(1, LOOKS + 1))
+    crossed = (z > LOOK_SIGNIFICANCE).any(axis=1).mean()
+    one_look = norm.sf(SIGNIFICANCE)
+    assert abs(crossed - one_look) < 0.0006, (crossed, one_look)
+    # A single look at the same boundary would be stricter: the looks are what it pays for.
+    assert (z[:, 0] > LOOK_SIGNIFICANCE).mean() < 0.7 * one_look
 
 
 def test_the_local_fits_estimate_says_what_it_cannot_read() -> None:

@@ -39,6 +39,16 @@ class LeftOut:
     given: NDArray[np.float64]
     """(R, 3): each row's left-out marker as the take gives it."""
 
+    def subset(self, rows: NDArray[np.int64]) -> LeftOut:
+        """These rows only (their frames kept in `picked`, in order)."""
+        return LeftOut(
+            frames=self.frames[rows],
+            frame=self.frame[rows],
+            marker=self.marker[rows],
+            picked=self.picked[np.isin(self.picked, self.frame[rows])],
+            given=self.given[rows],
+        )
+
 
 def leave_markers_out(
     arr: NDArray[np.float64], frames_used: int, per_frame: int | None = None, what: str = ""

@@ -29,7 +29,7 @@ import scipy.sparse as sp
 from numpy.typing import ArrayLike, NDArray
 
 import lgi._lgi as _lgi
-from lgi.detail import DETAIL_FRAMES, SIGNIFICANCE
+from lgi.detail import DETAIL_FRAMES
 from lgi.errors import InputError
 from lgi.leave_out import leave_markers_out, solved_in_chunks
 
@@ -42,6 +42,8 @@ F64 = NDArray[np.float64]
 __all__ = [
     "FITS_CHUNK",
     "LEFT_OUT_PER_FRAME",
+    "LOOKS",
+    "LOOK_SIGNIFICANCE",
     "LocalFitsEstimate",
     "LocalPieces",
     "estimate_local_fits",
@@ -55,6 +57,17 @@ ms at most: Ctrl-C is seen between calls)."""
 LEFT_OUT_PER_FRAME = 30
 """Markers `estimate_local_fits` leaves out, one at a time, on each frame it reads (spread over
 the face; every present one where a frame has fewer)."""
+
+LOOKS = 3
+"""Looks `estimate_local_fits` takes at most, each at `frames_used` more frames (interleaved
+with the others', so each look spans the take): it stops at the first whose saving is
+significant (`LOOK_SIGNIFICANCE`) or negative."""
+
+LOOK_SIGNIFICANCE = 2.33
+"""The standard errors a look's mean saving must exceed: with no saving, one of `LOOKS` looks
+at the cumulative frames crosses it as often as one look crosses `lgi.detail.SIGNIFICANCE`
+(2.3 % one-sided; Pocock's boundary for three looks, 1977; simulated in
+tests/test_local_fits.py)."""
 
 
 class LocalPieces:
@@ -247,7 +260,8 @@ class LocalFitsEstimate:
     """Whether local fits predict a take's left-out markers better (`estimate_local_fits`)."""
 
     use: bool
-    """Local fits saved left-out error by more than `SIGNIFICANCE` standard errors."""
+    """Local fits saved left-out distance by more than `LOOK_SIGNIFICANCE` standard errors at
+    one of the looks."""
     error_without: float
     """Mean distance (data units) of the left-out markers from the recommended solve's surface
     without them."""
@@ -256,7 +270,7 @@ class LocalFitsEstimate:
     left_out: int
     """Markers left out (one per solved frame)."""
     frames: int
-    """Take frames they were left out of."""
+    """Take frames they were left out of (`frames_used` a look)."""
 
 
 def estimate_local_fits(
@@ -268,42 +282,60 @@ def estimate_local_fits(
     frames_used: int = DETAIL_FRAMES,
 ) -> LocalFitsEstimate:
     """Whether local fits suit a take (F, B, 3; NaN rows missing) and `model`, read from the
-    take's own markers: on up to `frames_used` frames spread over the take, up to
-    `LEFT_OUT_PER_FRAME` present markers each left out in turn, predicted by the solve with
+    take's own markers: on `frames_used` frames spread over the take, up to
+    `LEFT_OUT_PER_FRAME` present markers each are left out in turn, predicted by the solve with
     `marker_noise` and `jaw` without them, and by the same solve with local fits. Local fits
-    are used when the left-out distance they save, averaged per frame, averages more than
-    `SIGNIFICANCE` standard errors of that mean over the frames (with fewer than 2 frames:
-    not). With the performer's own scans they usually save it; with a generic dataset driven
-    by another face they usually cost it (docs/results.md). One solve of about
-    `frames_used` x 30 frames, with their local fits (not their meshes)."""
+    are used when the left-out distance they save, averaged per frame, exceeds
+    `LOOK_SIGNIFICANCE` standard errors of that mean over the frames read; when it does not and
+    is positive, `frames_used` more frames are read, up to `LOOKS` looks (a clear case costs
+    one look, a close one up to three). With the performer's own scans they usually save it;
+    with a generic dataset driven by another face they usually cost it (docs/results.md). Each
+    look solves about `frames_used` x 30 frames, with their local fits (not their meshes)."""
     arr = np.asarray(frames, dtype=np.float64)
     b = model.num_bundles
     if arr.ndim != 3 or arr.shape[0] == 0 or arr.shape[1:] != (b, 3):
         raise InputError(f"frames: expected shape (F, {b}, 3) with F >= 1, got {arr.shape}")
     if marker_noise is None:
         raise InputError("estimate_local_fits needs marker_noise (0 for clean markers)")
-    out = leave_markers_out(arr, frames_used, LEFT_OUT_PER_FRAME, what="local fits")
+    if frames_used < 1:
+        raise InputError(f"frames_used must be >= 1, got {frames_used}")
+    out = leave_markers_out(arr, LOOKS * frames_used, LEFT_OUT_PER_FRAME, what="local fits")
     pieces = local_pieces(model)
-    without = np.empty((out.marker.size, 3))
-    with_local = np.empty((out.marker.size, 3))
-    for rows, solved in solved_in_chunks(model, out, jaw=jaw, marker_noise=marker_noise):
-        k = np.arange(solved.missing.shape[0])
-        left = out.marker[rows]
-        without[rows] = np.asarray(solved.bundle_positions)[k, left]
-        with_local[rows] = pieces.at_bundles(solved)[k, left]
-    # Distances, as the results report errors: squared ones let a few markers (the lips', whose
-    # left-out errors are the largest) decide the choice.
-    err_without = np.linalg.norm(without - out.given, axis=1)
-    err_with = np.linalg.norm(with_local - out.given, axis=1)
-    saved = np.array([(err_without - err_with)[out.frame == f].mean() for f in out.picked])
+    # Each look's frames every LOOKS-th of the picked ones, so every look spans the take.
+    look_of_row = np.searchsorted(out.picked, out.frame) % LOOKS
+    err_without = np.full(out.marker.size, np.nan)
+    err_with = np.full(out.marker.size, np.nan)
     use = False
-    if saved.size >= 2:
-        spread = saved.std(ddof=1) / np.sqrt(saved.size)
-        use = bool(saved.mean() > SIGNIFICANCE * spread)
+    for look in range(LOOKS):
+        rows = np.flatnonzero(look_of_row == look)
+        if rows.size == 0:
+            break
+        part = out.subset(rows)
+        for at, solved in solved_in_chunks(model, part, jaw=jaw, marker_noise=marker_noise):
+            k = np.arange(solved.missing.shape[0])
+            left = part.marker[at]
+            given = part.given[at]
+            err_without[rows[at]] = np.linalg.norm(
+                np.asarray(solved.bundle_positions)[k, left] - given, axis=1
+            )
+            err_with[rows[at]] = np.linalg.norm(pieces.at_bundles(solved)[k, left] - given, axis=1)
+        # Distances, as the results report errors: squared ones let a few markers (the lips',
+        # whose left-out errors are the largest) decide the choice.
+        seen = out.picked[np.isin(out.picked, out.frame[look_of_row <= look])]
+        saved = np.array([(err_without - err_with)[out.frame == f].mean() for f in seen])
+        if saved.size < 2:
+            continue
+        mean, spread = saved.mean(), saved.std(ddof=1) / np.sqrt(saved.size)
+        if mean > LOOK_SIGNIFICANCE * spread:
+            use = True
+            break
+        if mean < 0:
+            break
+    done = np.isfinite(err_without)
     return LocalFitsEstimate(
         use=use,
-        error_without=float(err_without.mean()),
-        error_with=float(err_with.mean()),
-        left_out=int(out.marker.size),
-        frames=int(out.picked.size),
+        error_without=float(err_without[done].mean()),
+        error_with=float(err_with[done].mean()),
+        left_out=int(done.sum()),
+        frames=int(np.unique(out.frame[done]).size),
     )
