@@ -358,6 +358,8 @@ def test_the_local_fits_estimate_is_the_left_out_markers_distance_both_ways(solv
     assert got.frames == len(read) and got.left_out == len(read) * LEFT_OUT_PER_FRAME
     np.testing.assert_allclose(got.error_without, np.mean([d_without[o] for o in read]), rtol=1e-9)
     np.testing.assert_allclose(got.error_with, np.mean([d_with[o] for o in read]), rtol=1e-6)
+    with pytest.raises(InputError, match="frames_used must be >= 1, got -1"):
+        lgi.estimate_local_fits(frames, model, marker_noise=sigma, frames_used=-1)
 
 
 def test_the_looks_boundary_is_crossed_by_chance_as_often_as_one_look_at_significance() -> None:
