@@ -6,7 +6,8 @@ fit), and the stages: the global fit with its jaw pose alone (`fit_residuals`); 
 is what the model's first recommended call takes beyond the best one (done once: the fit's
 shape basis); then the recommended call with local fits (`local_fits=True`: local_build_s,
 once per model, and local_ms per frame, the whole call), and estimate_s: what
-`lgi.estimate_local_fits` (`--local-fits auto`) takes to read the take. Each K runs in its own
+`lgi.estimate_local_fits` (`--local-fits auto`) takes to read the take (estimate_frames: the
+frames it read, 8 a look). Each K runs in its own
 process so its peak RSS (the process's, its own arrays included) is its own.
 
 Usage: python scripts/scans_cost.py [--scans 120 400 1000 2000] [--frames 100]
@@ -79,10 +80,11 @@ def one(k: int, frames: int) -> dict[str, float]:
         model.solve(take.frames, marker_noise=0.02, quiet=True, local_fits=True)
         times.append(time.perf_counter() - t0)
     out["local_ms"] = 1e3 * min(times) / len(take.frames)
-    # `--local-fits auto`'s reading of the take (its 240 left-out rows, solved once).
+    # `--local-fits auto`'s reading of the take (240 left-out rows a look, up to three looks).
     t0 = time.perf_counter()
-    lgi.estimate_local_fits(take.frames, model, marker_noise=0.02)
+    est = lgi.estimate_local_fits(take.frames, model, marker_noise=0.02)
     out["estimate_s"] = time.perf_counter() - t0
+    out["estimate_frames"] = est.frames
     out["peak_rss_gib"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2**20
     return out
 
@@ -108,6 +110,7 @@ def main() -> None:
         "local_build_s",
         "local_ms",
         "estimate_s",
+        "estimate_frames",
         "peak_rss_gib",
     ]
     print("| " + " | ".join(cols) + " |")
