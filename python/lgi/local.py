@@ -302,7 +302,8 @@ def estimate_local_fits(
     out = leave_markers_out(arr, LOOKS * frames_used, LEFT_OUT_PER_FRAME, what="local fits")
     pieces = local_pieces(model)
     # Each look's frames every LOOKS-th of the picked ones, so every look spans the take.
-    look_of_row = np.searchsorted(out.picked, out.frame) % LOOKS
+    look_of_frame = np.arange(out.picked.size) % LOOKS
+    look_of_row = look_of_frame[np.searchsorted(out.picked, out.frame)]
     err_without = np.full(out.marker.size, np.nan)
     err_with = np.full(out.marker.size, np.nan)
     use = False
@@ -321,7 +322,7 @@ def estimate_local_fits(
             err_with[rows[at]] = np.linalg.norm(pieces.at_bundles(solved)[k, left] - given, axis=1)
         # Distances, as the results report errors: squared ones let a few markers (the lips',
         # whose left-out errors are the largest) decide the choice.
-        seen = out.picked[np.isin(out.picked, out.frame[look_of_row <= look])]
+        seen = out.picked[look_of_frame <= look]
         saved = np.array([(err_without - err_with)[out.frame == f].mean() for f in seen])
         if saved.size < 2:
             continue

@@ -22,8 +22,8 @@ const GROUPS: usize = 32;
 /// cache while every later row `i` meets them.
 const TILE: usize = 32;
 
-/// The pairs' sums ([`crate::linalg::dot8`]): the inputs are f32 values widened to f64 once
-/// per block (exact), not once per pair (the Gram of ICT-300 took seconds with one chain).
+// The pairs' sums (`crate::linalg::dot8`): the inputs are f32 values widened to f64 once per
+// block (exact), not once per pair (the Gram of ICT-300 took seconds with one chain).
 use crate::linalg::dot8 as dot;
 
 /// Sums `add(wide, len, part)` over the blocks of coordinates into a vector of `size` f64:
