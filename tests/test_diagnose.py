@@ -5,6 +5,7 @@ flagged."""
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import numpy as np
@@ -85,5 +86,15 @@ def test_lgi_solve_prints_the_findings_and_lgi_info_names_them_from_the_file(
     assert "likely label swap: m012 <-> m047, time codes 101-150" in out
     assert "spike: m033, time codes 201-203" in out
     assert "residual median" in out and " cm" in out
-    assert "worst markers (largest residual): m033 " in out
-    assert "worst frames (time code, largest residual, marker): 20" in out
+    # The two planted faults lead, each at a time code of its own range: the swapped marker
+    # that the noise-aware targets pull back to the fit (its neighbours do not share its 9 cm),
+    # then the spike; the worst frames are the swap's.
+    worst = re.search(r"worst markers \(largest residual\): (.*)", out)
+    assert worst is not None
+    lead = [m.groups() for m in re.finditer(r"(m\d{3}) [\d.]+ cm at (\d+)", worst.group(1))][:2]
+    assert lead[0][0] == "m047" and 101 <= int(lead[0][1]) <= 150, lead
+    assert lead[1][0] == "m033" and 201 <= int(lead[1][1]) <= 203, lead
+    frames = re.search(r"worst frames \(time code, largest residual, marker\): (.*)", out)
+    assert frames is not None
+    for code, marker in re.findall(r"(\d+) [\d.]+ cm (m\d{3})", frames.group(1)):
+        assert marker == "m047" and 101 <= int(code) <= 150, frames.group(1)

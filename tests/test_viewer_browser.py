@@ -129,8 +129,9 @@ def test_a_b_colouring_differs_from_the_plain_one(page) -> None:  # type: ignore
     ab = _stage_pixels(driver)
     differs = np.abs(ab - plain).sum(axis=2) > 60
     assert differs.mean() > 0.05, differs.mean()
-    # Viridis over grey: the A/B view has saturated pixels the plain one lacks.
-    sat = lambda p: (p.max(axis=2) - p.min(axis=2)) > 80  # noqa: E731
+    # Viridis over grey: the A/B view has coloured pixels the plain one lacks. Viridis' low end
+    # (purple, chroma 83 in full light) is shaded on the face, so chroma > 40 counts a hue.
+    sat = lambda p: (p.max(axis=2) - p.min(axis=2)) > 40  # noqa: E731
     assert sat(ab).mean() > sat(plain).mean() + 0.05
     assert _errors(driver) == []
 

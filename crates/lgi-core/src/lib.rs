@@ -60,7 +60,9 @@ pub use model::{
     ModelPartsRef, PartsError, ShapeId, SolveOptions, MAX_UNIT_LEN,
 };
 pub use polygons::Polygons;
-pub use prior::{FitPrior, FrameFit, GramCache, FIT_L2, FIT_PENALTY, RESIDUAL_LENGTH};
+pub use prior::{
+    FitPrior, FrameFit, GramCache, FIELD_SIGNIFICANCE, FIT_L2, FIT_PENALTY, RESIDUAL_LENGTH,
+};
 
 // Files: meshes, datasets and the `.lgi` model file.
 pub use io::glob::expand as expand_glob;

@@ -17,6 +17,10 @@ pub const FIT_PENALTY: f64 = 10.0;
 /// Correlation length of what the dataset misses, in median nearest-marker distances: the
 /// residual field is smooth over about one marker spacing.
 pub const RESIDUAL_LENGTH: f64 = 1.0;
+/// Standard errors by which the residuals around a marker must exceed the noise before they
+/// count as field there (the usual ~95 % level, the detail weight's too): under noise alone a
+/// neighbourhood's mean square scatters about σ², and that scatter is not something to keep.
+pub const FIELD_SIGNIFICANCE: f64 = 2.0;
 
 /// The fit of one frame (one jaw bin's space).
 #[derive(Debug, Clone, PartialEq)]
@@ -257,9 +261,12 @@ impl FitPrior {
     /// Noise-aware targets: the fit's positions plus its residuals smoothed across
     /// neighbouring markers, the posterior mean of a residual field with the correlation of
     /// [`RESIDUAL_LENGTH`] under independent marker noise of `sigma` (data units, per
-    /// coordinate). The field's variance is what the residuals hold beyond the noise, so where
-    /// the dataset explains a frame the markers move to it by about their noise, and a
-    /// residual that neighbours share is kept. Missing rows stay missing.
+    /// coordinate). The field's variance is local: at each marker, what the residuals around it
+    /// (weighted by that same correlation) hold beyond the noise, by more than
+    /// [`FIELD_SIGNIFICANCE`] standard errors ([`field_deviations`]). So where the dataset
+    /// explains the face the markers move to the fit by about their noise, and a residual that
+    /// neighbours share (a shape the dataset lacks, around the brow) is kept there without
+    /// letting the noise elsewhere through. Missing rows stay missing.
     pub fn denoise(&self, targets: &[DVec3], fit: &FrameFit, sigma: f64) -> Result<Vec<DVec3>> {
         let b = self.rest.len();
         let present: Vec<usize> = (0..b).filter(|&i| !targets[i].is_nan()).collect();
@@ -272,22 +279,23 @@ impl FitPrior {
             .map(|&i| (targets[i] - fit.positions[i]).to_array())
             .collect();
         let noise = sigma * sigma;
-        let mean_square = residual.iter().flatten().map(|x| x * x).sum::<f64>() / (3 * n) as f64;
-        // A field of (almost) no variance: the markers sit at the fit.
-        let variance = (mean_square - noise).max(1e-6 * noise);
+        let deviation = field_deviations(&self.correlation, b, &present, &residual, noise);
+        let covariance = |r: usize, c: usize| {
+            deviation[r] * deviation[c] * self.correlation[present[r] * b + present[c]]
+        };
         let mut system = vec![0.0; n * n];
-        for (r, &i) in present.iter().enumerate() {
-            for (c, &j) in present.iter().enumerate() {
-                system[r * n + c] = variance * self.correlation[i * b + j];
+        for r in 0..n {
+            for c in 0..n {
+                system[r * n + c] = covariance(r, c);
             }
             system[r * n + r] += noise;
         }
         let solved = Lu::factor(n, system)?.solve3(&residual);
         let mut out = targets.to_vec();
-        for &i in &present {
+        for (r, &i) in present.iter().enumerate() {
             let mut s = [0.0; 3];
-            for (&j, x) in present.iter().zip(&solved) {
-                let k = variance * self.correlation[i * b + j];
+            for (c, x) in solved.iter().enumerate() {
+                let k = covariance(r, c);
                 for d in 0..3 {
                     s[d] += k * x[d];
                 }
@@ -296,6 +304,48 @@ impl FitPrior {
         }
         Ok(out)
     }
+}
+
+/// The residual field's standard deviation at each present marker (`present`, rows of the B × B
+/// `correlation`; `residual` their fit residuals): the mean square of its neighbours'
+/// residuals, weighted by the correlation over the other present markers (not its own: a
+/// spike on one marker is not a field its neighbours share), less the noise `noise` (σ²) and
+/// [`FIELD_SIGNIFICANCE`] standard errors of that mean under noise alone (σ² √(2/k) for k
+/// effective squared coordinates, `3 (Σw)² / Σw²`). Where nothing clears it the field has
+/// (almost) no variance there and the markers sit at the fit; the floor keeps the system
+/// regular.
+fn field_deviations(
+    correlation: &[f64],
+    b: usize,
+    present: &[usize],
+    residual: &[[f64; 3]],
+    noise: f64,
+) -> Vec<f64> {
+    let square: Vec<f64> = residual
+        .iter()
+        .map(|r| (r[0] * r[0] + r[1] * r[1] + r[2] * r[2]) / 3.0)
+        .collect();
+    present
+        .iter()
+        .map(|&i| {
+            let (mut sum, mut weight, mut weight_sq) = (0.0, 0.0, 0.0);
+            for (&j, q) in present.iter().zip(&square) {
+                if j != i {
+                    let w = correlation[i * b + j];
+                    sum += w * q;
+                    weight += w;
+                    weight_sq += w * w;
+                }
+            }
+            if weight_sq < f64::MIN_POSITIVE {
+                // No present neighbour within reach: nothing shares this residual.
+                return (1e-6 * noise).sqrt();
+            }
+            let effective = 3.0 * weight * weight / weight_sq;
+            let floor = noise * (1.0 + FIELD_SIGNIFICANCE * (2.0 / effective).sqrt());
+            (sum / weight - floor).max(1e-6 * noise).sqrt()
+        })
+        .collect()
 }
 
 /// Gram entries of one frame's present markers kept between
@@ -363,7 +413,11 @@ mod tests {
 
     /// Three shapes moving 12 bundles on a line in different directions.
     fn positions() -> (Vec<DVec3>, usize) {
-        let b = 12;
+        positions_on_line(12)
+    }
+
+    /// [`positions`]' three shapes on `b` bundles one unit apart.
+    fn positions_on_line(b: usize) -> (Vec<DVec3>, usize) {
         let rest: Vec<DVec3> = (0..b).map(|i| DVec3::new(i as f64, 0.0, 0.0)).collect();
         let mut out = rest.clone();
         for k in 0..3 {
@@ -449,5 +503,39 @@ mod tests {
         for (p, s) in d.iter().zip(&shifted) {
             assert!(p.distance(*s) < 0.2, "{p} vs {s}");
         }
+    }
+
+    #[test]
+    fn a_residual_one_region_shares_is_kept_there_while_noise_elsewhere_is_pulled_to_the_fit() {
+        let (sp, b) = positions_on_line(40);
+        let prior = FitPrior::new(&sp, b).unwrap().unwrap();
+        let sigma = 0.05;
+        // A bump of 0.5 in y over the first ten bundles, which no shape makes, on a frame of
+        // shape 0 at half weight; then alternating noise of σ in z everywhere.
+        let truth: Vec<DVec3> = (0..b)
+            .map(|i| {
+                let bump = 0.5 * (-0.5 * ((i as f64 - 4.0) / 2.0).powi(2)).exp();
+                sp[i] + (sp[b + i] - sp[i]) * 0.5 + DVec3::new(0.0, bump, 0.0)
+            })
+            .collect();
+        let noisy: Vec<DVec3> = truth
+            .iter()
+            .enumerate()
+            .map(|(i, t)| *t + DVec3::new(0.0, 0.0, if i % 2 == 0 { sigma } else { -sigma }))
+            .collect();
+        let fit = prior.fit(&noisy).unwrap();
+        let d = prior.denoise(&noisy, &fit, sigma).unwrap();
+        let mean_distance = |to: &[DVec3], range: std::ops::Range<usize>| {
+            let n = range.len() as f64;
+            range.map(|i| d[i].distance(to[i])).sum::<f64>() / n
+        };
+        // The bump is kept (it is ten times the noise); far from it the targets sit at the fit
+        // (which takes a little of the bump everywhere through shape 0). A variance shared by
+        // the whole face (the mean square over every marker) keeps nearly all of the noise
+        // there: the bump's energy spread over all markers.
+        let near = mean_distance(&truth, 0..9);
+        let far = mean_distance(&fit.positions, 20..40);
+        assert!(near < sigma, "near the bump {near}");
+        assert!(far < 0.3 * sigma, "far from the bump {far}");
     }
 }
