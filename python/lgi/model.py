@@ -370,8 +370,9 @@ class Model:
         `marker_noise`: the markers. noise sigma (data units, per coordinate; e.g. 0.05 for 0.5 mm
         in cm; `lgi.estimate_marker_noise` estimates it from a take). Each marker is first
         moved to the frame's global blendshape fit plus the fit's residual smoothed across
-        neighbouring markers (independent noise is pulled in by about sigma, a residual that
-        neighbours share is kept), then interpolated; `result.marker_corrections` says how far.
+        neighbouring markers (independent noise, a spike or a swapped label is pulled in, a
+        residual that neighbours share is kept where they share it), then interpolated;
+        `result.marker_corrections` says how far.
         None (default): every marker is interpolated as given (the paper's mode).
 
         `fit`: every bundle may take the frame's global blendshape fit instead of one of its
