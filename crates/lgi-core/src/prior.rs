@@ -21,6 +21,10 @@ pub const RESIDUAL_LENGTH: f64 = 1.0;
 /// count as field there (the usual ~95 % level, the detail weight's too): under noise alone a
 /// neighbourhood's mean square scatters about σ², and that scatter is not something to keep.
 pub const FIELD_SIGNIFICANCE: f64 = 2.0;
+/// Windows over which a marker's field variance may be read, each twice as wide as the one
+/// before it from [`RESIDUAL_LENGTH`] (1, 2, 4 and 8 lengths), then the whole face: the widest
+/// whose mean square agrees with every narrower one's is used ([`field_deviations`]).
+pub const FIELD_WINDOWS: usize = 4;
 
 /// The fit of one frame (one jaw bin's space).
 #[derive(Debug, Clone, PartialEq)]
@@ -307,13 +311,20 @@ impl FitPrior {
 }
 
 /// The residual field's standard deviation at each present marker (`present`, rows of the B × B
-/// `correlation`; `residual` their fit residuals): the mean square of its neighbours'
-/// residuals, weighted by the correlation over the other present markers (not its own: a
-/// spike on one marker is not a field its neighbours share), less the noise `noise` (σ²) and
-/// [`FIELD_SIGNIFICANCE`] standard errors of that mean under noise alone (σ² √(2/k) for k
-/// effective squared coordinates, `3 (Σw)² / Σw²`). Where nothing clears it the field has
-/// (almost) no variance there and the markers sit at the fit; the floor keeps the system
-/// regular.
+/// `correlation`; `residual` their fit residuals), read from the mean square of its neighbours'
+/// residuals (not its own: a spike on one marker is not a field its neighbours share) less the
+/// noise `noise` (σ²) and [`FIELD_SIGNIFICANCE`] standard errors of that mean under noise alone
+/// (σ² √(2/k) for k effective squared coordinates, `3 (Σw)² / Σw²`). Where nothing clears it
+/// the field has (almost) no variance there and the markers sit at the fit; the floor keeps
+/// the system regular.
+///
+/// The neighbourhood is chosen per marker, as Lepski's adaptive window: starting from the
+/// field's own correlation, the window doubles ([`FIELD_WINDOWS`] times, then the whole face)
+/// while its mean square stays within [`FIELD_SIGNIFICANCE`] standard errors of every
+/// narrower window's. A residual one region holds (a missing shape) stops the widening at its
+/// edge, so the quiet face beside it keeps a narrow window and goes to the fit; a small residual
+/// spread over the face (shapes that do not combine linearly) is read over the wide window,
+/// whose small standard error no longer hides it.
 fn field_deviations(
     correlation: &[f64],
     b: usize,
@@ -325,25 +336,55 @@ fn field_deviations(
         .iter()
         .map(|r| (r[0] * r[0] + r[1] * r[1] + r[2] * r[2]) / 3.0)
         .collect();
+    let floor = (1e-6 * noise).sqrt();
+    const READS: usize = FIELD_WINDOWS + 1;
     present
         .iter()
         .map(|&i| {
-            let (mut sum, mut weight, mut weight_sq) = (0.0, 0.0, 0.0);
+            // Per window: Σ w q, Σ w, Σ w². A window twice as wide weighs by the correlation's
+            // fourth root (a Gaussian of twice the length); the last weighs all alike.
+            let mut sums = [[0.0f64; 3]; READS];
             for (&j, q) in present.iter().zip(&square) {
-                if j != i {
-                    let w = correlation[i * b + j];
-                    sum += w * q;
-                    weight += w;
-                    weight_sq += w * w;
+                if j == i {
+                    continue;
+                }
+                let mut w = correlation[i * b + j];
+                for (n, sum) in sums.iter_mut().enumerate() {
+                    if n == FIELD_WINDOWS {
+                        w = 1.0;
+                    } else if n > 0 {
+                        w = w.sqrt().sqrt();
+                    }
+                    sum[0] += w * q;
+                    sum[1] += w;
+                    sum[2] += w * w;
                 }
             }
-            if weight_sq < f64::MIN_POSITIVE {
-                // No present neighbour within reach: nothing shares this residual.
-                return (1e-6 * noise).sqrt();
+            let mut reads = Vec::with_capacity(READS);
+            for [sum, weight, weight_sq] in sums {
+                if weight_sq < f64::MIN_POSITIVE {
+                    // No present neighbour within reach: nothing to read there.
+                    continue;
+                }
+                let error = noise * (2.0 / (3.0 * weight * weight / weight_sq)).sqrt();
+                reads.push((sum / weight, error));
             }
-            let effective = 3.0 * weight * weight / weight_sq;
-            let floor = noise * (1.0 + FIELD_SIGNIFICANCE * (2.0 / effective).sqrt());
-            (sum / weight - floor).max(1e-6 * noise).sqrt()
+            let mut chosen: Option<(f64, f64)> = None;
+            for (n, &(mean, error)) in reads.iter().enumerate() {
+                let agrees = reads[..n]
+                    .iter()
+                    .all(|&(narrow, e)| (mean - narrow).abs() <= FIELD_SIGNIFICANCE * e);
+                if !agrees {
+                    break;
+                }
+                chosen = Some((mean, error));
+            }
+            match chosen {
+                Some((mean, error)) => (mean - noise - FIELD_SIGNIFICANCE * error)
+                    .max(1e-6 * noise)
+                    .sqrt(),
+                None => floor,
+            }
         })
         .collect()
 }
@@ -537,5 +578,36 @@ mod tests {
         let far = mean_distance(&fit.positions, 20..40);
         assert!(near < sigma, "near the bump {near}");
         assert!(far < 0.3 * sigma, "far from the bump {far}");
+    }
+
+    #[test]
+    fn a_small_residual_the_whole_face_shares_is_kept_though_no_neighbourhood_alone_shows_it() {
+        let (sp, b) = positions_on_line(40);
+        let prior = FitPrior::new(&sp, b).unwrap().unwrap();
+        let sigma = 0.05;
+        // A wave of 2σ in y over the whole line, which no shape makes (shape 0 moves every
+        // bundle alike), and noise of σ in every coordinate (signs alternating at three rates).
+        // One marker spacing's neighbourhood holds too few markers to tell the wave's mean
+        // square (2σ²/3 a coordinate) from noise at 2 standard errors; the whole line can.
+        let truth: Vec<DVec3> = (0..b)
+            .map(|i| {
+                let wave = 2.0 * sigma * (std::f64::consts::TAU * i as f64 / b as f64).cos();
+                sp[i] + (sp[b + i] - sp[i]) * 0.5 + DVec3::new(0.0, wave, 0.0)
+            })
+            .collect();
+        let sign = |i: usize, rate: usize| if (i / rate) % 2 == 0 { sigma } else { -sigma };
+        let noisy: Vec<DVec3> = truth
+            .iter()
+            .enumerate()
+            .map(|(i, t)| *t + DVec3::new(sign(i, 1), sign(i, 2), sign(i, 4)))
+            .collect();
+        let fit = prior.fit(&noisy).unwrap();
+        let d = prior.denoise(&noisy, &fit, sigma).unwrap();
+        let wave_error =
+            |got: &[DVec3]| (0..b).map(|i| (got[i].y - truth[i].y).abs()).sum::<f64>() / b as f64;
+        let (kept, fitted) = (wave_error(&d), wave_error(&fit.positions));
+        // Read over the whole line about half of the wave is kept (0.54 of the fit's error);
+        // over one spacing's neighbourhood alone the targets stayed near the fit (0.90).
+        assert!(kept < 0.7 * fitted, "targets {kept}, fit {fitted}");
     }
 }
