@@ -45,8 +45,10 @@ pub struct FitPrior {
     rest: Vec<DVec3>,
     /// Shape displacements at the bundles, `S × B` (`[k * B + n]`, shape id k + 1).
     displacements: Vec<DVec3>,
-    /// Unit-amplitude correlation of the residual field between bundles (B × B).
-    correlation: Vec<f64>,
+    /// Weights of the residual field's windows between bundles (B × B, [`FIELD_WINDOWS`] each):
+    /// its unit-amplitude correlation, then the Gaussians of 2, 4 and 8 times its length
+    /// (each the previous one's fourth root), made once here rather than in every frame.
+    windows: Vec<[f64; FIELD_WINDOWS]>,
     /// The displacements' Gram matrix over every bundle (S × S), made on the first
     /// [`active_residuals`](Self::active_residuals) of a frame with every marker present.
     gram: OnceLock<Vec<f64>>,
@@ -84,12 +86,21 @@ impl FitPrior {
         }
         let scale = fit_scale(&a, s);
         let solver = BlendshapeSolver::new(a, 3 * b, s, FIT_L2 * scale, FIT_PENALTY * scale)?;
-        let correlation = correlation(&rest);
+        let windows = correlation(&rest)
+            .into_iter()
+            .map(|c| {
+                let mut w = [c; FIELD_WINDOWS];
+                for n in 1..FIELD_WINDOWS {
+                    w[n] = w[n - 1].sqrt().sqrt();
+                }
+                w
+            })
+            .collect();
         Ok(Some(FitPrior {
             solver,
             rest,
             displacements,
-            correlation,
+            windows,
             gram: OnceLock::new(),
         }))
     }
@@ -283,9 +294,9 @@ impl FitPrior {
             .map(|&i| (targets[i] - fit.positions[i]).to_array())
             .collect();
         let noise = sigma * sigma;
-        let deviation = field_deviations(&self.correlation, b, &present, &residual, noise);
+        let deviation = field_deviations(&self.windows, b, &present, &residual, noise);
         let covariance = |r: usize, c: usize| {
-            deviation[r] * deviation[c] * self.correlation[present[r] * b + present[c]]
+            deviation[r] * deviation[c] * self.windows[present[r] * b + present[c]][0]
         };
         let mut system = vec![0.0; n * n];
         for r in 0..n {
@@ -311,7 +322,7 @@ impl FitPrior {
 }
 
 /// The residual field's standard deviation at each present marker (`present`, rows of the B × B
-/// `correlation`; `residual` their fit residuals), read from the mean square of its neighbours'
+/// window weights `windows`; `residual` their fit residuals), read from the mean square of its neighbours'
 /// residuals (not its own: a spike on one marker is not a field its neighbours share) less the
 /// noise `noise` (σ²) and [`FIELD_SIGNIFICANCE`] standard errors of that mean under noise alone
 /// (σ² √(2/k) for k effective squared coordinates, `3 (Σw)² / Σw²`). Where nothing clears it
@@ -326,7 +337,7 @@ impl FitPrior {
 /// spread over the face (shapes that do not combine linearly) is read over the wide window,
 /// whose small standard error no longer hides it.
 fn field_deviations(
-    correlation: &[f64],
+    windows: &[[f64; FIELD_WINDOWS]],
     b: usize,
     present: &[usize],
     residual: &[[f64; 3]],
@@ -341,20 +352,15 @@ fn field_deviations(
     present
         .iter()
         .map(|&i| {
-            // Per window: Σ w q, Σ w, Σ w². A window twice as wide weighs by the correlation's
-            // fourth root (a Gaussian of twice the length); the last weighs all alike.
+            // Per window: Σ w q, Σ w, Σ w²; the last (the whole face) weighs all alike.
             let mut sums = [[0.0f64; 3]; READS];
             for (&j, q) in present.iter().zip(&square) {
                 if j == i {
                     continue;
                 }
-                let mut w = correlation[i * b + j];
+                let pair = &windows[i * b + j];
                 for (n, sum) in sums.iter_mut().enumerate() {
-                    if n == FIELD_WINDOWS {
-                        w = 1.0;
-                    } else if n > 0 {
-                        w = w.sqrt().sqrt();
-                    }
+                    let w = pair.get(n).copied().unwrap_or(1.0);
                     sum[0] += w * q;
                     sum[1] += w;
                     sum[2] += w * w;
