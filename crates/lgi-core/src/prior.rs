@@ -322,9 +322,9 @@ impl FitPrior {
 }
 
 /// The residual field's standard deviation at each present marker (`present`, rows of the B × B
-/// window weights `windows`; `residual` their fit residuals), read from the mean square of its neighbours'
-/// residuals (not its own: a spike on one marker is not a field its neighbours share) less the
-/// noise `noise` (σ²) and [`FIELD_SIGNIFICANCE`] standard errors of that mean under noise alone
+/// window weights `windows`; `residual` their fit residuals), read from the mean square of its
+/// neighbours' residuals (not its own: a spike on one marker is not a field its neighbours
+/// share) less the noise `noise` (σ²) and [`FIELD_SIGNIFICANCE`] standard errors of that mean under noise alone
 /// (σ² √(2/k) for k effective squared coordinates, `3 (Σw)² / Σw²`). Where nothing clears it
 /// the field has (almost) no variance there and the markers sit at the fit; the floor keeps
 /// the system regular.
@@ -347,7 +347,6 @@ fn field_deviations(
         .iter()
         .map(|r| (r[0] * r[0] + r[1] * r[1] + r[2] * r[2]) / 3.0)
         .collect();
-    let floor = (1e-6 * noise).sqrt();
     const READS: usize = FIELD_WINDOWS + 1;
     present
         .iter()
@@ -369,7 +368,7 @@ fn field_deviations(
             let mut reads = Vec::with_capacity(READS);
             for [sum, weight, weight_sq] in sums {
                 if weight_sq < f64::MIN_POSITIVE {
-                    // No present neighbour within reach: nothing to read there.
+                    // No present neighbour within reach of this window.
                     continue;
                 }
                 let error = noise * (2.0 / (3.0 * weight * weight / weight_sq)).sqrt();
@@ -385,12 +384,11 @@ fn field_deviations(
                 }
                 chosen = Some((mean, error));
             }
-            match chosen {
-                Some((mean, error)) => (mean - noise - FIELD_SIGNIFICANCE * error)
-                    .max(1e-6 * noise)
-                    .sqrt(),
-                None => floor,
-            }
+            // No window with a present neighbour: nothing shares this residual.
+            let variance = chosen.map_or(0.0, |(mean, error)| {
+                mean - noise - FIELD_SIGNIFICANCE * error
+            });
+            variance.max(1e-6 * noise).sqrt()
         })
         .collect()
 }
