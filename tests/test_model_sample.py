@@ -106,6 +106,14 @@ def test_too_many_missing_markers_raise_input_error_naming_the_frame(sample, sam
         sample_model.solve(frames)
 
 
+def test_a_refused_marker_noise_shows_its_error_and_no_progress_bar(sample, sample_model, capsys):  # type: ignore[no-untyped-def]
+    # The bar is on (quiet=False, several frames); the call is refused before it is drawn.
+    for bad, message in ((-1.0, "finite distance >= 0"), (float("nan"), "finite distance")):
+        with pytest.raises(lgi.InputError, match=message):
+            sample_model.solve(sample.performance[:3], marker_noise=bad, quiet=False)
+    assert capsys.readouterr().err == ""
+
+
 def test_marker_far_from_surface_raises_marker_error_naming_it(sample, sample_dataset):  # type: ignore[no-untyped-def]
     markers = sample.markers_rest.copy()
     markers[7] += np.array([0.0, 0.0, 5.0])

@@ -166,10 +166,22 @@ def _labels(marker_names: Sequence[str] | None, units: str | None) -> dict[str, 
     return out
 
 
+#: Seconds a solve's progress bar waits before it is drawn: the arguments are checked in the
+#: first moments of a call, and a call refused there should show its error, not "0/F".
+PROGRESS_DELAY = 0.5
+
+
 def _progress_bar(total: int, desc: str, quiet: bool) -> Any:
     from tqdm import tqdm
 
-    return tqdm(total=total, desc=desc, unit="frame", disable=quiet or total < 2, leave=False)
+    return tqdm(
+        total=total,
+        desc=desc,
+        unit="frame",
+        disable=quiet or total < 2,
+        leave=False,
+        delay=PROGRESS_DELAY,
+    )
 
 
 class Model:

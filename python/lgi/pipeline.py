@@ -33,7 +33,7 @@ from lgi.io.settings import SolveSettings
 from lgi.io.sink import FrameSink
 from lgi.io.topology import Topology, topology
 from lgi.local import estimate_local_fits
-from lgi.model import Model, estimate_marker_noise
+from lgi.model import PROGRESS_DELAY, Model, estimate_marker_noise
 from lgi.placement import ScaleFit, check_scale, describe_scale
 
 __all__ = [
@@ -854,7 +854,14 @@ def solve_file(
     first_frame: np.ndarray | None = None
     jaws: list[np.ndarray | None] = []
     try:
-        with tqdm(total=n, desc="lgi solve", unit="frame", disable=quiet, leave=False) as bar:
+        with tqdm(
+            total=n,
+            desc="lgi solve",
+            unit="frame",
+            disable=quiet,
+            leave=False,
+            delay=PROGRESS_DELAY,
+        ) as bar:
             for a, res in zip(range(0, n, size), chunks, strict=True):
                 b = min(n, a + size)
                 if first_frame is None:
