@@ -44,7 +44,16 @@ def by_recording(rows: list[dict[str, Any]]) -> dict[str, dict[str, dict[str, An
     return out
 
 
+#: The peers a TD has: the rig solve with the jaw as a joint and its residual corrective, and
+#: where a protocol has them (the scans'), the same with the weights unbounded.
+PEERS = (
+    "fit + jaw",
+    "fit + jaw + residual",
+    "fit + jaw (unbounded)",
+    "fit + jaw (unbounded) + residual",
+)
+
+
 def peer_ratio(means: dict[str, Any], method: str = "LGI") -> float:
-    """`method`'s mean error over the better of the two peers' (fit + jaw, and its
-    corrective)."""
-    return float(means[method] / min(means["fit + jaw"], means["fit + jaw + residual"]))
+    """`method`'s mean error over the best of the peers' the protocol ran (`PEERS`)."""
+    return float(means[method] / min(means[p] for p in PEERS if p in means))

@@ -79,6 +79,48 @@ def test_each_local_fit_is_the_minimum_of_its_windowed_objective_found_by_scipy(
         np.testing.assert_allclose(got[0, k], ref, rtol=0, atol=1e-6)
 
 
+def test_unbounded_local_fits_are_each_windows_ridge_solution_in_closed_form() -> None:
+    rng = np.random.default_rng(5)
+    b, s = 30, 6
+    rest = rng.uniform(-5, 5, size=(b, 3))
+    a = rng.standard_normal((3 * b, s))
+    truth = rng.uniform(-1.5, 2.5, size=s)  # far outside the box
+    target = (a @ truth + 0.05 * rng.standard_normal(3 * b)).reshape(1, b, 3)
+    got, kept = _lgi.LocalFits(a, rest, _lgi.FIT_L2, 0.0).solve(target, np.zeros((1, s)))
+    assert kept == 0
+    for k in range(b):
+        keep, g = _window(rest, k)
+        rows = (3 * keep[:, None] + np.arange(3)).ravel()
+        ga = a[rows] * np.sqrt(np.repeat(g, 3))[:, None]
+        gt = target.reshape(-1)[rows] * np.sqrt(np.repeat(g, 3))
+        l2 = _lgi.FIT_L2 * (ga**2).sum() / s
+        want = np.linalg.solve(ga.T @ ga + l2 * np.eye(s), ga.T @ gt)
+        np.testing.assert_allclose(got[0, k], want, rtol=0, atol=1e-8)
+
+
+def test_unbounded_local_fits_give_back_differences_of_shapes_the_bounded_ones_cannot(
+    solved,
+) -> None:  # type: ignore[no-untyped-def]
+    data, model, _, _ = solved
+    neutral = np.asarray(data.neutral)
+    shapes = np.asarray(data.shapes, dtype=np.float64)
+    theta = np.asarray(model.core.jaw()["shape_theta"])
+    still = np.flatnonzero(np.abs(theta).max(axis=1) == 0.0)  # shapes that do not turn the jaw
+    rng = np.random.default_rng(2)
+    pairs = rng.choice(still, size=(6, 2), replace=False)
+    # One shape less another: weights +1 and -1, a frame outside the [0, 1] box.
+    meshes = neutral[None] + shapes[pairs[:, 0]] - shapes[pairs[:, 1]]
+    frames = model.bundle_positions(meshes)
+    kw = {"marker_noise": 0.0, "quiet": True, "temporal": False}
+    free = model.solve(frames, local_fits="unbounded", **kw)
+    boxed = model.solve(frames, local_fits=True, **kw)
+    err_free = np.linalg.norm(free.vertices - meshes, axis=2).mean()
+    err_box = np.linalg.norm(boxed.vertices - meshes, axis=2).mean()
+    assert err_free < 0.2 * err_box, (err_free, err_box)
+    # Both pass through every marker.
+    assert free.bundle_residuals.max() < 1e-9 * model.diagonal
+
+
 def test_the_surface_passes_through_every_present_target_with_markers_missing(solved) -> None:  # type: ignore[no-untyped-def]
     _, model, frames, sigma = solved
     given = frames.copy()
@@ -142,7 +184,7 @@ def test_local_fits_without_marker_noise_or_with_jaw_bins_are_input_errors(solve
         model.solve(frames, quiet=True, local_fits=True)
     with pytest.raises(InputError, match="fit=False"):
         model.solve(frames, quiet=True, local_fits=True, marker_noise=0.01, fit=False)
-    with pytest.raises(InputError, match="True or False"):
+    with pytest.raises(InputError, match="True, False or 'unbounded'"):
         model.solve(frames, quiet=True, local_fits="yes", marker_noise=0.01)  # type: ignore[arg-type]
     binned = lgi.Model.build(data, sample.markers_rest, jaw_bins=2)
     with pytest.raises(InputError, match="jaw bins"):

@@ -80,6 +80,9 @@ def test_cli_scans_protocol_scores_every_method_on_both_recordings(tmp_path: Pat
     for rec in ("alex_rom_4", "jmtechart_myslate_3"):
         got = {k.split(": ", 1)[1]: v for k, v in means.items() if k.startswith(rec)}
         assert set(got) >= {"blendshape fit", "fit + jaw", "fit + jaw + residual", "LGI"}
+        assert set(got) >= {"fit + jaw (unbounded)", "fit + jaw (unbounded) + residual"}
+        # A scan's weight is no activation: without the box the local fits are closer.
+        assert got["LGI + local fits (unbounded)"] < got["LGI + local fits"]
         assert all(np.isfinite(v) and 0 < v < 1.0 for v in got.values())
         # Scans are whole faces: LGI's local geometry beats the plain blend of scans.
         assert got["LGI"] < got["blendshape fit"]

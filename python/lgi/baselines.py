@@ -44,6 +44,8 @@ __all__ = [
     "DisplacementInterpolation",
     "FitJaw",
     "FitJawResidual",
+    "FitJawUnbounded",
+    "FitJawUnboundedResidual",
     "LgiRbf",
     "vertex_uvs",
 ]
@@ -244,6 +246,44 @@ class FitJaw:
         return self._s.result(self._rig.skin(blend, theta), fr)
 
 
+class FitJawUnbounded(FitJaw):
+    """`FitJaw` with the weights not held to [0, 1]: the least-squares rig solve a dataset of
+    scans (a PCA-like model, whose weights are no activations) is solved with. Each frame's
+    markers, unskinned by the jaw pose `FitJaw` finds, are fitted by the unskinned shapes at the
+    markers with the fit's ridge (`FIT_L2` times the matrix's mean squared column norm) and no
+    bound; the blend is skinned by that pose."""
+
+    label: ClassVar[str] = "fit + jaw (unbounded)"
+
+    def __init__(self, model: Model, surface_tolerance: float = 0.02) -> None:
+        super().__init__(model, surface_tolerance)
+        jaw = model.core.jaw()
+        if jaw is None:
+            raise InputError("FitJawUnbounded needs a model built with a jaw rig")
+        self._bundle_jaw = np.asarray(jaw["bundle_weights"], dtype=np.float64)
+        # The shapes at the markers, rows 3b + d (B markers, 3 coordinates) by S columns.
+        at = self._s.sample(self._unskinned.astype(np.float64))
+        self._a = at.transpose(1, 2, 0).reshape(-1, at.shape[0])
+        self._ridge = _lgi.FIT_L2 * float(np.mean(np.sum(self._a**2, axis=0)))
+
+    def solve(self, frames: ArrayLike, *, quiet: bool = False, **_: Any) -> SolveResult:
+        fr = _frames(frames, self._s)
+        theta = self._model.solve(fr, jaw="fit", fit=True, quiet=True).jaw_theta
+        if theta is None:
+            raise InputError("FitJawUnbounded: the solve made no jaw pose")
+        unskinned = self._rig.unskin(np.nan_to_num(fr), theta, weights=self._bundle_jaw)
+        disp = (unskinned - self._s.rest[None]).reshape(len(fr), -1)
+        present = np.repeat(np.isfinite(fr).all(axis=2), 3, axis=1)
+        s = self._a.shape[1]
+        w = np.zeros((len(fr), s))
+        for f in range(len(fr)):
+            a = self._a[present[f]]
+            gram = a.T @ a + self._ridge * np.eye(s)
+            w[f] = np.linalg.solve(gram, a.T @ disp[f, present[f]])
+        blend = self._s.neutral[None] + np.einsum("fk,kvd->fvd", w, self._unskinned)
+        return self._s.result(self._rig.skin(blend, theta), fr)
+
+
 #: Smoothing candidates of `FitJawResidual`, times the median distance between markers.
 RESIDUAL_SMOOTHING = (0.0, 1e-2, 3e-2, 0.1, 0.3, 1.0, 3.0, 10.0, 30.0, 100.0, 1e3)
 #: Frames of a take (spread over it) whose left-out errors choose the smoothing.
@@ -406,3 +446,13 @@ class LgiRbf:
         spread = self._s.sample(verts)
         corr = self._s.rbf.interpolate(fr - spread)
         return self._s.result(verts + corr, fr, choices=ch)
+
+
+class FitJawUnboundedResidual(FitJawResidual):
+    """`FitJawResidual` on `FitJawUnbounded`: the unbounded rig solve followed by the
+    corrective of its marker residuals, its smoothing chosen the same way."""
+
+    label: ClassVar[str] = "fit + jaw (unbounded) + residual"
+
+    def __init__(self, peer: FitJawUnbounded, smoothing: ArrayLike | None = None) -> None:
+        super().__init__(peer, smoothing)

@@ -44,6 +44,7 @@ __all__ = [
     "LEFT_OUT_PER_FRAME",
     "LOOKS",
     "LOOK_SIGNIFICANCE",
+    "UNBOUNDED",
     "LocalFitsEstimate",
     "LocalPieces",
     "estimate_local_fits",
@@ -68,6 +69,22 @@ LOOK_SIGNIFICANCE = 2.33
 at the cumulative frames crosses it as often as one look crosses `lgi.detail.SIGNIFICANCE`
 (2.3 % one-sided; Pocock's boundary for three looks, 1977; simulated in
 tests/test_local_fits.py)."""
+
+
+UNBOUNDED = "unbounded"
+"""`local_fits=UNBOUNDED`: each window's weights are not held to [0, 1]. The box is a FACS rig's
+prior (a weight is an activation); a scan's weight in a window is no activation: a window of
+the face is matched by differences of scans as well as by sums (docs/concepts.md)."""
+
+
+def local_bounds(spec: object) -> bool | None:
+    """What a `local_fits` argument asks for: None (no local fits), True (weights held to [0, 1]
+    by the fit's penalty) or False (`UNBOUNDED`); an InputError for anything else."""
+    if isinstance(spec, (bool, np.bool_)):
+        return True if spec else None
+    if spec == UNBOUNDED:
+        return False
+    raise InputError(f"local_fits: expected True, False or {UNBOUNDED!r}, got {spec!r}")
 
 
 class LocalPieces:
@@ -125,6 +142,9 @@ class LocalPieces:
         a = at.reshape(3 * model.num_bundles, s_count)
         del unskinned
         self.fits = _lgi.LocalFits(a, self.rest, _lgi.FIT_L2, _lgi.FIT_PENALTY)
+        # Kept (3B x S doubles: 6 MB at 2,000 scans) for the unbounded fits, made when asked for.
+        self._a = a
+        self._unbounded: _lgi.LocalFits | None = None
         sw = model.core.sew_weights()
         v, b = self.neutral.shape[0], model.num_bundles
         sewing = sp.csr_matrix((sw["data"], sw["indices"], sw["indptr"]), shape=(v, b))
@@ -144,9 +164,19 @@ class LocalPieces:
             self.neutral[corners], self._corner_tris, bary
         )
 
-    def _fits(self, res: SolveResult) -> tuple[F64, F64, F64 | None]:
+    def fits_for(self, bounded: bool) -> _lgi.LocalFits:
+        """The windows' fits with weights held to [0, 1] (`bounded`) or not (`UNBOUNDED`: the
+        same ridge, no penalty)."""
+        if bounded:
+            return self.fits
+        if self._unbounded is None:
+            self._unbounded = _lgi.LocalFits(self._a, self.rest, _lgi.FIT_L2, 0.0)
+        return self._unbounded
+
+    def _fits(self, res: SolveResult, bounded: bool) -> tuple[F64, F64, F64 | None]:
         """The solve's targets (F, B, 3; NaN: missing), each frame's local weights per bundle
-        (F, B, q: over the shape basis where there is one) and the jaw poses."""
+        (F, B, q: over the shape basis where there is one; `bounded`: held to [0, 1]) and the
+        jaw poses."""
         if res.fit_weights is None:
             raise InputError("local fits need the solve's global fit: solve with marker_noise")
         missing = np.asarray(res.missing)
@@ -159,8 +189,9 @@ class LocalPieces:
         starts = np.asarray(res.fit_weights, dtype=np.float64)
         disp = unskinned - self.rest[None]
         # A chunk of frames per call, so Ctrl-C (seen between calls) stops a long take at once.
+        fits = self.fits_for(bounded)
         parts = [
-            self.fits.solve(disp[a : a + FITS_CHUNK], starts[a : a + FITS_CHUNK])
+            fits.solve(disp[a : a + FITS_CHUNK], starts[a : a + FITS_CHUNK])
             for a in range(0, disp.shape[0], FITS_CHUNK)
         ]
         weights = np.concatenate([w for w, _ in parts])
@@ -183,12 +214,12 @@ class LocalPieces:
             return blend
         return self.rig.skin(blend, theta, weights=jaw)
 
-    def surface(self, res: SolveResult, out: F64 | None = None) -> F64:
+    def surface(self, res: SolveResult, out: F64 | None = None, *, bounded: bool = True) -> F64:
         """The local fits' surface (F, V, 3) of a noise-aware solve `res` (its targets, jaw
-        poses and global fits), into `out` when given."""
+        poses and global fits), into `out` when given; `bounded`: as `fits_for`."""
         if np.asarray(res.missing).shape[0] == 0:
             return np.asarray(res.vertices, dtype=np.float64) if out is None else out
-        targets, weights, theta = self._fits(res)
+        targets, weights, theta = self._fits(res, bounded)
         blend = _blend(self.neutral, self.shapes, self._sew_rows, weights)
         posed = self._posed(blend, theta, None)
         misses = targets - self._bundle_positions(posed)
@@ -198,14 +229,14 @@ class LocalPieces:
         out[...] = result
         return out
 
-    def at_bundles(self, res: SolveResult) -> F64:
+    def at_bundles(self, res: SolveResult, *, bounded: bool = True) -> F64:
         """Every bundle's position (F, B, 3) on the local fits' surface of `res`: the same
         values as `surface` sampled at the bundles (to round-off), made on the bundles'
         triangles' vertices only (what `estimate_local_fits` compares)."""
         b = self.rest.shape[0]
         if np.asarray(res.missing).shape[0] == 0:
             return np.empty((0, b, 3))
-        targets, weights, theta = self._fits(res)
+        targets, weights, theta = self._fits(res, bounded)
         neutral = self.neutral[self._corners]
         blend = _blend(neutral, self._corner_shapes, self._corner_sew_rows, weights)
         posed = self._posed(blend, theta, self._corner_jaw)

@@ -21,7 +21,7 @@ from lgi.dataset import Dataset
 from lgi.detail import blend_detail, check_detail_weight
 from lgi.errors import InputError, LgiWarning
 from lgi.jaw import JawRig, estimate_rig
-from lgi.local import local_pieces
+from lgi.local import local_bounds, local_pieces
 
 
 def _bin_edges(jaw_bins: int | ArrayLike, shape_theta: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -354,7 +354,7 @@ class Model:
         marker_noise: float | None = None,
         fit: bool | None = None,
         detail_weight: float | None = None,
-        local_fits: bool = False,
+        local_fits: bool | str = False,
     ) -> SolveResult:
         """Solves frames (F, B, 3) of marker positions (a single (B, 3) frame gives F = 1).
         NaN rows are missing markers. With `temporal` (a performance), frames are solved in
@@ -404,7 +404,10 @@ class Model:
         put through the solve's targets by a biharmonic corrective. Needs `marker_noise` (its
         targets, poses and global fits) and a model without jaw bins. With a dataset of
         whole-face scans it is the most accurate path measured (docs/results.md); it costs a
-        fit per bundle and frame (docs/performance.md)."""
+        fit per bundle and frame (docs/performance.md). Each window's weights are held to
+        [0, 1] like the global fit's (a FACS rig's activations); `local_fits="unbounded"`
+        (`lgi.local.UNBOUNDED`) drops that bound, for a dataset of scans whose differences
+        match a region as well as their sums (docs/concepts.md)."""
         w = None if detail_weight is None else check_detail_weight(detail_weight)
         self._check_local(local_fits, marker_noise, fit)
         arr = np.asarray(frames)
@@ -424,11 +427,11 @@ class Model:
             )
         return self._finish(res, arr, w, local_fits)
 
-    def _check_local(self, local_fits: bool, marker_noise: float | None, fit: bool | None) -> None:
+    def _check_local(
+        self, local_fits: bool | str, marker_noise: float | None, fit: bool | None
+    ) -> None:
         """InputError where `local_fits` cannot be given (before any solving)."""
-        if not isinstance(local_fits, (bool, np.bool_)):
-            raise InputError(f"local_fits: expected True or False, got {local_fits!r}")
-        if not local_fits:
+        if local_bounds(local_fits) is None:
             return
         if marker_noise is None:
             raise InputError(
@@ -444,18 +447,23 @@ class Model:
             )
 
     def _finish(
-        self, res: SolveResult, frames: NDArray[Any], weight: float | None, local_fits: bool
+        self,
+        res: SolveResult,
+        frames: NDArray[Any],
+        weight: float | None,
+        local_fits: bool | str,
     ) -> SolveResult:
         """`res` with its local fits' surface (`local_fits`) and then `weight` of its detail."""
-        if local_fits:
-            res = self._with_local(res, frames)
+        bounded = local_bounds(local_fits)
+        if bounded is not None:
+            res = self._with_local(res, frames, bounded)
         return res if weight is None or weight == 1.0 else self._with_detail(res, frames, weight)
 
-    def _with_local(self, res: SolveResult, frames: NDArray[Any]) -> SolveResult:
+    def _with_local(self, res: SolveResult, frames: NDArray[Any], bounded: bool) -> SolveResult:
         """`res` with the local fits' surface (`lgi.local`) in place in its vertices (an `out`
         buffer receives it), its marker positions and residuals measured again."""
         v = np.asarray(res.vertices)
-        local_pieces(self).surface(res, out=v)
+        local_pieces(self).surface(res, out=v, bounded=bounded)
         return self._remeasured(res, v, frames)
 
     def _remeasured(
@@ -499,7 +507,7 @@ class Model:
         marker_noise: float | None = None,
         fit: bool | None = None,
         detail_weight: float | None = None,
-        local_fits: bool = False,
+        local_fits: bool | str = False,
     ) -> Iterator[SolveResult]:
         """Solves `frames` (F, B, 3; a numpy memmap keeps a long take on disk) `chunk` frames
         at a time and yields each chunk's `SolveResult`, so memory stays flat however long

@@ -276,7 +276,7 @@ class Recommended:
         model: Model,
         marker_noise: float | None,
         detail: str | None = None,
-        local_fits: bool = False,
+        local_fits: bool | str = False,
     ) -> None:
         self.model, self.marker_noise, self.detail = model, marker_noise, detail
         self.local_fits = local_fits
@@ -301,6 +301,8 @@ class Recommended:
 
 #: The name of LGI with local fits (`Model.solve(local_fits=True)`) among compared methods.
 LOCAL_FITS = "LGI + local fits"
+#: The same with unbounded local fits (`Model.solve(local_fits="unbounded")`).
+LOCAL_FITS_UNBOUNDED = "LGI + local fits (unbounded)"
 
 
 def capture_methods(
@@ -342,6 +344,24 @@ def capture_methods(
     if recommended.jaw_bins is None:
         methods[LOCAL_FITS] = Recommended(recommended, sigma, local_fits=True)
     return methods
+
+
+def _add_unbounded(methods: dict[str, Solver]) -> None:
+    """The scans protocol's unbounded methods beside the bounded ones: a scan's weight is no
+    activation, so the peers' fit without its [0, 1] bound is a peer too (`FitJawUnbounded`
+    and its corrective), and LGI's local fits without it (`LOCAL_FITS_UNBOUNDED`)."""
+    from lgi.baselines import FitJawUnbounded, FitJawUnboundedResidual
+
+    lgi = methods["LGI"]
+    if not isinstance(lgi, Recommended) or lgi.model.jaw_rig is None:
+        return
+    peer = FitJawUnbounded(lgi.model)
+    methods[FitJawUnbounded.label] = peer
+    methods[FitJawUnboundedResidual.label] = FitJawUnboundedResidual(peer)
+    if lgi.model.jaw_bins is None:
+        methods[LOCAL_FITS_UNBOUNDED] = Recommended(
+            lgi.model, lgi.marker_noise, local_fits="unbounded"
+        )
 
 
 def _performance(
@@ -494,6 +514,7 @@ def scans_protocol(
         )
         given = None if rig is None or session.theta is None else (rig, session.theta)
         methods = capture_methods(session.dataset, markers, sigma, jaw=given)
+        _add_unbounded(methods)
         shares.clear()
         got = capture(methods, take.frames, take.truth, take.jaw_open, region, bundles_fit)
         share = shares.get("LGI", float("nan"))
