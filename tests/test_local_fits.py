@@ -201,8 +201,14 @@ def test_solve_settings_record_local_fits_and_older_files_read_as_without() -> N
     assert back == s and back.local_fits and "local fits" in back.describe("cm")
     old = '{"detail_weight": null, "jaw": "auto", "marker_noise": 0.02, "version": "0.1.0"}'
     assert SolveSettings.from_json(old, "x.npz").local_fits is False
-    with pytest.raises(InputError, match="local_fits must be true or false"):
+    with pytest.raises(InputError, match="local_fits must be true, false or 'unbounded'"):
         SolveSettings.from_json(old[:-1] + ', "local_fits": 1}', "x.npz")
+    free = SolveSettings.of(
+        has_jaw_rig=True, jaw="auto", marker_noise=0.0, detail_weight=None, local_fits="unbounded"
+    )
+    back = SolveSettings.from_json(free.to_json(), "x.npz")
+    assert back == free and back.local_fits == "unbounded"
+    assert "unbounded local fits" in back.describe("cm")
 
 
 def _c3d_take(tmp_path: Path, sample) -> tuple[Path, Path, Path, np.ndarray]:  # type: ignore[no-untyped-def]
@@ -361,45 +367,56 @@ def test_local_fits_at_the_bundles_are_the_surface_sampled_there(solved) -> None
     )
 
 
-def test_the_local_fits_estimate_is_the_left_out_markers_distance_both_ways(solved) -> None:  # type: ignore[no-untyped-def]
-    from lgi.local import LEFT_OUT_PER_FRAME, LOOK_SIGNIFICANCE, LOOKS
+def test_the_local_fits_estimate_is_the_left_out_markers_distance_every_way(solved) -> None:  # type: ignore[no-untyped-def]
+    from lgi.local import LEFT_OUT_PER_FRAME, LOOK_SIGNIFICANCE_EACH, LOOKS, UNBOUNDED
 
     _, model, frames, sigma = solved
     per_look = 2
     got = lgi.estimate_local_fits(frames, model, marker_noise=sigma, frames_used=per_look)
-    # Brute force: each left-out row solved on its own, the local fits' whole surface.
+    # Brute force: each left-out row solved on its own, the local fits' whole surface, bounded
+    # and unbounded.
     present = np.isfinite(frames).all(axis=2)
     picked = np.unique(np.linspace(0, len(frames) - 1, LOOKS * per_look).round().astype(int))
-    saved_at, d_without, d_with = {}, {}, {}
+    saved_at: dict[int, np.ndarray] = {}
+    dist: dict[int, np.ndarray] = {}
+    kinds = (False, True, UNBOUNDED)
     for ordinal, f in enumerate(picked):
         markers = np.flatnonzero(present[f])
         n, step = markers.size, markers.size / LEFT_OUT_PER_FRAME
         shift = int(ordinal * step / len(picked))
         chosen = markers[(np.floor(np.arange(LEFT_OUT_PER_FRAME) * step).astype(int) + shift) % n]
-        a_f, b_f = [], []
-        for i in chosen:
+        d = np.zeros((len(chosen), 3))
+        for row, i in enumerate(chosen):
             x = frames[f : f + 1].copy()
             x[0, i] = np.nan
-            plain = model.solve(x, marker_noise=sigma, quiet=True, temporal=False)
-            local = model.solve(x, marker_noise=sigma, quiet=True, temporal=False, local_fits=True)
-            a_f.append(np.linalg.norm(np.asarray(plain.bundle_positions)[0, i] - frames[f, i]))
-            b_f.append(np.linalg.norm(np.asarray(local.bundle_positions)[0, i] - frames[f, i]))
-        d_without[ordinal], d_with[ordinal] = a_f, b_f
-        saved_at[ordinal] = np.mean(a_f) - np.mean(b_f)
-    # The looks: every LOOKS-th picked frame joins at its look; stop when significant or < 0.
-    use, read = False, []
+            for kind, local in enumerate(kinds):
+                res = model.solve(
+                    x, marker_noise=sigma, quiet=True, temporal=False, local_fits=local
+                )
+                d[row, kind] = np.linalg.norm(np.asarray(res.bundle_positions)[0, i] - frames[f, i])
+        dist[ordinal] = d
+        saved_at[ordinal] = d[:, 0].mean() - d[:, 1:].mean(axis=0)
+    # The looks: every LOOKS-th picked frame joins at its look; a kind is used when its saving
+    # is significant (of two, the larger); stop then or when both savings are < 0.
+    choice: bool | str = False
+    read: list[int] = []
     for look in range(LOOKS):
         read += [o for o in range(len(picked)) if o % LOOKS == look]
         s = np.array([saved_at[o] for o in read])
-        if s.mean() > LOOK_SIGNIFICANCE * s.std(ddof=1) / np.sqrt(s.size):
-            use = True
+        mean, se = s.mean(axis=0), s.std(axis=0, ddof=1) / np.sqrt(len(read))
+        crossed = mean > LOOK_SIGNIFICANCE_EACH * se
+        if crossed.any():
+            best = int(np.argmax(np.where(crossed, mean, -np.inf)))
+            choice = (True, UNBOUNDED)[best]
             break
-        if s.mean() < 0:
+        if (mean < 0).all():
             break
-    assert got.use is use
+    assert got.local_fits == choice
     assert got.frames == len(read) and got.left_out == len(read) * LEFT_OUT_PER_FRAME
-    np.testing.assert_allclose(got.error_without, np.mean([d_without[o] for o in read]), rtol=1e-9)
-    np.testing.assert_allclose(got.error_with, np.mean([d_with[o] for o in read]), rtol=1e-6)
+    all_read = np.vstack([dist[o] for o in read]).mean(axis=0)
+    np.testing.assert_allclose(got.error_without, all_read[0], rtol=1e-9)
+    np.testing.assert_allclose(got.error_with, all_read[1], rtol=1e-6)
+    np.testing.assert_allclose(got.error_unbounded, all_read[2], rtol=1e-6)
     with pytest.raises(InputError, match="frames_used must be >= 1, got -1"):
         lgi.estimate_local_fits(frames, model, marker_noise=sigma, frames_used=-1)
 
@@ -418,6 +435,23 @@ def test_the_looks_boundary_is_crossed_by_chance_as_often_as_one_look_at_signifi
     assert abs(crossed - one_look) < 0.0006, (crossed, one_look)
     # A single look at the same boundary would be stricter: the looks are what it pays for.
     assert (z[:, 0] > LOOK_SIGNIFICANCE).mean() < 0.7 * one_look
+
+
+def test_two_kinds_of_local_fits_are_chosen_by_chance_no_more_often_than_one_kind() -> None:
+    from scipy.stats import norm
+
+    from lgi.detail import SIGNIFICANCE
+    from lgi.local import LOOK_SIGNIFICANCE_EACH, LOOKS
+
+    # Two kinds with no saving, their looks' statistics as independent random walks (the least
+    # favourable case for Bonferroni: correlated kinds cross together, less often in all).
+    steps = np.random.default_rng(6).standard_normal((1_000_000, 2, LOOKS))
+    z = np.cumsum(steps, axis=2) / np.sqrt(np.arange(1, LOOKS + 1))
+    either = (z > LOOK_SIGNIFICANCE_EACH).any(axis=(1, 2)).mean()
+    one_kind = (z[:, 0] > LOOK_SIGNIFICANCE_EACH).any(axis=1).mean()
+    one_look = norm.sf(SIGNIFICANCE)
+    assert abs(one_kind - one_look / 2) < 0.0004, (one_kind, one_look)
+    assert either <= one_look + 0.0004, (either, one_look)
 
 
 def test_the_local_fits_estimate_says_what_it_cannot_read() -> None:
@@ -447,14 +481,15 @@ def test_cli_local_fits_auto_says_its_choice_and_records_it(
     assert cli.main([*argv, "--marker-noise", "0.01"]) == 0
     err = capsys.readouterr().err
     line = next(ln for ln in err.splitlines() if "local fits" in ln and "left out" in ln)
-    used = "local fits used" in line
+    said: bool | str = "unbounded" if "used, unbounded" in line else "local fits used" in line
     with np.load(out) as z:
         settings = SolveSettings.from_json(str(z["solve_settings"]), "o.npz")
     model = lgi.Model.load(model_path)
     x = (frames * 10.0).astype(np.float32).astype(np.float64) / 10.0
-    assert settings.local_fits is lgi.estimate_local_fits(x, model, marker_noise=0.01).use is used
+    est = lgi.estimate_local_fits(x, model, marker_noise=0.01)
+    assert settings.local_fits == est.local_fits == said
     with pytest.raises(SystemExit) as stop:  # argparse's own errors
         cli.main(["solve", str(model_path), str(take), "-o", str(out), "--local-fits", "maybe"])
     err = capsys.readouterr().err
     assert stop.value.code == 2 and "lgi: error:" in err, err
-    assert "--local-fits: expected no value or 'auto', got 'maybe'" in err, err
+    assert "--local-fits: expected no value, 'unbounded' or 'auto', got 'maybe'" in err, err

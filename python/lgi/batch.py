@@ -28,7 +28,7 @@ from lgi.io import takes as take_files
 from lgi.io.atomic import atomic_path, writable_folder
 from lgi.io.settings import SolveSettings
 from lgi.io.topology import topology
-from lgi.local import estimate_local_fits
+from lgi.local import UNBOUNDED, estimate_local_fits
 from lgi.model import Model, estimate_marker_noise
 
 __all__ = [
@@ -142,8 +142,10 @@ def _check_options(options: dict[str, Any]) -> str:
     if detail is not None and detail != "auto":
         check_detail_weight(detail)
     local = options.get("local_fits", False)
-    if not isinstance(local, bool) and local != "auto":
-        raise InputError(f"solve_shots: local_fits must be True, False or 'auto', got {local!r}")
+    if not isinstance(local, bool) and local not in ("auto", UNBOUNDED):
+        raise InputError(
+            f"solve_shots: local_fits must be True, False, 'unbounded' or 'auto', got {local!r}"
+        )
     if local and noise is None:
         raise InputError(
             "solve_shots: local_fits needs marker_noise (a number, 'auto', or 0 for clean "
@@ -286,7 +288,7 @@ def solve_shot(
         if opts.get("local_fits") == "auto":
             opts["local_fits"] = estimate_local_fits(
                 x, m, marker_noise=opts["marker_noise"], jaw=opts.get("jaw", "auto")
-            ).use
+            ).local_fits
         if opts.get("detail_weight") == "auto":
             opts["detail_weight"] = estimate_detail_weight(
                 x, m, marker_noise=opts.get("marker_noise"), jaw=opts.get("jaw", "auto")
@@ -302,7 +304,7 @@ def solve_shot(
             jaw=opts.get("jaw", "auto"),
             marker_noise=opts.get("marker_noise"),
             detail_weight=opts.get("detail_weight"),
-            local_fits=bool(opts.get("local_fits", False)),
+            local_fits=opts.get("local_fits", False),
         )
         written = write_solved(
             kind, Path(dest), topo, res, m, fps=rate, start=start, quiet=True, settings=settings

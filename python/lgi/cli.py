@@ -261,21 +261,22 @@ def _detail_weight_option(text: str) -> float | str | None:
 
 
 def _local_fits_option(text: str) -> str:
-    """`--local-fits auto` (the flag alone is True)."""
-    if text != "auto":
-        raise argparse.ArgumentTypeError(f"expected no value or 'auto', got {text!r}")
+    """`--local-fits auto` or `--local-fits unbounded` (the flag alone is True)."""
+    if text not in ("auto", "unbounded"):
+        raise argparse.ArgumentTypeError(f"expected no value, 'unbounded' or 'auto', got {text!r}")
     return text
 
 
 def _add_local_fits_argument(parser: argparse.ArgumentParser, help: str) -> None:
-    """`--local-fits [auto]` (`lgi solve`, `lgi batch`): False, True, or 'auto'."""
+    """`--local-fits [auto|unbounded]` (`lgi solve`, `lgi batch`): False, True, 'unbounded' or
+    'auto'."""
     parser.add_argument(
         "--local-fits",
         nargs="?",
         const=True,
         default=False,
         type=_local_fits_option,
-        metavar="auto",
+        metavar="auto|unbounded",
         help=help,
     )
 
@@ -462,7 +463,9 @@ def _add_pipeline_commands(sub: Any) -> None:
         s,
         "each bundle's piece is the blendshape fit of the markers around it (needs "
         "--marker-noise; the most accurate with a dataset of whole-face scans, docs/results.md); "
-        "auto: used when they predict the take's own markers, left out one at a time, better",
+        "unbounded: the windows' weights not held to [0, 1] (for scans, not a FACS rig); "
+        "auto: used, and which kind, when they predict the take's own markers, left out one "
+        "at a time, better",
     )
     s.add_argument("--frames", default=None, metavar="A:B", help="take frames A..B-1 (0-based)")
     s.add_argument("--fps", type=float, default=None, help="frame rate (default: the take's)")

@@ -44,6 +44,7 @@ __all__ = [
     "LEFT_OUT_PER_FRAME",
     "LOOKS",
     "LOOK_SIGNIFICANCE",
+    "LOOK_SIGNIFICANCE_EACH",
     "UNBOUNDED",
     "LocalFitsEstimate",
     "LocalPieces",
@@ -68,6 +69,12 @@ LOOK_SIGNIFICANCE = 2.33
 """The standard errors a look's mean saving must exceed: with no saving, one of `LOOKS` looks
 at the cumulative frames crosses it as often as one look crosses `lgi.detail.SIGNIFICANCE`
 (2.3 % one-sided; Pocock's boundary for three looks, 1977; simulated in
+tests/test_local_fits.py)."""
+
+LOOK_SIGNIFICANCE_EACH = 2.59
+"""The same boundary where both kinds of local fits are read (bounded and `UNBOUNDED`): each
+is held to half the chance (Bonferroni), so with no saving in either one of them is chosen by
+chance at most as often as one kind at `LOOK_SIGNIFICANCE` (simulated in
 tests/test_local_fits.py)."""
 
 
@@ -291,17 +298,28 @@ class LocalFitsEstimate:
     """Whether local fits predict a take's left-out markers better (`estimate_local_fits`)."""
 
     use: bool
-    """Local fits saved left-out distance by more than `LOOK_SIGNIFICANCE` standard errors at
-    one of the looks."""
+    """Local fits saved left-out distance by more than `LOOK_SIGNIFICANCE_EACH` standard errors
+    at one of the looks."""
     error_without: float
     """Mean distance (data units) of the left-out markers from the recommended solve's surface
     without them."""
     error_with: float
-    """The same with local fits."""
+    """The same with local fits (held to [0, 1])."""
     left_out: int
     """Markers left out (one per solved frame)."""
     frames: int
     """Take frames they were left out of (`frames_used` a look)."""
+    unbounded: bool = False
+    """The local fits used are `UNBOUNDED` ones (they saved more, and significantly)."""
+    error_unbounded: float = float("nan")
+    """The left-out distance with unbounded local fits."""
+
+    @property
+    def local_fits(self) -> bool | str:
+        """What to pass as `Model.solve(local_fits=...)`: False, True or `UNBOUNDED`."""
+        if not self.use:
+            return False
+        return UNBOUNDED if self.unbounded else True
 
 
 def estimate_local_fits(
@@ -312,16 +330,17 @@ def estimate_local_fits(
     jaw: str | None = "auto",
     frames_used: int = DETAIL_FRAMES,
 ) -> LocalFitsEstimate:
-    """Whether local fits suit a take (F, B, 3; NaN rows missing) and `model`, read from the
-    take's own markers: on `frames_used` frames spread over the take, up to
+    """Whether local fits suit a take (F, B, 3; NaN rows missing) and `model`, and which kind,
+    read from the take's own markers: on `frames_used` frames spread over the take, up to
     `LEFT_OUT_PER_FRAME` present markers each are left out in turn, predicted by the solve with
-    `marker_noise` and `jaw` without them, and by the same solve with local fits. Local fits
-    are used when the left-out distance they save, averaged per frame, exceeds
-    `LOOK_SIGNIFICANCE` standard errors of that mean over the frames read; when it does not and
-    is positive, `frames_used` more frames are read, up to `LOOKS` looks (a clear case costs
-    one look, a close one up to three). With the performer's own scans they usually save it;
-    with a generic dataset driven by another face they usually cost it (docs/results.md). Each
-    look solves about `frames_used` x 30 frames, with their local fits (not their meshes)."""
+    `marker_noise` and `jaw` without them, and by the same solve with local fits, bounded and
+    `UNBOUNDED`. A kind of local fits is used when the left-out distance it saves, averaged per
+    frame, exceeds `LOOK_SIGNIFICANCE_EACH` standard errors of that mean over the frames read
+    (of two that do, the one saving more); when neither does and one saving is positive,
+    `frames_used` more frames are read, up to `LOOKS` looks (a clear case costs one look, a
+    close one up to three). With the performer's own scans they usually save it; with a
+    generic dataset driven by another face they usually cost it (docs/results.md). Each look
+    solves about `frames_used` x 30 frames, with their local fits (not their meshes)."""
     arr = np.asarray(frames, dtype=np.float64)
     b = model.num_bundles
     if arr.ndim != 3 or arr.shape[0] == 0 or arr.shape[1:] != (b, 3):
@@ -336,8 +355,9 @@ def estimate_local_fits(
     look_of_frame = np.arange(out.picked.size) % LOOKS
     look_of_row = look_of_frame[np.searchsorted(out.picked, out.frame)]
     err_without = np.full(out.marker.size, np.nan)
-    err_with = np.full(out.marker.size, np.nan)
-    use = False
+    # Left-out distances with local fits: bounded (column 0) and unbounded (column 1).
+    err_with = np.full((out.marker.size, 2), np.nan)
+    use, unbounded = False, False
     for look in range(LOOKS):
         rows = np.flatnonzero(look_of_row == look)
         if rows.size == 0:
@@ -350,24 +370,32 @@ def estimate_local_fits(
             err_without[rows[at]] = np.linalg.norm(
                 np.asarray(solved.bundle_positions)[k, left] - given, axis=1
             )
-            err_with[rows[at]] = np.linalg.norm(pieces.at_bundles(solved)[k, left] - given, axis=1)
+            for kind, bounded in enumerate((True, False)):
+                on = pieces.at_bundles(solved, bounded=bounded)
+                err_with[rows[at], kind] = np.linalg.norm(on[k, left] - given, axis=1)
         # Distances, as the results report errors: squared ones let a few markers (the lips',
         # whose left-out errors are the largest) decide the choice.
         seen = out.picked[look_of_frame <= look]
-        saved = np.array([(err_without - err_with)[out.frame == f].mean() for f in seen])
-        if saved.size < 2:
+        saved = np.array(
+            [(err_without[:, None] - err_with)[out.frame == f].mean(axis=0) for f in seen]
+        )
+        if saved.shape[0] < 2:
             continue
-        mean, spread = saved.mean(), saved.std(ddof=1) / np.sqrt(saved.size)
-        if mean > LOOK_SIGNIFICANCE * spread:
-            use = True
+        mean = saved.mean(axis=0)
+        spread = saved.std(axis=0, ddof=1) / np.sqrt(saved.shape[0])
+        crossed = mean > LOOK_SIGNIFICANCE_EACH * spread
+        if crossed.any():
+            use, unbounded = True, bool(crossed[1] and (not crossed[0] or mean[1] > mean[0]))
             break
-        if mean < 0:
+        if (mean < 0).all():
             break
     done = np.isfinite(err_without)
     return LocalFitsEstimate(
         use=use,
         error_without=float(err_without[done].mean()),
-        error_with=float(err_with[done].mean()),
+        error_with=float(err_with[done, 0].mean()),
         left_out=int(done.sum()),
         frames=int(np.unique(out.frame[done]).size),
+        unbounded=unbounded,
+        error_unbounded=float(err_with[done, 1].mean()),
     )

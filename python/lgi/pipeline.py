@@ -32,7 +32,7 @@ from lgi.io.result import Result, read_result_npz
 from lgi.io.settings import SolveSettings
 from lgi.io.sink import FrameSink
 from lgi.io.topology import Topology, topology
-from lgi.local import estimate_local_fits
+from lgi.local import UNBOUNDED, estimate_local_fits
 from lgi.model import PROGRESS_DELAY, Model, estimate_marker_noise
 from lgi.placement import ScaleFit, check_scale, describe_scale
 
@@ -197,22 +197,24 @@ def local_fits_choice(
     sigma: float | None,
     jaw: str | None,
     say: Say,
-) -> bool:
-    """`--local-fits`: True, False, or 'auto' (read from the take's own markers left out,
-    `lgi.estimate_local_fits`, and said with its numbers)."""
+) -> bool | str:
+    """`--local-fits`: True, False, 'unbounded' or 'auto' (read from the take's own markers
+    left out, `lgi.estimate_local_fits`, and said with its numbers)."""
     check_local_fits_noise(spec, sigma)
-    if spec is True or spec is False:
+    if spec is True or spec is False or spec == UNBOUNDED:
         return spec
     if spec != "auto":
-        raise InputError(f"--local-fits {spec!r}: expected no value or 'auto'")
+        raise InputError(f"--local-fits {spec!r}: expected no value, 'unbounded' or 'auto'")
     assert sigma is not None  # checked above
     est = estimate_local_fits(frames, model, marker_noise=sigma, jaw=jaw)
+    chosen = {False: "not used", True: "used", UNBOUNDED: "used, unbounded"}[est.local_fits]
+    unit = model.units or "model units"
     say(
-        f"local fits {'used' if est.use else 'not used'}: {est.left_out} markers left out one "
-        f"at a time on {est.frames} frames are {est.error_with:.4g} {model.units or 'model units'} "
-        f"from the surface with them, {est.error_without:.4g} without"
+        f"local fits {chosen}: {est.left_out} markers left out one at a time on {est.frames} "
+        f"frames are {est.error_with:.4g} {unit} from the surface with them "
+        f"({est.error_unbounded:.4g} unbounded), {est.error_without:.4g} without"
     )
-    return est.use
+    return est.local_fits
 
 
 def detail_weight(
@@ -791,7 +793,7 @@ def solve_file(
         f"({100 * missing.mean():.1f}% samples missing)"
         + ("" if sigma is None else f", marker noise {sigma:.4g}")
         + ("" if weight is None else f", detail weight {weight:.3f}")
-        + (", local fits" if local_fits else "")
+        + {False: "", True: ", local fits", UNBOUNDED: ", unbounded local fits"}[local_fits]
     )
     topo = topology(m.dataset)
     start = t.first_frame + rng.start

@@ -21,14 +21,15 @@ class SolveSettings:
     """`marker_noise`: sigma per coordinate in the model's units (None: the exact
     interpolation); `jaw`: the jaw pose mode ('fit', 'track', ...; None without a jaw rig);
     `detail_weight`: the weight in [0, 1] (None: all of the dataset's detail); `version`:
-    lgi's version that solved; `local_fits`: the pieces were local fits (`lgi.local`; files
-    written before it was recorded read as False)."""
+    lgi's version that solved; `local_fits`: the pieces were local fits (`lgi.local`; True,
+    or 'unbounded' for `lgi.local.UNBOUNDED` ones; files written before it was recorded read as
+    False)."""
 
     marker_noise: float | None
     jaw: str | None
     detail_weight: float | None
     version: str
-    local_fits: bool = False
+    local_fits: bool | str = False
 
     @staticmethod
     def of(
@@ -37,7 +38,7 @@ class SolveSettings:
         jaw: object,
         marker_noise: float | None,
         detail_weight: float | None,
-        local_fits: bool = False,
+        local_fits: bool | str = False,
     ) -> SolveSettings:
         """The settings of a `Model.solve` call: `jaw` as passed (None, the rest pose, is
         recorded as 'rest' and a pose array as 'given'; None for a model without a jaw rig),
@@ -55,7 +56,7 @@ class SolveSettings:
             jaw=mode,
             detail_weight=None if detail_weight is None else float(detail_weight),
             version=__version__,
-            local_fits=bool(local_fits),
+            local_fits=local_fits if local_fits == "unbounded" else bool(local_fits),
         )
 
     def to_json(self) -> str:
@@ -85,8 +86,10 @@ class SolveSettings:
                 "(optionally) local_fits"
             )
         local = d.get("local_fits", False)
-        if not isinstance(local, bool):
-            raise InputError(f"{where}: local_fits must be true or false, got {local!r}")
+        if not isinstance(local, bool) and local != "unbounded":
+            raise InputError(
+                f"{where}: local_fits must be true, false or 'unbounded', got {local!r}"
+            )
 
         def number(key: str) -> float | None:
             x = d[key]
@@ -122,5 +125,7 @@ class SolveSettings:
             if self.detail_weight is None
             else f"detail weight {self.detail_weight:.3f}"
         )
-        pieces = ", local fits" if self.local_fits else ""
+        pieces = {False: "", True: ", local fits", "unbounded": ", unbounded local fits"}[
+            self.local_fits
+        ]
         return f"{noise}, {jaw}, {detail}{pieces} (lgi {self.version or 'version unknown'})"
