@@ -2,11 +2,12 @@
 own takes: the scans protocol's (K = 120 scans from the other recording, 200 frames, 2 %
 dropouts, seed 3), the capture protocol's with a quarter of ICT's shapes held out, and the
 lomo protocol's real takes (AnimFace, retargeted; their noise estimated). Each line: the take,
-whether local fits are chosen, and the left-out markers' mean distance (cm) from the surface
-with and without them; docs/results.md puts the choices beside the protocols' errors.
+whether local fits are chosen and which kind, and the left-out markers' mean distance (cm)
+from the surface with them (bounded, unbounded) and without; docs/results.md puts the
+choices beside the protocols' errors.
 
 Usage: python scripts/local_fits_choices.py [--layouts markers_120 random:160:1 random:140:7]
-[--sigma 0 0.02 0.05] (from the checkout, ../shared beside it)
+[--sigma 0 0.02 0.05] [--held-out 0 0.25] [--no-lomo] (from the checkout, ../shared beside it)
 """
 
 from __future__ import annotations
@@ -41,8 +42,9 @@ def layout(name: str, dataset: lgi.Dataset) -> np.ndarray:
 
 
 def line(what: str, est: lgi.LocalFitsEstimate, seconds: float) -> None:
+    chosen = {False: "no", True: "yes", "unbounded": "unbounded"}[est.local_fits]
     print(
-        f"| {what} | {'yes' if est.use else 'no'} | {est.error_with:.4f} | "
+        f"| {what} | {chosen} | {est.error_with:.4f} | {est.error_unbounded:.4f} | "
         f"{est.error_without:.4f} | {seconds:.1f} |",
         flush=True,
     )
@@ -52,6 +54,8 @@ def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--layouts", nargs="+", default=["markers_120", "random:160:1", "random:140:7"])
     ap.add_argument("--sigma", type=float, nargs="+", default=[0.0, 0.02, 0.05])
+    ap.add_argument("--held-out", type=float, nargs="+", default=[0.0, 0.25])
+    ap.add_argument("--no-lomo", action="store_true", help="skip the real takes")
     args = ap.parse_args()
     warnings.filterwarnings("ignore")
     d = ict.load_dataset(ICT)
@@ -59,9 +63,12 @@ def main() -> None:
     hinge = HingeJaw.fit(d, ict.lower_teeth())
     rig, theta = _auto_rig(d)
     curves = [read_livelinkface(r).for_dataset(d.names) for r in RECORDINGS]
-    print("| take | local fits chosen | left out, with (cm) | without (cm) | seconds |")
-    print("|---|---|---|---|---|")
-    for held in (0.0, 0.25):
+    print(
+        "| take | local fits chosen | left out, with (cm) | with unbounded (cm) | without (cm) "
+        "| seconds |"
+    )
+    print("|---|---|---|---|---|---|")
+    for held in args.held_out:
         for name in args.layouts if held == 0.0 else ["markers_120"]:
             markers = layout(name, d)
             for i, perf in enumerate(curves):
@@ -88,6 +95,8 @@ def main() -> None:
                     line(
                         f"{kind}, {name}, {NAMES[i]}, sigma {sigma}", est, time.perf_counter() - t0
                     )
+    if args.no_lomo:
+        return
     lm = np.asarray(ict.load_landmarks(ICT), dtype=np.int64)
     marks = {n: int(lm[k]) for n, k in lomo.ANIMFACE_IBUG.items()}
     face = ict.face_triangles(d)
