@@ -383,6 +383,16 @@ def vertex_uvs(dataset: Dataset) -> F64:
     return out
 
 
+class FitJawUnboundedResidual(FitJawResidual):
+    """`FitJawResidual` on `FitJawUnbounded`: the unbounded rig solve followed by the
+    corrective of its marker residuals, its smoothing chosen the same way."""
+
+    label: ClassVar[str] = "fit + jaw (unbounded) + residual"
+
+    def __init__(self, peer: FitJawUnbounded, smoothing: ArrayLike | None = None) -> None:
+        super().__init__(peer, smoothing)
+
+
 class LgiRbf:
     """LGI's per-bundle choices spread by normalised Gaussian weights over UV distance, then a
     biharmonic RBF correction of the residuals so the result interpolates every marker.
@@ -446,13 +456,3 @@ class LgiRbf:
         spread = self._s.sample(verts)
         corr = self._s.rbf.interpolate(fr - spread)
         return self._s.result(verts + corr, fr, choices=ch)
-
-
-class FitJawUnboundedResidual(FitJawResidual):
-    """`FitJawResidual` on `FitJawUnbounded`: the unbounded rig solve followed by the
-    corrective of its marker residuals, its smoothing chosen the same way."""
-
-    label: ClassVar[str] = "fit + jaw (unbounded) + residual"
-
-    def __init__(self, peer: FitJawUnbounded, smoothing: ArrayLike | None = None) -> None:
-        super().__init__(peer, smoothing)
