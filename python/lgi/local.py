@@ -44,7 +44,6 @@ __all__ = [
     "LEFT_OUT_PER_FRAME",
     "LOOKS",
     "LOOK_SIGNIFICANCE",
-    "LOOK_SIGNIFICANCE_EACH",
     "UNBOUNDED",
     "LocalFitsEstimate",
     "LocalPieces",
@@ -70,13 +69,6 @@ LOOK_SIGNIFICANCE = 2.33
 at the cumulative frames crosses it as often as one look crosses `lgi.detail.SIGNIFICANCE`
 (2.3 % one-sided; Pocock's boundary for three looks, 1977; simulated in
 tests/test_local_fits.py)."""
-
-LOOK_SIGNIFICANCE_EACH = 2.59
-"""The same boundary where both kinds of local fits are read (bounded and `UNBOUNDED`): each
-is held to half the chance (Bonferroni), so with no saving in either one of them is chosen by
-chance at most as often as one kind at `LOOK_SIGNIFICANCE` (simulated in
-tests/test_local_fits.py)."""
-
 
 UNBOUNDED = "unbounded"
 """`local_fits=UNBOUNDED`: each window's weights are not held to [0, 1]. The box is a FACS rig's
@@ -298,8 +290,8 @@ class LocalFitsEstimate:
     """Whether local fits predict a take's left-out markers better (`estimate_local_fits`)."""
 
     use: bool
-    """Local fits saved left-out distance by more than `LOOK_SIGNIFICANCE_EACH` standard errors
-    at one of the looks."""
+    """Local fits saved left-out distance by more than `LOOK_SIGNIFICANCE` standard errors at
+    one of the looks."""
     error_without: float
     """Mean distance (data units) of the left-out markers from the recommended solve's surface
     without them."""
@@ -310,7 +302,8 @@ class LocalFitsEstimate:
     frames: int
     """Take frames they were left out of (`frames_used` a look)."""
     unbounded: bool = False
-    """The local fits used are `UNBOUNDED` ones (they saved more, and significantly)."""
+    """The local fits used are `UNBOUNDED` ones (bounded ones saved significantly, and these
+    saved more, significantly too)."""
     error_unbounded: float = float("nan")
     """The left-out distance with unbounded local fits."""
 
@@ -334,11 +327,13 @@ def estimate_local_fits(
     read from the take's own markers: on `frames_used` frames spread over the take, up to
     `LEFT_OUT_PER_FRAME` present markers each are left out in turn, predicted by the solve with
     `marker_noise` and `jaw` without them, and by the same solve with local fits, bounded and
-    `UNBOUNDED`. A kind of local fits is used when the left-out distance it saves, averaged per
-    frame, exceeds `LOOK_SIGNIFICANCE_EACH` standard errors of that mean over the frames read
-    (of two that do, the one saving more); when neither does and one saving is positive,
-    `frames_used` more frames are read, up to `LOOKS` looks (a clear case costs one look, a
-    close one up to three). With the performer's own scans they usually save it; with a
+    `UNBOUNDED`. Local fits are used when the left-out distance bounded ones save, averaged
+    per frame, exceeds `LOOK_SIGNIFICANCE` standard errors of that mean over the frames read;
+    then unbounded ones are used instead if they save more and their saving clears the same
+    boundary (a fixed sequence of two tests: neither kind is chosen by chance more often than
+    one). When bounded ones do not clear it and either saving is positive, `frames_used` more
+    frames are read, up to `LOOKS` looks (a clear case costs one look, a close one up to
+    three). With the performer's own scans they usually save it; with a
     generic dataset driven by another face they usually cost it (docs/results.md). Each look
     solves about `frames_used` x 30 frames, with their local fits (not their meshes)."""
     arr = np.asarray(frames, dtype=np.float64)
@@ -383,9 +378,11 @@ def estimate_local_fits(
             continue
         mean = saved.mean(axis=0)
         spread = saved.std(axis=0, ddof=1) / np.sqrt(saved.shape[0])
-        crossed = mean > LOOK_SIGNIFICANCE_EACH * spread
-        if crossed.any():
-            use, unbounded = True, bool(crossed[1] and (not crossed[0] or mean[1] > mean[0]))
+        crossed = mean > LOOK_SIGNIFICANCE * spread
+        # A fixed sequence: bounded local fits first (the FACS rig's prior, the cautious kind),
+        # unbounded ones only after them, so each test keeps the whole 2.3 %.
+        if crossed[0]:
+            use, unbounded = True, bool(crossed[1] and mean[1] > mean[0])
             break
         if (mean < 0).all():
             break
