@@ -181,6 +181,10 @@ cli.entry()
 """
 
 
+def _sigint_default() -> None:
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 @pytest.mark.parametrize("when", ["solve", "write"])
 def test_a_real_sigint_ends_the_command_with_one_line_and_exit_130(
     files, tmp_path: Path, when: str
@@ -197,6 +201,9 @@ def test_a_real_sigint_ends_the_command_with_one_line_and_exit_130(
         capture_output=True,
         text=True,
         timeout=300,
+        # A process started in the background by a shell inherits SIGINT ignored, and Python
+        # then keeps ignoring it: the driver starts from the default, as a terminal's command.
+        preexec_fn=_sigint_default,
     )
     assert p.returncode == 130, p.stderr
     assert p.stderr == "lgi: interrupted\n"
