@@ -258,8 +258,7 @@ class FitJawUnbounded(FitJaw):
     def __init__(self, model: Model, surface_tolerance: float = 0.02) -> None:
         super().__init__(model, surface_tolerance)
         jaw = model.core.jaw()
-        if jaw is None:
-            raise InputError("FitJawUnbounded needs a model built with a jaw rig")
+        assert jaw is not None  # FitJaw refuses a model without a jaw rig
         self._bundle_jaw = np.asarray(jaw["bundle_weights"], dtype=np.float64)
         # The shapes at the markers, rows 3b + d (B markers, 3 coordinates) by S columns.
         at = self._s.sample(self._unskinned.astype(np.float64))
@@ -388,9 +387,6 @@ class FitJawUnboundedResidual(FitJawResidual):
     corrective of its marker residuals, its smoothing chosen the same way."""
 
     label: ClassVar[str] = "fit + jaw (unbounded) + residual"
-
-    def __init__(self, peer: FitJawUnbounded, smoothing: ArrayLike | None = None) -> None:
-        super().__init__(peer, smoothing)
 
 
 class LgiRbf:

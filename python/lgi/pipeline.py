@@ -29,7 +29,7 @@ from lgi.io.atomic import check_writable, existing_sequence, refuse_existing
 from lgi.io.frame import DATASET_NPZ, OutputFrame, output_frame
 from lgi.io.paths import output_file
 from lgi.io.result import Result, read_result_npz
-from lgi.io.settings import SolveSettings
+from lgi.io.settings import LOCAL_FITS_WORDS, SolveSettings
 from lgi.io.sink import FrameSink
 from lgi.io.topology import Topology, topology
 from lgi.local import UNBOUNDED, estimate_local_fits
@@ -793,7 +793,7 @@ def solve_file(
         f"({100 * missing.mean():.1f}% samples missing)"
         + ("" if sigma is None else f", marker noise {sigma:.4g}")
         + ("" if weight is None else f", detail weight {weight:.3f}")
-        + {False: "", True: ", local fits", UNBOUNDED: ", unbounded local fits"}[local_fits]
+        + LOCAL_FITS_WORDS[local_fits]
     )
     topo = topology(m.dataset)
     start = t.first_frame + rng.start

@@ -13,7 +13,14 @@ from typing import Any
 
 from lgi.errors import InputError
 
-__all__ = ["SolveSettings"]
+__all__ = ["LOCAL_FITS_WORDS", "SolveSettings"]
+
+#: How a solve's `local_fits` reads at the end of a line that describes it.
+LOCAL_FITS_WORDS: dict[bool | str, str] = {
+    False: "",
+    True: ", local fits",
+    "unbounded": ", unbounded local fits",
+}
 
 
 @dataclass(frozen=True)
@@ -125,7 +132,5 @@ class SolveSettings:
             if self.detail_weight is None
             else f"detail weight {self.detail_weight:.3f}"
         )
-        pieces = {False: "", True: ", local fits", "unbounded": ", unbounded local fits"}[
-            self.local_fits
-        ]
+        pieces = LOCAL_FITS_WORDS[self.local_fits]
         return f"{noise}, {jaw}, {detail}{pieces} (lgi {self.version or 'version unknown'})"
