@@ -373,52 +373,71 @@ def test_the_local_fits_estimate_is_the_left_out_markers_distance_every_way(solv
     _, model, frames, sigma = solved
     per_look = 2
     got = lgi.estimate_local_fits(frames, model, marker_noise=sigma, frames_used=per_look)
-    # Brute force: each left-out row solved on its own, the local fits' whole surface, bounded
-    # and unbounded.
+    free = lgi.estimate_local_fits(
+        frames, model, marker_noise=sigma, frames_used=per_look, fit=UNBOUNDED
+    )
+    # Brute force: each left-out row solved on its own, the local fits' whole surface: the
+    # solve, bounded local fits, unbounded ones, and the solve with the unbounded global fit.
     present = np.isfinite(frames).all(axis=2)
     picked = np.unique(np.linspace(0, len(frames) - 1, LOOKS * per_look).round().astype(int))
-    saved_at: dict[int, np.ndarray] = {}
     dist: dict[int, np.ndarray] = {}
-    kinds = (False, True, UNBOUNDED)
+    kinds = ((None, False), (None, True), (None, UNBOUNDED), (UNBOUNDED, False))
     for ordinal, f in enumerate(picked):
         markers = np.flatnonzero(present[f])
         n, step = markers.size, markers.size / LEFT_OUT_PER_FRAME
         shift = int(ordinal * step / len(picked))
         chosen = markers[(np.floor(np.arange(LEFT_OUT_PER_FRAME) * step).astype(int) + shift) % n]
-        d = np.zeros((len(chosen), 3))
+        d = np.zeros((len(chosen), len(kinds)))
         for row, i in enumerate(chosen):
             x = frames[f : f + 1].copy()
             x[0, i] = np.nan
-            for kind, local in enumerate(kinds):
+            for kind, (fit, local) in enumerate(kinds):
                 res = model.solve(
-                    x, marker_noise=sigma, quiet=True, temporal=False, local_fits=local
+                    x, marker_noise=sigma, quiet=True, temporal=False, local_fits=local, fit=fit
                 )
                 d[row, kind] = np.linalg.norm(np.asarray(res.bundle_positions)[0, i] - frames[f, i])
         dist[ordinal] = d
-        saved_at[ordinal] = d[:, 0].mean() - d[:, 1:].mean(axis=0)
-    # The looks: every LOOKS-th picked frame joins at its look; local fits are used when the
-    # bounded ones' saving is significant, unbounded ones when theirs is too and larger; stop
-    # then or when both savings are < 0.
-    choice: bool | str = False
-    read: list[int] = []
-    for look in range(LOOKS):
-        read += [o for o in range(len(picked)) if o % LOOKS == look]
-        s = np.array([saved_at[o] for o in read])
-        mean, se = s.mean(axis=0), s.std(axis=0, ddof=1) / np.sqrt(len(read))
-        crossed = mean > LOOK_SIGNIFICANCE * se
-        if crossed[0]:
-            choice = UNBOUNDED if crossed[1] and mean[1] > mean[0] else True
-            break
-        if (mean < 0).all():
-            break
+
+    def rule(base: int, first: int, second: int | None) -> tuple[bool | str, list[int]]:
+        """The looks: every LOOKS-th picked frame joins at its look; local fits (`first`) are
+        used when their saving over `base` is significant, `second` (unbounded) instead when
+        its saving is too and larger; stop then or when the first saving is < 0."""
+        read: list[int] = []
+        for look in range(LOOKS):
+            read += [o for o in range(len(picked)) if o % LOOKS == look]
+            s = np.array([dist[o][:, base].mean() - dist[o].mean(axis=0) for o in read])
+            mean, se = s.mean(axis=0), s.std(axis=0, ddof=1) / np.sqrt(len(read))
+            crossed = mean > LOOK_SIGNIFICANCE * se
+            if crossed[first]:
+                if second is None:
+                    return UNBOUNDED, read
+                bigger = crossed[second] and mean[second] > mean[first]
+                return (UNBOUNDED if bigger else True), read
+            if mean[first] < 0:
+                break
+        return False, read
+
+    choice, read = rule(0, 1, 2)
     assert got.local_fits == choice
     assert got.frames == len(read) and got.left_out == len(read) * LEFT_OUT_PER_FRAME
     all_read = np.vstack([dist[o] for o in read]).mean(axis=0)
     np.testing.assert_allclose(got.error_without, all_read[0], rtol=1e-9)
     np.testing.assert_allclose(got.error_with, all_read[1], rtol=1e-6)
-    np.testing.assert_allclose(got.error_unbounded, all_read[2], rtol=1e-6)
+    if choice:
+        np.testing.assert_allclose(got.error_unbounded, all_read[2], rtol=1e-6)
+    else:  # unbounded ones are read only once bounded ones have saved
+        assert np.isnan(got.error_unbounded)
+    # With the unbounded global fit: its solve against unbounded local fits alone.
+    choice, read = rule(3, 2, None)
+    assert free.local_fits == choice and free.frames == len(read)
+    all_read = np.vstack([dist[o] for o in read]).mean(axis=0)
+    np.testing.assert_allclose(free.error_without, all_read[3], rtol=1e-9)
+    np.testing.assert_allclose(free.error_unbounded, all_read[2], rtol=1e-6)
+    assert np.isnan(free.error_with)
     with pytest.raises(InputError, match="frames_used must be >= 1, got -1"):
         lgi.estimate_local_fits(frames, model, marker_noise=sigma, frames_used=-1)
+    with pytest.raises(InputError, match="fit: expected None, True or 'unbounded', got 'free'"):
+        lgi.estimate_local_fits(frames, model, marker_noise=sigma, fit="free")
 
 
 def test_the_looks_boundary_is_crossed_by_chance_as_often_as_one_look_at_significance() -> None:

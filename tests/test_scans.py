@@ -83,6 +83,8 @@ def test_cli_scans_protocol_scores_every_method_on_both_recordings(tmp_path: Pat
         assert set(got) >= {"fit + jaw (unbounded)", "fit + jaw (unbounded) + residual"}
         # A scan's weight is no activation: without the box the local fits are closer.
         assert got["LGI + local fits (unbounded)"] < got["LGI + local fits"]
+        # And the recommended call with the unbounded global fit is closer than with the box.
+        assert got["LGI (unbounded fit)"] < got["LGI"]
         assert all(np.isfinite(v) and 0 < v < 1.0 for v in got.values())
         # Scans are whole faces: LGI's local geometry beats the plain blend of scans.
         assert got["LGI"] < got["blendshape fit"]

@@ -431,11 +431,14 @@ class Model:
         fit: bool | None = None,
         marker_noise: float | None = None,
         previous: SolveState | None = None,
+        unbounded_fit: bool = False,
     ) -> SolveResult:
         """Solves (F, B, 3) frames (vertices into `out` if given); ``jaw`` is ``"auto"``,
         ``"fit"``, ``"track"``, (F, 3) poses or None (rest); ``fit`` offers the global fit as a
         candidate (None: exactly when ``marker_noise`` is given), ``marker_noise`` (data units)
-        solves noise-aware, ``previous`` (a temporal solve's ``state``) continues that solve."""
+        solves noise-aware, ``previous`` (a temporal solve's ``state``) continues that solve,
+        ``unbounded_fit`` fits the frame's weights without the [0, 1] box (at the pose the
+        boxed fit refined)."""
     def fit_residuals(
         self, frames: ArrayLike, jaw: str | ArrayLike | None = None
     ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:

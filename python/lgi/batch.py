@@ -146,6 +146,9 @@ def _check_options(options: dict[str, Any]) -> str:
         raise InputError(
             f"solve_shots: local_fits must be True, False, 'unbounded' or 'auto', got {local!r}"
         )
+    fit = options.get("fit")
+    if not (fit is None or isinstance(fit, bool) or fit == UNBOUNDED):
+        raise InputError(f"solve_shots: fit must be True, False, None or 'unbounded', got {fit!r}")
     if local and noise is None:
         raise InputError(
             "solve_shots: local_fits needs marker_noise (a number, 'auto', or 0 for clean "
@@ -287,11 +290,19 @@ def solve_shot(
             opts["marker_noise"] = estimate_marker_noise(x, m)
         if opts.get("local_fits") == "auto":
             opts["local_fits"] = estimate_local_fits(
-                x, m, marker_noise=opts["marker_noise"], jaw=opts.get("jaw", "auto")
+                x,
+                m,
+                marker_noise=opts["marker_noise"],
+                jaw=opts.get("jaw", "auto"),
+                fit=opts.get("fit"),
             ).local_fits
         if opts.get("detail_weight") == "auto":
             opts["detail_weight"] = estimate_detail_weight(
-                x, m, marker_noise=opts.get("marker_noise"), jaw=opts.get("jaw", "auto")
+                x,
+                m,
+                marker_noise=opts.get("marker_noise"),
+                jaw=opts.get("jaw", "auto"),
+                fit=opts.get("fit"),
             )
         if kind == "usd" and rate is None:
             raise InputError("the take has no frame rate; a USD point cache needs fps=")
@@ -305,6 +316,7 @@ def solve_shot(
             marker_noise=opts.get("marker_noise"),
             detail_weight=opts.get("detail_weight"),
             local_fits=opts.get("local_fits", False),
+            unbounded_fit=opts.get("fit") == UNBOUNDED,
         )
         written = write_solved(
             kind, Path(dest), topo, res, m, fps=rate, start=start, quiet=True, settings=settings

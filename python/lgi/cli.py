@@ -91,6 +91,7 @@ def _cmd_solve(args: argparse.Namespace) -> int:
         noise=args.marker_noise,
         detail=args.detail_weight,
         local_fits=args.local_fits,
+        unbounded_fit=args.unbounded_fit,
         frames=args.frames,
         fps=args.fps,
         allow_missing=args.allow_missing,
@@ -210,6 +211,8 @@ def _cmd_batch(args: argparse.Namespace) -> int:
     if args.local_fits:
         pipeline.check_local_fits_noise(args.local_fits, args.marker_noise)
         options["local_fits"] = args.local_fits
+    if args.unbounded_fit:
+        options["fit"] = "unbounded"
     if args.jaw != "auto":
         options["jaw"] = None if args.jaw == "rest" else args.jaw
     model = pipeline.existing_file(args.model, "MODEL")
@@ -281,6 +284,17 @@ def _add_local_fits_argument(parser: argparse.ArgumentParser, help: str) -> None
     )
 
 
+def _add_unbounded_fit_argument(parser: argparse.ArgumentParser) -> None:
+    """`--unbounded-fit` (`lgi solve`, `lgi batch`): `Model.solve(fit="unbounded")`."""
+    parser.add_argument(
+        "--unbounded-fit",
+        action="store_true",
+        help="the frame's global fit without holding its weights to [0, 1]: for a dataset of "
+        "whole-face scans (a scan's weight is no activation), not a FACS rig; implied by "
+        "--local-fits unbounded",
+    )
+
+
 def _marker_noise_option(text: str) -> float | str | None:
     """`lgi batch --marker-noise`: a sigma >= 0, 'auto' (per take) or 'none'."""
     return _number_auto_or_none(text, _non_negative, "a number >= 0 (model units)")
@@ -343,6 +357,7 @@ def _add_batch_command(sub: Any) -> None:
     _add_local_fits_argument(
         b, "as lgi solve --local-fits (needs --marker-noise; auto: chosen per take)"
     )
+    _add_unbounded_fit_argument(b)
     b.add_argument(
         "--jaw",
         choices=list(pipeline.JAW_POSES),
@@ -463,10 +478,12 @@ def _add_pipeline_commands(sub: Any) -> None:
         s,
         "each bundle's piece is the blendshape fit of the markers around it (needs "
         "--marker-noise; the most accurate with a dataset of whole-face scans, docs/results.md); "
-        "unbounded: the windows' weights not held to [0, 1] (for scans, not a FACS rig); "
+        "unbounded: the windows' and the global fit's weights not held to [0, 1] (for scans, "
+        "not a FACS rig); "
         "auto: used, and which kind, when they predict the take's own markers, left out one "
         "at a time, better",
     )
+    _add_unbounded_fit_argument(s)
     s.add_argument("--frames", default=None, metavar="A:B", help="take frames A..B-1 (0-based)")
     s.add_argument("--fps", type=float, default=None, help="frame rate (default: the take's)")
     s.add_argument(

@@ -121,9 +121,10 @@ def estimate_detail_weight(
     marker_noise: float | None = None,
     jaw: str | None = "auto",
     frames_used: int = DETAIL_FRAMES,
+    fit: bool | str | None = None,
 ) -> float:
     """The detail weight of a take (F, B, 3; NaN rows missing) for `model` solved with
-    `marker_noise` and `jaw` (as the take will be solved): on up to `frames_used` frames
+    `marker_noise`, `jaw` and `fit` (as the take will be solved): on up to `frames_used` frames
     spread over the take, every present marker left out in turn (frames with at least one
     more marker than the solve needs), predicted by the solve without it and by the smooth
     part through the others; the least-squares weight of the two, clipped to [0, 1]. It is
@@ -138,7 +139,7 @@ def estimate_detail_weight(
     out = leave_markers_out(arr, frames_used, what="detail weight")
     pick, batch, left = out.picked, out.frames, out.marker
     pos = np.empty(batch.shape)
-    for rows, solved in solved_in_chunks(model, out, jaw=jaw, marker_noise=marker_noise):
+    for rows, solved in solved_in_chunks(model, out, jaw=jaw, marker_noise=marker_noise, fit=fit):
         pos[rows] = np.asarray(solved.bundle_positions)
     rest = _rest(model)
     gone = np.asarray(~np.isfinite(batch).all(axis=2))

@@ -88,15 +88,26 @@ def leave_markers_out(
 
 
 def solved_in_chunks(
-    model: Model, rows: LeftOut, *, jaw: str | None, marker_noise: float | None
+    model: Model,
+    rows: LeftOut,
+    *,
+    jaw: str | None,
+    marker_noise: float | None,
+    fit: bool | str | None = None,
 ) -> Iterator[tuple[slice, SolveResult]]:
     """`rows`' frames solved as independent frames (`temporal=False`, as the take would be
-    with `jaw` and `marker_noise`), `SOLVE_ROWS` at a time: each chunk's rows and result."""
+    with `jaw`, `marker_noise` and `fit`), `SOLVE_ROWS` at a time: each chunk's rows and
+    result."""
     for a in range(0, rows.marker.size, SOLVE_ROWS):
         part = slice(a, a + SOLVE_ROWS)
         yield (
             part,
             model.solve(
-                rows.frames[part], temporal=False, jaw=jaw, marker_noise=marker_noise, quiet=True
+                rows.frames[part],
+                temporal=False,
+                jaw=jaw,
+                marker_noise=marker_noise,
+                fit=fit,
+                quiet=True,
             ),
         )

@@ -296,7 +296,7 @@ class LocalFitsEstimate:
     """Mean distance (data units) of the left-out markers from the recommended solve's surface
     without them."""
     error_with: float
-    """The same with local fits (held to [0, 1])."""
+    """The same with local fits (held to [0, 1]; NaN where only unbounded ones were read)."""
     left_out: int
     """Markers left out (one per solved frame)."""
     frames: int
@@ -305,7 +305,8 @@ class LocalFitsEstimate:
     """The local fits used are `UNBOUNDED` ones (bounded ones saved significantly, and these
     saved more, significantly too)."""
     error_unbounded: float = float("nan")
-    """The left-out distance with unbounded local fits."""
+    """The left-out distance with unbounded local fits (and the unbounded global fit); NaN
+    where bounded ones did not save (not read)."""
 
     @property
     def local_fits(self) -> bool | str:
@@ -322,20 +323,25 @@ def estimate_local_fits(
     marker_noise: float,
     jaw: str | None = "auto",
     frames_used: int = DETAIL_FRAMES,
+    fit: bool | str | None = None,
 ) -> LocalFitsEstimate:
     """Whether local fits suit a take (F, B, 3; NaN rows missing) and `model`, and which kind,
     read from the take's own markers: on `frames_used` frames spread over the take, up to
     `LEFT_OUT_PER_FRAME` present markers each are left out in turn, predicted by the solve with
-    `marker_noise` and `jaw` without them, and by the same solve with local fits, bounded and
-    `UNBOUNDED`. Local fits are used when the left-out distance bounded ones save, averaged
-    per frame, exceeds `LOOK_SIGNIFICANCE` standard errors of that mean over the frames read;
-    then unbounded ones are used instead if they save more and their saving clears the same
-    boundary (a fixed sequence of two tests: neither kind is chosen by chance more often than
-    one). When bounded ones do not clear it and either saving is positive, `frames_used` more
-    frames are read, up to `LOOKS` looks (a clear case costs one look, a close one up to
-    three). With the performer's own scans they usually save it; with a
-    generic dataset driven by another face they usually cost it (docs/results.md). Each look
-    solves about `frames_used` x 30 frames, with their local fits (not their meshes)."""
+    `marker_noise` and `jaw` without them, and by the same solve with bounded local fits.
+    They are used when the left-out distance they save, averaged per frame, exceeds
+    `LOOK_SIGNIFICANCE` standard errors of that mean over the frames read; then the same rows
+    are solved with `UNBOUNDED` local fits (and the unbounded global fit they start from), used
+    instead if they save more and their saving clears the same boundary (a fixed sequence of two
+    tests: neither kind is chosen by chance more often than one). When bounded ones do not
+    clear it and their saving is positive, `frames_used` more frames are read, up to `LOOKS`
+    looks (a clear case costs one look, a close one up to three). With the performer's own
+    scans they usually save it; with a generic dataset driven by another face they usually
+    cost it (docs/results.md). Each look solves about `frames_used` x 30 frames, with their
+    local fits (not their meshes); reading unbounded ones solves those rows once more.
+    `fit=UNBOUNDED` (the take is solved with the unbounded global fit, `Model.solve(fit=...)`):
+    the solve without local fits is that one, and only unbounded local fits are read (one test
+    at the same boundary)."""
     arr = np.asarray(frames, dtype=np.float64)
     b = model.num_bundles
     if arr.ndim != 3 or arr.shape[0] == 0 or arr.shape[1:] != (b, 3):
@@ -350,41 +356,64 @@ def estimate_local_fits(
     look_of_frame = np.arange(out.picked.size) % LOOKS
     look_of_row = look_of_frame[np.searchsorted(out.picked, out.frame)]
     err_without = np.full(out.marker.size, np.nan)
-    # Left-out distances with local fits: bounded (column 0) and unbounded (column 1).
+    # Left-out distances with local fits: bounded (column 0) and unbounded (column 1, read only
+    # once bounded ones have saved: the second test of the sequence).
     err_with = np.full((out.marker.size, 2), np.nan)
+
+    only_unbounded = fit == UNBOUNDED
+    if not (only_unbounded or fit is None or fit is True):
+        raise InputError(f"fit: expected None, True or {UNBOUNDED!r}, got {fit!r}")
+
+    def distances(rows: NDArray[np.int64], kind: int, base: bool) -> None:
+        """The left-out distances of `rows` with local fits of `kind` (column of `err_with`:
+        0 bounded, 1 unbounded, on the solve with the unbounded global fit); with `base`, the
+        solve's own (without them) too."""
+        part = out.subset(rows)
+        for at, solved in solved_in_chunks(
+            model, part, jaw=jaw, marker_noise=marker_noise, fit=UNBOUNDED if kind else None
+        ):
+            k = np.arange(solved.missing.shape[0])
+            left = part.marker[at]
+            given = part.given[at]
+            if base:
+                err_without[rows[at]] = np.linalg.norm(
+                    np.asarray(solved.bundle_positions)[k, left] - given, axis=1
+                )
+            on = pieces.at_bundles(solved, bounded=kind == 0)
+            err_with[rows[at], kind] = np.linalg.norm(on[k, left] - given, axis=1)
+
+    def savings(kind: int, seen: NDArray[np.int64]) -> tuple[float, float]:
+        """The mean over the frames `seen` of each frame's mean saving, and its standard
+        error. Distances, as the results report errors: squared ones let a few markers (the
+        lips', whose left-out errors are the largest) decide the choice."""
+        saved = np.array([(err_without - err_with[:, kind])[out.frame == f].mean() for f in seen])
+        return float(saved.mean()), float(saved.std(ddof=1) / np.sqrt(saved.size))
+
     use, unbounded = False, False
     for look in range(LOOKS):
         rows = np.flatnonzero(look_of_row == look)
         if rows.size == 0:
             break
-        part = out.subset(rows)
-        for at, solved in solved_in_chunks(model, part, jaw=jaw, marker_noise=marker_noise):
-            k = np.arange(solved.missing.shape[0])
-            left = part.marker[at]
-            given = part.given[at]
-            err_without[rows[at]] = np.linalg.norm(
-                np.asarray(solved.bundle_positions)[k, left] - given, axis=1
-            )
-            for kind, bounded in enumerate((True, False)):
-                on = pieces.at_bundles(solved, bounded=bounded)
-                err_with[rows[at], kind] = np.linalg.norm(on[k, left] - given, axis=1)
-        # Distances, as the results report errors: squared ones let a few markers (the lips',
-        # whose left-out errors are the largest) decide the choice.
+        first = 1 if only_unbounded else 0
+        distances(rows, first, True)
         seen = out.picked[look_of_frame <= look]
-        saved = np.array(
-            [(err_without[:, None] - err_with)[out.frame == f].mean(axis=0) for f in seen]
-        )
-        if saved.shape[0] < 2:
+        if seen.size < 2:
             continue
-        mean = saved.mean(axis=0)
-        spread = saved.std(axis=0, ddof=1) / np.sqrt(saved.shape[0])
-        crossed = mean > LOOK_SIGNIFICANCE * spread
+        mean, spread = savings(first, seen)
+        if only_unbounded:
+            if mean > LOOK_SIGNIFICANCE * spread:
+                use = unbounded = True
+                break
         # A fixed sequence: bounded local fits first (the FACS rig's prior, the cautious kind),
-        # unbounded ones only after them, so each test keeps the whole 2.3 %.
-        if crossed[0]:
-            use, unbounded = True, bool(crossed[1] and mean[1] > mean[0])
+        # unbounded ones (with the unbounded global fit they start from) only after them, on
+        # the same rows, so each test keeps the whole 2.3 %.
+        elif mean > LOOK_SIGNIFICANCE * spread:
+            use = True
+            distances(np.flatnonzero(look_of_row <= look), 1, False)
+            mean_u, spread_u = savings(1, seen)
+            unbounded = mean_u > LOOK_SIGNIFICANCE * spread_u and mean_u > mean
             break
-        if (mean < 0).all():
+        if mean < 0:
             break
     done = np.isfinite(err_without)
     return LocalFitsEstimate(
@@ -394,5 +423,5 @@ def estimate_local_fits(
         left_out=int(done.sum()),
         frames=int(np.unique(out.frame[done]).size),
         unbounded=unbounded,
-        error_unbounded=float(err_with[done, 1].mean()),
+        error_unbounded=float(err_with[done, 1].mean()) if use or only_unbounded else float("nan"),
     )

@@ -21,7 +21,7 @@ from lgi.dataset import Dataset
 from lgi.detail import blend_detail, check_detail_weight
 from lgi.errors import InputError, LgiWarning
 from lgi.jaw import JawRig, estimate_rig
-from lgi.local import local_bounds, local_pieces
+from lgi.local import UNBOUNDED, local_bounds, local_pieces
 
 
 def _bin_edges(jaw_bins: int | ArrayLike, shape_theta: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -352,7 +352,7 @@ class Model:
         quiet: bool = False,
         out: NDArray[np.float64] | None = None,
         marker_noise: float | None = None,
-        fit: bool | None = None,
+        fit: bool | str | None = None,
         detail_weight: float | None = None,
         local_fits: bool | str = False,
     ) -> SolveResult:
@@ -392,7 +392,10 @@ class Model:
         False is the paper's method, tets only. Default (None): on exactly when `marker_noise`
         is given (`marker_noise=0` for noise-free markers), so the recommended call on real
         capture is `solve(frames, marker_noise=sigma)`. Not offered with `smooth_window`. The
-        fit costs time with many shapes (docs/performance.md).
+        fit costs time with many shapes (docs/performance.md). `fit="unbounded"`
+        (`lgi.local.UNBOUNDED`): the fit is offered and its weights are not held to [0, 1]
+        (least squares with the fit's ridge alone, at the jaw pose the boxed fit refined): for a
+        dataset of whole-face scans, whose weights are no activations (docs/concepts.md).
 
         `detail_weight` in [0, 1]: how much of the dataset's detail between the markers to keep
         (`lgi.detail`; `lgi.estimate_detail_weight` reads it from a take): the result is
@@ -407,9 +410,10 @@ class Model:
         fit per bundle and frame (docs/performance.md). Each window's weights are held to
         [0, 1] like the global fit's (a FACS rig's activations); `local_fits="unbounded"`
         (`lgi.local.UNBOUNDED`) drops that bound, for a dataset of scans whose differences
-        match a region as well as their sums (docs/concepts.md)."""
+        match a region as well as their sums (docs/concepts.md), and so does the frame's global
+        fit the windows start from and the targets come from (as `fit="unbounded"`)."""
         w = None if detail_weight is None else check_detail_weight(detail_weight)
-        self._check_local(local_fits, marker_noise, fit)
+        offer, unbounded = self._check_local(local_fits, marker_noise, fit)
         arr = np.asarray(frames)
         if arr.ndim == 2:
             arr = arr[None]
@@ -422,17 +426,27 @@ class Model:
                 jaw=jaw,
                 smooth_window=smooth_window,
                 out=out,
-                fit=fit,
+                fit=offer,
                 marker_noise=marker_noise,
+                unbounded_fit=unbounded,
             )
         return self._finish(res, arr, w, local_fits)
 
     def _check_local(
-        self, local_fits: bool | str, marker_noise: float | None, fit: bool | None
-    ) -> None:
-        """InputError where `local_fits` cannot be given (before any solving)."""
-        if local_bounds(local_fits) is None:
-            return
+        self, local_fits: bool | str, marker_noise: float | None, fit: bool | str | None
+    ) -> tuple[bool | None, bool]:
+        """The core's `fit` and `unbounded_fit` for `fit` and `local_fits` (unbounded local
+        fits start from an unbounded global fit); an InputError where they cannot be given
+        (before any solving)."""
+        if isinstance(fit, (bool, np.bool_)) or fit is None:
+            offer, unbounded = (None if fit is None else bool(fit)), False
+        elif fit == UNBOUNDED:
+            offer, unbounded = True, True
+        else:
+            raise InputError(f"fit: expected True, False, None or {UNBOUNDED!r}, got {fit!r}")
+        bounded = local_bounds(local_fits)
+        if bounded is None:
+            return offer, unbounded
         if marker_noise is None:
             raise InputError(
                 "local_fits needs marker_noise (the noise-aware solve's targets and global fits; "
@@ -445,6 +459,7 @@ class Model:
                 "local_fits: the model has jaw bins (each bin fits its own re-posed shapes); "
                 "build it without jaw_bins"
             )
+        return offer, unbounded or not bounded
 
     def _finish(
         self,
@@ -505,7 +520,7 @@ class Model:
         quiet: bool = False,
         out: NDArray[np.float64] | None = None,
         marker_noise: float | None = None,
-        fit: bool | None = None,
+        fit: bool | str | None = None,
         detail_weight: float | None = None,
         local_fits: bool | str = False,
     ) -> Iterator[SolveResult]:
@@ -520,7 +535,7 @@ class Model:
         `solve`. Other options as in `solve` (`detail_weight` applied chunk by chunk: each
         frame's blend is its own, and `local_fits` too)."""
         w = None if detail_weight is None else check_detail_weight(detail_weight)
-        self._check_local(local_fits, marker_noise, fit)
+        offer, unbounded = self._check_local(local_fits, marker_noise, fit)
         n = _lgi.check_count(chunk, "chunk")
         if n < 1:
             raise InputError(f"chunk must be >= 1 frames, got {n}")
@@ -540,9 +555,10 @@ class Model:
                     temporal=temporal,
                     jaw=jaw,
                     out=buf,
-                    fit=fit,
+                    fit=offer,
                     marker_noise=marker_noise,
                     previous=state,
+                    unbounded_fit=unbounded,
                 )
                 state = res.state if temporal else None
                 yield self._finish(res, part, w, local_fits)

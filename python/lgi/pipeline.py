@@ -29,7 +29,7 @@ from lgi.io.atomic import check_writable, existing_sequence, refuse_existing
 from lgi.io.frame import DATASET_NPZ, OutputFrame, output_frame
 from lgi.io.paths import output_file
 from lgi.io.result import Result, read_result_npz
-from lgi.io.settings import LOCAL_FITS_WORDS, SolveSettings
+from lgi.io.settings import SolveSettings
 from lgi.io.sink import FrameSink
 from lgi.io.topology import Topology, topology
 from lgi.local import UNBOUNDED, estimate_local_fits
@@ -197,35 +197,47 @@ def local_fits_choice(
     sigma: float | None,
     jaw: str | None,
     say: Say,
+    fit: str | None = None,
 ) -> bool | str:
     """`--local-fits`: True, False, 'unbounded' or 'auto' (read from the take's own markers
-    left out, `lgi.estimate_local_fits`, and said with its numbers)."""
+    left out, `lgi.estimate_local_fits` with `fit`, and said with its numbers)."""
     check_local_fits_noise(spec, sigma)
     if spec is True or spec is False or spec == UNBOUNDED:
         return spec
     if spec != "auto":
         raise InputError(f"--local-fits {spec!r}: expected no value, 'unbounded' or 'auto'")
     assert sigma is not None  # checked above
-    est = estimate_local_fits(frames, model, marker_noise=sigma, jaw=jaw)
+    est = estimate_local_fits(frames, model, marker_noise=sigma, jaw=jaw, fit=fit)
     chosen = {False: "not used", True: "used", UNBOUNDED: "used, unbounded"}[est.local_fits]
     unit = model.units or "model units"
+    read = [
+        f"{x:.4g}{kind}"
+        for x, kind in ((est.error_with, ""), (est.error_unbounded, " unbounded"))
+        if np.isfinite(x)
+    ]
     say(
         f"local fits {chosen}: {est.left_out} markers left out one at a time on {est.frames} "
-        f"frames are {est.error_with:.4g} {unit} from the surface with them "
-        f"({est.error_unbounded:.4g} unbounded), {est.error_without:.4g} without"
+        f"frames are {' and '.join(read)} {unit} from the surface with them, "
+        f"{est.error_without:.4g} without"
     )
     return est.local_fits
 
 
 def detail_weight(
-    spec: str | None, frames: np.ndarray, model: Model, sigma: float | None, jaw: str | None
+    spec: str | None,
+    frames: np.ndarray,
+    model: Model,
+    sigma: float | None,
+    jaw: str | None,
+    fit: str | None = None,
 ) -> float | None:
-    """`--detail-weight`: a weight in [0, 1], 'auto' (read from `frames` solved with `sigma`
-    and `jaw`, `lgi.estimate_detail_weight`) or 'none'/None (all of the dataset's detail)."""
+    """`--detail-weight`: a weight in [0, 1], 'auto' (read from `frames` solved with `sigma`,
+    `jaw` and `fit`, `lgi.estimate_detail_weight`) or 'none'/None (all of the dataset's
+    detail)."""
     if spec is None or spec == "none":
         return None
     if spec == "auto":
-        return estimate_detail_weight(frames, model, marker_noise=sigma, jaw=jaw)
+        return estimate_detail_weight(frames, model, marker_noise=sigma, jaw=jaw, fit=fit)
     try:
         w = float(spec)
     except ValueError:
@@ -718,11 +730,13 @@ def solve_file(
     quiet: bool = False,
     say: Say = _silent,
     local_fits: bool | str = False,
+    unbounded_fit: bool = False,
 ) -> tuple[Path, int]:
     """`lgi solve`: the take file solved with the model file, written by `out`'s suffix
     (`output_kind`). `noise` is `--marker-noise` (a number, 'auto' or 'none'; 'auto' looks at
     the whole range), `detail` `--detail-weight` (the same forms, `detail_weight`),
     `local_fits` `--local-fits` (`Model.solve(local_fits=True)`; 'auto': `local_fits_choice`),
+    `unbounded_fit` `--unbounded-fit` (`Model.solve(fit="unbounded")`),
     `frames` is `--frames A:B`. By default the range is solved in one
     `Model.solve` (frames prefer their predecessor's choices across the whole range), then
     written chunk by chunk; `chunk` (`--chunk N`) solves and writes N frames at a time into
@@ -778,14 +792,16 @@ def solve_file(
     if local_fits and m.jaw_bins is not None:
         raise InputError(f"--local-fits: the model {model} has jaw bins; build it without them")
     jaw_mode = None if m.jaw_rig is None or jaw == "rest" else jaw
-    local_fits = local_fits_choice(local_fits, x, m, sigma, jaw_mode, say)
-    weight = detail_weight(detail, x, m, sigma, jaw_mode)
+    fit = UNBOUNDED if unbounded_fit else None
+    local_fits = local_fits_choice(local_fits, x, m, sigma, jaw_mode, say, fit)
+    weight = detail_weight(detail, x, m, sigma, jaw_mode, fit)
     settings = SolveSettings.of(
         has_jaw_rig=m.jaw_rig is not None,
         jaw=jaw,
         marker_noise=sigma,
         detail_weight=weight,
         local_fits=local_fits,
+        unbounded_fit=unbounded_fit,
     )
     missing = np.isnan(x).any(axis=2)
     say(
@@ -793,7 +809,7 @@ def solve_file(
         f"({100 * missing.mean():.1f}% samples missing)"
         + ("" if sigma is None else f", marker noise {sigma:.4g}")
         + ("" if weight is None else f", detail weight {weight:.3f}")
-        + LOCAL_FITS_WORDS[local_fits]
+        + settings.pieces()
     )
     topo = topology(m.dataset)
     start = t.first_frame + rng.start
@@ -803,6 +819,7 @@ def solve_file(
         "marker_noise": sigma,
         "detail_weight": weight,
         "local_fits": local_fits,
+        "fit": fit,
     }
     if chunk is None:
         res = m.solve(x, quiet=quiet, **how)
@@ -882,9 +899,9 @@ def solve_file(
                 )
                 bar.update(b - a)
         if curves_out is not None:
-            fit = _joined(fits)
+            weights = _joined(fits)
             jaw_all = _joined(jaws)
-            _write_curves(curves_out, fit, jaw_all, m, fps=rate, start=start, frame=frame)
+            _write_curves(curves_out, weights, jaw_all, m, fps=rate, start=start, frame=frame)
             say(f"wrote the curves {curves_out}")
         written = sink.close()
     except BaseException:

@@ -52,6 +52,8 @@ pub struct FitPrior {
     /// The displacements' Gram matrix over every bundle (S × S), made on the first
     /// [`active_residuals`](Self::active_residuals) of a frame with every marker present.
     gram: OnceLock<Vec<f64>>,
+    /// The fit without the box (ridge alone), made on first use ([`fit_unbounded`]).
+    unbounded: OnceLock<std::result::Result<BlendshapeSolver, String>>,
 }
 
 impl FitPrior {
@@ -102,6 +104,7 @@ impl FitPrior {
             displacements,
             windows,
             gram: OnceLock::new(),
+            unbounded: OnceLock::new(),
         }))
     }
 
@@ -151,6 +154,44 @@ impl FitPrior {
             positions: Vec::new(),
             dual: solution.dual,
         })
+    }
+
+    /// The least-squares fit of `targets` with the ridge alone (no box): the fit a dataset of
+    /// scans is solved with, whose weights are no activations.
+    pub fn fit_unbounded(&self, targets: &[DVec3]) -> Result<FrameFit> {
+        let solver = self
+            .unbounded
+            .get_or_init(|| {
+                let b = self.rest.len();
+                let s = self.displacements.len() / b.max(1);
+                let mut a = vec![0.0; 3 * b * s];
+                for k in 0..s {
+                    for n in 0..b {
+                        for (c, v) in self.displacements[k * b + n].to_array().iter().enumerate() {
+                            a[(3 * n + c) * s + k] = *v;
+                        }
+                    }
+                }
+                let scale = fit_scale(&a, s);
+                BlendshapeSolver::new(a, 3 * b, s, FIT_L2 * scale, 0.0).map_err(|e| e.to_string())
+            })
+            .as_ref()
+            .map_err(|e| LgiError::Input(e.clone()))?;
+        let mut rhs = Vec::with_capacity(3 * self.rest.len());
+        for (t, r) in targets.iter().zip(&self.rest) {
+            rhs.extend_from_slice(&(*t - *r).to_array());
+        }
+        let solution = solver.solve(&rhs)?;
+        let mut weights = Vec::with_capacity(solution.weights.len() + 1);
+        weights.push(0.0);
+        weights.extend_from_slice(&solution.weights);
+        let mut fit = FrameFit {
+            weights,
+            positions: Vec::new(),
+            dual: Vec::new(),
+        };
+        self.place(&mut fit);
+        Ok(fit)
     }
 
     /// Every bundle's position under `fit`'s weights, into `fit.positions`.
@@ -499,6 +540,63 @@ mod tests {
         for (p, t) in fit.positions.iter().zip(&targets) {
             assert!(p.distance(*t) < 1e-3);
         }
+    }
+
+    #[test]
+    fn the_unbounded_fit_is_the_closed_form_ridge_and_leaves_the_box_where_the_fit_cannot() {
+        let (sp, b) = positions();
+        let prior = FitPrior::new(&sp, b).unwrap().unwrap();
+        let w = [-0.8, 1.9, 0.5];
+        let mut targets: Vec<DVec3> = (0..b)
+            .map(|n| {
+                sp[n]
+                    + (0..3)
+                        .map(|k| (sp[(k + 1) * b + n] - sp[n]) * w[k])
+                        .sum::<DVec3>()
+            })
+            .collect();
+        targets[4] = DVec3::NAN;
+        let free = prior.fit_unbounded(&targets).unwrap();
+        // Closed form over the present rows: (AᵀA + l2·scale·I) x = Aᵀ(t − rest), the same
+        // scale as the fit's (mean squared column norm over every row).
+        let col = |k: usize, n: usize| sp[(k + 1) * b + n] - sp[n];
+        let scale = (0..3)
+            .map(|k| (0..b).map(|n| col(k, n).length_squared()).sum::<f64>())
+            .sum::<f64>()
+            / 3.0;
+        let present: Vec<usize> = (0..b).filter(|&n| n != 4).collect();
+        let mut g = vec![0.0; 9];
+        let mut r = vec![0.0; 3];
+        for i in 0..3 {
+            for j in 0..3 {
+                g[i * 3 + j] = present.iter().map(|&n| col(i, n).dot(col(j, n))).sum();
+            }
+            g[i * 3 + i] += FIT_L2 * scale;
+            r[i] = present
+                .iter()
+                .map(|&n| col(i, n).dot(targets[n] - sp[n]))
+                .sum();
+        }
+        let want = cholesky_solve(3, &cholesky(3, g).unwrap(), &r);
+        for (got, want) in free.weights[1..].iter().zip(&want) {
+            assert!((got - want).abs() < 1e-12, "{:?} vs {want:?}", free.weights);
+        }
+        for (got, truth) in free.weights[1..].iter().zip(w) {
+            assert!((got - truth).abs() < 5e-3, "{:?}", free.weights);
+        }
+        // The boxed fit cannot reach -0.8 or 1.9.
+        let boxed = prior.fit(&targets).unwrap();
+        assert!(
+            boxed.weights[1] > -0.2 && boxed.weights[2] < 1.2,
+            "{:?}",
+            boxed.weights
+        );
+        // Its positions are the weights' (the missing row placed too).
+        let want4 = sp[4]
+            + (0..3)
+                .map(|k| col(k, 4) * free.weights[k + 1])
+                .sum::<DVec3>();
+        assert!(free.positions[4].distance(want4) < 1e-12);
     }
 
     #[test]

@@ -195,8 +195,9 @@ impl Model {
     /// beside its tets (None: exactly when `marker_noise` is given); `marker_noise` (data
     /// units) solves noise-aware (None: every marker interpolated as given); `previous` (a
     /// temporal solve's `state`) continues that solve: the first frame prefers its choices
-    /// and keeps its jaw bin, so chunks solved in turn equal one call.
-    #[pyo3(signature = (frames, progress=None, temporal=true, jaw=None, smooth_window=0, out=None, fit=None, marker_noise=None, previous=None))]
+    /// and keeps its jaw bin, so chunks solved in turn equal one call. `unbounded_fit`: the
+    /// frame's global fit without the [0, 1] box (at the pose the boxed fit refined).
+    #[pyo3(signature = (frames, progress=None, temporal=true, jaw=None, smooth_window=0, out=None, fit=None, marker_noise=None, previous=None, unbounded_fit=false))]
     #[allow(clippy::too_many_arguments)]
     fn solve<'py>(
         &self,
@@ -210,11 +211,13 @@ impl Model {
         #[pyo3(from_py_with = solve_args::fit)] fit: Option<bool>,
         #[pyo3(from_py_with = solve_args::marker_noise)] marker_noise: Option<f64>,
         previous: Option<PyRef<'py, SolveState>>,
+        unbounded_fit: bool,
     ) -> PyResult<SolveResult> {
         let b = self.inner.num_bundles();
         let frames = point_sets(frames, "frames", ("frame", "bundle"), Some(b), true)?;
         let options = SolveOptions {
             jaw: solve_args::jaw_pose(jaw, &self.inner, frames.len())?,
+            unbounded_fit,
             ..SolveOptions::new(temporal, smooth_window, fit, marker_noise)
         };
         let previous = previous.map(|p| p.inner.clone());

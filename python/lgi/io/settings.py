@@ -1,5 +1,6 @@
 """How a take was solved, kept with what was written (`SolveSettings`): the marker noise, the
-jaw pose, the detail weight and whether local fits made the pieces, as `lgi solve` used them,
+jaw pose, the detail weight, whether local fits made the pieces and whether the global fit was
+held to [0, 1], as `lgi solve` used them,
 and lgi's version. A solved `.npz` holds it as
 the JSON text `solve_settings`, a USD cache as the mesh's `lgi:solveSettings`; `lgi report`
 and `lgi info` show it, so a result says how it was made without its command line."""
@@ -30,13 +31,16 @@ class SolveSettings:
     `detail_weight`: the weight in [0, 1] (None: all of the dataset's detail); `version`:
     lgi's version that solved; `local_fits`: the pieces were local fits (`lgi.local`; True,
     or 'unbounded' for `lgi.local.UNBOUNDED` ones; files written before it was recorded read as
-    False)."""
+    False); `unbounded_fit`: the frame's global fit was not held to [0, 1]
+    (`Model.solve(fit="unbounded")`, and always with unbounded local fits; files written
+    before it was recorded read as False)."""
 
     marker_noise: float | None
     jaw: str | None
     detail_weight: float | None
     version: str
     local_fits: bool | str = False
+    unbounded_fit: bool = False
 
     @staticmethod
     def of(
@@ -46,6 +50,7 @@ class SolveSettings:
         marker_noise: float | None,
         detail_weight: float | None,
         local_fits: bool | str = False,
+        unbounded_fit: bool = False,
     ) -> SolveSettings:
         """The settings of a `Model.solve` call: `jaw` as passed (None, the rest pose, is
         recorded as 'rest' and a pose array as 'given'; None for a model without a jaw rig),
@@ -64,6 +69,7 @@ class SolveSettings:
             detail_weight=None if detail_weight is None else float(detail_weight),
             version=__version__,
             local_fits=local_fits if local_fits == "unbounded" else bool(local_fits),
+            unbounded_fit=bool(unbounded_fit) or local_fits == "unbounded",
         )
 
     def to_json(self) -> str:
@@ -74,6 +80,7 @@ class SolveSettings:
                 "detail_weight": self.detail_weight,
                 "version": self.version,
                 "local_fits": self.local_fits,
+                "unbounded_fit": self.unbounded_fit,
             },
             sort_keys=True,
         )
@@ -87,16 +94,20 @@ class SolveSettings:
         except ValueError:
             raise InputError(f"{where}: not the JSON text lgi writes: {text[:60]!r}") from None
         keys = {"marker_noise", "jaw", "detail_weight", "version"}
-        if not isinstance(d, dict) or not keys <= set(d) <= keys | {"local_fits"}:
+        optional = {"local_fits", "unbounded_fit"}
+        if not isinstance(d, dict) or not keys <= set(d) <= keys | optional:
             raise InputError(
                 f"{where}: expected the keys marker_noise, jaw, detail_weight, version and "
-                "(optionally) local_fits"
+                "(optionally) local_fits and unbounded_fit"
             )
         local = d.get("local_fits", False)
         if not isinstance(local, bool) and local != "unbounded":
             raise InputError(
                 f"{where}: local_fits must be true, false or 'unbounded', got {local!r}"
             )
+        unbounded = d.get("unbounded_fit", False)
+        if not isinstance(unbounded, bool):
+            raise InputError(f"{where}: unbounded_fit must be true or false, got {unbounded!r}")
 
         def number(key: str) -> float | None:
             x = d[key]
@@ -115,6 +126,7 @@ class SolveSettings:
             detail_weight=number("detail_weight"),
             version=str(d["version"] or ""),
             local_fits=local,
+            unbounded_fit=unbounded,
         )
 
     def describe(self, units: str | None) -> str:
@@ -132,5 +144,12 @@ class SolveSettings:
             if self.detail_weight is None
             else f"detail weight {self.detail_weight:.3f}"
         )
-        pieces = LOCAL_FITS_WORDS[self.local_fits]
-        return f"{noise}, {jaw}, {detail}{pieces} (lgi {self.version or 'version unknown'})"
+        return f"{noise}, {jaw}, {detail}{self.pieces()} (lgi {self.version or 'version unknown'})"
+
+    def pieces(self) -> str:
+        """How the pieces and the global fit read at the end of a line that describes the solve:
+        '', ', local fits', ', unbounded fit' or ', unbounded local fits' (which start from the
+        unbounded fit)."""
+        if self.unbounded_fit and self.local_fits != "unbounded":
+            return LOCAL_FITS_WORDS[self.local_fits] + ", unbounded fit"
+        return LOCAL_FITS_WORDS[self.local_fits]

@@ -269,7 +269,7 @@ class Recommended:
     "auto", the frames' detail weight (`lgi.estimate_detail_weight`, read from the frames
     solved, with the same sigma) is kept too, the call for a performer the dataset is not
     (`last_detail_weight` says which); with `local_fits`, the pieces are local fits
-    (`lgi.local`)."""
+    (`lgi.local`); `fit` is `Model.solve`'s (e.g. "unbounded")."""
 
     def __init__(
         self,
@@ -277,9 +277,10 @@ class Recommended:
         marker_noise: float | None,
         detail: str | None = None,
         local_fits: bool | str = False,
+        fit: bool | str | None = None,
     ) -> None:
         self.model, self.marker_noise, self.detail = model, marker_noise, detail
-        self.local_fits = local_fits
+        self.local_fits, self.fit = local_fits, fit
         self.last_detail_weight: float | None = None
 
     def solve(self, frames: ArrayLike, *, temporal: bool = True, quiet: bool = True) -> SolveResult:
@@ -287,7 +288,9 @@ class Recommended:
 
         weight = None
         if self.detail == "auto":
-            weight = estimate_detail_weight(frames, self.model, marker_noise=self.marker_noise)
+            weight = estimate_detail_weight(
+                frames, self.model, marker_noise=self.marker_noise, fit=self.fit
+            )
             self.last_detail_weight = weight
         return self.model.solve(
             frames,
@@ -296,13 +299,17 @@ class Recommended:
             marker_noise=self.marker_noise,
             detail_weight=weight,
             local_fits=self.local_fits,
+            fit=self.fit,
         )
 
 
 #: The name of LGI with local fits (`Model.solve(local_fits=True)`) among compared methods.
 LOCAL_FITS = "LGI + local fits"
-#: The same with unbounded local fits (`Model.solve(local_fits="unbounded")`).
+#: The same with unbounded local fits (`Model.solve(local_fits="unbounded")`, which start from
+#: the unbounded global fit).
 LOCAL_FITS_UNBOUNDED = "LGI + local fits (unbounded)"
+#: LGI's recommended call with the unbounded global fit (`Model.solve(fit="unbounded")`).
+UNBOUNDED_FIT = "LGI (unbounded fit)"
 
 
 def capture_methods(
@@ -349,7 +356,8 @@ def capture_methods(
 def _add_unbounded(methods: dict[str, Solver]) -> None:
     """The scans protocol's unbounded methods beside the bounded ones: a scan's weight is no
     activation, so the peers' fit without its [0, 1] bound is a peer too (`FitJawUnbounded`
-    and its corrective), and LGI's local fits without it (`LOCAL_FITS_UNBOUNDED`)."""
+    and its corrective), and LGI without it: the recommended call (`UNBOUNDED_FIT`) and with
+    local fits (`LOCAL_FITS_UNBOUNDED`)."""
     from lgi.baselines import FitJawUnbounded, FitJawUnboundedResidual
 
     lgi = methods["LGI"]
@@ -358,6 +366,7 @@ def _add_unbounded(methods: dict[str, Solver]) -> None:
     peer = FitJawUnbounded(lgi.model)
     methods[FitJawUnbounded.label] = peer
     methods[FitJawUnboundedResidual.label] = FitJawUnboundedResidual(peer)
+    methods[UNBOUNDED_FIT] = Recommended(lgi.model, lgi.marker_noise, fit="unbounded")
     if lgi.model.jaw_bins is None:
         methods[LOCAL_FITS_UNBOUNDED] = Recommended(
             lgi.model, lgi.marker_noise, local_fits="unbounded"

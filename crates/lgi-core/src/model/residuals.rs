@@ -39,7 +39,7 @@ impl Model {
                 if let Some(start) = fit_starts.get(f) {
                     prep.fit_start = Some(self.fit_start_in_bin(prep.bin, start.clone()));
                 }
-                self.add_fit(&mut prep, false, None, refine)
+                self.add_fit(&mut prep, false, None, refine, false)
                     .map_err(|e| frame_context(e, f))?;
                 let lk = &self.lookups[prep.bin];
                 let (Some(fit), Some(prior)) = (&prep.fit, &lk.prior) else {

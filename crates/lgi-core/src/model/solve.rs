@@ -36,6 +36,12 @@ pub struct SolveOptions {
     /// targets of [`FitPrior::denoise`](crate::prior::FitPrior::denoise) before the
     /// solve, which then interpolates those. `None`: every marker is interpolated as given.
     pub marker_noise: Option<f64>,
+    /// The frame's global fit without the box: weights by least squares with the fit's ridge
+    /// alone ([`FitPrior::fit_unbounded`](crate::prior::FitPrior::fit_unbounded)), for a
+    /// dataset of scans, whose weights are no activations. The jaw pose is still refined
+    /// against the boxed fit (unbounded weights can stand in for the jaw's turn); the
+    /// unbounded fit is made once, at that pose.
+    pub unbounded_fit: bool,
     /// Each frame's jaw pose (a model built with a jaw rig): none, given, from the fit or
     /// tracked ([`JawPose`]).
     pub jaw: JawPose,
@@ -56,6 +62,7 @@ impl SolveOptions {
             smooth_window,
             fit: false,
             marker_noise: None,
+            unbounded_fit: false,
             jaw: JawPose::Rest,
         }
     }
@@ -75,6 +82,7 @@ impl SolveOptions {
             smooth_window,
             fit: fit.unwrap_or(marker_noise.is_some()),
             marker_noise,
+            unbounded_fit: false,
             jaw: JawPose::Rest,
         }
     }
@@ -116,14 +124,16 @@ impl Model {
     }
 
     /// Adds the frame's global fit to a prepared frame (offered as a candidate with
-    /// `offer`) and, with `marker_noise`, moves its targets to the noise-aware ones, in the
-    /// bin's space and back to the frame's.
+    /// `offer`; without the box where `unbounded`, at the pose the boxed fit refined) and,
+    /// with `marker_noise`, moves its targets to the noise-aware ones, in the bin's space and
+    /// back to the frame's.
     pub(super) fn add_fit(
         &self,
         prep: &mut Prepared,
         offer: bool,
         marker_noise: Option<f64>,
         refine_jaw: bool,
+        unbounded: bool,
     ) -> Result<()> {
         let Some(prior) = &self.lookups[prep.bin].prior else {
             return Ok(());
@@ -133,9 +143,10 @@ impl Model {
         } else {
             None
         };
-        let fit = match refined {
-            Some(fit) => fit,
-            None => prior.fit(&prep.lookup)?,
+        let fit = match (refined, unbounded) {
+            (_, true) => prior.fit_unbounded(&prep.lookup)?,
+            (Some(fit), false) => fit,
+            (None, false) => prior.fit(&prep.lookup)?,
         };
         if marker_noise == Some(0.0) {
             // Noise-free markers stay where they are (no round trip through the jaw's space).
@@ -505,8 +516,14 @@ impl Model {
                 });
             }
             prepared.par_iter_mut().enumerate().try_for_each(|(f, p)| {
-                self.add_fit(p, offer, options.marker_noise, refine)
-                    .map_err(|e| frame_context(e, f))
+                self.add_fit(
+                    p,
+                    offer,
+                    options.marker_noise,
+                    refine,
+                    options.unbounded_fit,
+                )
+                .map_err(|e| frame_context(e, f))
             })?;
         }
         match (smooth_window <= 1, temporal) {
