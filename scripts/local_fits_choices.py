@@ -7,7 +7,9 @@ from the surface with them (bounded, unbounded) and without; docs/results.md put
 choices beside the protocols' errors.
 
 Usage: python scripts/local_fits_choices.py [--layouts markers_120 random:160:1 random:140:7]
-[--sigma 0 0.02 0.05] [--held-out 0 0.25] [--no-lomo] (from the checkout, ../shared beside it)
+[--sigma 0 0.02 0.05] [--held-out 0 0.25] [--no-lomo] [--unbounded-fit] (from the checkout,
+../shared beside it). `--unbounded-fit`: the scans takes are read as `--unbounded-fit
+--local-fits auto` reads them (the unbounded solve against unbounded local fits alone).
 """
 
 from __future__ import annotations
@@ -56,6 +58,7 @@ def main() -> None:
     ap.add_argument("--sigma", type=float, nargs="+", default=[0.0, 0.02, 0.05])
     ap.add_argument("--held-out", type=float, nargs="+", default=[0.0, 0.25])
     ap.add_argument("--no-lomo", action="store_true", help="skip the real takes")
+    ap.add_argument("--unbounded-fit", action="store_true", help="scans: fit='unbounded'")
     args = ap.parse_args()
     warnings.filterwarnings("ignore")
     d = ict.load_dataset(ICT)
@@ -88,8 +91,9 @@ def main() -> None:
                     else:
                         methods = capture_methods(take.dataset, markers, sigma)
                     t0 = time.perf_counter()
+                    fit = "unbounded" if args.unbounded_fit and held == 0.0 else None
                     est = lgi.estimate_local_fits(
-                        take.frames, methods["LGI"].model, marker_noise=sigma
+                        take.frames, methods["LGI"].model, marker_noise=sigma, fit=fit
                     )
                     kind = "scans K=120" if held == 0.0 else "capture, 25 % held out"
                     line(

@@ -152,3 +152,85 @@ def test_cli_unbounded_fit_writes_what_model_solve_gives_and_records_it(
     # lgi info says how it was solved.
     assert cli.main(["info", str(out)]) == 0
     assert "unbounded fit" in capsys.readouterr().out
+    # auto: the take's own markers decide, the choice said and recorded (the sample's
+    # performance has every weight inside the box: measured "not used").
+    auto = tmp_path / "auto.npz"
+    argv = ["solve", str(model_path), str(take), "-o", str(auto), "--marker-noise", "0.01"]
+    assert cli.main([*argv, "--unbounded-fit", "auto"]) == 0
+    err = capsys.readouterr().err
+    est = lgi.estimate_unbounded_fit(x, model, marker_noise=0.01)
+    said = "unbounded fit used:" if est.use else "unbounded fit not used:"
+    assert said in err and "with the fit held to [0, 1]" in err, err
+    with np.load(auto) as z:
+        assert SolveSettings.from_json(str(z["solve_settings"]), "a.npz").unbounded_fit is est.use
+    with pytest.raises(SystemExit) as stop:  # argparse's own errors
+        cli.main([*argv, "--unbounded-fit", "Auto", "--force"])
+    err = capsys.readouterr().err
+    assert stop.value.code == 2 and "lgi: error:" in err, err
+    assert "argument --unbounded-fit: expected no value or 'auto', got 'Auto'" in err, err
+
+
+def _brute_force_choice(model, frames, sigma, per_look):  # type: ignore[no-untyped-def]
+    """`estimate_unbounded_fit`'s rule from its definition: each left-out row solved on its
+    own with the boxed and the unbounded fit; the looks read every LOOKS-th picked frame; used
+    when the mean per-frame saving clears LOOK_SIGNIFICANCE standard errors, stopped when it is
+    negative. Returns (use, frames read, mean distances boxed and unbounded over them)."""
+    from lgi.local import LEFT_OUT_PER_FRAME, LOOK_SIGNIFICANCE, LOOKS
+
+    present = np.isfinite(frames).all(axis=2)
+    usable = np.flatnonzero(present.sum(axis=1) > _lgi.MIN_PRESENT_MARKERS)
+    at = np.unique(np.linspace(0, usable.size - 1, LOOKS * per_look).round().astype(int))
+    picked = usable[at]
+    dist = []
+    for ordinal, f in enumerate(picked):
+        markers = np.flatnonzero(present[f])
+        n = markers.size
+        if LEFT_OUT_PER_FRAME < n:
+            step = n / LEFT_OUT_PER_FRAME
+            shift = int(ordinal * step / len(picked))
+            markers = markers[
+                (np.floor(np.arange(LEFT_OUT_PER_FRAME) * step).astype(int) + shift) % n
+            ]
+        d = np.zeros((markers.size, 2))
+        for row, i in enumerate(markers):
+            x = frames[f : f + 1].copy()
+            x[0, i] = np.nan
+            for kind, fit in enumerate((None, "unbounded")):
+                res = model.solve(x, marker_noise=sigma, quiet=True, temporal=False, fit=fit)
+                d[row, kind] = np.linalg.norm(np.asarray(res.bundle_positions)[0, i] - frames[f, i])
+        dist.append(d)
+    read: list[int] = []
+    use = False
+    for look in range(LOOKS):
+        read += [o for o in range(len(picked)) if o % LOOKS == look]
+        s = np.array([dist[o][:, 0].mean() - dist[o][:, 1].mean() for o in read])
+        if len(read) < 2:
+            continue
+        mean, se = s.mean(), s.std(ddof=1) / np.sqrt(len(read))
+        if mean > LOOK_SIGNIFICANCE * se:
+            use = True
+            break
+        if mean < 0:
+            break
+    return use, len(read), np.vstack([dist[o] for o in read]).mean(axis=0)
+
+
+def test_the_unbounded_fit_estimate_is_the_left_out_markers_distance_both_ways(
+    outside_the_box,  # type: ignore[no-untyped-def]
+    sample,
+    noise_aware_sample,
+) -> None:
+    model, frames, _ = outside_the_box
+    noisy = frames + np.random.default_rng(7).normal(0.0, 0.01, frames.shape)
+    faces, sigma = noise_aware_sample
+    # A take outside the box (the unbounded fit should win) and the sample's own performance,
+    # every weight inside it (it should not).
+    for m, take, s in ((model, noisy, 0.01), (faces, sample.performance[:24], sigma)):
+        got = lgi.estimate_unbounded_fit(take, m, marker_noise=s, frames_used=2)
+        use, read, means = _brute_force_choice(m, take, s, 2)
+        assert got.use == use and got.frames == read
+        assert got.fit == ("unbounded" if use else None)
+        np.testing.assert_allclose([got.error_boxed, got.error_unbounded], means, rtol=1e-9)
+    assert lgi.estimate_unbounded_fit(noisy, model, marker_noise=0.01, frames_used=2).use
+    with pytest.raises(lgi.InputError, match=r"frames: expected shape \(F, "):
+        lgi.estimate_unbounded_fit(noisy[:, :4], model, marker_noise=0.01)

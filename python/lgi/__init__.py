@@ -31,6 +31,7 @@ from lgi.errors import (
 )
 from lgi.local import LocalFitsEstimate, estimate_local_fits
 from lgi.model import BuildConfig, Model, estimate_marker_noise
+from lgi.unbounded import UnboundedFitEstimate, estimate_unbounded_fit
 
 __all__ = [
     "BuildConfig",
@@ -47,11 +48,13 @@ __all__ = [
     "Model",
     "ModelFormatError",
     "SolveResult",
+    "UnboundedFitEstimate",
     "__version__",
     "capture",
     "estimate_detail_weight",
     "estimate_local_fits",
     "estimate_marker_noise",
+    "estimate_unbounded_fit",
     "get_num_threads",
     "io",
     "jaw",

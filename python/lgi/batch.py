@@ -30,6 +30,7 @@ from lgi.io.settings import SolveSettings
 from lgi.io.topology import topology
 from lgi.local import UNBOUNDED, estimate_local_fits
 from lgi.model import Model, estimate_marker_noise
+from lgi.unbounded import estimate_unbounded_fit
 
 __all__ = [
     "MANIFEST",
@@ -147,8 +148,10 @@ def _check_options(options: dict[str, Any]) -> str:
             f"solve_shots: local_fits must be True, False, 'unbounded' or 'auto', got {local!r}"
         )
     fit = options.get("fit")
-    if not (fit is None or isinstance(fit, bool) or fit == UNBOUNDED):
-        raise InputError(f"solve_shots: fit must be True, False, None or 'unbounded', got {fit!r}")
+    if not (fit is None or isinstance(fit, bool) or fit in (UNBOUNDED, "auto")):
+        raise InputError(
+            f"solve_shots: fit must be True, False, None, 'unbounded' or 'auto', got {fit!r}"
+        )
     if local and noise is None:
         raise InputError(
             "solve_shots: local_fits needs marker_noise (a number, 'auto', or 0 for clean "
@@ -288,6 +291,10 @@ def solve_shot(
         opts = dict(options)
         if opts.get("marker_noise") == "auto":
             opts["marker_noise"] = estimate_marker_noise(x, m)
+        if opts.get("fit") == "auto":
+            opts["fit"] = estimate_unbounded_fit(
+                x, m, marker_noise=opts.get("marker_noise"), jaw=opts.get("jaw", "auto")
+            ).fit
         if opts.get("local_fits") == "auto":
             opts["local_fits"] = estimate_local_fits(
                 x,
@@ -418,9 +425,10 @@ def solve_shots(
     (`lgi.set_num_threads`); default: the cores shared among the local workers, or the
     worker's own default on a given cluster.
 
-    `solve_options` go to `Model.solve` (`marker_noise`, `detail_weight` and `local_fits` may
-    also be "auto": estimated per take, the detail weight and the local fits' choice,
-    `lgi.estimate_local_fits`, with the take's noise); `fps` is the
+    `solve_options` go to `Model.solve` (`marker_noise`, `detail_weight`, `local_fits` and
+    `fit` may also be "auto": estimated per take, the detail weight, the local fits' choice
+    (`lgi.estimate_local_fits`) and the fit's (`lgi.estimate_unbounded_fit`: "unbounded" or
+    None), with the take's noise); `fps` is the
     output's frame rate when the take has none (arrays); `allow_missing` and `take_units` are
     `lgi.io.takes.read`'s.
 

@@ -212,7 +212,7 @@ def _cmd_batch(args: argparse.Namespace) -> int:
         pipeline.check_local_fits_noise(args.local_fits, args.marker_noise)
         options["local_fits"] = args.local_fits
     if args.unbounded_fit:
-        options["fit"] = "unbounded"
+        options["fit"] = "auto" if args.unbounded_fit == "auto" else "unbounded"
     if args.jaw != "auto":
         options["jaw"] = None if args.jaw == "rest" else args.jaw
     model = pipeline.existing_file(args.model, "MODEL")
@@ -284,14 +284,27 @@ def _add_local_fits_argument(parser: argparse.ArgumentParser, help: str) -> None
     )
 
 
+def _auto_only(text: str) -> str:
+    """`--unbounded-fit auto` (the flag alone is True)."""
+    if text != "auto":
+        raise argparse.ArgumentTypeError(f"expected no value or 'auto', got {text!r}")
+    return text
+
+
 def _add_unbounded_fit_argument(parser: argparse.ArgumentParser) -> None:
-    """`--unbounded-fit` (`lgi solve`, `lgi batch`): `Model.solve(fit="unbounded")`."""
+    """`--unbounded-fit [auto]` (`lgi solve`, `lgi batch`): `Model.solve(fit="unbounded")`,
+    or 'auto' (`lgi.estimate_unbounded_fit`)."""
     parser.add_argument(
         "--unbounded-fit",
-        action="store_true",
+        nargs="?",
+        const=True,
+        default=False,
+        type=_auto_only,
+        metavar="auto",
         help="the frame's global fit without holding its weights to [0, 1]: for a dataset of "
         "whole-face scans (a scan's weight is no activation), not a FACS rig; implied by "
-        "--local-fits unbounded",
+        "--local-fits unbounded; auto: used when it predicts the take's own markers, left out "
+        "one at a time, better",
     )
 
 

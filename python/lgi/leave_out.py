@@ -1,5 +1,6 @@
 """Markers left out one at a time on a few frames of a take: what the take-driven estimates
-(`lgi.estimate_detail_weight`, `lgi.estimate_local_fits`) compare their predictions on."""
+(`lgi.estimate_detail_weight`, `lgi.estimate_local_fits`, `lgi.estimate_unbounded_fit`) compare
+their predictions on, and the looks the last two read them in."""
 
 from __future__ import annotations
 
@@ -8,7 +9,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
 import lgi._lgi as _lgi
 from lgi.errors import InputError
@@ -17,11 +18,36 @@ if TYPE_CHECKING:
     from lgi._lgi import SolveResult
     from lgi.model import Model
 
-__all__ = ["SOLVE_ROWS", "LeftOut", "leave_markers_out", "solved_in_chunks"]
+__all__ = [
+    "LEFT_OUT_PER_FRAME",
+    "LOOKS",
+    "LOOK_SIGNIFICANCE",
+    "SOLVE_ROWS",
+    "LeftOut",
+    "Looks",
+    "leave_markers_out",
+    "solved_in_chunks",
+]
 
 SOLVE_ROWS = 32
 """Left-out rows solved at a time (`solved_in_chunks`): their meshes are dropped between
 (960 rows of ICT's mesh would take 615 MB)."""
+
+
+LEFT_OUT_PER_FRAME = 30
+"""Markers the looked-at estimates leave out, one at a time, on each frame they read (spread
+over the face; every present one where a frame has fewer)."""
+
+LOOKS = 3
+"""Looks the looked-at estimates take at most, each at `frames_used` more frames (interleaved
+with the others', so each look spans the take): they stop at the first whose saving is
+significant (`LOOK_SIGNIFICANCE`) or negative."""
+
+LOOK_SIGNIFICANCE = 2.33
+"""The standard errors a look's mean saving must exceed: with no saving, one of `LOOKS` looks
+at the cumulative frames crosses it as often as one look crosses `lgi.detail.SIGNIFICANCE`
+(2.3 % one-sided; Pocock's boundary for three looks, 1977; simulated in
+tests/test_local_fits.py)."""
 
 
 @dataclass(frozen=True)
@@ -48,6 +74,44 @@ class LeftOut:
             picked=self.picked[np.isin(self.picked, self.frame[rows])],
             given=self.given[rows],
         )
+
+
+class Looks:
+    """`LOOKS` looks at the rows of a `LeftOut`: look k reads every `LOOKS`-th of its picked
+    frames from the k-th, so every look spans the take."""
+
+    def __init__(self, rows: LeftOut) -> None:
+        self.left_out = rows
+        self._look_of_frame = np.arange(rows.picked.size) % LOOKS
+        self._look_of_row = self._look_of_frame[np.searchsorted(rows.picked, rows.frame)]
+
+    def rows(self, look: int, *, through: bool = False) -> NDArray[np.int64]:
+        """The rows look `look` reads (`through`: and every look before it)."""
+        on = self._look_of_row <= look if through else self._look_of_row == look
+        return np.flatnonzero(on)
+
+    def saving(
+        self, before: NDArray[np.float64], after: NDArray[np.float64], look: int
+    ) -> tuple[float, float, int]:
+        """The mean over the frames read through `look` of each frame's mean saving
+        `before - after` (per row: NaN where not read), its standard error (NaN for one frame)
+        and how many frames. Distances, as the results report errors: squared ones let a few
+        markers (the lips', whose left-out errors are the largest) decide the choice."""
+        seen = self.left_out.picked[self._look_of_frame <= look]
+        saved = np.array([(before - after)[self.left_out.frame == f].mean() for f in seen])
+        if saved.size < 2:
+            return float(saved.mean()), float("nan"), int(saved.size)
+        return (
+            float(saved.mean()),
+            float(saved.std(ddof=1) / np.sqrt(saved.size)),
+            int(saved.size),
+        )
+
+    def distances(self, rows: NDArray[np.int64], positions: ArrayLike) -> NDArray[np.float64]:
+        """Each of `rows`' left-out marker's distance from its position in `positions` (the
+        rows' marker positions on a surface, (len(rows), B, 3))."""
+        at = np.asarray(positions)[np.arange(rows.size), self.left_out.marker[rows]]
+        return np.asarray(np.linalg.norm(at - self.left_out.given[rows], axis=1))
 
 
 def leave_markers_out(

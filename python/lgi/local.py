@@ -31,7 +31,14 @@ from numpy.typing import ArrayLike, NDArray
 import lgi._lgi as _lgi
 from lgi.detail import DETAIL_FRAMES
 from lgi.errors import InputError
-from lgi.leave_out import leave_markers_out, solved_in_chunks
+from lgi.leave_out import (
+    LEFT_OUT_PER_FRAME,
+    LOOK_SIGNIFICANCE,
+    LOOKS,
+    Looks,
+    leave_markers_out,
+    solved_in_chunks,
+)
 
 if TYPE_CHECKING:
     from lgi._lgi import SolveResult
@@ -54,21 +61,6 @@ __all__ = [
 FITS_CHUNK = 16
 """Frames whose local fits (and then whose blend) one call to the core makes (a few hundred
 ms at most: Ctrl-C is seen between calls)."""
-
-LEFT_OUT_PER_FRAME = 30
-"""Markers `estimate_local_fits` leaves out, one at a time, on each frame it reads (spread over
-the face; every present one where a frame has fewer)."""
-
-LOOKS = 3
-"""Looks `estimate_local_fits` takes at most, each at `frames_used` more frames (interleaved
-with the others', so each look spans the take): it stops at the first whose saving is
-significant (`LOOK_SIGNIFICANCE`) or negative."""
-
-LOOK_SIGNIFICANCE = 2.33
-"""The standard errors a look's mean saving must exceed: with no saving, one of `LOOKS` looks
-at the cumulative frames crosses it as often as one look crosses `lgi.detail.SIGNIFICANCE`
-(2.3 % one-sided; Pocock's boundary for three looks, 1977; simulated in
-tests/test_local_fits.py)."""
 
 UNBOUNDED = "unbounded"
 """`local_fits=UNBOUNDED`: each window's weights are not held to [0, 1]. The box is a FACS rig's
@@ -350,56 +342,41 @@ def estimate_local_fits(
         raise InputError("estimate_local_fits needs marker_noise (0 for clean markers)")
     if frames_used < 1:
         raise InputError(f"frames_used must be >= 1, got {frames_used}")
+    only_unbounded = fit == UNBOUNDED
+    if not (only_unbounded or fit is None or fit is True):
+        raise InputError(f"fit: expected None, True or {UNBOUNDED!r}, got {fit!r}")
     out = leave_markers_out(arr, LOOKS * frames_used, LEFT_OUT_PER_FRAME, what="local fits")
+    looks = Looks(out)
     pieces = local_pieces(model)
-    # Each look's frames every LOOKS-th of the picked ones, so every look spans the take.
-    look_of_frame = np.arange(out.picked.size) % LOOKS
-    look_of_row = look_of_frame[np.searchsorted(out.picked, out.frame)]
     err_without = np.full(out.marker.size, np.nan)
     # Left-out distances with local fits: bounded (column 0) and unbounded (column 1, read only
     # once bounded ones have saved: the second test of the sequence).
     err_with = np.full((out.marker.size, 2), np.nan)
-
-    only_unbounded = fit == UNBOUNDED
-    if not (only_unbounded or fit is None or fit is True):
-        raise InputError(f"fit: expected None, True or {UNBOUNDED!r}, got {fit!r}")
 
     def distances(rows: NDArray[np.int64], kind: int, base: bool) -> None:
         """The left-out distances of `rows` with local fits of `kind` (column of `err_with`:
         0 bounded, 1 unbounded, on the solve with the unbounded global fit); with `base`, the
         solve's own (without them) too."""
         part = out.subset(rows)
+        fit = UNBOUNDED if kind else None
         for at, solved in solved_in_chunks(
-            model, part, jaw=jaw, marker_noise=marker_noise, fit=UNBOUNDED if kind else None
+            model, part, jaw=jaw, marker_noise=marker_noise, fit=fit
         ):
-            k = np.arange(solved.missing.shape[0])
-            left = part.marker[at]
-            given = part.given[at]
             if base:
-                err_without[rows[at]] = np.linalg.norm(
-                    np.asarray(solved.bundle_positions)[k, left] - given, axis=1
-                )
+                err_without[rows[at]] = looks.distances(rows[at], solved.bundle_positions)
             on = pieces.at_bundles(solved, bounded=kind == 0)
-            err_with[rows[at], kind] = np.linalg.norm(on[k, left] - given, axis=1)
-
-    def savings(kind: int, seen: NDArray[np.int64]) -> tuple[float, float]:
-        """The mean over the frames `seen` of each frame's mean saving, and its standard
-        error. Distances, as the results report errors: squared ones let a few markers (the
-        lips', whose left-out errors are the largest) decide the choice."""
-        saved = np.array([(err_without - err_with[:, kind])[out.frame == f].mean() for f in seen])
-        return float(saved.mean()), float(saved.std(ddof=1) / np.sqrt(saved.size))
+            err_with[rows[at], kind] = looks.distances(rows[at], on)
 
     use, unbounded = False, False
+    first = 1 if only_unbounded else 0
     for look in range(LOOKS):
-        rows = np.flatnonzero(look_of_row == look)
+        rows = looks.rows(look)
         if rows.size == 0:
             break
-        first = 1 if only_unbounded else 0
         distances(rows, first, True)
-        seen = out.picked[look_of_frame <= look]
-        if seen.size < 2:
+        mean, spread, seen = looks.saving(err_without, err_with[:, first], look)
+        if seen < 2:
             continue
-        mean, spread = savings(first, seen)
         if only_unbounded:
             if mean > LOOK_SIGNIFICANCE * spread:
                 use = unbounded = True
@@ -409,8 +386,8 @@ def estimate_local_fits(
         # the same rows, so each test keeps the whole 2.3 %.
         elif mean > LOOK_SIGNIFICANCE * spread:
             use = True
-            distances(np.flatnonzero(look_of_row <= look), 1, False)
-            mean_u, spread_u = savings(1, seen)
+            distances(looks.rows(look, through=True), 1, False)
+            mean_u, spread_u, _ = looks.saving(err_without, err_with[:, 1], look)
             unbounded = mean_u > LOOK_SIGNIFICANCE * spread_u and mean_u > mean
             break
         if mean < 0:

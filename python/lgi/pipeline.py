@@ -35,6 +35,7 @@ from lgi.io.topology import Topology, topology
 from lgi.local import UNBOUNDED, estimate_local_fits
 from lgi.model import PROGRESS_DELAY, Model, estimate_marker_noise
 from lgi.placement import ScaleFit, check_scale, describe_scale
+from lgi.unbounded import estimate_unbounded_fit
 
 __all__ = [
     "CHUNK_FRAMES",
@@ -188,6 +189,30 @@ def check_local_fits_noise(spec: bool | str, sigma: float | str | None) -> None:
             "--local-fits needs --marker-noise (SIGMA or auto; 0 for clean markers): the local "
             "fits fit the noise-aware targets"
         )
+
+
+def unbounded_fit_choice(
+    spec: bool | str,
+    frames: np.ndarray,
+    model: Model,
+    sigma: float | None,
+    jaw: str | None,
+    say: Say,
+) -> bool:
+    """`--unbounded-fit`: True, False or 'auto' (read from the take's own markers left out,
+    `lgi.estimate_unbounded_fit`, and said with its numbers)."""
+    if spec is True or spec is False:
+        return spec
+    if spec != "auto":
+        raise InputError(f"--unbounded-fit {spec!r}: expected no value or 'auto'")
+    est = estimate_unbounded_fit(frames, model, marker_noise=sigma, jaw=jaw)
+    unit = model.units or "model units"
+    say(
+        f"unbounded fit {'used' if est.use else 'not used'}: {est.left_out} markers left out "
+        f"one at a time on {est.frames} frames are {est.error_unbounded:.4g} {unit} from the "
+        f"surface with it, {est.error_boxed:.4g} with the fit held to [0, 1]"
+    )
+    return est.use
 
 
 def local_fits_choice(
@@ -730,13 +755,14 @@ def solve_file(
     quiet: bool = False,
     say: Say = _silent,
     local_fits: bool | str = False,
-    unbounded_fit: bool = False,
+    unbounded_fit: bool | str = False,
 ) -> tuple[Path, int]:
     """`lgi solve`: the take file solved with the model file, written by `out`'s suffix
     (`output_kind`). `noise` is `--marker-noise` (a number, 'auto' or 'none'; 'auto' looks at
     the whole range), `detail` `--detail-weight` (the same forms, `detail_weight`),
     `local_fits` `--local-fits` (`Model.solve(local_fits=True)`; 'auto': `local_fits_choice`),
-    `unbounded_fit` `--unbounded-fit` (`Model.solve(fit="unbounded")`),
+    `unbounded_fit` `--unbounded-fit` (`Model.solve(fit="unbounded")`; 'auto':
+    `unbounded_fit_choice`),
     `frames` is `--frames A:B`. By default the range is solved in one
     `Model.solve` (frames prefer their predecessor's choices across the whole range), then
     written chunk by chunk; `chunk` (`--chunk N`) solves and writes N frames at a time into
@@ -792,6 +818,7 @@ def solve_file(
     if local_fits and m.jaw_bins is not None:
         raise InputError(f"--local-fits: the model {model} has jaw bins; build it without them")
     jaw_mode = None if m.jaw_rig is None or jaw == "rest" else jaw
+    unbounded_fit = unbounded_fit_choice(unbounded_fit, x, m, sigma, jaw_mode, say)
     fit = UNBOUNDED if unbounded_fit else None
     local_fits = local_fits_choice(local_fits, x, m, sigma, jaw_mode, say, fit)
     weight = detail_weight(detail, x, m, sigma, jaw_mode, fit)

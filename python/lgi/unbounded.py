@@ -1,0 +1,113 @@
+"""Whether a take is better solved with the unbounded global fit (`Model.solve(fit="unbounded")`,
+`--unbounded-fit auto`), read from its own markers.
+
+The box on the fit's weights is a FACS rig's prior; a dataset of whole-face scans has none, and
+a TD does not always know which a dataset is (a set of scans with FACS names, an actor rig built
+from scans). The take's markers, left out one at a time, say it the way they say whether local
+fits pay (`lgi.estimate_local_fits`, the same rows and looks): the solve with the boxed fit and
+the solve with the unbounded one each predict every left-out marker, and the unbounded fit is
+used when the distance it saves, averaged per frame, clears `LOOK_SIGNIFICANCE` standard
+errors. docs/concepts.md explains it; docs/results.md says what it chose on the protocols'
+takes."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from lgi.detail import DETAIL_FRAMES
+from lgi.errors import InputError
+from lgi.leave_out import (
+    LEFT_OUT_PER_FRAME,
+    LOOK_SIGNIFICANCE,
+    LOOKS,
+    Looks,
+    leave_markers_out,
+    solved_in_chunks,
+)
+from lgi.local import UNBOUNDED
+
+if TYPE_CHECKING:
+    from lgi.model import Model
+
+__all__ = ["UnboundedFitEstimate", "estimate_unbounded_fit"]
+
+
+@dataclass(frozen=True)
+class UnboundedFitEstimate:
+    """Whether the unbounded global fit predicts a take's left-out markers better
+    (`estimate_unbounded_fit`)."""
+
+    use: bool
+    """It saved left-out distance by more than `LOOK_SIGNIFICANCE` standard errors at one of
+    the looks."""
+    error_boxed: float
+    """Mean distance (data units) of the left-out markers from the solve's surface without
+    them, the fit held to [0, 1]."""
+    error_unbounded: float
+    """The same with the unbounded fit."""
+    left_out: int
+    """Markers left out (one per solved frame)."""
+    frames: int
+    """Take frames they were left out of (`frames_used` a look)."""
+
+    @property
+    def fit(self) -> str | None:
+        """What to pass as `Model.solve(fit=...)`: `UNBOUNDED` or None (the default)."""
+        return UNBOUNDED if self.use else None
+
+
+def estimate_unbounded_fit(
+    frames: ArrayLike,
+    model: Model,
+    *,
+    marker_noise: float | None,
+    jaw: str | None = "auto",
+    frames_used: int = DETAIL_FRAMES,
+) -> UnboundedFitEstimate:
+    """Whether a take (F, B, 3; NaN rows missing) is better solved by `model` with the unbounded
+    global fit, read from its own markers: on `frames_used` frames spread over the take, up to
+    `LEFT_OUT_PER_FRAME` present markers each are left out in turn and predicted by the solve
+    with `marker_noise` and `jaw` without them, once with the fit held to [0, 1] and once
+    unbounded. The unbounded fit is used when the left-out distance it saves, averaged per
+    frame, exceeds `LOOK_SIGNIFICANCE` standard errors of that mean over the frames read; when
+    it does not and the saving is positive, `frames_used` more frames are read, up to `LOOKS`
+    looks. Each look solves about `frames_used` x 30 frames twice."""
+    arr = np.asarray(frames, dtype=np.float64)
+    b = model.num_bundles
+    if arr.ndim != 3 or arr.shape[0] == 0 or arr.shape[1:] != (b, 3):
+        raise InputError(f"frames: expected shape (F, {b}, 3) with F >= 1, got {arr.shape}")
+    out = leave_markers_out(arr, LOOKS * frames_used, LEFT_OUT_PER_FRAME, what="unbounded fit")
+    looks = Looks(out)
+    # Left-out distances: the boxed fit's solve (column 0) and the unbounded one's (column 1).
+    err = np.full((out.marker.size, 2), np.nan)
+    use = False
+    for look in range(LOOKS):
+        rows = looks.rows(look)
+        if rows.size == 0:
+            break
+        part = out.subset(rows)
+        for kind, fit in enumerate((None, UNBOUNDED)):
+            for at, solved in solved_in_chunks(
+                model, part, jaw=jaw, marker_noise=marker_noise, fit=fit
+            ):
+                err[rows[at], kind] = looks.distances(rows[at], solved.bundle_positions)
+        mean, spread, seen = looks.saving(err[:, 0], err[:, 1], look)
+        if seen < 2:
+            continue
+        if mean > LOOK_SIGNIFICANCE * spread:
+            use = True
+            break
+        if mean < 0:
+            break
+    done = np.isfinite(err[:, 0])
+    return UnboundedFitEstimate(
+        use=use,
+        error_boxed=float(err[done, 0].mean()),
+        error_unbounded=float(err[done, 1].mean()),
+        left_out=int(done.sum()),
+        frames=int(np.unique(out.frame[done]).size),
+    )
