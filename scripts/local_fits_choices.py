@@ -7,9 +7,11 @@ from the surface with them (bounded, unbounded) and without; docs/results.md put
 choices beside the protocols' errors.
 
 Usage: python scripts/local_fits_choices.py [--layouts markers_120 random:160:1 random:140:7]
-[--sigma 0 0.02 0.05] [--held-out 0 0.25] [--no-lomo] [--unbounded-fit] (from the checkout,
-../shared beside it). `--unbounded-fit`: the scans takes are read as `--unbounded-fit
---local-fits auto` reads them (the unbounded solve against unbounded local fits alone).
+[--sigma 0 0.02 0.05] [--held-out 0 0.25] [--no-lomo] [--unbounded-fit-auto] (from the
+checkout, ../shared beside it). `--unbounded-fit-auto`: every take is read as `--unbounded-fit
+auto --local-fits auto` reads it (`lgi.estimate_unbounded_fit` first, then the local fits
+with the fit it chose), with two more columns: the fit chosen and its left-out distances
+(boxed / unbounded).
 """
 
 from __future__ import annotations
@@ -43,13 +45,33 @@ def layout(name: str, dataset: lgi.Dataset) -> np.ndarray:
     return random_layout(dataset, int(count), int(seed), np.arange(ict.NARROW_FACE))  # type: ignore[arg-type]
 
 
-def line(what: str, est: lgi.LocalFitsEstimate, seconds: float) -> None:
+def line(
+    what: str, est: lgi.LocalFitsEstimate, seconds: float, fit: lgi.UnboundedFitEstimate | None
+) -> None:
     chosen = {False: "no", True: "yes", "unbounded": "unbounded"}[est.local_fits]
+    fit_cells = ""
+    if fit is not None:
+        fit_cells = (
+            f" {'unbounded' if fit.use else 'boxed'} | "
+            f"{fit.error_boxed:.4f} / {fit.error_unbounded:.4f} |"
+        )
     print(
-        f"| {what} | {chosen} | {est.error_with:.4f} | {est.error_unbounded:.4f} | "
+        f"| {what} |{fit_cells} {chosen} | {est.error_with:.4f} | {est.error_unbounded:.4f} | "
         f"{est.error_without:.4f} | {seconds:.1f} |",
         flush=True,
     )
+
+
+def choose(
+    frames: np.ndarray, model: lgi.Model, sigma: float | None, fit_auto: bool
+) -> tuple[lgi.LocalFitsEstimate, lgi.UnboundedFitEstimate | None]:
+    """What `--local-fits auto` (after `--unbounded-fit auto` with `fit_auto`) chooses."""
+    fit = lgi.estimate_unbounded_fit(frames, model, marker_noise=sigma) if fit_auto else None
+    assert sigma is not None
+    est = lgi.estimate_local_fits(
+        frames, model, marker_noise=sigma, fit=None if fit is None else fit.fit
+    )
+    return est, fit
 
 
 def main() -> None:
@@ -58,7 +80,7 @@ def main() -> None:
     ap.add_argument("--sigma", type=float, nargs="+", default=[0.0, 0.02, 0.05])
     ap.add_argument("--held-out", type=float, nargs="+", default=[0.0, 0.25])
     ap.add_argument("--no-lomo", action="store_true", help="skip the real takes")
-    ap.add_argument("--unbounded-fit", action="store_true", help="scans: fit='unbounded'")
+    ap.add_argument("--unbounded-fit-auto", action="store_true", help="the fit chosen per take")
     args = ap.parse_args()
     warnings.filterwarnings("ignore")
     d = ict.load_dataset(ICT)
@@ -66,11 +88,14 @@ def main() -> None:
     hinge = HingeJaw.fit(d, ict.lower_teeth())
     rig, theta = _auto_rig(d)
     curves = [read_livelinkface(r).for_dataset(d.names) for r in RECORDINGS]
-    print(
-        "| take | local fits chosen | left out, with (cm) | with unbounded (cm) | without (cm) "
-        "| seconds |"
+    fit_head = (
+        " fit chosen | left out, boxed / unbounded fit (cm) |" if args.unbounded_fit_auto else ""
     )
-    print("|---|---|---|---|---|---|")
+    print(
+        f"| take |{fit_head} local fits chosen | left out, with (cm) | with unbounded (cm) "
+        "| without (cm) | seconds |"
+    )
+    print("|---|---|---|---|---|---|" + ("---|---|" if args.unbounded_fit_auto else ""))
     for held in args.held_out:
         for name in args.layouts if held == 0.0 else ["markers_120"]:
             markers = layout(name, d)
@@ -91,14 +116,12 @@ def main() -> None:
                     else:
                         methods = capture_methods(take.dataset, markers, sigma)
                     t0 = time.perf_counter()
-                    fit = "unbounded" if args.unbounded_fit and held == 0.0 else None
-                    est = lgi.estimate_local_fits(
-                        take.frames, methods["LGI"].model, marker_noise=sigma, fit=fit
+                    est, fit = choose(
+                        take.frames, methods["LGI"].model, sigma, args.unbounded_fit_auto
                     )
                     kind = "scans K=120" if held == 0.0 else "capture, 25 % held out"
-                    line(
-                        f"{kind}, {name}, {NAMES[i]}, sigma {sigma}", est, time.perf_counter() - t0
-                    )
+                    what = f"{kind}, {name}, {NAMES[i]}, sigma {sigma}"
+                    line(what, est, time.perf_counter() - t0, fit)
     if args.no_lomo:
         return
     lm = np.asarray(ict.load_landmarks(ICT), dtype=np.int64)
@@ -109,8 +132,8 @@ def main() -> None:
         frames = real.frames[:: max(1, real.frames.shape[0] // 250)]
         model = capture_methods(d, real.rest, None, frames)["LGI"]
         t0 = time.perf_counter()
-        est = lgi.estimate_local_fits(frames, model.model, marker_noise=model.marker_noise)
-        line(f"lomo, {Path(path).stem}", est, time.perf_counter() - t0)
+        est, fit = choose(frames, model.model, model.marker_noise, args.unbounded_fit_auto)
+        line(f"lomo, {Path(path).stem}", est, time.perf_counter() - t0, fit)
 
 
 if __name__ == "__main__":

@@ -413,7 +413,7 @@ class Model:
         match a region as well as their sums (docs/concepts.md), and so does the frame's global
         fit the windows start from and the targets come from (as `fit="unbounded"`)."""
         w = None if detail_weight is None else check_detail_weight(detail_weight)
-        offer, unbounded = self._check_local(local_fits, marker_noise, fit)
+        offer, unbounded = self._fit_options(local_fits, marker_noise, fit)
         arr = np.asarray(frames)
         if arr.ndim == 2:
             arr = arr[None]
@@ -432,7 +432,7 @@ class Model:
             )
         return self._finish(res, arr, w, local_fits)
 
-    def _check_local(
+    def _fit_options(
         self, local_fits: bool | str, marker_noise: float | None, fit: bool | str | None
     ) -> tuple[bool | None, bool]:
         """The core's `fit` and `unbounded_fit` for `fit` and `local_fits` (unbounded local
@@ -440,7 +440,7 @@ class Model:
         (before any solving)."""
         if isinstance(fit, (bool, np.bool_)) or fit is None:
             offer, unbounded = (None if fit is None else bool(fit)), False
-        elif fit == UNBOUNDED:
+        elif isinstance(fit, str) and fit == UNBOUNDED:
             offer, unbounded = True, True
         else:
             raise InputError(f"fit: expected True, False, None or {UNBOUNDED!r}, got {fit!r}")
@@ -535,7 +535,7 @@ class Model:
         `solve`. Other options as in `solve` (`detail_weight` applied chunk by chunk: each
         frame's blend is its own, and `local_fits` too)."""
         w = None if detail_weight is None else check_detail_weight(detail_weight)
-        offer, unbounded = self._check_local(local_fits, marker_noise, fit)
+        offer, unbounded = self._fit_options(local_fits, marker_noise, fit)
         n = _lgi.check_count(chunk, "chunk")
         if n < 1:
             raise InputError(f"chunk must be >= 1 frames, got {n}")
