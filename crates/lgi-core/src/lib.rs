@@ -34,6 +34,7 @@ mod model;
 mod polygons;
 mod prefetch;
 mod prior;
+mod ridge;
 mod sew;
 mod sibson;
 mod simd;

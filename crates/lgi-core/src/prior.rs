@@ -7,6 +7,7 @@
 use crate::baselines::{BlendshapeSolver, FitStart};
 use crate::error::{LgiError, Result};
 use crate::linalg::{cholesky, cholesky_solve, Lu};
+use crate::ridge::RidgeFit;
 use glam::DVec3;
 use std::sync::OnceLock;
 
@@ -52,8 +53,9 @@ pub struct FitPrior {
     /// The displacements' Gram matrix over every bundle (S × S), made on the first
     /// [`active_residuals`](Self::active_residuals) of a frame with every marker present.
     gram: OnceLock<Vec<f64>>,
-    /// The fit without the box (ridge alone), made on first use ([`fit_unbounded`]).
-    unbounded: OnceLock<std::result::Result<BlendshapeSolver, String>>,
+    /// The fit without the box (ridge alone), made on first use
+    /// ([`fit_unbounded`](Self::fit_unbounded)).
+    unbounded: OnceLock<std::result::Result<RidgeFit, String>>,
 }
 
 impl FitPrior {
@@ -173,7 +175,7 @@ impl FitPrior {
                     }
                 }
                 let scale = fit_scale(&a, s);
-                BlendshapeSolver::new(a, 3 * b, s, FIT_L2 * scale, 0.0).map_err(|e| e.to_string())
+                RidgeFit::new(a, 3 * b, s, FIT_L2 * scale).map_err(|e| e.to_string())
             })
             .as_ref()
             .map_err(|e| LgiError::Input(e.clone()))?;
@@ -182,9 +184,9 @@ impl FitPrior {
             rhs.extend_from_slice(&(*t - *r).to_array());
         }
         let solution = solver.solve(&rhs)?;
-        let mut weights = Vec::with_capacity(solution.weights.len() + 1);
+        let mut weights = Vec::with_capacity(solution.len() + 1);
         weights.push(0.0);
-        weights.extend_from_slice(&solution.weights);
+        weights.extend_from_slice(&solution);
         let mut fit = FrameFit {
             weights,
             positions: Vec::new(),

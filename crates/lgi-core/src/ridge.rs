@@ -1,0 +1,230 @@
+//! The least-squares fit with a ridge alone, min ‖A w − t‖² + λ‖w‖² over the present rows of
+//! `t`: the unbounded global fit ([`FitPrior::fit_unbounded`](crate::prior::FitPrior)). It is
+//! made once per matrix in the cheaper of its two forms. With fewer shapes than rows, the
+//! normal equations (S × S), a frame's missing rows' outer products taken off the whole Gram
+//! matrix. With more (K = 2,000 scans on 360 marker rows), the dual ones: `(A Aᵀ + λI)⁻¹` once,
+//! a frame's missing rows taken off that inverse by its Schur complement, and
+//! `w = A_Pᵀ (A_P A_Pᵀ + λI)⁻¹ t_P`, so a frame costs O(R² + R S) instead of a new R × R
+//! factorisation.
+
+use crate::error::{LgiError, Result};
+use crate::linalg::{cholesky, cholesky_solve, lower_solve, lower_t_solve};
+
+/// The form the fit's equations are kept in.
+#[derive(Debug, Clone)]
+enum Form {
+    /// `AᵀA + λI` over every row (S × S, row-major).
+    Primal { gram: Vec<f64> },
+    /// `(A Aᵀ + λI)⁻¹` over every row (R × R, row-major).
+    Dual { inverse: Vec<f64> },
+}
+
+/// A ridge fit of one matrix (see the module's text).
+#[derive(Debug, Clone)]
+pub struct RidgeFit {
+    /// Row-major R × S.
+    a: Vec<f64>,
+    rows: usize,
+    shapes: usize,
+    form: Form,
+}
+
+impl RidgeFit {
+    /// `a` row-major `rows × shapes`; `lambda` > 0 (absolute).
+    pub fn new(a: Vec<f64>, rows: usize, shapes: usize, lambda: f64) -> Result<RidgeFit> {
+        if a.len() != rows * shapes || shapes == 0 {
+            return Err(LgiError::Input(format!(
+                "ridge fit: {} values are not {rows} rows of {shapes} shapes",
+                a.len()
+            )));
+        }
+        if !(lambda.is_finite() && lambda > 0.0) {
+            return Err(LgiError::Input(format!(
+                "ridge fit: the ridge must be finite and > 0, got {lambda}"
+            )));
+        }
+        let row = |r: usize| &a[r * shapes..(r + 1) * shapes];
+        let form = if shapes <= rows {
+            let mut gram = vec![0.0; shapes * shapes];
+            for r in 0..rows {
+                let x = row(r);
+                for i in 0..shapes {
+                    for j in 0..=i {
+                        gram[i * shapes + j] += x[i] * x[j];
+                    }
+                }
+            }
+            for i in 0..shapes {
+                for j in 0..i {
+                    gram[j * shapes + i] = gram[i * shapes + j];
+                }
+                gram[i * shapes + i] += lambda;
+            }
+            Form::Primal { gram }
+        } else {
+            let mut k = vec![0.0; rows * rows];
+            for i in 0..rows {
+                for j in 0..=i {
+                    let d: f64 = row(i).iter().zip(row(j)).map(|(x, y)| x * y).sum();
+                    k[i * rows + j] = d;
+                    k[j * rows + i] = d;
+                }
+                k[i * rows + i] += lambda;
+            }
+            let l = cholesky(rows, k)?;
+            // Column c of the inverse is L⁻ᵀ L⁻¹ e_c; the inverse is symmetric, so it is row c.
+            let mut inverse = vec![0.0; rows * rows];
+            for c in 0..rows {
+                let mut e = vec![0.0; rows];
+                e[c] = 1.0;
+                let col = lower_t_solve(rows, &l, &lower_solve(rows, &l, &e));
+                inverse[c * rows..(c + 1) * rows].copy_from_slice(&col);
+            }
+            Form::Dual { inverse }
+        };
+        Ok(RidgeFit {
+            a,
+            rows,
+            shapes,
+            form,
+        })
+    }
+
+    /// The weights (S) fitting `target` (R values; NaN entries are missing rows, dropped).
+    pub fn solve(&self, target: &[f64]) -> Result<Vec<f64>> {
+        let (r, s) = (self.rows, self.shapes);
+        if target.len() != r {
+            return Err(LgiError::Input(format!(
+                "expected {r} target values, got {}",
+                target.len()
+            )));
+        }
+        if target.iter().any(|t| t.is_infinite()) {
+            return Err(LgiError::Input("target has an infinite value".into()));
+        }
+        let present: Vec<usize> = (0..r).filter(|&i| !target[i].is_nan()).collect();
+        let missing: Vec<usize> = (0..r).filter(|&i| target[i].is_nan()).collect();
+        let row = |i: usize| &self.a[i * s..(i + 1) * s];
+        match &self.form {
+            Form::Primal { gram } => {
+                let mut g = gram.clone();
+                for &m in &missing {
+                    let x = row(m);
+                    for i in 0..s {
+                        for j in 0..s {
+                            g[i * s + j] -= x[i] * x[j];
+                        }
+                    }
+                }
+                let mut rhs = vec![0.0; s];
+                for &p in &present {
+                    for (acc, x) in rhs.iter_mut().zip(row(p)) {
+                        *acc += x * target[p];
+                    }
+                }
+                Ok(cholesky_solve(s, &cholesky(s, g)?, &rhs))
+            }
+            Form::Dual { inverse } => {
+                let inv = |i: usize, j: usize| inverse[i * r + j];
+                // x_P = (K_PP)⁻¹ t_P with (K_PP)⁻¹ = Kinv_PP − Kinv_PM (Kinv_MM)⁻¹ Kinv_MP.
+                let mut x: Vec<f64> = present
+                    .iter()
+                    .map(|&i| present.iter().map(|&j| inv(i, j) * target[j]).sum())
+                    .collect();
+                if !missing.is_empty() {
+                    let m = missing.len();
+                    let y: Vec<f64> = missing
+                        .iter()
+                        .map(|&i| present.iter().map(|&j| inv(i, j) * target[j]).sum())
+                        .collect();
+                    let mut block = vec![0.0; m * m];
+                    for (a, &i) in missing.iter().enumerate() {
+                        for (b, &j) in missing.iter().enumerate() {
+                            block[a * m + b] = inv(i, j);
+                        }
+                    }
+                    let z = cholesky_solve(m, &cholesky(m, block)?, &y);
+                    for (xp, &i) in x.iter_mut().zip(&present) {
+                        *xp -= missing
+                            .iter()
+                            .zip(&z)
+                            .map(|(&j, zj)| inv(i, j) * zj)
+                            .sum::<f64>();
+                    }
+                }
+                let mut w = vec![0.0; s];
+                for (&p, xp) in present.iter().zip(&x) {
+                    for (acc, a) in w.iter_mut().zip(row(p)) {
+                        *acc += a * xp;
+                    }
+                }
+                Ok(w)
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A small LCG's values in [-1, 1): test data only.
+    fn values(n: usize, seed: u64) -> Vec<f64> {
+        let mut x = seed;
+        (0..n)
+            .map(|_| {
+                x = x
+                    .wrapping_mul(6364136223846793005)
+                    .wrapping_add(1442695040888963407);
+                (x >> 11) as f64 / (1u64 << 52) as f64 - 1.0
+            })
+            .collect()
+    }
+
+    /// The normal equations over the present rows, solved afresh: the reference.
+    fn reference(a: &[f64], rows: usize, s: usize, lambda: f64, t: &[f64]) -> Vec<f64> {
+        let present: Vec<usize> = (0..rows).filter(|&i| !t[i].is_nan()).collect();
+        let mut g = vec![0.0; s * s];
+        let mut rhs = vec![0.0; s];
+        for i in 0..s {
+            for j in 0..s {
+                g[i * s + j] = present.iter().map(|&r| a[r * s + i] * a[r * s + j]).sum();
+            }
+            g[i * s + i] += lambda;
+            rhs[i] = present.iter().map(|&r| a[r * s + i] * t[r]).sum();
+        }
+        cholesky_solve(s, &cholesky(s, g).unwrap(), &rhs)
+    }
+
+    #[test]
+    fn both_forms_equal_the_normal_equations_over_the_present_rows() {
+        // Fewer shapes than rows (the primal form) and more (the dual form).
+        for (rows, s) in [(30, 7), (12, 40)] {
+            let a = values(rows * s, 3 + s as u64);
+            let fit = RidgeFit::new(a.clone(), rows, s, 1e-3).unwrap();
+            let mut t = values(rows, 11);
+            for missing in [vec![], vec![4], vec![0, 5, 6, 11]] {
+                for &m in &missing {
+                    t[m] = f64::NAN;
+                }
+                let got = fit.solve(&t).unwrap();
+                let want = reference(&a, rows, s, 1e-3, &t);
+                for (g, w) in got.iter().zip(&want) {
+                    assert!(
+                        (g - w).abs() < 1e-9 * (1.0 + w.abs()),
+                        "{rows}x{s}: {g} vs {w}"
+                    );
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn bad_shapes_ridges_and_targets_are_input_errors() {
+        assert!(RidgeFit::new(vec![0.0; 5], 2, 3, 1.0).is_err());
+        assert!(RidgeFit::new(vec![0.0; 6], 2, 3, 0.0).is_err());
+        let fit = RidgeFit::new(values(6, 1), 2, 3, 1.0).unwrap();
+        assert!(fit.solve(&[1.0]).is_err());
+        assert!(fit.solve(&[1.0, f64::INFINITY]).is_err());
+    }
+}
