@@ -9,9 +9,8 @@ choices beside the protocols' errors.
 Usage: python scripts/local_fits_choices.py [--layouts markers_120 random:160:1 random:140:7]
 [--sigma 0 0.02 0.05] [--held-out 0 0.25] [--no-lomo] [--unbounded-fit-auto] (from the
 checkout, ../shared beside it). `--unbounded-fit-auto`: every take is read as `--unbounded-fit
-auto --local-fits auto` reads it (`lgi.estimate_unbounded_fit` first, then the local fits
-with the fit it chose), with two more columns: the fit chosen and its left-out distances
-(boxed / unbounded).
+auto --local-fits auto` reads it (`lgi.pipeline.fits_choice`): the two choices and the lines
+`lgi solve` says about them.
 """
 
 from __future__ import annotations
@@ -45,33 +44,29 @@ def layout(name: str, dataset: lgi.Dataset) -> np.ndarray:
     return random_layout(dataset, int(count), int(seed), np.arange(ict.NARROW_FACE))  # type: ignore[arg-type]
 
 
-def line(
-    what: str, est: lgi.LocalFitsEstimate, seconds: float, fit: lgi.UnboundedFitEstimate | None
-) -> None:
+def line(what: str, est: lgi.LocalFitsEstimate, seconds: float) -> None:
     chosen = {False: "no", True: "yes", "unbounded": "unbounded"}[est.local_fits]
-    fit_cells = ""
-    if fit is not None:
-        fit_cells = (
-            f" {'unbounded' if fit.use else 'boxed'} | "
-            f"{fit.error_boxed:.4f} / {fit.error_unbounded:.4f} |"
-        )
     print(
-        f"| {what} |{fit_cells} {chosen} | {est.error_with:.4f} | {est.error_unbounded:.4f} | "
+        f"| {what} | {chosen} | {est.error_with:.4f} | {est.error_unbounded:.4f} | "
         f"{est.error_without:.4f} | {seconds:.1f} |",
         flush=True,
     )
 
 
-def choose(
-    frames: np.ndarray, model: lgi.Model, sigma: float | None, fit_auto: bool
-) -> tuple[lgi.LocalFitsEstimate, lgi.UnboundedFitEstimate | None]:
-    """What `--local-fits auto` (after `--unbounded-fit auto` with `fit_auto`) chooses."""
-    fit = lgi.estimate_unbounded_fit(frames, model, marker_noise=sigma) if fit_auto else None
-    assert sigma is not None
-    est = lgi.estimate_local_fits(
-        frames, model, marker_noise=sigma, fit=None if fit is None else fit.fit
+def choose_both(frames: np.ndarray, model: lgi.Model, sigma: float | None, what: str) -> None:
+    """What `--unbounded-fit auto --local-fits auto` chooses (`lgi.pipeline.fits_choice`), and
+    the distances it read, as one line."""
+    from lgi.pipeline import fits_choice
+
+    said: list[str] = []
+    t0 = time.perf_counter()
+    local, free = fits_choice("auto", "auto", frames, model, sigma, "auto", said.append)
+    kind = {False: "no", True: "yes", "unbounded": "unbounded"}[local]
+    print(
+        f"| {what} | {kind} | {'unbounded' if free else 'boxed'} | {'; '.join(said)} "
+        f"| {time.perf_counter() - t0:.1f} |",
+        flush=True,
     )
-    return est, fit
 
 
 def main() -> None:
@@ -116,12 +111,14 @@ def main() -> None:
                     else:
                         methods = capture_methods(take.dataset, markers, sigma)
                     t0 = time.perf_counter()
-                    est, fit = choose(
-                        take.frames, methods["LGI"].model, sigma, args.unbounded_fit_auto
-                    )
                     kind = "scans K=120" if held == 0.0 else "capture, 25 % held out"
                     what = f"{kind}, {name}, {NAMES[i]}, sigma {sigma}"
-                    line(what, est, time.perf_counter() - t0, fit)
+                    model = methods["LGI"].model
+                    if args.unbounded_fit_auto:
+                        choose_both(take.frames, model, sigma, what)
+                        continue
+                    est = lgi.estimate_local_fits(take.frames, model, marker_noise=sigma)
+                    line(what, est, time.perf_counter() - t0)
     if args.no_lomo:
         return
     lm = np.asarray(ict.load_landmarks(ICT), dtype=np.int64)
@@ -132,8 +129,11 @@ def main() -> None:
         frames = real.frames[:: max(1, real.frames.shape[0] // 250)]
         model = capture_methods(d, real.rest, None, frames)["LGI"]
         t0 = time.perf_counter()
-        est, fit = choose(frames, model.model, model.marker_noise, args.unbounded_fit_auto)
-        line(f"lomo, {Path(path).stem}", est, time.perf_counter() - t0, fit)
+        if args.unbounded_fit_auto:
+            choose_both(frames, model.model, model.marker_noise, f"lomo, {Path(path).stem}")
+            continue
+        est = lgi.estimate_local_fits(frames, model.model, marker_noise=model.marker_noise)
+        line(f"lomo, {Path(path).stem}", est, time.perf_counter() - t0)
 
 
 if __name__ == "__main__":

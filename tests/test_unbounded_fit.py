@@ -163,6 +163,16 @@ def test_cli_unbounded_fit_writes_what_model_solve_gives_and_records_it(
     assert said in err and "with the fit held to [0, 1]" in err, err
     with np.load(auto) as z:
         assert SolveSettings.from_json(str(z["solve_settings"]), "a.npz").unbounded_fit is est.use
+    # Both auto: the local fits first (on the boxed solve); the fit only where they are not used.
+    both = tmp_path / "both.npz"
+    argv_both = ["solve", str(model_path), str(take), "-o", str(both), "--marker-noise", "0.01"]
+    assert cli.main([*argv_both, "--unbounded-fit", "auto", "--local-fits", "auto"]) == 0
+    capsys.readouterr()
+    local = lgi.estimate_local_fits(x, model, marker_noise=0.01).local_fits
+    free = local == "unbounded" if local else est.use
+    with np.load(both) as z:
+        got = SolveSettings.from_json(str(z["solve_settings"]), "b.npz")
+    assert (got.local_fits, got.unbounded_fit) == (local, free)
     with pytest.raises(SystemExit) as stop:  # argparse's own errors
         cli.main([*argv, "--unbounded-fit", "Auto", "--force"])
     err = capsys.readouterr().err
@@ -234,3 +244,39 @@ def test_the_unbounded_fit_estimate_is_the_left_out_markers_distance_both_ways(
     assert lgi.estimate_unbounded_fit(noisy, model, marker_noise=0.01, frames_used=2).use
     with pytest.raises(lgi.InputError, match=r"frames: expected shape \(F, "):
         lgi.estimate_unbounded_fit(noisy[:, :4], model, marker_noise=0.01)
+
+
+@pytest.mark.parametrize(
+    ("local_read", "fit_read", "want", "reads"),
+    [
+        ("unbounded", None, ("unbounded", True), ["local"]),
+        (True, None, (True, False), ["local"]),
+        (False, True, (False, True), ["local", "fit"]),
+        (False, False, (False, False), ["local", "fit"]),
+    ],
+)
+def test_both_auto_read_the_local_fits_first_and_the_fit_only_without_them(
+    monkeypatch: pytest.MonkeyPatch,
+    local_read: bool | str,
+    fit_read: bool | None,
+    want: tuple[bool | str, bool],
+    reads: list[str],
+) -> None:
+    from lgi import pipeline
+
+    calls: list[str] = []
+
+    def local_choice(spec, frames, model, sigma, jaw, say, fit=None):  # type: ignore[no-untyped-def]
+        calls.append("local")
+        assert spec == "auto" and fit is None  # read on the boxed solve
+        return local_read
+
+    def fit_choice(spec, frames, model, sigma, jaw, say):  # type: ignore[no-untyped-def]
+        calls.append("fit")
+        assert spec == "auto"
+        return fit_read
+
+    monkeypatch.setattr(pipeline, "local_fits_choice", local_choice)
+    monkeypatch.setattr(pipeline, "unbounded_fit_choice", fit_choice)
+    got = pipeline.fits_choice("auto", "auto", np.zeros((1, 1, 3)), None, 0.1, "auto", print)  # type: ignore[arg-type]
+    assert got == want and calls == reads

@@ -28,9 +28,8 @@ from lgi.io import takes as take_files
 from lgi.io.atomic import atomic_path, writable_folder
 from lgi.io.settings import SolveSettings
 from lgi.io.topology import topology
-from lgi.local import UNBOUNDED, estimate_local_fits
+from lgi.local import UNBOUNDED
 from lgi.model import Model, estimate_marker_noise
-from lgi.unbounded import estimate_unbounded_fit
 
 __all__ = [
     "MANIFEST",
@@ -291,18 +290,21 @@ def solve_shot(
         opts = dict(options)
         if opts.get("marker_noise") == "auto":
             opts["marker_noise"] = estimate_marker_noise(x, m)
-        if opts.get("fit") == "auto":
-            opts["fit"] = estimate_unbounded_fit(
-                x, m, marker_noise=opts.get("marker_noise"), jaw=opts.get("jaw", "auto")
-            ).fit
-        if opts.get("local_fits") == "auto":
-            opts["local_fits"] = estimate_local_fits(
+        if "auto" in (opts.get("fit"), opts.get("local_fits")):
+            from lgi.pipeline import fits_choice
+
+            fit = opts.get("fit")
+            local, free = fits_choice(
+                opts.get("local_fits", False),
+                "auto" if fit == "auto" else fit == UNBOUNDED,
                 x,
                 m,
-                marker_noise=opts["marker_noise"],
-                jaw=opts.get("jaw", "auto"),
-                fit=opts.get("fit"),
-            ).local_fits
+                opts.get("marker_noise"),
+                opts.get("jaw", "auto"),
+                lambda _message: None,
+            )
+            opts["local_fits"] = local
+            opts["fit"] = UNBOUNDED if free else (None if fit == "auto" else fit)
         if opts.get("detail_weight") == "auto":
             opts["detail_weight"] = estimate_detail_weight(
                 x,

@@ -191,6 +191,31 @@ def check_local_fits_noise(spec: bool | str, sigma: float | str | None) -> None:
         )
 
 
+def fits_choice(
+    local: bool | str,
+    unbounded: bool | str,
+    frames: np.ndarray,
+    model: Model,
+    sigma: float | None,
+    jaw: str | None,
+    say: Say,
+) -> tuple[bool | str, bool]:
+    """`--local-fits` and `--unbounded-fit` as given or read from the take (`local_fits_choice`,
+    `unbounded_fit_choice`): `local_fits` and whether the global fit is unbounded. When both
+    are 'auto', the local fits are read first, on the boxed solve (bounded, then unbounded ones
+    with the unbounded fit they start from): unbounded ones chosen bring the unbounded fit,
+    bounded ones keep the box, and with neither the unbounded fit is read on its own
+    (docs/concepts.md). Otherwise the fit is decided first and the local fits read on it."""
+    if local == "auto" and unbounded == "auto":
+        chosen = local_fits_choice(local, frames, model, sigma, jaw, say)
+        if chosen:
+            return chosen, chosen == UNBOUNDED
+        return False, unbounded_fit_choice(unbounded, frames, model, sigma, jaw, say)
+    free = unbounded_fit_choice(unbounded, frames, model, sigma, jaw, say)
+    fit = UNBOUNDED if free else None
+    return local_fits_choice(local, frames, model, sigma, jaw, say, fit), free
+
+
 def unbounded_fit_choice(
     spec: bool | str,
     frames: np.ndarray,
@@ -818,9 +843,8 @@ def solve_file(
     if local_fits and m.jaw_bins is not None:
         raise InputError(f"--local-fits: the model {model} has jaw bins; build it without them")
     jaw_mode = None if m.jaw_rig is None or jaw == "rest" else jaw
-    unbounded_fit = unbounded_fit_choice(unbounded_fit, x, m, sigma, jaw_mode, say)
+    local_fits, unbounded_fit = fits_choice(local_fits, unbounded_fit, x, m, sigma, jaw_mode, say)
     fit = UNBOUNDED if unbounded_fit else None
-    local_fits = local_fits_choice(local_fits, x, m, sigma, jaw_mode, say, fit)
     weight = detail_weight(detail, x, m, sigma, jaw_mode, fit)
     settings = SolveSettings.of(
         has_jaw_rig=m.jaw_rig is not None,
