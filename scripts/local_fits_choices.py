@@ -83,14 +83,15 @@ def main() -> None:
     hinge = HingeJaw.fit(d, ict.lower_teeth())
     rig, theta = _auto_rig(d)
     curves = [read_livelinkface(r).for_dataset(d.names) for r in RECORDINGS]
-    fit_head = (
-        " fit chosen | left out, boxed / unbounded fit (cm) |" if args.unbounded_fit_auto else ""
-    )
-    print(
-        f"| take |{fit_head} local fits chosen | left out, with (cm) | with unbounded (cm) "
-        "| without (cm) | seconds |"
-    )
-    print("|---|---|---|---|---|---|" + ("---|---|" if args.unbounded_fit_auto else ""))
+    if args.unbounded_fit_auto:
+        print("| take | local fits chosen | global fit chosen | what was read | seconds |")
+        print("|---|---|---|---|---|")
+    else:
+        print(
+            "| take | local fits chosen | left out, with (cm) | with unbounded (cm) "
+            "| without (cm) | seconds |"
+        )
+        print("|---|---|---|---|---|---|")
     for held in args.held_out:
         for name in args.layouts if held == 0.0 else ["markers_120"]:
             markers = layout(name, d)
