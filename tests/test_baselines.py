@@ -273,3 +273,17 @@ def test_fit_jaw_residual_left_out_errors_equal_refits_without_each_marker() -> 
     assert got.bundle_residuals.mean() < 0.2 * base.bundle_residuals.mean()
     with pytest.raises(lgi.InputError, match="smoothing"):
         FitJawResidual(jaw_peer, smoothing=[-1.0])
+
+
+def test_ridge_weights_are_the_normal_equations_solution_with_more_columns_than_rows() -> None:
+    from scipy.linalg import lstsq
+
+    from lgi.baselines import ridge_weights
+
+    rng = np.random.default_rng(8)
+    for rows, cols in ((30, 7), (12, 40)):
+        a, b = rng.normal(size=(rows, cols)), rng.normal(size=rows)
+        # Reference: the ridge as least squares on [a; sqrt(ridge) I] against [b; 0].
+        stacked = np.vstack([a, np.sqrt(0.3) * np.eye(cols)])
+        want = lstsq(stacked, np.concatenate([b, np.zeros(cols)]))[0]
+        np.testing.assert_allclose(ridge_weights(a, b, 0.3), want, rtol=1e-10, atol=1e-12)
