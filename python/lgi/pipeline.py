@@ -212,8 +212,9 @@ def fits_choice(
             return chosen, chosen == UNBOUNDED
         return False, unbounded_fit_choice(unbounded, frames, model, sigma, jaw, say)
     free = unbounded_fit_choice(unbounded, frames, model, sigma, jaw, say)
-    fit = UNBOUNDED if free else None
-    return local_fits_choice(local, frames, model, sigma, jaw, say, fit), free
+    chosen = local_fits_choice(local, frames, model, sigma, jaw, say, UNBOUNDED if free else None)
+    # Unbounded local fits start from the unbounded fit whatever was asked of the fit.
+    return chosen, free or chosen == UNBOUNDED
 
 
 def unbounded_fit_choice(
