@@ -81,3 +81,26 @@ def noise_aware_sample(sample, sample_dataset):  # type: ignore[no-untyped-def]
 
     model = lgi.Model.build(sample_dataset, sample.markers_rest)
     return model, lgi.estimate_marker_noise(sample.performance, model)
+
+
+@pytest.fixture(scope="session")
+def outside_the_box():  # type: ignore[no-untyped-def]
+    """The sample's model and frames of weights in [-1, 2] on the shapes that do not turn the
+    jaw (truth meshes too), one marker missing on one frame: faces a fit held to [0, 1]
+    cannot reach (the unbounded fit's and the unbounded peer's tests)."""
+    import lgi
+    from lgi.lab.sample import make_sample, sample_dataset
+
+    s = make_sample(0)
+    data = sample_dataset(s)
+    model = lgi.Model.build(data, s.markers_rest)
+    theta_s = np.asarray(model.core.jaw()["shape_theta"])
+    x0, shapes = np.asarray(data.neutral), np.asarray(data.shapes, dtype=np.float64)
+    still = np.abs(theta_s).max(axis=1) == 0.0
+    rng = np.random.default_rng(4)
+    w = rng.uniform(-1, 2, (6, data.num_shapes)) * (rng.random((6, data.num_shapes)) < 0.2)
+    w[:, ~still] = 0.0
+    truth = x0[None] + np.einsum("fk,kvd->fvd", w, shapes)
+    frames = model.bundle_positions(truth)
+    frames[2, 5] = np.nan
+    return model, frames, truth

@@ -219,22 +219,13 @@ def test_fit_jaw_recovers_frames_made_by_its_own_rig_where_a_box_fit_cannot() ->
         FitJaw(lgi.Model.build(data, s.markers_rest, jaw=None))
 
 
-def test_fit_jaw_unbounded_recovers_weights_outside_the_box_where_fit_jaw_cannot() -> None:
+def test_fit_jaw_unbounded_recovers_weights_outside_the_box_where_fit_jaw_cannot(
+    outside_the_box,  # type: ignore[no-untyped-def]
+) -> None:
     from lgi.baselines import FitJaw, FitJawUnbounded, FitJawUnboundedResidual
-    from lgi.lab.sample import make_sample, sample_dataset
 
-    s = make_sample(0)
-    data = sample_dataset(s)
-    model = lgi.Model.build(data, s.markers_rest)
-    theta_s = np.asarray(model.core.jaw()["shape_theta"])
-    x0, shapes = np.asarray(data.neutral), np.asarray(data.shapes, dtype=np.float64)
-    still = np.abs(theta_s).max(axis=1) == 0.0
-    rng = np.random.default_rng(4)
     # Weights in [-1, 2] on the shapes that do not turn the jaw, at the rest pose.
-    w = rng.uniform(-1, 2, (6, data.num_shapes)) * (rng.random((6, data.num_shapes)) < 0.2)
-    w[:, ~still] = 0.0
-    truth = x0[None] + np.einsum("fk,kvd->fvd", w, shapes)
-    frames = model.bundle_positions(truth)
+    model, frames, truth = outside_the_box
     free = FitJawUnbounded(model).solve(frames)
     boxed = FitJaw(model).solve(frames)
     err_free = np.linalg.norm(free.vertices - truth, axis=2).mean()

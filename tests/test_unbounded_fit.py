@@ -14,26 +14,6 @@ import pytest
 import lgi
 from lgi import _lgi
 from lgi.io.settings import SolveSettings
-from lgi.lab.sample import make_sample, sample_dataset
-
-
-@pytest.fixture(scope="module")
-def outside_the_box():  # type: ignore[no-untyped-def]
-    """The sample's model and frames of weights in [-1, 2] on the shapes that do not turn the
-    jaw (truth meshes too), one marker missing on one frame."""
-    s = make_sample(0)
-    data = sample_dataset(s)
-    model = lgi.Model.build(data, s.markers_rest)
-    theta_s = np.asarray(model.core.jaw()["shape_theta"])
-    x0, shapes = np.asarray(data.neutral), np.asarray(data.shapes, dtype=np.float64)
-    still = np.abs(theta_s).max(axis=1) == 0.0
-    rng = np.random.default_rng(4)
-    w = rng.uniform(-1, 2, (6, data.num_shapes)) * (rng.random((6, data.num_shapes)) < 0.2)
-    w[:, ~still] = 0.0
-    truth = x0[None] + np.einsum("fk,kvd->fvd", w, shapes)
-    frames = model.bundle_positions(truth)
-    frames[2, 5] = np.nan
-    return model, frames, truth
 
 
 def test_unbounded_fit_weights_equal_numpys_ridge_of_the_unskinned_markers_at_the_boxed_pose(

@@ -522,19 +522,24 @@ mod tests {
         (out, b)
     }
 
-    #[test]
-    fn the_fit_recovers_weights_inside_the_box_and_reproduces_the_markers() {
-        let (sp, b) = positions();
-        let prior = FitPrior::new(&sp, b).unwrap().unwrap();
-        let w = [0.3, 0.7, 0.5];
-        let targets: Vec<DVec3> = (0..b)
+    /// The bundles' positions (B) under weights `w` of the three shapes of `sp`.
+    fn blended(sp: &[DVec3], b: usize, w: [f64; 3]) -> Vec<DVec3> {
+        (0..b)
             .map(|n| {
                 sp[n]
                     + (0..3)
                         .map(|k| (sp[(k + 1) * b + n] - sp[n]) * w[k])
                         .sum::<DVec3>()
             })
-            .collect();
+            .collect()
+    }
+
+    #[test]
+    fn the_fit_recovers_weights_inside_the_box_and_reproduces_the_markers() {
+        let (sp, b) = positions();
+        let prior = FitPrior::new(&sp, b).unwrap().unwrap();
+        let w = [0.3, 0.7, 0.5];
+        let targets = blended(&sp, b, w);
         let fit = prior.fit(&targets).unwrap();
         for (got, want) in fit.weights[1..].iter().zip(w) {
             assert!((got - want).abs() < 5e-3, "{:?}", fit.weights);
@@ -549,14 +554,7 @@ mod tests {
         let (sp, b) = positions();
         let prior = FitPrior::new(&sp, b).unwrap().unwrap();
         let w = [-0.8, 1.9, 0.5];
-        let mut targets: Vec<DVec3> = (0..b)
-            .map(|n| {
-                sp[n]
-                    + (0..3)
-                        .map(|k| (sp[(k + 1) * b + n] - sp[n]) * w[k])
-                        .sum::<DVec3>()
-            })
-            .collect();
+        let mut targets = blended(&sp, b, w);
         targets[4] = DVec3::NAN;
         let free = prior.fit_unbounded(&targets).unwrap();
         // Closed form over the present rows: (AᵀA + l2·scale·I) x = Aᵀ(t − rest), the same

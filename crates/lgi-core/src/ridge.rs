@@ -7,6 +7,7 @@
 //! `w = A_Pᵀ (A_P A_Pᵀ + λI)⁻¹ t_P`, so a frame costs O(R² + R S) instead of a new R × R
 //! factorisation.
 
+use crate::baselines::check_target;
 use crate::error::{LgiError, Result};
 use crate::linalg::{cholesky, cholesky_solve, lower_solve, lower_t_solve};
 
@@ -93,15 +94,7 @@ impl RidgeFit {
     /// The weights (S) fitting `target` (R values; NaN entries are missing rows, dropped).
     pub fn solve(&self, target: &[f64]) -> Result<Vec<f64>> {
         let (r, s) = (self.rows, self.shapes);
-        if target.len() != r {
-            return Err(LgiError::Input(format!(
-                "expected {r} target values, got {}",
-                target.len()
-            )));
-        }
-        if target.iter().any(|t| t.is_infinite()) {
-            return Err(LgiError::Input("target has an infinite value".into()));
-        }
+        check_target(target, r)?;
         let present: Vec<usize> = (0..r).filter(|&i| !target[i].is_nan()).collect();
         let missing: Vec<usize> = (0..r).filter(|&i| target[i].is_nan()).collect();
         let row = |i: usize| &self.a[i * s..(i + 1) * s];

@@ -86,6 +86,20 @@ struct Steps<Pc, Pr, Ob, St> {
     stepped: St,
 }
 
+/// A fit's target: `rows` values, none infinite (NaN: a missing row).
+pub(crate) fn check_target(target: &[f64], rows: usize) -> Result<()> {
+    if target.len() != rows {
+        return Err(LgiError::Input(format!(
+            "expected {rows} target values, got {}",
+            target.len()
+        )));
+    }
+    if target.iter().any(|t| t.is_infinite()) {
+        return Err(LgiError::Input("target has an infinite value".into()));
+    }
+    Ok(())
+}
+
 impl BlendshapeSolver {
     /// `a` is row-major `rows × shapes`; `l2` and `penalty` are absolute, non-negative.
     pub fn new(a: Vec<f64>, rows: usize, shapes: usize, l2: f64, penalty: f64) -> Result<Self> {
@@ -244,15 +258,7 @@ impl BlendshapeSolver {
         start: FitStart<'_>,
     ) -> Result<(BlendshapeSolution, Vec<Vec<f64>>)> {
         let rows = self.rows;
-        if target.len() != rows {
-            return Err(LgiError::Input(format!(
-                "expected {rows} target values, got {}",
-                target.len()
-            )));
-        }
-        if target.iter().any(|t| t.is_infinite()) {
-            return Err(LgiError::Input("target has an infinite value".into()));
-        }
+        check_target(target, rows)?;
         let start_weights = match start {
             FitStart::Cold => None,
             FitStart::Weights(w) | FitStart::Nearby { weights: w, .. } => Some(w),

@@ -6,5 +6,6 @@
 pub mod blendshape;
 pub mod rbf;
 
+pub(crate) use blendshape::check_target;
 pub use blendshape::{BlendshapeSolution, BlendshapeSolver, FitStart};
 pub use rbf::RbfInterpolator;
