@@ -1,13 +1,13 @@
 //! Criterion benches of the core's per-frame stages on one workload (ICT-300 when the data is
 //! present): grid query, candidate choice, outside projection, Sibson weights, sewing, the full
-//! solve, and the model build.
+//! solve, and the model build; the local fits; the frame's global fit, boxed and unbounded.
 
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};
 use glam::DVec3;
 use lgi_benches::{build_model, load_workload, make_frames, solve_frame, Workload};
 use lgi_core::{
-    blend, blend_by_columns, Choice, FrameState, LocalFits, Model, Pieces, Scratch, SibsonWeights,
-    BLEND_BLOCK, FIT_L2, FIT_PENALTY,
+    blend, blend_by_columns, BlendshapeSolver, Choice, FrameState, LocalFits, Model, Pieces,
+    RidgeFit, Scratch, SibsonWeights, BLEND_BLOCK, FIT_L2, FIT_PENALTY,
 };
 use std::hint::black_box;
 use std::time::{Duration, Instant};
@@ -223,8 +223,9 @@ fn stages(c: &mut Criterion) {
 
 /// The local fits (`solve(local_fits=True)`): their build (a solver per bundle's window) and
 /// one frame's fits, every bundle's, of the workload's shapes at the bundles (no jaw).
-fn local_fits(c: &mut Criterion) {
-    let f = fixture();
+/// The shapes' displacements at the bundles (rows `3n + d`, S columns, row-major), the
+/// bundles' rest positions, and the frames' markers as displacements from rest.
+fn fit_matrix(f: &Fixture) -> (Vec<f64>, Vec<DVec3>, Vec<Vec<f64>>) {
     let data = f.model.dataset();
     let neutral = &data.neutral().positions;
     let rest = f
@@ -247,8 +248,6 @@ fn local_fits(c: &mut Criterion) {
             }
         }
     }
-    let fits = LocalFits::new(&a, s, &rest, FIT_L2, FIT_PENALTY).unwrap_or_else(|e| panic!("{e}"));
-    // The frames' markers as displacements from rest; each frame's fits start at 0.
     let targets: Vec<Vec<f64>> = f
         .frames
         .iter()
@@ -259,6 +258,81 @@ fn local_fits(c: &mut Criterion) {
                 .collect()
         })
         .collect();
+    (a, rest, targets)
+}
+
+/// The mean squared column norm of a row-major `rows × cols` matrix (what the fit's ridge and
+/// penalty are relative to).
+fn column_scale(a: &[f64], cols: usize) -> f64 {
+    a.iter().map(|x| x * x).sum::<f64>() / cols as f64
+}
+
+/// The frame's global fit: boxed (the recommended call's) and unbounded (`fit="unbounded"`,
+/// the ridge fit) on the workload's matrix (fewer shapes than rows: the normal equations), and
+/// the ridge fit on 2,000 columns over the same rows (a K = 2,000 scans model: its dual form),
+/// two markers missing in every frame (a take's usual dropouts).
+fn global_fit(c: &mut Criterion) {
+    let f = fixture();
+    let (a, rest, mut targets) = fit_matrix(&f);
+    let (rows, s) = (3 * rest.len(), f.model.dataset().num_shapes());
+    for (i, t) in targets.iter_mut().enumerate() {
+        for n in [i % rest.len(), (7 * i + 3) % rest.len()] {
+            t[3 * n..3 * n + 3].fill(f64::NAN);
+        }
+    }
+    let scale = column_scale(&a, s);
+    let boxed = BlendshapeSolver::new(a.clone(), rows, s, FIT_L2 * scale, FIT_PENALTY * scale)
+        .unwrap_or_else(|e| panic!("{e}"));
+    let ridge = RidgeFit::new(a.clone(), rows, s, FIT_L2 * scale).unwrap_or_else(|e| panic!("{e}"));
+    // 2,000 columns: the workload's shapes' columns cycled with a deterministic perturbation
+    // (the same rows and scale; independent enough to be full rank).
+    const SCANS: usize = 2000;
+    let wide: Vec<f64> = (0..rows * SCANS)
+        .map(|i| {
+            let (r, k) = (i / SCANS, i % SCANS);
+            a[r * s + k % s] * (1.0 + 0.3 * (((r * 31 + k * 17) % 97) as f64 / 97.0 - 0.5))
+        })
+        .collect();
+    let wide_ridge = RidgeFit::new(
+        wide.clone(),
+        rows,
+        SCANS,
+        FIT_L2 * column_scale(&wide, SCANS),
+    )
+    .unwrap_or_else(|e| panic!("{e}"));
+    let mut g = c.benchmark_group("global_fit");
+    g.sample_size(20);
+    let mut i = 0;
+    g.bench_function("boxed_fit_frame", |bench| {
+        bench.iter(|| {
+            i = (i + 1) % targets.len();
+            black_box(boxed.solve(&targets[i]))
+        });
+    });
+    g.bench_function("ridge_fit_frame", |bench| {
+        bench.iter(|| {
+            i = (i + 1) % targets.len();
+            black_box(ridge.solve(&targets[i]))
+        });
+    });
+    g.bench_function("ridge_fit_frame_2000_scans", |bench| {
+        bench.iter(|| {
+            i = (i + 1) % targets.len();
+            black_box(wide_ridge.solve(&targets[i]))
+        });
+    });
+    g.bench_function("ridge_fit_build_2000_scans", |bench| {
+        bench.iter(|| black_box(RidgeFit::new(wide.clone(), rows, SCANS, 1.0)));
+    });
+    g.finish();
+}
+
+fn local_fits(c: &mut Criterion) {
+    let f = fixture();
+    let (a, rest, targets) = fit_matrix(&f);
+    let (b, s) = (rest.len(), f.model.dataset().num_shapes());
+    let fits = LocalFits::new(&a, s, &rest, FIT_L2, FIT_PENALTY).unwrap_or_else(|e| panic!("{e}"));
+    // Each frame's fits start at 0.
     let starts = vec![0.0; s];
     let mut g = c.benchmark_group("local_fits");
     g.sample_size(10);
@@ -289,5 +363,5 @@ fn local_fits(c: &mut Criterion) {
     g.finish();
 }
 
-criterion_group!(benches, stages, local_fits);
+criterion_group!(benches, stages, local_fits, global_fit);
 criterion_main!(benches);

@@ -78,6 +78,7 @@ pub use io::obj::{parse_obj, read_obj, read_obj_polygons, read_obj_positions, wr
 // The jaw (Eq. 2) and the baselines.
 pub use baselines::{BlendshapeSolution, BlendshapeSolver, FitStart, RbfInterpolator};
 pub use jaw::{validate_frame, JawBins, JawParams, JawRig, VertexMap, FRAME_TOLERANCE};
+pub use ridge::RidgeFit;
 
 // The stages of build and solve, public for the benches, for tests against brute force and
 // for tools built on the core.

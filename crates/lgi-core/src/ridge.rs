@@ -1,11 +1,12 @@
 //! The least-squares fit with a ridge alone, min ‖A w − t‖² + λ‖w‖² over the present rows of
-//! `t`: the unbounded global fit ([`FitPrior::fit_unbounded`](crate::prior::FitPrior)). It is
-//! made once per matrix in the cheaper of its two forms. With fewer shapes than rows, the
-//! normal equations (S × S), a frame's missing rows' outer products taken off the whole Gram
-//! matrix. With more (K = 2,000 scans on 360 marker rows), the dual ones: `(A Aᵀ + λI)⁻¹` once,
-//! a frame's missing rows taken off that inverse by its Schur complement, and
-//! `w = A_Pᵀ (A_P A_Pᵀ + λI)⁻¹ t_P`, so a frame costs O(R² + R S) instead of a new R × R
-//! factorisation.
+//! `t`: the unbounded global fit ([`FitPrior::fit_unbounded`](crate::prior::FitPrior)). Its
+//! equations over every row are inverted once, in the smaller of their two forms, and a
+//! frame's missing rows (a take's dropouts) are taken off that inverse rather than factorised
+//! again. With fewer shapes than rows, the normal equations `(AᵀA + λI)⁻¹` (S × S), the
+//! missing rows a rank-m downdate (Woodbury's identity). With more (K = 2,000 scans on 360
+//! marker rows), the dual ones `(A Aᵀ + λI)⁻¹` (R × R), the missing rows dropped by the
+//! inverse's Schur complement, and `w = A_Pᵀ (A_P A_Pᵀ + λI)⁻¹ t_P`. A frame costs
+//! O(min(R, S)² + R S) instead of a new factorisation.
 
 use crate::baselines::check_target;
 use crate::error::{LgiError, Result};
@@ -14,8 +15,8 @@ use crate::linalg::{cholesky, cholesky_solve, lower_solve, lower_t_solve};
 /// The form the fit's equations are kept in.
 #[derive(Debug, Clone)]
 enum Form {
-    /// `AᵀA + λI` over every row (S × S, row-major).
-    Primal { gram: Vec<f64> },
+    /// `(AᵀA + λI)⁻¹` over every row (S × S, row-major).
+    Primal { inverse: Vec<f64> },
     /// `(A Aᵀ + λI)⁻¹` over every row (R × R, row-major).
     Dual { inverse: Vec<f64> },
 }
@@ -61,7 +62,9 @@ impl RidgeFit {
                 }
                 gram[i * shapes + i] += lambda;
             }
-            Form::Primal { gram }
+            Form::Primal {
+                inverse: inverse(shapes, gram)?,
+            }
         } else {
             let mut k = vec![0.0; rows * rows];
             for i in 0..rows {
@@ -72,16 +75,9 @@ impl RidgeFit {
                 }
                 k[i * rows + i] += lambda;
             }
-            let l = cholesky(rows, k)?;
-            // Column c of the inverse is L⁻ᵀ L⁻¹ e_c; the inverse is symmetric, so it is row c.
-            let mut inverse = vec![0.0; rows * rows];
-            for c in 0..rows {
-                let mut e = vec![0.0; rows];
-                e[c] = 1.0;
-                let col = lower_t_solve(rows, &l, &lower_solve(rows, &l, &e));
-                inverse[c * rows..(c + 1) * rows].copy_from_slice(&col);
+            Form::Dual {
+                inverse: inverse(rows, k)?,
             }
-            Form::Dual { inverse }
         };
         Ok(RidgeFit {
             a,
@@ -99,23 +95,42 @@ impl RidgeFit {
         let missing: Vec<usize> = (0..r).filter(|&i| target[i].is_nan()).collect();
         let row = |i: usize| &self.a[i * s..(i + 1) * s];
         match &self.form {
-            Form::Primal { gram } => {
-                let mut g = gram.clone();
-                for &m in &missing {
-                    let x = row(m);
-                    for i in 0..s {
-                        for j in 0..s {
-                            g[i * s + j] -= x[i] * x[j];
-                        }
-                    }
-                }
+            Form::Primal { inverse } => {
+                let inv = |i: usize| &inverse[i * s..(i + 1) * s];
                 let mut rhs = vec![0.0; s];
                 for &p in &present {
                     for (acc, x) in rhs.iter_mut().zip(row(p)) {
                         *acc += x * target[p];
                     }
                 }
-                Ok(cholesky_solve(s, &cholesky(s, g)?, &rhs))
+                // y = G⁻¹ c over every row's G; the missing rows U (m × S) are then taken off
+                // G by Woodbury: (G − UᵀU)⁻¹ = G⁻¹ + V (I − U V)⁻¹ Vᵀ with V = G⁻¹ Uᵀ.
+                let apply = |v: &[f64]| -> Vec<f64> {
+                    (0..s)
+                        .map(|i| inv(i).iter().zip(v).map(|(g, x)| g * x).sum())
+                        .collect()
+                };
+                let mut w = apply(&rhs);
+                if !missing.is_empty() {
+                    let m = missing.len();
+                    let v: Vec<Vec<f64>> = missing.iter().map(|&i| apply(row(i))).collect();
+                    let dot = |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(x, y)| x * y).sum();
+                    let mut block = vec![0.0; m * m];
+                    for (a, &i) in missing.iter().enumerate() {
+                        for b in 0..m {
+                            let uv: f64 = dot(row(i), &v[b]);
+                            block[a * m + b] = if a == b { 1.0 - uv } else { -uv };
+                        }
+                    }
+                    let uy: Vec<f64> = missing.iter().map(|&i| dot(row(i), &w)).collect();
+                    let z = cholesky_solve(m, &cholesky(m, block)?, &uy);
+                    for (vb, zb) in v.iter().zip(&z) {
+                        for (wi, vi) in w.iter_mut().zip(vb) {
+                            *wi += vi * zb;
+                        }
+                    }
+                }
+                Ok(w)
             }
             Form::Dual { inverse } => {
                 let inv = |i: usize, j: usize| inverse[i * r + j];
@@ -155,6 +170,19 @@ impl RidgeFit {
             }
         }
     }
+}
+
+/// The inverse of the symmetric positive definite `n × n` matrix `g` (row-major): column c is
+/// `L⁻ᵀ L⁻¹ e_c`, and by symmetry it is row c too.
+fn inverse(n: usize, g: Vec<f64>) -> Result<Vec<f64>> {
+    let l = cholesky(n, g)?;
+    let mut out = vec![0.0; n * n];
+    for c in 0..n {
+        let mut e = vec![0.0; n];
+        e[c] = 1.0;
+        out[c * n..(c + 1) * n].copy_from_slice(&lower_t_solve(n, &l, &lower_solve(n, &l, &e)));
+    }
+    Ok(out)
 }
 
 #[cfg(test)]
