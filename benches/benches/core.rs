@@ -6,8 +6,8 @@ use criterion::{criterion_group, criterion_main, Criterion, Throughput};
 use glam::DVec3;
 use lgi_benches::{build_model, load_workload, make_frames, solve_frame, Workload};
 use lgi_core::{
-    blend, blend_by_columns, BlendshapeSolver, Choice, FrameState, LocalFits, Model, Pieces,
-    RidgeFit, Scratch, SibsonWeights, BLEND_BLOCK, FIT_L2, FIT_PENALTY,
+    blend, blend_by_columns, fit_scale, BlendshapeSolver, Choice, FrameState, LocalFits, Model,
+    Pieces, RidgeFit, Scratch, SibsonWeights, BLEND_BLOCK, FIT_L2, FIT_PENALTY,
 };
 use std::hint::black_box;
 use std::time::{Duration, Instant};
@@ -261,12 +261,6 @@ fn fit_matrix(f: &Fixture) -> (Vec<f64>, Vec<DVec3>, Vec<Vec<f64>>) {
     (a, rest, targets)
 }
 
-/// The mean squared column norm of a row-major `rows × cols` matrix (what the fit's ridge and
-/// penalty are relative to).
-fn column_scale(a: &[f64], cols: usize) -> f64 {
-    a.iter().map(|x| x * x).sum::<f64>() / cols as f64
-}
-
 /// The frame's global fit: boxed (the recommended call's) and unbounded (`fit="unbounded"`,
 /// the ridge fit) on the workload's matrix (fewer shapes than rows: the normal equations), and
 /// the ridge fit on 2,000 columns over the same rows (a K = 2,000 scans model: its dual form),
@@ -280,7 +274,7 @@ fn global_fit(c: &mut Criterion) {
             t[3 * n..3 * n + 3].fill(f64::NAN);
         }
     }
-    let scale = column_scale(&a, s);
+    let scale = fit_scale(&a, s);
     let boxed = BlendshapeSolver::new(a.clone(), rows, s, FIT_L2 * scale, FIT_PENALTY * scale)
         .unwrap_or_else(|e| panic!("{e}"));
     let ridge = RidgeFit::new(a.clone(), rows, s, FIT_L2 * scale).unwrap_or_else(|e| panic!("{e}"));
@@ -293,13 +287,8 @@ fn global_fit(c: &mut Criterion) {
             a[r * s + k % s] * (1.0 + 0.3 * (((r * 31 + k * 17) % 97) as f64 / 97.0 - 0.5))
         })
         .collect();
-    let wide_ridge = RidgeFit::new(
-        wide.clone(),
-        rows,
-        SCANS,
-        FIT_L2 * column_scale(&wide, SCANS),
-    )
-    .unwrap_or_else(|e| panic!("{e}"));
+    let wide_ridge = RidgeFit::new(wide.clone(), rows, SCANS, FIT_L2 * fit_scale(&wide, SCANS))
+        .unwrap_or_else(|e| panic!("{e}"));
     let mut g = c.benchmark_group("global_fit");
     g.sample_size(20);
     let mut i = 0;

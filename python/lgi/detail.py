@@ -28,7 +28,7 @@ from numpy.typing import ArrayLike, NDArray
 
 import lgi._lgi as _lgi
 from lgi.errors import InputError
-from lgi.leave_out import leave_markers_out, solved_in_chunks
+from lgi.leave_out import leave_markers_out, solved_in_chunks, take_frames
 
 if TYPE_CHECKING:
     from lgi.model import Model
@@ -132,10 +132,7 @@ def estimate_detail_weight(
     `SIGNIFICANCE` standard errors of that mean over the frames; otherwise (and with fewer
     than 2 frames, or predictions that agree everywhere) 1. One solve of about
     `frames_used` x B frames."""
-    arr = np.asarray(frames, dtype=np.float64)
-    b = model.num_bundles
-    if arr.ndim != 3 or arr.shape[0] == 0 or arr.shape[1:] != (b, 3):
-        raise InputError(f"frames: expected shape (F, {b}, 3) with F >= 1, got {arr.shape}")
+    arr = take_frames(frames, model)
     out = leave_markers_out(arr, frames_used, what="detail weight")
     pick, batch, left = out.picked, out.frames, out.marker
     pos = np.empty(batch.shape)

@@ -4,7 +4,7 @@ their predictions on, and the looks the last two read them in."""
 
 from __future__ import annotations
 
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
@@ -27,6 +27,7 @@ __all__ = [
     "Looks",
     "leave_markers_out",
     "solved_in_chunks",
+    "take_frames",
 ]
 
 SOLVE_ROWS = 32
@@ -48,6 +49,16 @@ LOOK_SIGNIFICANCE = 2.33
 at the cumulative frames crosses it as often as one look crosses `lgi.detail.SIGNIFICANCE`
 (2.3 % one-sided; Pocock's boundary for three looks, 1977; simulated in
 tests/test_local_fits.py)."""
+
+
+def take_frames(frames: ArrayLike, model: Model) -> NDArray[np.float64]:
+    """A take's frames for `model` as float64 (F, B, 3) with F >= 1; an InputError saying the
+    shape otherwise (what every take-driven estimate reads)."""
+    arr = np.asarray(frames, dtype=np.float64)
+    b = model.num_bundles
+    if arr.ndim != 3 or arr.shape[0] == 0 or arr.shape[1:] != (b, 3):
+        raise InputError(f"frames: expected shape (F, {b}, 3) with F >= 1, got {arr.shape}")
+    return arr
 
 
 @dataclass(frozen=True)
@@ -106,6 +117,29 @@ class Looks:
             float(saved.std(ddof=1) / np.sqrt(saved.size)),
             int(saved.size),
         )
+
+    def first_clearing(
+        self,
+        read: Callable[[NDArray[np.int64]], None],
+        before: NDArray[np.float64],
+        after: NDArray[np.float64],
+    ) -> int | None:
+        """Reads the looks in turn (`read(rows)` fills `before` and `after` at those rows)
+        until the mean per-frame saving `before - after` clears `LOOK_SIGNIFICANCE` standard
+        errors (that look is returned) or is negative, or the looks run out (None)."""
+        for look in range(LOOKS):
+            rows = self.rows(look)
+            if rows.size == 0:
+                break
+            read(rows)
+            mean, spread, seen = self.saving(before, after, look)
+            if seen < 2:
+                continue
+            if mean > LOOK_SIGNIFICANCE * spread:
+                return look
+            if mean < 0:
+                break
+        return None
 
     def distances(self, rows: NDArray[np.int64], positions: ArrayLike) -> NDArray[np.float64]:
         """Each of `rows`' left-out marker's distance from its position in `positions` (the

@@ -38,6 +38,7 @@ from lgi.leave_out import (
     Looks,
     leave_markers_out,
     solved_in_chunks,
+    take_frames,
 )
 
 if TYPE_CHECKING:
@@ -334,10 +335,7 @@ def estimate_local_fits(
     `fit=UNBOUNDED` (the take is solved with the unbounded global fit, `Model.solve(fit=...)`):
     the solve without local fits is that one, and only unbounded local fits are read (one test
     at the same boundary)."""
-    arr = np.asarray(frames, dtype=np.float64)
-    b = model.num_bundles
-    if arr.ndim != 3 or arr.shape[0] == 0 or arr.shape[1:] != (b, 3):
-        raise InputError(f"frames: expected shape (F, {b}, 3) with F >= 1, got {arr.shape}")
+    arr = take_frames(frames, model)
     if marker_noise is None:
         raise InputError("estimate_local_fits needs marker_noise (0 for clean markers)")
     if frames_used < 1:
@@ -358,40 +356,29 @@ def estimate_local_fits(
         0 bounded, 1 unbounded, on the solve with the unbounded global fit); with `base`, the
         solve's own (without them) too."""
         part = out.subset(rows)
-        fit = UNBOUNDED if kind else None
+        solve_fit = UNBOUNDED if kind else None
         for at, solved in solved_in_chunks(
-            model, part, jaw=jaw, marker_noise=marker_noise, fit=fit
+            model, part, jaw=jaw, marker_noise=marker_noise, fit=solve_fit
         ):
             if base:
                 err_without[rows[at]] = looks.distances(rows[at], solved.bundle_positions)
             on = pieces.at_bundles(solved, bounded=kind == 0)
             err_with[rows[at], kind] = looks.distances(rows[at], on)
 
-    use, unbounded = False, False
     first = 1 if only_unbounded else 0
-    for look in range(LOOKS):
-        rows = looks.rows(look)
-        if rows.size == 0:
-            break
-        distances(rows, first, True)
-        mean, spread, seen = looks.saving(err_without, err_with[:, first], look)
-        if seen < 2:
-            continue
-        if only_unbounded:
-            if mean > LOOK_SIGNIFICANCE * spread:
-                use = unbounded = True
-                break
+    look = looks.first_clearing(
+        lambda rows: distances(rows, first, True), err_without, err_with[:, first]
+    )
+    use = look is not None
+    unbounded = use and only_unbounded
+    if look is not None and not only_unbounded:
         # A fixed sequence: bounded local fits first (the FACS rig's prior, the cautious kind),
         # unbounded ones (with the unbounded global fit they start from) only after them, on
         # the same rows, so each test keeps the whole 2.3 %.
-        elif mean > LOOK_SIGNIFICANCE * spread:
-            use = True
-            distances(looks.rows(look, through=True), 1, False)
-            mean_u, spread_u, _ = looks.saving(err_without, err_with[:, 1], look)
-            unbounded = mean_u > LOOK_SIGNIFICANCE * spread_u and mean_u > mean
-            break
-        if mean < 0:
-            break
+        distances(looks.rows(look, through=True), 1, False)
+        mean, _, _ = looks.saving(err_without, err_with[:, 0], look)
+        mean_u, spread_u, _ = looks.saving(err_without, err_with[:, 1], look)
+        unbounded = mean_u > LOOK_SIGNIFICANCE * spread_u and mean_u > mean
     done = np.isfinite(err_without)
     return LocalFitsEstimate(
         use=use,

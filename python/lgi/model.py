@@ -21,6 +21,7 @@ from lgi.dataset import Dataset
 from lgi.detail import blend_detail, check_detail_weight
 from lgi.errors import InputError, LgiWarning
 from lgi.jaw import JawRig, estimate_rig
+from lgi.leave_out import take_frames
 from lgi.local import UNBOUNDED, local_bounds, local_pieces
 
 
@@ -130,10 +131,7 @@ def fit_noise_bound(model: Model, frames: ArrayLike) -> float | None:
     noise sigma from above; what the dataset cannot explain adds to it. None when no frame
     has more present rows than the fit's rank, or none has the solve's minimum of present
     markers."""
-    arr = np.asarray(frames, dtype=np.float64)
-    b = model.num_bundles
-    if arr.ndim != 3 or arr.shape[0] == 0 or arr.shape[1:] != (b, 3):
-        raise InputError(f"frames: expected shape (F, {b}, 3) with F >= 1, got {arr.shape}")
+    arr = take_frames(frames, model)
     # Frames the fit can read (the solve's minimum of present markers), spread over the take.
     usable = np.flatnonzero(np.isfinite(arr).all(axis=2).sum(axis=1) >= _lgi.MIN_PRESENT_MARKERS)
     if usable.size == 0:

@@ -16,17 +16,16 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
-from numpy.typing import ArrayLike
+from numpy.typing import ArrayLike, NDArray
 
 from lgi.detail import DETAIL_FRAMES
-from lgi.errors import InputError
 from lgi.leave_out import (
     LEFT_OUT_PER_FRAME,
-    LOOK_SIGNIFICANCE,
     LOOKS,
     Looks,
     leave_markers_out,
     solved_in_chunks,
+    take_frames,
 )
 from lgi.local import UNBOUNDED
 
@@ -76,33 +75,22 @@ def estimate_unbounded_fit(
     frame, exceeds `LOOK_SIGNIFICANCE` standard errors of that mean over the frames read; when
     it does not and the saving is positive, `frames_used` more frames are read, up to `LOOKS`
     looks. Each look solves about `frames_used` x 30 frames twice."""
-    arr = np.asarray(frames, dtype=np.float64)
-    b = model.num_bundles
-    if arr.ndim != 3 or arr.shape[0] == 0 or arr.shape[1:] != (b, 3):
-        raise InputError(f"frames: expected shape (F, {b}, 3) with F >= 1, got {arr.shape}")
+    arr = take_frames(frames, model)
     out = leave_markers_out(arr, LOOKS * frames_used, LEFT_OUT_PER_FRAME, what="unbounded fit")
     looks = Looks(out)
     # Left-out distances: the boxed fit's solve (column 0) and the unbounded one's (column 1).
     err = np.full((out.marker.size, 2), np.nan)
-    use = False
-    for look in range(LOOKS):
-        rows = looks.rows(look)
-        if rows.size == 0:
-            break
+
+    def read(rows: NDArray[np.int64]) -> None:
+        """The left-out distances of `rows`, solved boxed (column 0) and unbounded (1)."""
         part = out.subset(rows)
         for kind, fit in enumerate((None, UNBOUNDED)):
             for at, solved in solved_in_chunks(
                 model, part, jaw=jaw, marker_noise=marker_noise, fit=fit
             ):
                 err[rows[at], kind] = looks.distances(rows[at], solved.bundle_positions)
-        mean, spread, seen = looks.saving(err[:, 0], err[:, 1], look)
-        if seen < 2:
-            continue
-        if mean > LOOK_SIGNIFICANCE * spread:
-            use = True
-            break
-        if mean < 0:
-            break
+
+    use = looks.first_clearing(read, err[:, 0], err[:, 1]) is not None
     done = np.isfinite(err[:, 0])
     return UnboundedFitEstimate(
         use=use,

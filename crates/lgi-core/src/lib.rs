@@ -62,8 +62,8 @@ pub use model::{
 };
 pub use polygons::Polygons;
 pub use prior::{
-    FitPrior, FrameFit, GramCache, FIELD_SIGNIFICANCE, FIELD_WINDOWS, FIT_L2, FIT_PENALTY,
-    RESIDUAL_LENGTH,
+    fit_scale, FitPrior, FrameFit, GramCache, FIELD_SIGNIFICANCE, FIELD_WINDOWS, FIT_L2,
+    FIT_PENALTY, RESIDUAL_LENGTH,
 };
 
 // Files: meshes, datasets and the `.lgi` model file.

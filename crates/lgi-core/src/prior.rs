@@ -78,16 +78,7 @@ impl FitPrior {
             .chunks(b)
             .flat_map(|row| row.iter().zip(&rest).map(|(p, r)| *p - *r))
             .collect();
-        // Row 3n + d of the fit's matrix is coordinate d of bundle n.
-        let mut a = vec![0.0; 3 * b * s];
-        for k in 0..s {
-            for n in 0..b {
-                let d = displacements[k * b + n].to_array();
-                for (c, v) in d.iter().enumerate() {
-                    a[(3 * n + c) * s + k] = *v;
-                }
-            }
-        }
+        let a = fit_matrix(&displacements, b);
         let scale = fit_scale(&a, s);
         let solver = BlendshapeSolver::new(a, 3 * b, s, FIT_L2 * scale, FIT_PENALTY * scale)?;
         let windows = correlation(&rest)
@@ -138,10 +129,7 @@ impl FitPrior {
     /// [`fit_from`](Self::fit_from) without the bundles' positions (empty; [`place`](Self::place)
     /// adds them): for fits that only lead to another.
     pub fn weights_from(&self, targets: &[DVec3], start: Option<&FrameFit>) -> Result<FrameFit> {
-        let mut rhs = Vec::with_capacity(3 * self.rest.len());
-        for (t, r) in targets.iter().zip(&self.rest) {
-            rhs.extend_from_slice(&(*t - *r).to_array());
-        }
+        let rhs = self.offsets(targets);
         let from = match start.and_then(|f| f.weights.get(1..).map(|w| (w, &f.dual))) {
             Some((weights, dual)) if !dual.is_empty() => FitStart::Nearby { weights, dual },
             Some((w, _)) => FitStart::Weights(w),
@@ -166,24 +154,13 @@ impl FitPrior {
             .get_or_init(|| {
                 let b = self.rest.len();
                 let s = self.displacements.len() / b.max(1);
-                let mut a = vec![0.0; 3 * b * s];
-                for k in 0..s {
-                    for n in 0..b {
-                        for (c, v) in self.displacements[k * b + n].to_array().iter().enumerate() {
-                            a[(3 * n + c) * s + k] = *v;
-                        }
-                    }
-                }
+                let a = fit_matrix(&self.displacements, b);
                 let scale = fit_scale(&a, s);
                 RidgeFit::new(a, 3 * b, s, FIT_L2 * scale).map_err(|e| e.to_string())
             })
             .as_ref()
             .map_err(|e| LgiError::Input(e.clone()))?;
-        let mut rhs = Vec::with_capacity(3 * self.rest.len());
-        for (t, r) in targets.iter().zip(&self.rest) {
-            rhs.extend_from_slice(&(*t - *r).to_array());
-        }
-        let solution = solver.solve(&rhs)?;
+        let solution = solver.solve(&self.offsets(targets))?;
         let mut weights = Vec::with_capacity(solution.len() + 1);
         weights.push(0.0);
         weights.extend_from_slice(&solution);
@@ -194,6 +171,16 @@ impl FitPrior {
         };
         self.place(&mut fit);
         Ok(fit)
+    }
+
+    /// `targets − rest` as the fit's right-hand side (row 3n + d: coordinate d of bundle n;
+    /// NaN rows stay NaN, the fits' missing rows).
+    fn offsets(&self, targets: &[DVec3]) -> Vec<f64> {
+        let mut rhs = Vec::with_capacity(3 * self.rest.len());
+        for (t, r) in targets.iter().zip(&self.rest) {
+            rhs.extend_from_slice(&(*t - *r).to_array());
+        }
+        rhs
     }
 
     /// Every bundle's position under `fit`'s weights, into `fit.positions`.
@@ -460,9 +447,24 @@ impl GramCache {
     }
 }
 
+/// The fit's matrix from the shapes' displacements at the bundles (`S × B`, `[k * B + n]`):
+/// row-major `3B × S`, row 3n + d coordinate d of bundle n.
+fn fit_matrix(displacements: &[DVec3], b: usize) -> Vec<f64> {
+    let s = displacements.len() / b.max(1);
+    let mut a = vec![0.0; 3 * b * s];
+    for k in 0..s {
+        for n in 0..b {
+            for (c, v) in displacements[k * b + n].to_array().iter().enumerate() {
+                a[(3 * n + c) * s + k] = *v;
+            }
+        }
+    }
+    a
+}
+
 /// What [`FIT_L2`] and [`FIT_PENALTY`] are relative to: the mean squared column norm of a fit's
 /// matrix (row-major, `cols` columns), at least the smallest positive double.
-pub(crate) fn fit_scale(a: &[f64], cols: usize) -> f64 {
+pub fn fit_scale(a: &[f64], cols: usize) -> f64 {
     (a.iter().map(|x| x * x).sum::<f64>() / cols as f64).max(f64::MIN_POSITIVE)
 }
 
