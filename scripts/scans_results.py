@@ -23,7 +23,13 @@ import numpy as np
 
 from lgi.lab import evaluate, ict
 from lgi.lab.capture import random_layout
-from lgi.lab.evaluate import LOCAL_FITS, LOCAL_FITS_UNBOUNDED, UNBOUNDED_FIT
+from lgi.lab.evaluate import (
+    LOCAL_FITS,
+    LOCAL_FITS_TAKE_PRIOR,
+    LOCAL_FITS_UNBOUNDED,
+    TAKE_PRIOR,
+    UNBOUNDED_FIT,
+)
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import ict_captures
@@ -38,6 +44,8 @@ METHODS = (
     UNBOUNDED_FIT,
     LOCAL_FITS,
     LOCAL_FITS_UNBOUNDED,
+    TAKE_PRIOR,
+    LOCAL_FITS_TAKE_PRIOR,
 )
 
 
@@ -46,6 +54,11 @@ def layout(name: str, dataset: object) -> np.ndarray:
         return ict.load_layout(ICT).positions
     _, count, seed = name.split(":")
     return random_layout(dataset, int(count), int(seed), np.arange(ict.NARROW_FACE))  # type: ignore[arg-type]
+
+
+def ratio(m: dict[str, float], method: str) -> str:
+    """`method`'s ratio to the best peer, "—" where it was not run (noise-free takes)."""
+    return f"{ict_captures.peer_ratio(m, method):.3f}" if method in m else "—"
 
 
 def main() -> None:
@@ -61,8 +74,9 @@ def main() -> None:
     print("| performance | layout | K | sigma (cm) | " + " | ".join(METHODS), end="")
     print(" | LGI bundles on the fit | LGI / best peer | local fits / best peer", end="")
     print(" | unbounded fit / best peer | unbounded local fits / best peer", end="")
+    print(" | take prior / best peer | take prior + local fits / best peer", end="")
     print(" | truth from linear | seconds |")
-    print("|---" * (len(METHODS) + 11) + "|")
+    print("|---" * (len(METHODS) + 13) + "|")
     for name in args.layouts:
         markers = layout(name, d)
         for k in args.scans:
@@ -82,7 +96,8 @@ def main() -> None:
                 took = time.perf_counter() - t0
                 for rec, got in ict_captures.by_recording(rows).items():
                     m = {x: r["mean"] for x, r in got.items()}
-                    cells = " | ".join(f"{m[x]:.4f}" for x in METHODS)
+                    # Noise-free takes have no take-prior rows (no prior is read): "—".
+                    cells = " | ".join(f"{m[x]:.4f}" if x in m else "—" for x in METHODS)
                     lgi_row = got["LGI"]
                     print(
                         f"| {rec} | {name} | {k} | {sigma} | {cells} "
@@ -90,6 +105,7 @@ def main() -> None:
                         f"| {ict_captures.peer_ratio(m, LOCAL_FITS):.3f} "
                         f"| {ict_captures.peer_ratio(m, UNBOUNDED_FIT):.3f} "
                         f"| {ict_captures.peer_ratio(m, LOCAL_FITS_UNBOUNDED):.3f} "
+                        f"| {ratio(m, TAKE_PRIOR)} | {ratio(m, LOCAL_FITS_TAKE_PRIOR)} "
                         f"| {lgi_row['truth_departure']:.4f} | {took:.0f} |",
                         flush=True,
                     )

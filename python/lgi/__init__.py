@@ -31,6 +31,12 @@ from lgi.errors import (
 )
 from lgi.local import LocalFitsEstimate, estimate_local_fits
 from lgi.model import BuildConfig, Model, estimate_marker_noise
+from lgi.take_prior import (
+    TakePrior,
+    TakePriorEstimate,
+    estimate_take_prior,
+    estimate_take_prior_use,
+)
 from lgi.unbounded import UnboundedFitEstimate, estimate_unbounded_fit
 
 __all__ = [
@@ -48,12 +54,16 @@ __all__ = [
     "Model",
     "ModelFormatError",
     "SolveResult",
+    "TakePrior",
+    "TakePriorEstimate",
     "UnboundedFitEstimate",
     "__version__",
     "capture",
     "estimate_detail_weight",
     "estimate_local_fits",
     "estimate_marker_noise",
+    "estimate_take_prior",
+    "estimate_take_prior_use",
     "estimate_unbounded_fit",
     "get_num_threads",
     "io",

@@ -432,18 +432,25 @@ class Model:
         marker_noise: float | None = None,
         previous: SolveState | None = None,
         unbounded_fit: bool = False,
+        take_prior: tuple[ArrayLike, ArrayLike, float] | None = None,
     ) -> SolveResult:
         """Solves (F, B, 3) frames (vertices into `out` if given); ``jaw`` is ``"auto"``,
         ``"fit"``, ``"track"``, (F, 3) poses or None (rest); ``fit`` offers the global fit as a
         candidate (None: exactly when ``marker_noise`` is given), ``marker_noise`` (data units)
         solves noise-aware, ``previous`` (a temporal solve's ``state``) continues that solve,
         ``unbounded_fit`` fits the frame's weights without the [0, 1] box (at the pose the
-        boxed fit refined)."""
+        boxed fit refined), ``take_prior`` ``(mean, factor, noise_variance)`` puts the take's
+        prior on that fit in place of its ridge."""
     def fit_residuals(
         self, frames: ArrayLike, jaw: str | ArrayLike | None = None
     ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """Each frame's global-fit residual (F, B, 3; NaN where missing) and the fit's rank
         at the bundles (F,)."""
+    def fit_rows(
+        self, frames: ArrayLike, jaw: str | ArrayLike | None = None
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+        """Jaw bin 0's fit matrix (3B, S), each frame's markers in its bin's space less the
+        bundles' rest (F, 3B; NaN where missing) and each frame's bin (F,)."""
     def bundle_positions(self, meshes: ArrayLike) -> NDArray[np.float64]:
         """(F, V, 3) meshes -> (F, B, 3) bundle surface positions."""
     def bundle_stats(self) -> _BundleStats:

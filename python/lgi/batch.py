@@ -151,6 +151,9 @@ def _check_options(options: dict[str, Any]) -> str:
         raise InputError(
             f"solve_shots: fit must be True, False, None, 'unbounded' or 'auto', got {fit!r}"
         )
+    prior = options.get("take_prior", False)
+    if not (isinstance(prior, bool) or prior == "auto"):
+        raise InputError(f"solve_shots: take_prior must be True, False or 'auto', got {prior!r}")
     if local and noise is None:
         raise InputError(
             "solve_shots: local_fits needs marker_noise (a number, 'auto', or 0 for clean "
@@ -305,6 +308,19 @@ def solve_shot(
             )
             opts["local_fits"] = local
             opts["fit"] = UNBOUNDED if free else (None if fit == "auto" else fit)
+        if "take_prior" in opts:
+            from lgi.pipeline import take_prior_choice
+
+            unbounded = opts.get("fit") == UNBOUNDED or opts.get("local_fits") == UNBOUNDED
+            opts["take_prior"] = take_prior_choice(
+                opts["take_prior"],
+                x,
+                m,
+                opts.get("marker_noise"),
+                opts.get("jaw", "auto"),
+                lambda _message: None,
+                unbounded,
+            )
         if opts.get("detail_weight") == "auto":
             opts["detail_weight"] = estimate_detail_weight(
                 x,
@@ -326,6 +342,7 @@ def solve_shot(
             detail_weight=opts.get("detail_weight"),
             local_fits=opts.get("local_fits", False),
             unbounded_fit=opts.get("fit") == UNBOUNDED,
+            take_prior=opts.get("take_prior") is not None,
         )
         written = write_solved(
             kind, Path(dest), topo, res, m, fps=rate, start=start, quiet=True, settings=settings
@@ -430,7 +447,9 @@ def solve_shots(
     `solve_options` go to `Model.solve` (`marker_noise`, `detail_weight`, `local_fits` and
     `fit` may also be "auto": estimated per take, the detail weight, the local fits' choice
     (`lgi.estimate_local_fits`) and the fit's (`lgi.estimate_unbounded_fit`: "unbounded" or
-    None), with the take's noise); `fps` is the
+    None), with the take's noise; `take_prior` is True, False or "auto": the take's prior on
+    the unbounded fit read per take, `lgi.estimate_take_prior`, or where it predicts the take's
+    left-out markers better, `lgi.estimate_take_prior_use`); `fps` is the
     output's frame rate when the take has none (arrays); `allow_missing` and `take_units` are
     `lgi.io.takes.read`'s.
 

@@ -92,6 +92,7 @@ def _cmd_solve(args: argparse.Namespace) -> int:
         detail=args.detail_weight,
         local_fits=args.local_fits,
         unbounded_fit=args.unbounded_fit,
+        take_prior=args.take_prior,
         frames=args.frames,
         fps=args.fps,
         allow_missing=args.allow_missing,
@@ -213,6 +214,8 @@ def _cmd_batch(args: argparse.Namespace) -> int:
         options["local_fits"] = args.local_fits
     if args.unbounded_fit:
         options["fit"] = "auto" if args.unbounded_fit == "auto" else "unbounded"
+    if args.take_prior:
+        options["take_prior"] = args.take_prior
     if args.jaw != "auto":
         options["jaw"] = None if args.jaw == "rest" else args.jaw
     model = pipeline.existing_file(args.model, "MODEL")
@@ -285,10 +288,27 @@ def _add_local_fits_argument(parser: argparse.ArgumentParser, help: str) -> None
 
 
 def _auto_only(text: str) -> str:
-    """`--unbounded-fit auto` (the flag alone is True)."""
+    """`--unbounded-fit auto`, `--take-prior auto` (the flag alone is True)."""
     if text != "auto":
         raise argparse.ArgumentTypeError(f"expected no value or 'auto', got {text!r}")
     return text
+
+
+def _add_take_prior_argument(parser: argparse.ArgumentParser) -> None:
+    """`--take-prior [auto]` (`lgi solve`, `lgi batch`): `lgi.estimate_take_prior` on the
+    unbounded fit, or 'auto' (`lgi.estimate_take_prior_use`)."""
+    parser.add_argument(
+        "--take-prior",
+        nargs="?",
+        const=True,
+        default=False,
+        type=_auto_only,
+        metavar="auto",
+        help="the unbounded global fit with the take's own prior on its weights (the "
+        "directions its frames move in above the marker noise), for noisy markers; needs "
+        "--marker-noise and --unbounded-fit or --local-fits unbounded; auto: used when it "
+        "predicts the take's own markers, left out one at a time, better",
+    )
 
 
 def _add_unbounded_fit_argument(parser: argparse.ArgumentParser) -> None:
@@ -371,6 +391,7 @@ def _add_batch_command(sub: Any) -> None:
         b, "as lgi solve --local-fits (needs --marker-noise; auto: chosen per take)"
     )
     _add_unbounded_fit_argument(b)
+    _add_take_prior_argument(b)
     b.add_argument(
         "--jaw",
         choices=list(pipeline.JAW_POSES),
@@ -497,6 +518,7 @@ def _add_pipeline_commands(sub: Any) -> None:
         "at a time, better",
     )
     _add_unbounded_fit_argument(s)
+    _add_take_prior_argument(s)
     s.add_argument("--frames", default=None, metavar="A:B", help="take frames A..B-1 (0-based)")
     s.add_argument("--fps", type=float, default=None, help="frame rate (default: the take's)")
     s.add_argument(

@@ -1,5 +1,6 @@
 """Markers left out one at a time on a few frames of a take: what the take-driven estimates
-(`lgi.estimate_detail_weight`, `lgi.estimate_local_fits`, `lgi.estimate_unbounded_fit`) compare
+(`lgi.estimate_detail_weight`, `lgi.estimate_local_fits`, `lgi.estimate_unbounded_fit`,
+`lgi.estimate_take_prior_use`) compare
 their predictions on, and the looks the last two read them in."""
 
 from __future__ import annotations
@@ -17,6 +18,7 @@ from lgi.errors import InputError
 if TYPE_CHECKING:
     from lgi._lgi import SolveResult
     from lgi.model import Model
+    from lgi.take_prior import TakePrior
 
 __all__ = [
     "LEFT_OUT_PER_FRAME",
@@ -192,10 +194,11 @@ def solved_in_chunks(
     jaw: str | None,
     marker_noise: float | None,
     fit: bool | str | None = None,
+    take_prior: TakePrior | None = None,
 ) -> Iterator[tuple[slice, SolveResult]]:
     """`rows`' frames solved as independent frames (`temporal=False`, as the take would be
-    with `jaw`, `marker_noise` and `fit`), `SOLVE_ROWS` at a time: each chunk's rows and
-    result."""
+    with `jaw`, `marker_noise`, `fit` and `take_prior`), `SOLVE_ROWS` at a time: each chunk's
+    rows and result."""
     for a in range(0, rows.marker.size, SOLVE_ROWS):
         part = slice(a, a + SOLVE_ROWS)
         yield (
@@ -206,6 +209,7 @@ def solved_in_chunks(
                 jaw=jaw,
                 marker_noise=marker_noise,
                 fit=fit,
+                take_prior=take_prior,
                 quiet=True,
             ),
         )

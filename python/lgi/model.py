@@ -23,6 +23,7 @@ from lgi.errors import InputError, LgiWarning
 from lgi.jaw import JawRig, estimate_rig
 from lgi.leave_out import take_frames
 from lgi.local import UNBOUNDED, local_bounds, local_pieces
+from lgi.take_prior import TakePrior
 
 
 def _bin_edges(jaw_bins: int | ArrayLike, shape_theta: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -353,6 +354,7 @@ class Model:
         fit: bool | str | None = None,
         detail_weight: float | None = None,
         local_fits: bool | str = False,
+        take_prior: TakePrior | None = None,
     ) -> SolveResult:
         """Solves frames (F, B, 3) of marker positions (a single (B, 3) frame gives F = 1).
         NaN rows are missing markers. With `temporal` (a performance), frames are solved in
@@ -409,9 +411,14 @@ class Model:
         [0, 1] like the global fit's (a FACS rig's activations); `local_fits="unbounded"`
         (`lgi.local.UNBOUNDED`) drops that bound, for a dataset of scans whose differences
         match a region as well as their sums (docs/concepts.md), and so does the frame's global
-        fit the windows start from and the targets come from (as `fit="unbounded"`)."""
+        fit the windows start from and the targets come from (as `fit="unbounded"`).
+
+        `take_prior` (`lgi.estimate_take_prior`, with an unbounded global fit): the take's own
+        prior on the fit's weights in place of its ridge, so a noisy frame keeps to the
+        directions the take moves in (docs/concepts.md)."""
         w = None if detail_weight is None else check_detail_weight(detail_weight)
         offer, unbounded = self._fit_options(local_fits, marker_noise, fit)
+        prior = _take_prior_argument(take_prior, unbounded)
         arr = np.asarray(frames)
         if arr.ndim == 2:
             arr = arr[None]
@@ -427,6 +434,7 @@ class Model:
                 fit=offer,
                 marker_noise=marker_noise,
                 unbounded_fit=unbounded,
+                take_prior=prior,
             )
         return self._finish(res, arr, w, local_fits)
 
@@ -521,6 +529,7 @@ class Model:
         fit: bool | str | None = None,
         detail_weight: float | None = None,
         local_fits: bool | str = False,
+        take_prior: TakePrior | None = None,
     ) -> Iterator[SolveResult]:
         """Solves `frames` (F, B, 3; a numpy memmap keeps a long take on disk) `chunk` frames
         at a time and yields each chunk's `SolveResult`, so memory stays flat however long
@@ -531,9 +540,10 @@ class Model:
         are then overwritten by the next chunk: copy what you keep). Smoothing is not offered
         (it needs frames beyond the chunk); give poses as arrays by solving chunks with
         `solve`. Other options as in `solve` (`detail_weight` applied chunk by chunk: each
-        frame's blend is its own, and `local_fits` too)."""
+        frame's blend is its own, and `local_fits` too; `take_prior` is the whole take's)."""
         w = None if detail_weight is None else check_detail_weight(detail_weight)
         offer, unbounded = self._fit_options(local_fits, marker_noise, fit)
+        prior = _take_prior_argument(take_prior, unbounded)
         n = _lgi.check_count(chunk, "chunk")
         if n < 1:
             raise InputError(f"chunk must be >= 1 frames, got {n}")
@@ -557,6 +567,7 @@ class Model:
                     marker_noise=marker_noise,
                     previous=state,
                     unbounded_fit=unbounded,
+                    take_prior=prior,
                 )
                 state = res.state if temporal else None
                 yield self._finish(res, part, w, local_fits)
@@ -570,6 +581,25 @@ class Model:
 
     def __repr__(self) -> str:
         return f"Model(num_bundles={self.num_bundles}, num_vertices={self.num_vertices})"
+
+
+def _take_prior_argument(
+    prior: TakePrior | None, unbounded: bool
+) -> tuple[NDArray[np.float64], NDArray[np.float64], float] | None:
+    """The core's `take_prior` for `prior`, which is a prior on the unbounded fit alone."""
+    if prior is None:
+        return None
+    if not isinstance(prior, TakePrior):
+        raise InputError(
+            f"take_prior: expected an lgi.TakePrior (lgi.estimate_take_prior) or None, got "
+            f"{type(prior).__name__}"
+        )
+    if not unbounded:
+        raise InputError(
+            "take_prior is a prior on the unbounded global fit: solve with fit='unbounded' or "
+            "local_fits='unbounded'"
+        )
+    return prior.as_core()
 
 
 def _auto_rig(dataset: Dataset) -> tuple[JawRig | None, NDArray[np.float64] | None]:

@@ -35,6 +35,7 @@ from lgi.io.topology import Topology, topology
 from lgi.local import UNBOUNDED, estimate_local_fits
 from lgi.model import PROGRESS_DELAY, Model, estimate_marker_noise
 from lgi.placement import ScaleFit, check_scale, describe_scale
+from lgi.take_prior import TakePrior, estimate_take_prior, estimate_take_prior_use
 from lgi.unbounded import estimate_unbounded_fit
 
 __all__ = [
@@ -239,6 +240,58 @@ def unbounded_fit_choice(
         f"surface with it, {est.error_boxed:.4g} with the fit held to [0, 1]"
     )
     return est.use
+
+
+def take_prior_choice(
+    spec: bool | str,
+    frames: np.ndarray,
+    model: Model,
+    sigma: float | None,
+    jaw: str | None,
+    say: Say,
+    unbounded: bool,
+) -> TakePrior | None:
+    """`--take-prior`: True, False or 'auto' (read from the take's own markers left out,
+    `lgi.estimate_take_prior_use`, and said with its numbers), on the unbounded fit
+    (`unbounded`, as chosen) and with the markers' noise `sigma`: the prior to solve with, or
+    None."""
+    if spec is False:
+        return None
+    if spec is not True and spec != "auto":
+        raise InputError(f"--take-prior {spec!r}: expected no value or 'auto'")
+    noisy = sigma is not None and sigma > 0.0
+    if spec is True:
+        if not unbounded:
+            raise InputError(
+                "--take-prior is a prior on the unbounded global fit: add --unbounded-fit (or "
+                "--local-fits unbounded)"
+            )
+        if not noisy:
+            raise InputError(
+                "--take-prior needs the markers' noise: --marker-noise with a distance > 0 "
+                "or auto (noise-free markers need no prior)"
+            )
+        assert sigma is not None
+        prior = estimate_take_prior(model, frames, sigma, jaw=jaw)
+        say(f"take prior: {prior.kept} of {prior.directions} directions move above the noise")
+        return prior
+    if not unbounded or not noisy:
+        why = "the fit is held to [0, 1]" if not unbounded else "the markers are noise-free"
+        say(f"take prior not read: {why}")
+        return None
+    assert sigma is not None
+    est = estimate_take_prior_use(frames, model, marker_noise=sigma, jaw=jaw)
+    if est.left_out == 0:
+        say("take prior not used: the take is too short to read it on frames of its own")
+        return None
+    unit = model.units or "model units"
+    kept = "" if est.prior is None else f" ({est.prior.kept} of {est.prior.directions} directions)"
+    say(
+        f"take prior {'used' if est.use else 'not used'}{kept}: {est.left_out} markers left "
+        f"out one at a time on {est.frames} frames are {est.error_with:.4g} {unit} from the "
+        f"surface with it, {est.error_without:.4g} without"
+    )
+    return est.prior
 
 
 def local_fits_choice(
@@ -782,13 +835,15 @@ def solve_file(
     say: Say = _silent,
     local_fits: bool | str = False,
     unbounded_fit: bool | str = False,
+    take_prior: bool | str = False,
 ) -> tuple[Path, int]:
     """`lgi solve`: the take file solved with the model file, written by `out`'s suffix
     (`output_kind`). `noise` is `--marker-noise` (a number, 'auto' or 'none'; 'auto' looks at
     the whole range), `detail` `--detail-weight` (the same forms, `detail_weight`),
     `local_fits` `--local-fits` (`Model.solve(local_fits=True)`; 'auto': `local_fits_choice`),
     `unbounded_fit` `--unbounded-fit` (`Model.solve(fit="unbounded")`; 'auto':
-    `unbounded_fit_choice`),
+    `unbounded_fit_choice`), `take_prior` `--take-prior` (`lgi.estimate_take_prior`; 'auto':
+    `take_prior_choice`),
     `frames` is `--frames A:B`. By default the range is solved in one
     `Model.solve` (frames prefer their predecessor's choices across the whole range), then
     written chunk by chunk; `chunk` (`--chunk N`) solves and writes N frames at a time into
@@ -846,6 +901,9 @@ def solve_file(
     jaw_mode = None if m.jaw_rig is None or jaw == "rest" else jaw
     local_fits, unbounded_fit = fits_choice(local_fits, unbounded_fit, x, m, sigma, jaw_mode, say)
     fit = UNBOUNDED if unbounded_fit else None
+    prior = take_prior_choice(
+        take_prior, x, m, sigma, jaw_mode, say, unbounded_fit or local_fits == UNBOUNDED
+    )
     weight = detail_weight(detail, x, m, sigma, jaw_mode, fit)
     settings = SolveSettings.of(
         has_jaw_rig=m.jaw_rig is not None,
@@ -854,6 +912,7 @@ def solve_file(
         detail_weight=weight,
         local_fits=local_fits,
         unbounded_fit=unbounded_fit,
+        take_prior=prior is not None,
     )
     missing = np.isnan(x).any(axis=2)
     say(
@@ -872,6 +931,7 @@ def solve_file(
         "detail_weight": weight,
         "local_fits": local_fits,
         "fit": fit,
+        "take_prior": prior,
     }
     if chunk is None:
         res = m.solve(x, quiet=quiet, **how)

@@ -40,6 +40,7 @@ mod sibson;
 mod simd;
 mod smooth;
 mod sparse;
+mod take_prior;
 mod tet_index;
 mod tets;
 mod text;
@@ -79,6 +80,7 @@ pub use io::obj::{parse_obj, read_obj, read_obj_polygons, read_obj_positions, wr
 pub use baselines::{BlendshapeSolution, BlendshapeSolver, FitStart, RbfInterpolator};
 pub use jaw::{validate_frame, JawBins, JawParams, JawRig, VertexMap, FRAME_TOLERANCE};
 pub use ridge::RidgeFit;
+pub use take_prior::{TakeFit, TakePrior};
 
 // The stages of build and solve, public for the benches, for tests against brute force and
 // for tools built on the core.

@@ -8,6 +8,7 @@ use crate::baselines::{BlendshapeSolver, FitStart};
 use crate::error::{LgiError, Result};
 use crate::linalg::{cholesky, cholesky_solve, Lu};
 use crate::ridge::RidgeFit;
+use crate::take_prior::{TakeFit, TakePrior};
 use glam::DVec3;
 use std::sync::OnceLock;
 
@@ -107,6 +108,16 @@ impl FitPrior {
         self.solver.low_rank()
     }
 
+    /// The fit's matrix (row-major `3B × S`, row 3n + d coordinate d of bundle n).
+    pub fn matrix(&self) -> Vec<f64> {
+        fit_matrix(&self.displacements, self.rest.len())
+    }
+
+    /// The bundles' rest positions the fit's targets are offsets from.
+    pub fn rest(&self) -> &[DVec3] {
+        &self.rest
+    }
+
     /// Number of bundles B.
     pub fn num_bundles(&self) -> usize {
         self.rest.len()
@@ -161,6 +172,27 @@ impl FitPrior {
             .as_ref()
             .map_err(|e| LgiError::Input(e.clone()))?;
         let solution = solver.solve(&self.offsets(targets))?;
+        let mut weights = Vec::with_capacity(solution.len() + 1);
+        weights.push(0.0);
+        weights.extend_from_slice(&solution);
+        let mut fit = FrameFit {
+            weights,
+            positions: Vec::new(),
+            dual: Vec::new(),
+        };
+        self.place(&mut fit);
+        Ok(fit)
+    }
+
+    /// A take's prior ([`TakePrior`]) made ready for this fit's matrix.
+    pub fn take_fit(&self, prior: &TakePrior) -> Result<TakeFit> {
+        prior.fit(&self.matrix(), 3 * self.rest.len())
+    }
+
+    /// The fit of `targets` under a take's prior ([`take_fit`](Self::take_fit)): unbounded,
+    /// the prior in place of the fit's ridge.
+    pub fn fit_with_take(&self, take: &TakeFit, targets: &[DVec3]) -> Result<FrameFit> {
+        let solution = take.solve(&self.offsets(targets))?;
         let mut weights = Vec::with_capacity(solution.len() + 1);
         weights.push(0.0);
         weights.extend_from_slice(&solution);

@@ -19,6 +19,11 @@ use std::sync::Arc;
 
 /// Two numpy arrays returned together.
 type ArrayPair<'py> = (Bound<'py, PyArrayDyn<f64>>, Bound<'py, PyArrayDyn<f64>>);
+type ArrayTriple<'py> = (
+    Bound<'py, PyArrayDyn<f64>>,
+    Bound<'py, PyArrayDyn<f64>>,
+    Bound<'py, PyArrayDyn<f64>>,
+);
 
 /// A built LGI model (immutable, thread-safe).
 #[pyclass(frozen, module = "lgi._lgi")]
@@ -196,8 +201,10 @@ impl Model {
     /// units) solves noise-aware (None: every marker interpolated as given); `previous` (a
     /// temporal solve's `state`) continues that solve: the first frame prefers its choices
     /// and keeps its jaw bin, so chunks solved in turn equal one call. `unbounded_fit`: the
-    /// frame's global fit without the [0, 1] box (at the pose the boxed fit refined).
-    #[pyo3(signature = (frames, progress=None, temporal=true, jaw=None, smooth_window=0, out=None, fit=None, marker_noise=None, previous=None, unbounded_fit=false))]
+    /// frame's global fit without the [0, 1] box (at the pose the boxed fit refined);
+    /// `take_prior` (`(mean, factor, noise_variance)`, with `unbounded_fit`): the take's own
+    /// prior on its weights in place of its ridge (`lgi.take_prior`).
+    #[pyo3(signature = (frames, progress=None, temporal=true, jaw=None, smooth_window=0, out=None, fit=None, marker_noise=None, previous=None, unbounded_fit=false, take_prior=None))]
     #[allow(clippy::too_many_arguments)]
     fn solve<'py>(
         &self,
@@ -212,12 +219,16 @@ impl Model {
         #[pyo3(from_py_with = solve_args::marker_noise)] marker_noise: Option<f64>,
         previous: Option<PyRef<'py, SolveState>>,
         unbounded_fit: bool,
+        #[pyo3(from_py_with = solve_args::take_prior)] take_prior: Option<
+            std::sync::Arc<lgi_core::TakePrior>,
+        >,
     ) -> PyResult<SolveResult> {
         let b = self.inner.num_bundles();
         let frames = point_sets(frames, "frames", ("frame", "bundle"), Some(b), true)?;
         let options = SolveOptions {
             jaw: solve_args::jaw_pose(jaw, &self.inner, frames.len())?,
             unbounded_fit,
+            take_prior,
             ..SolveOptions::new(temporal, smooth_window, fit, marker_noise)
         };
         let previous = previous.map(|p| p.inner.clone());
@@ -279,6 +290,45 @@ impl Model {
         Ok((
             flat_to_array(py, flat, &[nf, b, 3])?,
             flat_to_array(py, ranks, &[nf])?,
+        ))
+    }
+
+    /// What the global fit of `frames` fits, for a take's prior (`lgi.take_prior`): jaw bin
+    /// 0's fit matrix (3B, S; row 3n + d coordinate d of bundle n), each frame's markers in
+    /// its bin's space less the bundles' rest there (F, 3B; NaN: missing) with the jaw pose
+    /// `jaw` as in `solve`, and each frame's bin (F,). GIL released.
+    #[pyo3(signature = (frames, jaw=None))]
+    fn fit_rows<'py>(
+        &self,
+        py: Python<'py>,
+        frames: &Bound<'py, PyAny>,
+        jaw: Option<&Bound<'py, PyAny>>,
+    ) -> PyResult<ArrayTriple<'py>> {
+        let b = self.inner.num_bundles();
+        let frames = point_sets(frames, "frames", ("frame", "bundle"), Some(b), true)?;
+        let pose = solve_args::jaw_pose(jaw, &self.inner, frames.len())?;
+        let model = self.inner.clone();
+        let (fitted, matrix) = py
+            .detach(|| {
+                let matrix = model.fit_matrix(0).ok_or_else(|| {
+                    lgi_core::LgiError::Input("fit rows need a dataset with shapes".into())
+                })?;
+                Ok::<_, lgi_core::LgiError>((model.fit_residuals(&frames, &pose)?, matrix))
+            })
+            .map_err(PyLgiError)?;
+        let (a, rest) = matrix;
+        let nf = fitted.targets.len();
+        let s = a.len() / (3 * b).max(1);
+        let offsets: Vec<f64> = fitted
+            .targets
+            .iter()
+            .flat_map(|t| t.iter().zip(&rest).flat_map(|(p, r)| (*p - *r).to_array()))
+            .collect();
+        let bins: Vec<f64> = fitted.bins.iter().map(|&x| x as f64).collect();
+        Ok((
+            flat_to_array(py, a, &[3 * b, s])?,
+            flat_to_array(py, offsets, &[nf, 3 * b])?,
+            flat_to_array(py, bins, &[nf])?,
         ))
     }
 

@@ -4,10 +4,12 @@
 
 use crate::convert::{any_numbers, count, float_array};
 use crate::error::input_error;
-use lgi_core::{JawParams, JawPose, Model as CoreModel};
+use crate::error::PyLgiError;
+use lgi_core::{JawParams, JawPose, Model as CoreModel, TakePrior};
 use numpy::{PyArray3, PyUntypedArrayMethods};
 use pyo3::prelude::*;
 use pyo3::types::{PyFloat, PyString};
+use std::sync::Arc;
 
 /// `smooth_window`: a count (an int >= 0, not a bool).
 pub fn smooth_window(obj: &Bound<'_, PyAny>) -> PyResult<usize> {
@@ -117,4 +119,27 @@ pub fn output_array<'py>(
     }
     // Writeability is checked where the solve borrows it.
     Ok(arr.clone())
+}
+
+/// `take_prior`: None, or `(mean (S,), factor (S, q), noise_variance)` (`lgi.TakePrior`'s
+/// arrays), checked by the core.
+pub fn take_prior(obj: &Bound<'_, PyAny>) -> PyResult<Option<Arc<TakePrior>>> {
+    if obj.is_none() {
+        return Ok(None);
+    }
+    let (mean, factor, noise): (Bound<'_, PyAny>, Bound<'_, PyAny>, f64) = obj
+        .extract()
+        .map_err(|_| input_error("take_prior: expected None or (mean, factor, noise_variance)"))?;
+    let mean = float_array(&mean, "take_prior mean", &[None])?;
+    let s = mean.len();
+    let factor = float_array(&factor, "take_prior factor", &[Some(s), None])?;
+    let rank = factor.shape()[1];
+    let prior = TakePrior::new(
+        mean.iter().copied().collect(),
+        factor.iter().copied().collect(),
+        rank,
+        noise,
+    )
+    .map_err(PyLgiError)?;
+    Ok(Some(Arc::new(prior)))
 }

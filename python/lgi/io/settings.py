@@ -33,7 +33,8 @@ class SolveSettings:
     or 'unbounded' for `lgi.local.UNBOUNDED` ones; files written before it was recorded read as
     False); `unbounded_fit`: the frame's global fit was not held to [0, 1]
     (`Model.solve(fit="unbounded")`, and always with unbounded local fits; files written
-    before it was recorded read as False)."""
+    before it was recorded read as False); `take_prior`: that fit took the take's own prior
+    (`lgi.estimate_take_prior`; older files read as False)."""
 
     marker_noise: float | None
     jaw: str | None
@@ -41,6 +42,7 @@ class SolveSettings:
     version: str
     local_fits: bool | str = False
     unbounded_fit: bool = False
+    take_prior: bool = False
 
     @staticmethod
     def of(
@@ -51,6 +53,7 @@ class SolveSettings:
         detail_weight: float | None,
         local_fits: bool | str = False,
         unbounded_fit: bool = False,
+        take_prior: bool = False,
     ) -> SolveSettings:
         """The settings of a `Model.solve` call: `jaw` as passed (None, the rest pose, is
         recorded as 'rest' and a pose array as 'given'; None for a model without a jaw rig),
@@ -70,6 +73,7 @@ class SolveSettings:
             version=__version__,
             local_fits=local_fits if local_fits == "unbounded" else bool(local_fits),
             unbounded_fit=bool(unbounded_fit) or local_fits == "unbounded",
+            take_prior=bool(take_prior),
         )
 
     def to_json(self) -> str:
@@ -81,6 +85,7 @@ class SolveSettings:
                 "version": self.version,
                 "local_fits": self.local_fits,
                 "unbounded_fit": self.unbounded_fit,
+                "take_prior": self.take_prior,
             },
             sort_keys=True,
         )
@@ -94,11 +99,11 @@ class SolveSettings:
         except ValueError:
             raise InputError(f"{where}: not the JSON text lgi writes: {text[:60]!r}") from None
         keys = {"marker_noise", "jaw", "detail_weight", "version"}
-        optional = {"local_fits", "unbounded_fit"}
+        optional = {"local_fits", "unbounded_fit", "take_prior"}
         if not isinstance(d, dict) or not keys <= set(d) <= keys | optional:
             raise InputError(
                 f"{where}: expected the keys marker_noise, jaw, detail_weight, version and "
-                "(optionally) local_fits and unbounded_fit"
+                "(optionally) local_fits, unbounded_fit and take_prior"
             )
         local = d.get("local_fits", False)
         if not isinstance(local, bool) and local != "unbounded":
@@ -108,6 +113,9 @@ class SolveSettings:
         unbounded = d.get("unbounded_fit", False)
         if not isinstance(unbounded, bool):
             raise InputError(f"{where}: unbounded_fit must be true or false, got {unbounded!r}")
+        prior = d.get("take_prior", False)
+        if not isinstance(prior, bool):
+            raise InputError(f"{where}: take_prior must be true or false, got {prior!r}")
 
         def number(key: str) -> float | None:
             x = d[key]
@@ -127,6 +135,7 @@ class SolveSettings:
             version=str(d["version"] or ""),
             local_fits=local,
             unbounded_fit=unbounded,
+            take_prior=prior,
         )
 
     def describe(self, units: str | None) -> str:
@@ -149,7 +158,8 @@ class SolveSettings:
     def pieces(self) -> str:
         """How the pieces and the global fit read at the end of a line that describes the solve:
         '', ', local fits', ', unbounded fit' or ', unbounded local fits' (which start from the
-        unbounded fit)."""
+        unbounded fit), then ', take prior' where that fit took the take's prior."""
+        prior = ", take prior" if self.take_prior else ""
         if self.unbounded_fit and self.local_fits != "unbounded":
-            return LOCAL_FITS_WORDS[self.local_fits] + ", unbounded fit"
-        return LOCAL_FITS_WORDS[self.local_fits]
+            return LOCAL_FITS_WORDS[self.local_fits] + ", unbounded fit" + prior
+        return LOCAL_FITS_WORDS[self.local_fits] + prior

@@ -27,6 +27,7 @@ from lgi.lab.capture import (
     marker_samples,
 )
 from lgi.model import Model, estimate_marker_noise
+from lgi.take_prior import estimate_take_prior
 
 F64 = NDArray[np.float64]
 Row = dict[str, Any]
@@ -269,7 +270,8 @@ class Recommended:
     "auto", the frames' detail weight (`lgi.estimate_detail_weight`, read from the frames
     solved, with the same sigma) is kept too, the call for a performer the dataset is not
     (`last_detail_weight` says which); with `local_fits`, the pieces are local fits
-    (`lgi.local`); `fit` is `Model.solve`'s (e.g. "unbounded")."""
+    (`lgi.local`); `fit` is `Model.solve`'s (e.g. "unbounded"); with `take_prior`, the
+    unbounded fit takes the prior read from the frames solved (`lgi.estimate_take_prior`)."""
 
     def __init__(
         self,
@@ -278,9 +280,10 @@ class Recommended:
         detail: str | None = None,
         local_fits: bool | str = False,
         fit: bool | str | None = None,
+        take_prior: bool = False,
     ) -> None:
         self.model, self.marker_noise, self.detail = model, marker_noise, detail
-        self.local_fits, self.fit = local_fits, fit
+        self.local_fits, self.fit, self.take_prior = local_fits, fit, take_prior
         self.last_detail_weight: float | None = None
 
     def solve(self, frames: ArrayLike, *, temporal: bool = True, quiet: bool = True) -> SolveResult:
@@ -292,6 +295,11 @@ class Recommended:
                 frames, self.model, marker_noise=self.marker_noise, fit=self.fit
             )
             self.last_detail_weight = weight
+        prior = None
+        if self.take_prior:
+            if self.marker_noise is None:
+                raise InputError("a take prior needs the markers' noise")
+            prior = estimate_take_prior(self.model, frames, self.marker_noise)
         return self.model.solve(
             frames,
             temporal=temporal,
@@ -300,6 +308,7 @@ class Recommended:
             detail_weight=weight,
             local_fits=self.local_fits,
             fit=self.fit,
+            take_prior=prior,
         )
 
 
@@ -310,6 +319,10 @@ LOCAL_FITS = "LGI + local fits"
 LOCAL_FITS_UNBOUNDED = "LGI + local fits (unbounded)"
 #: LGI's recommended call with the unbounded global fit (`Model.solve(fit="unbounded")`).
 UNBOUNDED_FIT = "LGI (unbounded fit)"
+#: The same with the take's prior on the unbounded fit (`lgi.estimate_take_prior`).
+TAKE_PRIOR = "LGI (take prior)"
+#: Unbounded local fits from the unbounded fit with the take's prior.
+LOCAL_FITS_TAKE_PRIOR = "LGI + local fits (take prior)"
 
 
 def capture_methods(
@@ -357,7 +370,8 @@ def _add_unbounded(methods: dict[str, Solver]) -> None:
     """The scans protocol's unbounded methods beside the bounded ones: a scan's weight is no
     activation, so the peers' fit without its [0, 1] bound is a peer too (`FitJawUnbounded`
     and its corrective), and LGI without it: the recommended call (`UNBOUNDED_FIT`) and with
-    local fits (`LOCAL_FITS_UNBOUNDED`)."""
+    local fits (`LOCAL_FITS_UNBOUNDED`); with noisy markers, both with the take's prior on the
+    unbounded fit (`TAKE_PRIOR`, `LOCAL_FITS_TAKE_PRIOR`)."""
     from lgi.baselines import FitJawUnbounded, FitJawUnboundedResidual
 
     lgi = methods["LGI"]
@@ -370,6 +384,14 @@ def _add_unbounded(methods: dict[str, Solver]) -> None:
     if lgi.model.jaw_bins is None:
         methods[LOCAL_FITS_UNBOUNDED] = Recommended(
             lgi.model, lgi.marker_noise, local_fits="unbounded"
+        )
+    if lgi.marker_noise and lgi.model.jaw_bins is None:
+        # Noise-free markers need no prior (the solve would be the unbounded fit's).
+        methods[TAKE_PRIOR] = Recommended(
+            lgi.model, lgi.marker_noise, fit="unbounded", take_prior=True
+        )
+        methods[LOCAL_FITS_TAKE_PRIOR] = Recommended(
+            lgi.model, lgi.marker_noise, local_fits="unbounded", take_prior=True
         )
 
 

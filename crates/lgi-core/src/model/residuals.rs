@@ -19,6 +19,11 @@ pub struct FitResiduals {
     /// Per frame, the rank of the fit's shapes at the bundles (the directions the fit can take
     /// from a residual): the degrees of freedom it spends.
     pub ranks: Vec<usize>,
+    /// Per frame, per marker: the marker in the frame's jaw bin space (what the fit fitted);
+    /// NaN for a missing marker.
+    pub targets: Vec<Vec<DVec3>>,
+    /// Per frame, its jaw bin.
+    pub bins: Vec<usize>,
 }
 
 impl Model {
@@ -28,7 +33,7 @@ impl Model {
         let FramePoses { poses, fit_starts } = self.jaw_poses(frames, pose)?;
         let refine = *pose == JawPose::Fit;
         let b = self.bundles.len();
-        let per_frame: Vec<(Vec<DVec3>, usize)> = frames
+        let per_frame: Vec<(Vec<DVec3>, usize, Vec<DVec3>, usize)> = frames
             .par_iter()
             .enumerate()
             .map(|(f, t)| {
@@ -39,7 +44,7 @@ impl Model {
                 if let Some(start) = fit_starts.get(f) {
                     prep.fit_start = Some(self.fit_start_in_bin(prep.bin, start.clone()));
                 }
-                self.add_fit(&mut prep, false, None, refine, false)
+                self.add_fit(&mut prep, false, None, refine, false, None)
                     .map_err(|e| frame_context(e, f))?;
                 let lk = &self.lookups[prep.bin];
                 let (Some(fit), Some(prior)) = (&prep.fit, &lk.prior) else {
@@ -54,10 +59,29 @@ impl Model {
                     .zip(&fit.positions)
                     .map(|(t, p)| if t.is_nan() { DVec3::NAN } else { *t - *p })
                     .collect();
-                Ok((residual, rank))
+                Ok((residual, rank, prep.lookup, prep.bin))
             })
             .collect::<Result<_>>()?;
-        let (residuals, ranks) = per_frame.into_iter().unzip();
-        Ok(FitResiduals { residuals, ranks })
+        let mut out = FitResiduals {
+            residuals: Vec::with_capacity(frames.len()),
+            ranks: Vec::with_capacity(frames.len()),
+            targets: Vec::with_capacity(frames.len()),
+            bins: Vec::with_capacity(frames.len()),
+        };
+        for (residual, rank, target, bin) in per_frame {
+            out.residuals.push(residual);
+            out.ranks.push(rank);
+            out.targets.push(target);
+            out.bins.push(bin);
+        }
+        Ok(out)
+    }
+
+    /// Jaw bin `bin`'s global fit: its matrix (row-major `3B × S`, row 3n + d coordinate d of
+    /// bundle n: each shape's displacement at the bundles in the bin's space) and the bundles'
+    /// rest positions there. `None` for a dataset without shapes or a bin out of range.
+    pub fn fit_matrix(&self, bin: usize) -> Option<(Vec<f64>, Vec<DVec3>)> {
+        let prior = self.lookups.get(bin)?.prior.as_ref()?;
+        Some((prior.matrix(), prior.rest().to_vec()))
     }
 }

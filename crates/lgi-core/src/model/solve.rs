@@ -13,8 +13,10 @@ use crate::jaw::JawParams;
 use crate::magnitude::Extent;
 use crate::sew::{BundleTargets, Pieces};
 use crate::smooth::smooth_choices_in_bins;
+use crate::take_prior::{TakeFit, TakePrior};
 use glam::DVec3;
 use rayon::prelude::*;
+use std::sync::Arc;
 
 /// Round-off left at a bundle after the residual pass that triggers a refinement round
 /// (relative to the diagonal; the promise to users is 1e-6).
@@ -42,6 +44,9 @@ pub struct SolveOptions {
     /// against the boxed fit (unbounded weights can stand in for the jaw's turn); the
     /// unbounded fit is made once, at that pose.
     pub unbounded_fit: bool,
+    /// The take's own prior on the unbounded fit's weights ([`TakePrior`]), in place of its
+    /// ridge; needs [`unbounded_fit`](Self::unbounded_fit).
+    pub take_prior: Option<Arc<TakePrior>>,
     /// Each frame's jaw pose (a model built with a jaw rig): none, given, from the fit or
     /// tracked ([`JawPose`]).
     pub jaw: JawPose,
@@ -63,6 +68,7 @@ impl SolveOptions {
             fit: false,
             marker_noise: None,
             unbounded_fit: false,
+            take_prior: None,
             jaw: JawPose::Rest,
         }
     }
@@ -83,11 +89,17 @@ impl SolveOptions {
             fit: fit.unwrap_or(marker_noise.is_some()),
             marker_noise,
             unbounded_fit: false,
+            take_prior: None,
             jaw: JawPose::Rest,
         }
     }
 
     fn validate(&self) -> Result<()> {
+        if self.take_prior.is_some() && !self.unbounded_fit {
+            return Err(LgiError::Input(
+                "a take prior is a prior on the unbounded fit: solve with unbounded_fit".into(),
+            ));
+        }
         match self.marker_noise {
             Some(s) if !(s.is_finite() && s >= 0.0) => Err(LgiError::Input(format!(
                 "marker_noise must be a finite distance >= 0 (data units), got {s}"
@@ -134,6 +146,7 @@ impl Model {
         marker_noise: Option<f64>,
         refine_jaw: bool,
         unbounded: bool,
+        take: Option<&TakeFit>,
     ) -> Result<()> {
         let Some(prior) = &self.lookups[prep.bin].prior else {
             return Ok(());
@@ -144,7 +157,10 @@ impl Model {
             None
         };
         let fit = match (refined, unbounded) {
-            (_, true) => prior.fit_unbounded(&prep.lookup)?,
+            (_, true) => match take {
+                Some(take) => prior.fit_with_take(take, &prep.lookup)?,
+                None => prior.fit_unbounded(&prep.lookup)?,
+            },
             (Some(fit), false) => fit,
             (None, false) => prior.fit(&prep.lookup)?,
         };
@@ -515,6 +531,15 @@ impl Model {
                     lk.fit_basis();
                 });
             }
+            // The take's prior made ready once per bin's fit matrix.
+            let takes: Vec<Option<TakeFit>> = match &options.take_prior {
+                Some(take) => self
+                    .lookups
+                    .iter()
+                    .map(|lk| lk.prior.as_ref().map(|p| p.take_fit(take)).transpose())
+                    .collect::<Result<_>>()?,
+                None => Vec::new(),
+            };
             prepared.par_iter_mut().enumerate().try_for_each(|(f, p)| {
                 self.add_fit(
                     p,
@@ -522,6 +547,7 @@ impl Model {
                     options.marker_noise,
                     refine,
                     options.unbounded_fit,
+                    takes.get(p.bin).and_then(Option::as_ref),
                 )
                 .map_err(|e| frame_context(e, f))
             })?;

@@ -1,0 +1,290 @@
+"""A take's own prior on its frames' global fit (empirical Bayes).
+
+A performance moves a dataset's face in a few directions of its many shapes. Least squares
+with noisy markers spends the noise over every direction the shapes can take at the markers;
+the take's frames show which directions it really moves in, and by how much. The prior is
+read from the take itself:
+
+1. Each frame's markers, in the jaw's unskinned space less the bundles' rest (the rows the
+   global fit fits, `core.fit_rows`), are written in the fit matrix's own coordinates:
+   `A = U S Vᵀ`, `ζ_t = Uᵀ d_t / sigma`. Noise of sigma per coordinate is then white, of
+   variance 1, in `ζ`. A frame's missing rows are filled by its fit (first its ridge fit,
+   then its fit under the prior read so far, `REFILL_ROUNDS` times), so that a frame short
+   of a marker neither loses the directions the marker saw nor shows its noise as motion.
+2. The frames' centred `ζ` (a matrix of F frames by q directions) are shrunk by the optimal
+   singular-value shrinker for white noise of known level (Gavish & Donoho 2017, Frobenius
+   loss): a singular value y inside the noise's bulk edge `1 + √β` goes to 0, the others to
+   `η(y) = √((y² - β - 1)² - 4β) / y`. Each direction's factor `f = η(y)/y` is a Gaussian
+   prior's Wiener factor `c / (c + 1)`, so the prior's variance there is `c = f / (1 - f)`.
+3. Mapped back to the shapes' weights, `w = V S⁻¹ sigma ζ`: the prior's mean and covariance
+   factor. The fit's own ridge is kept on top (its precision added on the prior's span,
+   `with_ridge`): where a take's out-of-span motion (a performance beyond the dataset) lands
+   in weakly seen directions, least squares there would follow it too far.
+4. The core applies it per frame with that frame's rows (`TakePrior`), dropouts included:
+   the ridge fit of `A L` to the markers less `A μ`.
+
+A frame of a take whose motion lies in a few directions then loses the noise in the others;
+noise-free markers (sigma = 0) need no prior. Whether a take gains by it is read from the take's
+own markers left out (`estimate_take_prior_use`): a take that ranges beyond the directions
+its frames show often (a range-of-motion session) can lose more to the prior's pull than it
+saves in noise.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from lgi import _lgi
+from lgi.detail import DETAIL_FRAMES
+from lgi.errors import InputError
+from lgi.leave_out import (
+    LEFT_OUT_PER_FRAME,
+    LOOKS,
+    Looks,
+    leave_markers_out,
+    solved_in_chunks,
+    take_frames,
+)
+from lgi.local import UNBOUNDED
+
+if TYPE_CHECKING:
+    from lgi.model import Model
+
+__all__ = [
+    "TakePrior",
+    "TakePriorEstimate",
+    "estimate_take_prior",
+    "estimate_take_prior_use",
+    "shrinkage_factors",
+]
+
+F64 = NDArray[np.float64]
+
+#: Directions of the fit's matrix kept, relative to its largest singular value (every one the
+#: markers see; numerically zero ones have no weight to put a prior on).
+DIRECTION_TOLERANCE = 1e-9
+
+#: Rounds of filling frames' missing rows by their fit under the prior and reading it again.
+REFILL_ROUNDS = 3
+
+
+@dataclass(frozen=True)
+class TakePrior:
+    """The prior on a take's global-fit weights: `w = mean + factor @ v`, `v ~ N(0, I)`.
+
+    `mean` (S,) and `factor` (S, q) are in the dataset's shape weights; `noise` the markers' sigma
+    (data units, per coordinate) it was read with; `directions` the fit's directions at the
+    markers (q's ceiling), `kept` the directions the take moves in above its noise (q), and
+    `frames` the frames it was read from."""
+
+    mean: F64
+    factor: F64
+    noise: float
+    directions: int
+    frames: int
+
+    @property
+    def kept(self) -> int:
+        return int(self.factor.shape[1])
+
+    def as_core(self) -> tuple[F64, F64, float]:
+        """The core's `take_prior` argument: (mean, factor, noise variance)."""
+        return self.mean, self.factor, self.noise**2
+
+
+def shrinkage_factors(singular_values: F64, beta: float) -> F64:
+    """Each singular value's optimal factor η(y)/y for white noise of level 1 (Gavish & Donoho
+    2017, Frobenius loss) in a matrix of aspect ratio `beta` ≤ 1: 0 inside the noise's bulk
+    edge 1 + √β, else √((y² - β - 1)² - 4β) / y²."""
+    y = np.asarray(singular_values, dtype=np.float64)
+    out = np.zeros_like(y)
+    above = y > 1.0 + np.sqrt(beta)
+    ya = y[above]
+    out[above] = np.sqrt(np.maximum((ya**2 - beta - 1.0) ** 2 - 4.0 * beta, 0.0)) / ya**2
+    return out
+
+
+def _shrunk(zeta: F64) -> tuple[F64, F64]:
+    """The mean (q,) and covariance factor (q, k) of frames `zeta` (F, q) with white noise of
+    level 1: the centred frames' singular values shrunk optimally (`shrinkage_factors`), each
+    kept direction's factor `f` read as a prior's Wiener factor, variance `f / (1 - f)`."""
+    n_frames, q = zeta.shape
+    mean = zeta.mean(axis=0)
+    m, n = sorted((q, n_frames - 1))
+    _, sv, wt = np.linalg.svd((zeta - mean) / np.sqrt(n), full_matrices=False)
+    f = shrinkage_factors(sv, m / n)
+    used = f > 0.0
+    return mean, wt[used].T * np.sqrt(f[used] / (1.0 - f[used]))
+
+
+def _frames_in_directions(
+    u: F64, s: F64, offsets: F64, sigma: float, ridge: float
+) -> tuple[F64, NDArray[np.bool_]]:
+    """Each frame in the fit matrix's own coordinates, `ζ = Uᵀ d / sigma` (F, q), its missing
+    rows filled by the frame's ridge fit (`J c` with `J = (D - U_Mᵀ U_M)⁻¹`, `D = I +
+    ridge S⁻²`, `c = U_Pᵀ d_P / sigma`: Woodbury's identity, an m x m solve for m missing
+    rows), and which rows are present (F, R)."""
+    present = np.isfinite(offsets)
+    c = (np.where(present, offsets, 0.0) @ u) / sigma
+    a0 = 1.0 / (1.0 + ridge / s**2)
+    zeta = c.copy()
+    for f in np.flatnonzero(~present.all(axis=1)):
+        um = u[~present[f]]
+        qm = (um * a0).T  # D⁻¹ U_Mᵀ (q, m)
+        fitted = c[f] * a0 + qm @ np.linalg.solve(np.eye(len(um)) - um @ qm, qm.T @ c[f])
+        zeta[f] = c[f] + um.T @ (um @ fitted)
+    return zeta, present
+
+
+def _refilled(u: F64, zeta: F64, present: NDArray[np.bool_], mean: F64, phi: F64) -> F64:
+    """`zeta` with each frame's missing rows filled again, by its fit under the prior `mean`,
+    `phi` (its MAP over its present rows: `mean + Φ (ΦᵀU_PᵀU_PΦ + I)⁻¹ Φᵀ (c - U_PᵀU_P mean)`,
+    with `U_PᵀU_P = I - U_MᵀU_M`)."""
+    out = zeta.copy()
+    k = phi.shape[1]
+    for f in np.flatnonzero(~present.all(axis=1)):
+        um = u[~present[f]]
+        c = zeta[f] - um.T @ (um @ zeta[f])  # the present rows' share, U_Pᵀ d_P / sigma
+        seen = mean - um.T @ (um @ mean)
+        uphi = um @ phi
+        gram = phi.T @ phi - uphi.T @ uphi + np.eye(k)
+        fitted = mean + phi @ np.linalg.solve(gram, phi.T @ (c - seen))
+        out[f] = c + um.T @ (um @ fitted)
+    return out
+
+
+def estimate_take_prior(
+    model: Model, frames: ArrayLike, marker_noise: float, *, jaw: str | None = "auto"
+) -> TakePrior:
+    """The take's prior on its frames' global fit (module text), read from `frames` (F, B, 3;
+    NaN: missing) with markers of noise `marker_noise` (sigma, data units, > 0) on `model` (built
+    with a dataset of shapes and without jaw bins), each frame at the jaw pose `jaw` gives as
+    in `Model.solve` (a pose from the fit refined against the boxed fit, as the unbounded fit
+    the prior is for is made at)."""
+    sigma = float(marker_noise)
+    if not (np.isfinite(sigma) and sigma > 0.0):
+        raise InputError(
+            f"take prior: the marker noise must be a distance > 0 (data units), got {sigma}; "
+            "noise-free markers need no prior"
+        )
+    if model.jaw_bins is not None:
+        raise InputError(
+            "take prior: the model has jaw bins (each bin fits its own re-posed shapes); "
+            "build it without jaw_bins"
+        )
+    a, offsets, _ = model.core.fit_rows(take_frames(frames, model), jaw=jaw)
+    a = np.asarray(a, dtype=np.float64)
+    offsets = np.asarray(offsets, dtype=np.float64)
+    n_frames = offsets.shape[0]
+    if n_frames < 2:
+        raise InputError(f"take prior: needs a take of 2 frames or more, got {n_frames}")
+    ridge = _lgi.FIT_L2 * float(np.mean(np.sum(a**2, axis=0)))
+    u, s, vt = np.linalg.svd(a, full_matrices=False)
+    # Every direction the markers see at all (the fit's ridge still weighs the weak ones).
+    keep = s > s[0] * DIRECTION_TOLERANCE if s.size else s > 0
+    u, s, vt = u[:, keep], s[keep], vt[keep]
+    q = len(s)
+    if q == 0:
+        raise InputError("take prior: the dataset's shapes do not move the markers")
+    zeta, present = _frames_in_directions(u, s, offsets, sigma, ridge)
+    mean, phi = _shrunk(zeta)
+    if not present.all():
+        # A frame short of a marker is filled by its fit under the prior read so far, and the
+        # prior read again (a few rounds: the kept directions settle in two or three).
+        for _ in range(REFILL_ROUNDS):
+            zeta = _refilled(u, zeta, present, mean, phi)
+            mean, phi = _shrunk(zeta)
+    # ζ = S z / sigma and w = V z: w = V S⁻¹ sigma ζ. Mean and factor are the frames' ridge
+    # fits' (each direction's share by s² / (s² + ridge)): in a weakly seen direction they are
+    # mostly noise over s, which the ridge keeps from the weights as in every frame's fit.
+    to_w = vt.T * (sigma / s * (s**2 / (s**2 + ridge)))
+    factor = to_w @ phi
+    return TakePrior(
+        mean=np.ascontiguousarray(to_w @ mean),
+        factor=np.ascontiguousarray(with_ridge(factor, ridge / sigma**2)),
+        noise=sigma,
+        directions=q,
+        frames=n_frames,
+    )
+
+
+def with_ridge(factor: F64, precision: float) -> F64:
+    """The factor of the prior whose precision on the span of `factor` (S, q) is the take's
+    plus `precision` (the fit's ridge over sigma²): `L (I + p LᵀL)^(-1/2)`, so a direction the
+    take moves in far above its noise is still held as the fit's ridge holds it."""
+    ev, evec = np.linalg.eigh(factor.T @ factor * precision)
+    return np.asarray(factor @ ((evec / np.sqrt(1.0 + np.clip(ev, 0.0, None))) @ evec.T))
+
+
+@dataclass(frozen=True)
+class TakePriorEstimate:
+    """Whether the take's prior predicts a take's left-out markers better
+    (`estimate_take_prior_use`)."""
+
+    use: bool
+    """It saved left-out distance by more than `LOOK_SIGNIFICANCE` standard errors at one of
+    the looks."""
+    error_without: float
+    """Mean distance (data units) of the left-out markers from the solve's surface without
+    them, with the unbounded fit and no prior (NaN: not read)."""
+    error_with: float
+    """The same with the prior (read from the take's other frames)."""
+    left_out: int
+    """Markers left out (one per solved frame)."""
+    frames: int
+    """Take frames they were left out of."""
+    prior: TakePrior | None
+    """The prior from the whole take where it is used, else None."""
+
+
+def estimate_take_prior_use(
+    frames: ArrayLike,
+    model: Model,
+    *,
+    marker_noise: float,
+    jaw: str | None = "auto",
+    frames_used: int = DETAIL_FRAMES,
+) -> TakePriorEstimate:
+    """Whether a take (F, B, 3; NaN rows missing) is better solved by `model` with the take's
+    prior on its unbounded fit, read from its own markers: on `frames_used` frames spread over
+    the take (more at each of up to `LOOKS` looks), up to `LEFT_OUT_PER_FRAME` present markers
+    each are left out in turn and predicted by the unbounded solve with `marker_noise` and
+    `jaw`, once without the prior and once with the prior read from the take's other frames
+    (none of the frames left out from, so no left-out marker informs it; a take with fewer
+    than 2 such frames is not read). Used as the looks' rule says (`Looks.first_clearing`);
+    then the prior is read from the whole take."""
+    arr = take_frames(frames, model)
+    nan = float("nan")
+    if not (np.isfinite(marker_noise) and marker_noise > 0.0):
+        return TakePriorEstimate(False, nan, nan, 0, 0, None)
+    out = leave_markers_out(arr, LOOKS * frames_used, LEFT_OUT_PER_FRAME, what="take prior")
+    others = np.setdiff1d(np.arange(arr.shape[0]), out.picked)
+    if others.size < 2:
+        return TakePriorEstimate(False, nan, nan, 0, 0, None)
+    held = estimate_take_prior(model, arr[others], marker_noise, jaw=jaw)
+    looks = Looks(out)
+    err = np.full((out.marker.size, 2), np.nan)
+
+    def read(rows: NDArray[np.int64]) -> None:
+        """The left-out distances of `rows`: without the prior (column 0) and with it (1)."""
+        part = out.subset(rows)
+        for kind, prior in enumerate((None, held)):
+            for at, solved in solved_in_chunks(
+                model, part, jaw=jaw, marker_noise=marker_noise, fit=UNBOUNDED, take_prior=prior
+            ):
+                err[rows[at], kind] = looks.distances(rows[at], solved.bundle_positions)
+
+    use = looks.first_clearing(read, err[:, 0], err[:, 1]) is not None
+    done = np.isfinite(err[:, 0])
+    return TakePriorEstimate(
+        use=use,
+        error_without=float(err[done, 0].mean()),
+        error_with=float(err[done, 1].mean()),
+        left_out=int(done.sum()),
+        frames=int(np.unique(out.frame[done]).size),
+        prior=estimate_take_prior(model, arr, marker_noise, jaw=jaw) if use else None,
+    )
