@@ -7,10 +7,11 @@ from the surface with them (bounded, unbounded) and without; docs/results.md put
 choices beside the protocols' errors.
 
 Usage: python scripts/local_fits_choices.py [--layouts markers_120 random:160:1 random:140:7]
-[--sigma 0 0.02 0.05] [--held-out 0 0.25] [--no-lomo] [--unbounded-fit-auto] (from the
+[--sigma 0 0.02 0.05] [--held-out 0 0.25] [--no-lomo] [--unbounded-fit-auto
+[--take-prior-auto]] (from the
 checkout, ../shared beside it). `--unbounded-fit-auto`: every take is read as `--unbounded-fit
 auto --local-fits auto` reads it (`lgi.pipeline.fits_choice`): the two choices and the lines
-`lgi solve` says about them.
+`lgi solve` says about them; `--take-prior-auto` with it: then `--take-prior auto` too.
 """
 
 from __future__ import annotations
@@ -53,17 +54,26 @@ def line(what: str, est: lgi.LocalFitsEstimate, seconds: float) -> None:
     )
 
 
-def choose_both(frames: np.ndarray, model: lgi.Model, sigma: float | None, what: str) -> None:
-    """What `--unbounded-fit auto --local-fits auto` chooses (`lgi.pipeline.fits_choice`), and
-    the distances it read, as one line."""
-    from lgi.pipeline import fits_choice
+def choose_both(
+    frames: np.ndarray, model: lgi.Model, sigma: float | None, what: str, prior: bool
+) -> None:
+    """What `--unbounded-fit auto --local-fits auto` chooses (`lgi.pipeline.fits_choice`; with
+    `prior`, then `--take-prior auto`: `lgi.pipeline.take_prior_choice`), and the distances it
+    read, as one line."""
+    from lgi.local import UNBOUNDED
+    from lgi.pipeline import fits_choice, take_prior_choice
 
     said: list[str] = []
     t0 = time.perf_counter()
     local, free = fits_choice("auto", "auto", frames, model, sigma, "auto", said.append)
     kind = {False: "no", True: "yes", "unbounded": "unbounded"}[local]
+    took = ""
+    if prior:
+        unbounded = free or local == UNBOUNDED
+        got = take_prior_choice("auto", frames, model, sigma, "auto", said.append, unbounded)
+        took = f" | {'yes' if got is not None else 'no'}"
     print(
-        f"| {what} | {kind} | {'unbounded' if free else 'boxed'} | {'; '.join(said)} "
+        f"| {what} | {kind} | {'unbounded' if free else 'boxed'}{took} | {'; '.join(said)} "
         f"| {time.perf_counter() - t0:.1f} |",
         flush=True,
     )
@@ -76,6 +86,9 @@ def main() -> None:
     ap.add_argument("--held-out", type=float, nargs="+", default=[0.0, 0.25])
     ap.add_argument("--no-lomo", action="store_true", help="skip the real takes")
     ap.add_argument("--unbounded-fit-auto", action="store_true", help="the fit chosen per take")
+    ap.add_argument(
+        "--take-prior-auto", action="store_true", help="with --unbounded-fit-auto: the prior too"
+    )
     args = ap.parse_args()
     warnings.filterwarnings("ignore")
     d = ict.load_dataset(ICT)
@@ -84,8 +97,10 @@ def main() -> None:
     rig, theta = _auto_rig(d)
     curves = [read_livelinkface(r).for_dataset(d.names) for r in RECORDINGS]
     if args.unbounded_fit_auto:
-        print("| take | local fits chosen | global fit chosen | what was read | seconds |")
-        print("|---|---|---|---|---|")
+        prior_column = " take prior chosen |" if args.take_prior_auto else ""
+        print(f"| take | local fits chosen | global fit chosen |{prior_column}", end="")
+        print(" what was read | seconds |")
+        print("|---|---|---|---|---|" + ("---|" if args.take_prior_auto else ""))
     else:
         print(
             "| take | local fits chosen | left out, with (cm) | with unbounded (cm) "
@@ -116,7 +131,7 @@ def main() -> None:
                     what = f"{kind}, {name}, {NAMES[i]}, sigma {sigma}"
                     model = methods["LGI"].model
                     if args.unbounded_fit_auto:
-                        choose_both(take.frames, model, sigma, what)
+                        choose_both(take.frames, model, sigma, what, args.take_prior_auto)
                         continue
                     est = lgi.estimate_local_fits(take.frames, model, marker_noise=sigma)
                     line(what, est, time.perf_counter() - t0)
@@ -131,7 +146,13 @@ def main() -> None:
         model = capture_methods(d, real.rest, None, frames)["LGI"]
         t0 = time.perf_counter()
         if args.unbounded_fit_auto:
-            choose_both(frames, model.model, model.marker_noise, f"lomo, {Path(path).stem}")
+            choose_both(
+                frames,
+                model.model,
+                model.marker_noise,
+                f"lomo, {Path(path).stem}",
+                args.take_prior_auto,
+            )
             continue
         est = lgi.estimate_local_fits(frames, model.model, marker_noise=model.marker_noise)
         line(f"lomo, {Path(path).stem}", est, time.perf_counter() - t0)

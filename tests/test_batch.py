@@ -358,6 +358,25 @@ def test_a_batch_with_the_unbounded_fit_auto_records_the_takes_own_choice(
     assert written.settings is not None and written.settings.unbounded_fit is (fit is not None)
 
 
+def test_a_batch_with_the_take_prior_writes_what_model_solve_gives_and_records_it(
+    client, named_model, shots, tmp_path
+):  # type: ignore[no-untyped-def]
+    take = shots["sh040"]
+    written = _one_shot(
+        client,
+        named_model,
+        take,
+        tmp_path / "o",
+        marker_noise=0.01,
+        fit="unbounded",
+        take_prior=True,
+    )
+    prior = lgi.estimate_take_prior(named_model, take, 0.01)
+    ref = named_model.solve(take, quiet=True, marker_noise=0.01, fit="unbounded", take_prior=prior)
+    assert np.array_equal(written.vertices, ref.vertices.astype(np.float32))
+    assert written.settings is not None and written.settings.take_prior
+
+
 def test_a_batch_with_local_fits_auto_records_the_takes_own_choice(
     client, named_model, shots, tmp_path
 ):  # type: ignore[no-untyped-def]
@@ -389,6 +408,7 @@ def test_solve_shots_refuses_bad_arguments_before_starting_anything(named_model,
             "local_fits must be True, False, .unbounded. or .auto.",
         ),
         ({"fit": "free"}, "fit must be True, False, None, .unbounded. or .auto."),
+        ({"take_prior": "yes"}, "take_prior must be True, False or .auto."),
         ({"model": tmp_path / "none.lgi"}, "no such model file"),
         ({"client": 3}, "client: expected"),
         ({"client": "tcp://127.0.0.1:8786", "workers": 2}, "workers sizes the embedded"),
