@@ -5,7 +5,9 @@ alex_rom_4, ICT's jaw rig), solving 100 frames of the other recording with the r
 fit), and the stages: the global fit with its jaw pose alone (`fit_residuals`);
 recommended_first_extra_s is what the model's first recommended call takes beyond the best one
 (done once: the fit's shape basis); unbounded_ms: the recommended call with the unbounded
-global fit (`fit="unbounded"`, its first call's extra as for the recommended one); then the
+global fit (`fit="unbounded"`, its first call's extra as for the recommended one);
+take_prior_s: reading the take's prior (`lgi.estimate_take_prior`, the whole take) and
+take_prior_ms: the unbounded call with it; then the
 recommended call with local fits (`local_fits=True`: local_build_s, once per model, and
 local_ms per frame, the whole call), and estimate_s: what `lgi.estimate_local_fits`
 (`--local-fits auto`) takes to read the take (estimate_frames: the frames it read, 8 a look).
@@ -56,10 +58,16 @@ def one(k: int, frames: int) -> dict[str, float]:
     model = lgi.Model.build(session.dataset, markers, jaw=rig, shape_theta=session.theta)
     t_build = time.perf_counter() - t0
     out: dict[str, float] = {"K": k, "scans_s": t_scans, "build_s": t_build}
+    t0 = time.perf_counter()
+    prior = lgi.estimate_take_prior(model, take.frames, 0.02)
+    out["take_prior_s"] = time.perf_counter() - t0
     calls = {
         "recommended_ms": lambda: model.solve(take.frames, marker_noise=0.02, quiet=True),
         "unbounded_ms": lambda: model.solve(
             take.frames, marker_noise=0.02, quiet=True, fit="unbounded"
+        ),
+        "take_prior_ms": lambda: model.solve(
+            take.frames, marker_noise=0.02, quiet=True, fit="unbounded", take_prior=prior
         ),
         "paper_ms": lambda: model.solve(take.frames, jaw="fit", fit=False, quiet=True),
         "fit_ms": lambda: model.core.fit_residuals(take.frames, jaw="fit"),
@@ -113,6 +121,8 @@ def main() -> None:
         "recommended_ms",
         "unbounded_first_extra_s",
         "unbounded_ms",
+        "take_prior_s",
+        "take_prior_ms",
         "paper_ms",
         "fit_ms",
         "local_build_s",

@@ -153,6 +153,7 @@ def test_a_take_of_one_still_face_keeps_no_direction_and_solves_to_its_mean(
     model, _, clean, _ = two_directions
     rng = np.random.default_rng(5)
     still = clean[10][None] + rng.normal(0.0, SIGMA, (60, *clean.shape[1:]))
+    still[rng.random(still.shape[:2]) < 0.02] = np.nan  # the refill with no direction kept
     prior = lgi.estimate_take_prior(model, still, SIGMA)
     assert prior.kept == 0
     res = model.solve(still, marker_noise=SIGMA, fit="unbounded", take_prior=prior, quiet=True)
@@ -168,45 +169,71 @@ def test_solve_iter_with_the_take_prior_equals_one_solve(two_directions: Any) ->
     np.testing.assert_array_equal(np.concatenate([p.vertices for p in parts]), one.vertices)
 
 
-def test_the_left_out_reading_matches_every_row_solved_alone(two_directions: Any) -> None:
-    from lgi.leave_out import LOOKS, leave_markers_out
-    from lgi.take_prior import estimate_take_prior
+def _rows_read(out: Any, frames_read: int) -> np.ndarray:
+    """The left-out rows the looks read to reach `frames_read` frames: look k reads every
+    LOOKS-th picked frame from the k-th."""
+    from lgi.leave_out import LOOKS
 
-    model, frames, _, _ = two_directions
-    est = lgi.estimate_take_prior_use(frames, model, marker_noise=SIGMA, frames_used=2)
-    # Brute force: the same left-out rows, each solved on its own, the prior read from the
-    # frames none was left out of.
-    out = leave_markers_out(np.asarray(frames), LOOKS * 2, 30)
-    others = np.setdiff1d(np.arange(len(frames)), out.picked)
-    held = estimate_take_prior(model, frames[others], SIGMA)
-    errs: dict[str, list[float]] = {"without": [], "with": []}
-    # Look k reads every LOOKS-th picked frame from the k-th; the looks read are those whose
-    # frames add up to the estimate's.
     ordinal = np.arange(out.picked.size) % LOOKS
     seen = next(
         out.picked[ordinal <= k]
         for k in range(LOOKS)
-        if np.count_nonzero(ordinal <= k) == est.frames
+        if np.count_nonzero(ordinal <= k) == frames_read
     )
-    rows = np.flatnonzero(np.isin(out.frame, seen))
+    return np.flatnonzero(np.isin(out.frame, seen))
+
+
+def _left_out_error(model: Any, out: Any, rows: np.ndarray, **solve: Any) -> float:
+    """Each row solved on its own (`solve`'s options) and its left-out marker's mean distance
+    from the surface."""
+    errs = []
     for r in rows:
-        for key, p in (("without", None), ("with", held)):
-            res = model.solve(
-                out.frames[r][None],
-                temporal=False,
-                marker_noise=SIGMA,
-                fit="unbounded",
-                take_prior=p,
-                quiet=True,
-            )
-            at = res.bundle_positions[0, out.marker[r]]
-            errs[key].append(float(np.linalg.norm(at - out.given[r])))
+        res = model.solve(
+            out.frames[r][None], temporal=False, marker_noise=SIGMA, quiet=True, **solve
+        )
+        errs.append(float(np.linalg.norm(res.bundle_positions[0, out.marker[r]] - out.given[r])))
+    return float(np.mean(errs))
+
+
+def _left_out_with_held_prior(model: Any, frames: np.ndarray) -> tuple[Any, TakePrior]:
+    """The rows the estimates leave out at `frames_used=2` and the prior read from the frames
+    none of them leaves a marker out of."""
+    from lgi.leave_out import LOOKS, leave_markers_out
+
+    out = leave_markers_out(np.asarray(frames), LOOKS * 2, 30)
+    others = np.setdiff1d(np.arange(len(frames)), out.picked)
+    return out, lgi.estimate_take_prior(model, frames[others], SIGMA)
+
+
+def test_the_left_out_reading_matches_every_row_solved_alone(two_directions: Any) -> None:
+    model, frames, _, _ = two_directions
+    est = lgi.estimate_take_prior_use(frames, model, marker_noise=SIGMA, frames_used=2)
+    out, held = _left_out_with_held_prior(model, frames)
+    rows = _rows_read(out, est.frames)
     assert est.left_out == len(rows) > 0
-    assert est.error_without == pytest.approx(np.mean(errs["without"]), rel=1e-9)
-    assert est.error_with == pytest.approx(np.mean(errs["with"]), rel=1e-9)
+    free = {"fit": "unbounded"}
+    assert est.error_without == pytest.approx(_left_out_error(model, out, rows, **free), rel=1e-9)
+    with_prior = _left_out_error(model, out, rows, take_prior=held, **free)
+    assert est.error_with == pytest.approx(with_prior, rel=1e-9)
     # On this take the prior pays, and the whole take's prior comes with the answer.
     assert est.use and est.error_with < est.error_without
     assert isinstance(est.prior, TakePrior) and est.prior.frames == len(frames)
+
+
+def test_the_unbounded_fits_reading_with_the_take_prior_solves_it_as_it_would_be(
+    two_directions: Any,
+) -> None:
+    model, frames, _, _ = two_directions
+    est = lgi.estimate_unbounded_fit(
+        frames, model, marker_noise=SIGMA, frames_used=2, take_prior=True
+    )
+    out, held = _left_out_with_held_prior(model, frames)
+    rows = _rows_read(out, est.frames)
+    assert est.error_boxed == pytest.approx(_left_out_error(model, out, rows), rel=1e-9)
+    free = _left_out_error(model, out, rows, fit="unbounded", take_prior=held)
+    assert est.error_unbounded == pytest.approx(free, rel=1e-9)
+    plain = lgi.estimate_unbounded_fit(frames, model, marker_noise=SIGMA, frames_used=2)
+    assert plain.error_unbounded != est.error_unbounded
 
 
 def test_noise_free_or_short_takes_are_not_read(two_directions: Any) -> None:
@@ -286,6 +313,12 @@ def test_cli_take_prior_writes_what_model_solve_gives_and_says_its_reading(
     est = lgi.estimate_take_prior_use(x, model, marker_noise=SIGMA)
     said = "take prior used (" if est.use else "take prior not used:"
     assert said in err and "markers left out one at a time" in err, err
+    # Both auto: the unbounded fit is read as it would be solved, with the prior.
+    both = ["solve", str(model_path), str(take), "-o", str(tmp_path / "both.npz")]
+    argv_both = [*both, "--marker-noise", str(SIGMA), "--unbounded-fit", "auto"]
+    assert cli.main([*argv_both, "--take-prior", "auto"]) == 0
+    err = capsys.readouterr().err
+    assert "unbounded fit (with the take prior) " in err, err
     # Without the unbounded fit, or without noise: exit 2 in lgi's own words.
     bad = ["solve", str(model_path), str(take), "-o", str(tmp_path / "x.npz")]
     assert cli.main([*bad, "--marker-noise", str(SIGMA), "--take-prior"]) == 2

@@ -251,9 +251,9 @@ def test_both_auto_read_the_local_fits_first_and_the_fit_only_without_them(
         assert spec == "auto" and fit is None  # read on the boxed solve
         return local_read
 
-    def fit_choice(spec, frames, model, sigma, jaw, say):  # type: ignore[no-untyped-def]
+    def fit_choice(spec, frames, model, sigma, jaw, say, prior=False):  # type: ignore[no-untyped-def]
         calls.append("fit")
-        assert spec == "auto"
+        assert spec == "auto" and prior is False  # no --take-prior here
         return fit_read
 
     monkeypatch.setattr(pipeline, "local_fits_choice", local_choice)

@@ -305,6 +305,7 @@ def solve_shot(
                 opts.get("marker_noise"),
                 opts.get("jaw", "auto"),
                 lambda _message: None,
+                opts.get("take_prior", False),
             )
             opts["local_fits"] = local
             opts["fit"] = UNBOUNDED if free else (None if fit == "auto" else fit)

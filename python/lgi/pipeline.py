@@ -200,19 +200,22 @@ def fits_choice(
     sigma: float | None,
     jaw: str | None,
     say: Say,
+    prior: bool | str = False,
 ) -> tuple[bool | str, bool]:
     """`--local-fits` and `--unbounded-fit` as given or read from the take (`local_fits_choice`,
     `unbounded_fit_choice`): `local_fits` and whether the global fit is unbounded. When both
     are 'auto', the local fits are read first, on the boxed solve (bounded, then unbounded ones
     with the unbounded fit they start from): unbounded ones chosen bring the unbounded fit,
     bounded ones keep the box, and with neither the unbounded fit is read on its own
-    (docs/concepts.md). Otherwise the fit is decided first and the local fits read on it."""
+    (docs/concepts.md). Otherwise the fit is decided first and the local fits read on it.
+    With `prior` (`--take-prior`, given or 'auto') the unbounded fit is read as it would be
+    solved, with the take's prior."""
     if local == "auto" and unbounded == "auto":
         chosen = local_fits_choice(local, frames, model, sigma, jaw, say)
         if chosen:
             return chosen, chosen == UNBOUNDED
-        return False, unbounded_fit_choice(unbounded, frames, model, sigma, jaw, say)
-    free = unbounded_fit_choice(unbounded, frames, model, sigma, jaw, say)
+        return False, unbounded_fit_choice(unbounded, frames, model, sigma, jaw, say, prior)
+    free = unbounded_fit_choice(unbounded, frames, model, sigma, jaw, say, prior)
     chosen = local_fits_choice(local, frames, model, sigma, jaw, say, UNBOUNDED if free else None)
     # Unbounded local fits start from the unbounded fit whatever was asked of the fit.
     return chosen, free or chosen == UNBOUNDED
@@ -225,18 +228,22 @@ def unbounded_fit_choice(
     sigma: float | None,
     jaw: str | None,
     say: Say,
+    prior: bool | str = False,
 ) -> bool:
     """`--unbounded-fit`: True, False or 'auto' (read from the take's own markers left out,
-    `lgi.estimate_unbounded_fit`, and said with its numbers)."""
+    `lgi.estimate_unbounded_fit`, and said with its numbers; with `prior`, the unbounded fit
+    with the take's prior, as it would be solved)."""
     if spec is True or spec is False:
         return spec
     if spec != "auto":
         raise InputError(f"--unbounded-fit {spec!r}: expected no value or 'auto'")
-    est = estimate_unbounded_fit(frames, model, marker_noise=sigma, jaw=jaw)
+    with_prior = bool(prior) and sigma is not None and sigma > 0.0
+    est = estimate_unbounded_fit(frames, model, marker_noise=sigma, jaw=jaw, take_prior=with_prior)
     unit = model.units or "model units"
+    which = " (with the take prior)" if with_prior else ""
     say(
-        f"unbounded fit {'used' if est.use else 'not used'}: {est.left_out} markers left out "
-        f"one at a time on {est.frames} frames are {est.error_unbounded:.4g} {unit} from the "
+        f"unbounded fit{which} {'used' if est.use else 'not used'}: {est.left_out} markers left "
+        f"out one at a time on {est.frames} frames are {est.error_unbounded:.4g} {unit} from the "
         f"surface with it, {est.error_boxed:.4g} with the fit held to [0, 1]"
     )
     return est.use
@@ -899,7 +906,9 @@ def solve_file(
     if local_fits and m.jaw_bins is not None:
         raise InputError(f"--local-fits: the model {model} has jaw bins; build it without them")
     jaw_mode = None if m.jaw_rig is None or jaw == "rest" else jaw
-    local_fits, unbounded_fit = fits_choice(local_fits, unbounded_fit, x, m, sigma, jaw_mode, say)
+    local_fits, unbounded_fit = fits_choice(
+        local_fits, unbounded_fit, x, m, sigma, jaw_mode, say, take_prior
+    )
     fit = UNBOUNDED if unbounded_fit else None
     prior = take_prior_choice(
         take_prior, x, m, sigma, jaw_mode, say, unbounded_fit or local_fits == UNBOUNDED

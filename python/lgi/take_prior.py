@@ -44,6 +44,7 @@ from lgi.errors import InputError
 from lgi.leave_out import (
     LEFT_OUT_PER_FRAME,
     LOOKS,
+    LeftOut,
     Looks,
     leave_markers_out,
     solved_in_chunks,
@@ -59,6 +60,7 @@ __all__ = [
     "TakePriorEstimate",
     "estimate_take_prior",
     "estimate_take_prior_use",
+    "held_out_prior",
     "shrinkage_factors",
 ]
 
@@ -220,6 +222,17 @@ def with_ridge(factor: F64, precision: float) -> F64:
     return np.asarray(factor @ ((evec / np.sqrt(1.0 + np.clip(ev, 0.0, None))) @ evec.T))
 
 
+def held_out_prior(
+    model: Model, arr: F64, rows: LeftOut, marker_noise: float, jaw: str | None
+) -> TakePrior | None:
+    """The take's prior read from the frames of `arr` that no row of `rows` leaves a marker
+    out of (so no left-out marker informs it); None with fewer than 2 such frames."""
+    others = np.setdiff1d(np.arange(arr.shape[0]), rows.picked)
+    if others.size < 2:
+        return None
+    return estimate_take_prior(model, arr[others], marker_noise, jaw=jaw)
+
+
 @dataclass(frozen=True)
 class TakePriorEstimate:
     """Whether the take's prior predicts a take's left-out markers better
@@ -262,10 +275,9 @@ def estimate_take_prior_use(
     if not (np.isfinite(marker_noise) and marker_noise > 0.0):
         return TakePriorEstimate(False, nan, nan, 0, 0, None)
     out = leave_markers_out(arr, LOOKS * frames_used, LEFT_OUT_PER_FRAME, what="take prior")
-    others = np.setdiff1d(np.arange(arr.shape[0]), out.picked)
-    if others.size < 2:
+    held = held_out_prior(model, arr, out, marker_noise, jaw)
+    if held is None:
         return TakePriorEstimate(False, nan, nan, 0, 0, None)
-    held = estimate_take_prior(model, arr[others], marker_noise, jaw=jaw)
     looks = Looks(out)
     err = np.full((out.marker.size, 2), np.nan)
 

@@ -66,6 +66,7 @@ def estimate_unbounded_fit(
     marker_noise: float | None,
     jaw: str | None = "auto",
     frames_used: int = DETAIL_FRAMES,
+    take_prior: bool = False,
 ) -> UnboundedFitEstimate:
     """Whether a take (F, B, 3; NaN rows missing) is better solved by `model` with the unbounded
     global fit, read from its own markers: on `frames_used` frames spread over the take, up to
@@ -74,9 +75,17 @@ def estimate_unbounded_fit(
     unbounded. The unbounded fit is used when the left-out distance it saves, averaged per
     frame, exceeds `LOOK_SIGNIFICANCE` standard errors of that mean over the frames read; when
     it does not and the saving is positive, `frames_used` more frames are read, up to `LOOKS`
-    looks. Each look solves about `frames_used` x 30 frames twice."""
+    looks. Each look solves about `frames_used` x 30 frames twice. With `take_prior` (and a
+    `marker_noise` > 0) the unbounded fit is read as it would be solved with the take's prior
+    (`lgi.take_prior`), the prior read from the take's frames none of the markers is left out
+    of (`held_out_prior`)."""
+    from lgi.take_prior import held_out_prior
+
     arr = take_frames(frames, model)
     out = leave_markers_out(arr, LOOKS * frames_used, LEFT_OUT_PER_FRAME, what="unbounded fit")
+    prior = None
+    if take_prior and marker_noise:
+        prior = held_out_prior(model, arr, out, marker_noise, jaw)
     looks = Looks(out)
     # Left-out distances: the boxed fit's solve (column 0) and the unbounded one's (column 1).
     err = np.full((out.marker.size, 2), np.nan)
@@ -86,7 +95,12 @@ def estimate_unbounded_fit(
         part = out.subset(rows)
         for kind, fit in enumerate((None, UNBOUNDED)):
             for at, solved in solved_in_chunks(
-                model, part, jaw=jaw, marker_noise=marker_noise, fit=fit
+                model,
+                part,
+                jaw=jaw,
+                marker_noise=marker_noise,
+                fit=fit,
+                take_prior=prior if fit else None,
             ):
                 err[rows[at], kind] = looks.distances(rows[at], solved.bundle_positions)
 
