@@ -65,7 +65,9 @@ def choose_both(
 
     said: list[str] = []
     t0 = time.perf_counter()
-    local, free = fits_choice("auto", "auto", frames, model, sigma, "auto", said.append)
+    local, free = fits_choice(
+        "auto", "auto", frames, model, sigma, "auto", said.append, "auto" if prior else False
+    )
     kind = {False: "no", True: "yes", "unbounded": "unbounded"}[local]
     took = ""
     if prior:
