@@ -16,6 +16,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import lgi
+from fit_reference import fit_reference
 from lgi.io.settings import SolveSettings
 from lgi.take_prior import TakePrior, shrinkage_factors, with_ridge
 
@@ -93,16 +94,8 @@ def test_fit_rows_are_the_markers_unskinned_by_the_boxed_pose_less_the_rest(
     boxed = model.solve(frames, jaw="fit", fit=True, quiet=True)
     # Reference: the rig's own unskinning of the markers at the boxed pose (each bundle's jaw
     # weight), and of the shapes' marker positions at each shape's own pose.
-    data, rig = model.dataset, model.jaw_rig
-    jaw = model.core.jaw()
-    bundle_jaw = np.asarray(jaw["bundle_weights"], dtype=np.float64)
-    x0, shapes = np.asarray(data.neutral), np.asarray(data.shapes, dtype=np.float64)
-    rest = model.bundle_positions(x0)
-    on_shapes = model.bundle_positions(x0[None] + shapes)
-    thetas = np.asarray(jaw["shape_theta"], dtype=np.float64)
-    columns = rig.unskin(on_shapes, thetas, weights=bundle_jaw) - rest[None]
-    np.testing.assert_allclose(a, columns.transpose(1, 2, 0).reshape(-1, len(shapes)), atol=1e-9)
-    markers = rig.unskin(np.nan_to_num(frames), np.asarray(boxed.jaw_theta), weights=bundle_jaw)
+    want_a, rest, markers = fit_reference(model, frames, np.asarray(boxed.jaw_theta))
+    np.testing.assert_allclose(a, want_a, atol=1e-9)
     want = (markers - rest[None]).reshape(len(frames), -1)
     missing = np.repeat(np.isnan(frames).any(axis=2), 3, axis=1)
     assert np.array_equal(np.isnan(offsets), missing)

@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 import lgi
+from fit_reference import fit_reference
 from lgi import _lgi
 from lgi.io.settings import SolveSettings
 
@@ -27,18 +28,9 @@ def test_unbounded_fit_weights_equal_numpys_ridge_of_the_unskinned_markers_at_th
     # Reference: the markers unskinned by that pose with each bundle's jaw weight, fitted by
     # the shapes' marker positions unskinned the same way by each shape's own pose, ridge
     # FIT_L2 x the mean squared column norm.
-    data, rig = model.dataset, model.jaw_rig
-    jaw = model.core.jaw()
-    bundle_jaw = np.asarray(jaw["bundle_weights"], dtype=np.float64)
-    x0, shapes = np.asarray(data.neutral), np.asarray(data.shapes, dtype=np.float64)
-    rest = model.bundle_positions(x0)
-    on_shapes = model.bundle_positions(x0[None] + shapes)
-    thetas = np.asarray(jaw["shape_theta"], dtype=np.float64)
-    columns = rig.unskin(on_shapes, thetas, weights=bundle_jaw) - rest[None]
-    a = columns.transpose(1, 2, 0).reshape(-1, len(shapes))
-    ridge = _lgi.FIT_L2 * np.mean(np.sum(a**2, axis=0))
     theta = np.asarray(boxed.jaw_theta)
-    markers = rig.unskin(np.nan_to_num(frames), theta, weights=bundle_jaw)
+    a, rest, markers = fit_reference(model, frames, theta)
+    ridge = _lgi.FIT_L2 * np.mean(np.sum(a**2, axis=0))
     for f in range(len(frames)):
         present = np.repeat(np.isfinite(frames[f]).all(axis=1), 3)
         rows = a[present]

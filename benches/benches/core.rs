@@ -7,7 +7,7 @@ use glam::DVec3;
 use lgi_benches::{build_model, load_workload, make_frames, solve_frame, Workload};
 use lgi_core::{
     blend, blend_by_columns, fit_scale, BlendshapeSolver, Choice, FrameState, LocalFits, Model,
-    Pieces, RidgeFit, Scratch, SibsonWeights, BLEND_BLOCK, FIT_L2, FIT_PENALTY,
+    Pieces, RidgeFit, Scratch, SibsonWeights, TakePrior, BLEND_BLOCK, FIT_L2, FIT_PENALTY,
 };
 use std::hint::black_box;
 use std::time::{Duration, Instant};
@@ -289,6 +289,15 @@ fn global_fit(c: &mut Criterion) {
         .collect();
     let wide_ridge = RidgeFit::new(wide.clone(), rows, SCANS, FIT_L2 * fit_scale(&wide, SCANS))
         .unwrap_or_else(|e| panic!("{e}"));
+    // A take's prior on the 2,000 columns: 20 kept directions (the scans protocol's takes kept
+    // 16-23), deterministic values of the weights' scale.
+    const KEPT: usize = 20;
+    let factor: Vec<f64> = (0..SCANS * KEPT)
+        .map(|i| 0.05 * (((i * 37 + 11) % 101) as f64 / 101.0 - 0.5))
+        .collect();
+    let take =
+        TakePrior::new(vec![0.01; SCANS], factor, KEPT, 4e-4).unwrap_or_else(|e| panic!("{e}"));
+    let take_fit = take.fit(&wide, rows).unwrap_or_else(|e| panic!("{e}"));
     let mut g = c.benchmark_group("global_fit");
     g.sample_size(20);
     let mut i = 0;
@@ -312,6 +321,15 @@ fn global_fit(c: &mut Criterion) {
     });
     g.bench_function("ridge_fit_build_2000_scans", |bench| {
         bench.iter(|| black_box(RidgeFit::new(wide.clone(), rows, SCANS, 1.0)));
+    });
+    g.bench_function("take_prior_fit_frame_2000_scans", |bench| {
+        bench.iter(|| {
+            i = (i + 1) % targets.len();
+            black_box(take_fit.solve(&targets[i]))
+        });
+    });
+    g.bench_function("take_prior_build_2000_scans", |bench| {
+        bench.iter(|| black_box(take.fit(&wide, rows)));
     });
     g.finish();
 }

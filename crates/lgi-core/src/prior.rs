@@ -171,17 +171,7 @@ impl FitPrior {
             })
             .as_ref()
             .map_err(|e| LgiError::Input(e.clone()))?;
-        let solution = solver.solve(&self.offsets(targets))?;
-        let mut weights = Vec::with_capacity(solution.len() + 1);
-        weights.push(0.0);
-        weights.extend_from_slice(&solution);
-        let mut fit = FrameFit {
-            weights,
-            positions: Vec::new(),
-            dual: Vec::new(),
-        };
-        self.place(&mut fit);
-        Ok(fit)
+        Ok(self.placed(&solver.solve(&self.offsets(targets))?))
     }
 
     /// A take's prior ([`TakePrior`]) made ready for this fit's matrix.
@@ -192,17 +182,22 @@ impl FitPrior {
     /// The fit of `targets` under a take's prior ([`take_fit`](Self::take_fit)): unbounded,
     /// the prior in place of the fit's ridge.
     pub fn fit_with_take(&self, take: &TakeFit, targets: &[DVec3]) -> Result<FrameFit> {
-        let solution = take.solve(&self.offsets(targets))?;
+        Ok(self.placed(&take.solve(&self.offsets(targets))?))
+    }
+
+    /// The frame fit of shape weights `solution` (S; no dual point): the neutral's weight 0
+    /// first, the bundles placed.
+    fn placed(&self, solution: &[f64]) -> FrameFit {
         let mut weights = Vec::with_capacity(solution.len() + 1);
         weights.push(0.0);
-        weights.extend_from_slice(&solution);
+        weights.extend_from_slice(solution);
         let mut fit = FrameFit {
             weights,
             positions: Vec::new(),
             dual: Vec::new(),
         };
         self.place(&mut fit);
-        Ok(fit)
+        fit
     }
 
     /// `targets − rest` as the fit's right-hand side (row 3n + d: coordinate d of bundle n;
