@@ -176,11 +176,15 @@ def _rows_read(out: Any, frames_read: int) -> np.ndarray:
     return np.flatnonzero(np.isin(out.frame, seen))
 
 
-def _left_out_error(model: Any, out: Any, rows: np.ndarray, **solve: Any) -> float:
-    """Each row solved on its own (`solve`'s options) and its left-out marker's mean distance
-    from the surface."""
+def _left_out_error(
+    model: Any, out: Any, rows: np.ndarray, priors: Any = None, **solve: Any
+) -> float:
+    """Each row solved on its own (`solve`'s options; `priors`: with the prior read without
+    the row's left-out marker) and its left-out marker's mean distance from the surface."""
     errs = []
     for r in rows:
+        if priors is not None:
+            solve["take_prior"] = priors.prior(without=int(out.marker[r]))
         res = model.solve(
             out.frames[r][None], temporal=False, marker_noise=SIGMA, quiet=True, **solve
         )
@@ -188,25 +192,26 @@ def _left_out_error(model: Any, out: Any, rows: np.ndarray, **solve: Any) -> flo
     return float(np.mean(errs))
 
 
-def _left_out_with_held_prior(model: Any, frames: np.ndarray) -> tuple[Any, TakePrior]:
-    """The rows the estimates leave out at `frames_used=2` and the prior read from the frames
-    none of them leaves a marker out of."""
+def _left_out_with_held_rows(model: Any, frames: np.ndarray) -> tuple[Any, Any]:
+    """The rows the estimates leave out at `frames_used=2` and the prior's rows read from the
+    frames none of them leaves a marker out of."""
     from lgi.leave_out import LOOKS, leave_markers_out
+    from lgi.take_prior import TakeRows
 
     out = leave_markers_out(np.asarray(frames), LOOKS * 2, 30)
     others = np.setdiff1d(np.arange(len(frames)), out.picked)
-    return out, lgi.estimate_take_prior(model, frames[others], SIGMA)
+    return out, TakeRows(model, frames[others], SIGMA)
 
 
 def test_the_left_out_reading_matches_every_row_solved_alone(two_directions: Any) -> None:
     model, frames, _, _ = two_directions
     est = lgi.estimate_take_prior_use(frames, model, marker_noise=SIGMA, frames_used=2)
-    out, held = _left_out_with_held_prior(model, frames)
+    out, held = _left_out_with_held_rows(model, frames)
     rows = _rows_read(out, est.frames)
     assert est.left_out == len(rows) > 0
     free = {"fit": "unbounded"}
     assert est.error_without == pytest.approx(_left_out_error(model, out, rows, **free), rel=1e-9)
-    with_prior = _left_out_error(model, out, rows, take_prior=held, **free)
+    with_prior = _left_out_error(model, out, rows, held, **free)
     assert est.error_with == pytest.approx(with_prior, rel=1e-9)
     # On this take the prior pays, and the whole take's prior comes with the answer.
     assert est.use and est.error_with < est.error_without
@@ -220,13 +225,26 @@ def test_the_unbounded_fits_reading_with_the_take_prior_solves_it_as_it_would_be
     est = lgi.estimate_unbounded_fit(
         frames, model, marker_noise=SIGMA, frames_used=2, take_prior=True
     )
-    out, held = _left_out_with_held_prior(model, frames)
+    out, held = _left_out_with_held_rows(model, frames)
     rows = _rows_read(out, est.frames)
     assert est.error_boxed == pytest.approx(_left_out_error(model, out, rows), rel=1e-9)
-    free = _left_out_error(model, out, rows, fit="unbounded", take_prior=held)
+    free = _left_out_error(model, out, rows, held, fit="unbounded")
     assert est.error_unbounded == pytest.approx(free, rel=1e-9)
     plain = lgi.estimate_unbounded_fit(frames, model, marker_noise=SIGMA, frames_used=2)
     assert plain.error_unbounded != est.error_unbounded
+
+
+def test_a_prior_read_without_a_marker_does_not_depend_on_its_track(two_directions: Any) -> None:
+    from lgi.take_prior import TakeRows
+
+    model, frames, _, _ = two_directions
+    rows = TakeRows(model, frames, SIGMA)
+    before = rows.prior(without=7)
+    rows.offsets[:, 21:24] += 5.0  # marker 7's track, moved far away in every frame
+    after = rows.prior(without=7)
+    np.testing.assert_array_equal(before.mean, after.mean)
+    np.testing.assert_array_equal(before.factor, after.factor)
+    assert not np.array_equal(rows.prior().mean, before.mean)
 
 
 def test_noise_free_or_short_takes_are_not_read(two_directions: Any) -> None:

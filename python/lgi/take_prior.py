@@ -32,6 +32,7 @@ saves in noise.
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
@@ -53,14 +54,16 @@ from lgi.leave_out import (
 from lgi.local import UNBOUNDED
 
 if TYPE_CHECKING:
+    from lgi._lgi import SolveResult
     from lgi.model import Model
 
 __all__ = [
+    "HeldOutPriors",
     "TakePrior",
     "TakePriorEstimate",
+    "TakeRows",
     "estimate_take_prior",
     "estimate_take_prior_use",
-    "held_out_prior",
     "shrinkage_factors",
 ]
 
@@ -159,6 +162,71 @@ def _refilled(u: F64, zeta: F64, present: NDArray[np.bool_], mean: F64, phi: F64
     return out
 
 
+class TakeRows:
+    """What a take's prior is read from (module text): the fit's matrix in its own coordinates
+    (`A = U S Vᵀ`, numerically zero directions dropped) and every frame's rows (the markers in
+    the jaw's unskinned space less the rest, `core.fit_rows`), read once; `prior` reads the
+    prior, with some markers' rows left out of every frame where asked."""
+
+    def __init__(
+        self, model: Model, frames: ArrayLike, marker_noise: float, jaw: str | None = "auto"
+    ) -> None:
+        sigma = float(marker_noise)
+        if not (np.isfinite(sigma) and sigma > 0.0):
+            raise InputError(
+                f"take prior: the marker noise must be a distance > 0 (data units), got "
+                f"{sigma}; noise-free markers need no prior"
+            )
+        if model.jaw_bins is not None:
+            raise InputError(
+                "take prior: the model has jaw bins (each bin fits its own re-posed shapes); "
+                "build it without jaw_bins"
+            )
+        a, offsets, _ = model.core.fit_rows(take_frames(frames, model), jaw=jaw)
+        a = np.asarray(a, dtype=np.float64)
+        self.offsets = np.asarray(offsets, dtype=np.float64)
+        if self.offsets.shape[0] < 2:
+            raise InputError(
+                f"take prior: needs a take of 2 frames or more, got {self.offsets.shape[0]}"
+            )
+        self.sigma = sigma
+        self.ridge = _lgi.FIT_L2 * float(np.mean(np.sum(a**2, axis=0)))
+        u, s, vt = np.linalg.svd(a, full_matrices=False)
+        # Every direction the markers see at all (the fit's ridge still weighs the weak ones).
+        keep = s > s[0] * DIRECTION_TOLERANCE if s.size else s > 0
+        if not keep.any():
+            raise InputError("take prior: the dataset's shapes do not move the markers")
+        self.u, self.s, self.vt = u[:, keep], s[keep], vt[keep]
+
+    def prior(self, without: int | None = None) -> TakePrior:
+        """The take's prior; `without`: marker `without`'s rows left out of every frame, as if
+        the take had never had it (the left-out readings' prior for a row leaving it out)."""
+        u, s, sigma, ridge = self.u, self.s, self.sigma, self.ridge
+        offsets = self.offsets
+        if without is not None:
+            offsets = offsets.copy()
+            offsets[:, 3 * without : 3 * without + 3] = np.nan
+        zeta, present = _frames_in_directions(u, s, offsets, sigma, ridge)
+        mean, phi = _shrunk(zeta)
+        if not present.all():
+            # A frame short of a marker is filled by its fit under the prior read so far, and
+            # the prior read again (a few rounds: the kept directions settle in two or three).
+            for _ in range(REFILL_ROUNDS):
+                zeta = _refilled(u, zeta, present, mean, phi)
+                mean, phi = _shrunk(zeta)
+        # ζ = S z / sigma and w = V z: w = V S⁻¹ sigma ζ. Mean and factor are the frames' ridge
+        # fits' (each direction's share by s² / (s² + ridge)): in a weakly seen direction they
+        # are mostly noise over s, which the ridge keeps from the weights as in every frame's fit.
+        to_w = self.vt.T * (sigma / s * (s**2 / (s**2 + ridge)))
+        return TakePrior(
+            mean=np.ascontiguousarray(to_w @ mean),
+            factor=np.ascontiguousarray(with_ridge(to_w @ phi, ridge / sigma**2)),
+            noise=sigma,
+            directions=len(s),
+            frames=offsets.shape[0],
+        )
+
+
 def estimate_take_prior(
     model: Model, frames: ArrayLike, marker_noise: float, *, jaw: str | None = "auto"
 ) -> TakePrior:
@@ -167,51 +235,7 @@ def estimate_take_prior(
     with a dataset of shapes and without jaw bins), each frame at the jaw pose `jaw` gives as
     in `Model.solve` (a pose from the fit refined against the boxed fit, as the unbounded fit
     the prior is for is made at)."""
-    sigma = float(marker_noise)
-    if not (np.isfinite(sigma) and sigma > 0.0):
-        raise InputError(
-            f"take prior: the marker noise must be a distance > 0 (data units), got {sigma}; "
-            "noise-free markers need no prior"
-        )
-    if model.jaw_bins is not None:
-        raise InputError(
-            "take prior: the model has jaw bins (each bin fits its own re-posed shapes); "
-            "build it without jaw_bins"
-        )
-    a, offsets, _ = model.core.fit_rows(take_frames(frames, model), jaw=jaw)
-    a = np.asarray(a, dtype=np.float64)
-    offsets = np.asarray(offsets, dtype=np.float64)
-    n_frames = offsets.shape[0]
-    if n_frames < 2:
-        raise InputError(f"take prior: needs a take of 2 frames or more, got {n_frames}")
-    ridge = _lgi.FIT_L2 * float(np.mean(np.sum(a**2, axis=0)))
-    u, s, vt = np.linalg.svd(a, full_matrices=False)
-    # Every direction the markers see at all (the fit's ridge still weighs the weak ones).
-    keep = s > s[0] * DIRECTION_TOLERANCE if s.size else s > 0
-    u, s, vt = u[:, keep], s[keep], vt[keep]
-    q = len(s)
-    if q == 0:
-        raise InputError("take prior: the dataset's shapes do not move the markers")
-    zeta, present = _frames_in_directions(u, s, offsets, sigma, ridge)
-    mean, phi = _shrunk(zeta)
-    if not present.all():
-        # A frame short of a marker is filled by its fit under the prior read so far, and the
-        # prior read again (a few rounds: the kept directions settle in two or three).
-        for _ in range(REFILL_ROUNDS):
-            zeta = _refilled(u, zeta, present, mean, phi)
-            mean, phi = _shrunk(zeta)
-    # ζ = S z / sigma and w = V z: w = V S⁻¹ sigma ζ. Mean and factor are the frames' ridge
-    # fits' (each direction's share by s² / (s² + ridge)): in a weakly seen direction they are
-    # mostly noise over s, which the ridge keeps from the weights as in every frame's fit.
-    to_w = vt.T * (sigma / s * (s**2 / (s**2 + ridge)))
-    factor = to_w @ phi
-    return TakePrior(
-        mean=np.ascontiguousarray(to_w @ mean),
-        factor=np.ascontiguousarray(with_ridge(factor, ridge / sigma**2)),
-        noise=sigma,
-        directions=q,
-        frames=n_frames,
-    )
+    return TakeRows(model, frames, marker_noise, jaw).prior()
 
 
 def with_ridge(factor: F64, precision: float) -> F64:
@@ -222,15 +246,56 @@ def with_ridge(factor: F64, precision: float) -> F64:
     return np.asarray(factor @ ((evec / np.sqrt(1.0 + np.clip(ev, 0.0, None))) @ evec.T))
 
 
-def held_out_prior(
-    model: Model, arr: F64, rows: LeftOut, marker_noise: float, jaw: str | None
-) -> TakePrior | None:
-    """The take's prior read from the frames of `arr` that no row of `rows` leaves a marker
-    out of (so no left-out marker informs it); None with fewer than 2 such frames."""
-    others = np.setdiff1d(np.arange(arr.shape[0]), rows.picked)
-    if others.size < 2:
-        return None
-    return estimate_take_prior(model, arr[others], marker_noise, jaw=jaw)
+class HeldOutPriors:
+    """The priors the left-out readings solve a take's rows with: read from the frames no row
+    leaves a marker out of, and without the row's left-out marker in any frame, so that what
+    a left-out marker does is in no prior its row is solved with (a real marker between the
+    markers is in none either; with its track in the prior, a real take's left-out markers
+    favoured the prior where the surface lost by it). `None` from `of` for a take with fewer
+    than 2 such frames."""
+
+    def __init__(self, rows: TakeRows) -> None:
+        self._rows = rows
+        self._priors: dict[int, TakePrior] = {}
+
+    @staticmethod
+    def of(
+        model: Model, arr: F64, left_out: LeftOut, marker_noise: float, jaw: str | None
+    ) -> HeldOutPriors | None:
+        others = np.setdiff1d(np.arange(arr.shape[0]), left_out.picked)
+        if others.size < 2:
+            return None
+        return HeldOutPriors(TakeRows(model, arr[others], marker_noise, jaw))
+
+    def without(self, marker: int) -> TakePrior:
+        """The prior without marker `marker` (read once)."""
+        if marker not in self._priors:
+            self._priors[marker] = self._rows.prior(without=marker)
+        return self._priors[marker]
+
+    def solved(
+        self,
+        model: Model,
+        left_out: LeftOut,
+        rows: NDArray[np.int64],
+        *,
+        jaw: str | None,
+        marker_noise: float | None,
+    ) -> Iterator[tuple[NDArray[np.int64], SolveResult]]:
+        """`rows` of `left_out` solved with the unbounded fit, each with the prior without its
+        left-out marker: the rows of each marker together (`solved_in_chunks`)."""
+        for marker in np.unique(left_out.marker[rows]):
+            mine = rows[left_out.marker[rows] == marker]
+            part = left_out.subset(mine)
+            for at, res in solved_in_chunks(
+                model,
+                part,
+                jaw=jaw,
+                marker_noise=marker_noise,
+                fit=UNBOUNDED,
+                take_prior=self.without(int(marker)),
+            ):
+                yield mine[at], res
 
 
 @dataclass(frozen=True)
@@ -267,15 +332,16 @@ def estimate_take_prior_use(
     the take (more at each of up to `LOOKS` looks), up to `LEFT_OUT_PER_FRAME` present markers
     each are left out in turn and predicted by the unbounded solve with `marker_noise` and
     `jaw`, once without the prior and once with the prior read from the take's other frames
-    (none of the frames left out from, so no left-out marker informs it; a take with fewer
-    than 2 such frames is not read). Used as the looks' rule says (`Looks.first_clearing`);
-    then the prior is read from the whole take."""
+    (none of the frames left out from, and without the row's left-out marker in any frame,
+    `HeldOutPriors`, so no left-out marker informs its prior; a take with fewer than 2 such
+    frames is not read). Used as the looks' rule says (`Looks.first_clearing`); then the prior
+    is read from the whole take."""
     arr = take_frames(frames, model)
     nan = float("nan")
     if not (np.isfinite(marker_noise) and marker_noise > 0.0):
         return TakePriorEstimate(False, nan, nan, 0, 0, None)
     out = leave_markers_out(arr, LOOKS * frames_used, LEFT_OUT_PER_FRAME, what="take prior")
-    held = held_out_prior(model, arr, out, marker_noise, jaw)
+    held = HeldOutPriors.of(model, arr, out, marker_noise, jaw)
     if held is None:
         return TakePriorEstimate(False, nan, nan, 0, 0, None)
     looks = Looks(out)
@@ -284,11 +350,12 @@ def estimate_take_prior_use(
     def read(rows: NDArray[np.int64]) -> None:
         """The left-out distances of `rows`: without the prior (column 0) and with it (1)."""
         part = out.subset(rows)
-        for kind, prior in enumerate((None, held)):
-            for at, solved in solved_in_chunks(
-                model, part, jaw=jaw, marker_noise=marker_noise, fit=UNBOUNDED, take_prior=prior
-            ):
-                err[rows[at], kind] = looks.distances(rows[at], solved.bundle_positions)
+        for at, solved in solved_in_chunks(
+            model, part, jaw=jaw, marker_noise=marker_noise, fit=UNBOUNDED
+        ):
+            err[rows[at], 0] = looks.distances(rows[at], solved.bundle_positions)
+        for mine, solved in held.solved(model, out, rows, jaw=jaw, marker_noise=marker_noise):
+            err[mine, 1] = looks.distances(mine, solved.bundle_positions)
 
     use = looks.first_clearing(read, err[:, 0], err[:, 1]) is not None
     done = np.isfinite(err[:, 0])

@@ -77,15 +77,15 @@ def estimate_unbounded_fit(
     it does not and the saving is positive, `frames_used` more frames are read, up to `LOOKS`
     looks. Each look solves about `frames_used` x 30 frames twice. With `take_prior` (and a
     `marker_noise` > 0) the unbounded fit is read as it would be solved with the take's prior
-    (`lgi.take_prior`), the prior read from the take's frames none of the markers is left out
-    of (`held_out_prior`)."""
-    from lgi.take_prior import held_out_prior
+    (`lgi.take_prior`), each row's prior read without its left-out marker from the take's
+    frames none of the markers is left out of (`lgi.take_prior.HeldOutPriors`)."""
+    from lgi.take_prior import HeldOutPriors
 
     arr = take_frames(frames, model)
     out = leave_markers_out(arr, LOOKS * frames_used, LEFT_OUT_PER_FRAME, what="unbounded fit")
-    prior = None
+    held = None
     if take_prior and marker_noise:
-        prior = held_out_prior(model, arr, out, marker_noise, jaw)
+        held = HeldOutPriors.of(model, arr, out, marker_noise, jaw)
     looks = Looks(out)
     # Left-out distances: the boxed fit's solve (column 0) and the unbounded one's (column 1).
     err = np.full((out.marker.size, 2), np.nan)
@@ -94,13 +94,12 @@ def estimate_unbounded_fit(
         """The left-out distances of `rows`, solved boxed (column 0) and unbounded (1)."""
         part = out.subset(rows)
         for kind, fit in enumerate((None, UNBOUNDED)):
+            if kind == 1 and held is not None:
+                for mine, res in held.solved(model, out, rows, jaw=jaw, marker_noise=marker_noise):
+                    err[mine, 1] = looks.distances(mine, res.bundle_positions)
+                continue
             for at, solved in solved_in_chunks(
-                model,
-                part,
-                jaw=jaw,
-                marker_noise=marker_noise,
-                fit=fit,
-                take_prior=prior if fit else None,
+                model, part, jaw=jaw, marker_noise=marker_noise, fit=fit
             ):
                 err[rows[at], kind] = looks.distances(rows[at], solved.bundle_positions)
 
