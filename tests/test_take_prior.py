@@ -339,3 +339,20 @@ def test_cli_take_prior_writes_what_model_solve_gives_and_says_its_reading(
     assert cli.main([*bad, "--unbounded-fit", "--take-prior"]) == 2
     assert "lgi: error: --take-prior needs the markers' noise" in capsys.readouterr().err
     assert not (tmp_path / "x.npz").exists()
+
+
+def test_take_prior_auto_says_why_it_was_not_read(two_directions: Any) -> None:
+    from lgi.pipeline import take_prior_choice
+
+    model, frames, _, _ = two_directions
+    said: list[str] = []
+    for sigma, unbounded in ((SIGMA, False), (None, True), (0.0, True)):
+        got = take_prior_choice("auto", frames, model, sigma, "auto", said.append, unbounded)
+        assert got is None
+    assert said == [
+        "take prior not read: the fit is held to [0, 1]",
+        "take prior not read: no --marker-noise (every marker interpolated as given)",
+        "take prior not read: the markers are noise-free",
+    ]
+    with pytest.raises(lgi.InputError, match="expected no value or 'auto'"):
+        take_prior_choice("Auto", frames, model, SIGMA, "auto", said.append, True)

@@ -283,7 +283,12 @@ def take_prior_choice(
         say(f"take prior: {prior.kept} of {prior.directions} directions move above the noise")
         return prior
     if not unbounded or not noisy:
-        why = "the fit is held to [0, 1]" if not unbounded else "the markers are noise-free"
+        if not unbounded:
+            why = "the fit is held to [0, 1]"
+        elif sigma is None:
+            why = "no --marker-noise (every marker interpolated as given)"
+        else:
+            why = "the markers are noise-free"
         say(f"take prior not read: {why}")
         return None
     assert sigma is not None
