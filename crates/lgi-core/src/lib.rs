@@ -41,6 +41,8 @@ mod simd;
 mod smooth;
 mod sparse;
 mod take_prior;
+#[cfg(test)]
+mod test_values;
 mod tet_index;
 mod tets;
 mod text;

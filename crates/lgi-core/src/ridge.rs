@@ -188,19 +188,7 @@ fn inverse(n: usize, g: Vec<f64>) -> Result<Vec<f64>> {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    /// A small LCG's values in [-1, 1): test data only.
-    fn values(n: usize, seed: u64) -> Vec<f64> {
-        let mut x = seed;
-        (0..n)
-            .map(|_| {
-                x = x
-                    .wrapping_mul(6364136223846793005)
-                    .wrapping_add(1442695040888963407);
-                (x >> 11) as f64 / (1u64 << 52) as f64 - 1.0
-            })
-            .collect()
-    }
+    use crate::test_values::values;
 
     /// The normal equations over the present rows, solved afresh: the reference.
     fn reference(a: &[f64], rows: usize, s: usize, lambda: f64, t: &[f64]) -> Vec<f64> {

@@ -130,18 +130,7 @@ impl TakeFit {
 mod tests {
     use super::*;
     use crate::linalg::{cholesky, cholesky_solve};
-
-    fn values(n: usize, seed: u64) -> Vec<f64> {
-        let mut x = seed;
-        (0..n)
-            .map(|_| {
-                x = x
-                    .wrapping_mul(6364136223846793005)
-                    .wrapping_add(1442695040888963407);
-                (x >> 11) as f64 / (1u64 << 52) as f64 - 1.0
-            })
-            .collect()
-    }
+    use crate::test_values::values;
 
     /// The MAP weights in the covariance form, over the present rows:
     /// μ + Σ Aᵀ (A Σ Aᵀ + σ² I)⁻¹ (t − A μ) with Σ = L Lᵀ (an independent route to the fit's
