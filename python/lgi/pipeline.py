@@ -239,14 +239,32 @@ def unbounded_fit_choice(
         raise InputError(f"--unbounded-fit {spec!r}: expected no value or 'auto'")
     with_prior = bool(prior) and sigma is not None and sigma > 0.0
     est = estimate_unbounded_fit(frames, model, marker_noise=sigma, jaw=jaw, take_prior=with_prior)
-    unit = model.units or "model units"
     which = " (with the take prior)" if with_prior else ""
     say(
-        f"unbounded fit{which} {'used' if est.use else 'not used'}: {est.left_out} markers left "
-        f"out one at a time on {est.frames} frames are {est.error_unbounded:.4g} {unit} from the "
-        f"surface with it, {est.error_boxed:.4g} with the fit held to [0, 1]"
+        _reading(
+            f"unbounded fit{which} {'used' if est.use else 'not used'}",
+            est.left_out,
+            est.frames,
+            f"{est.error_unbounded:.4g}",
+            model,
+            "it",
+            f"{est.error_boxed:.4g} with the fit held to [0, 1]",
+        )
     )
     return est.use
+
+
+def _reading(
+    what: str, left_out: int, frames: int, near: str, model: Model, them: str, other: str
+) -> str:
+    """The line a left-out reading says: `what` (the choice), how many markers were left out on
+    how many frames, their distance `near` from the surface with `them` (the option read) in
+    the model's units, and `other`, the distance without it."""
+    unit = model.units or "model units"
+    return (
+        f"{what}: {left_out} markers left out one at a time on {frames} frames are {near} "
+        f"{unit} from the surface with {them}, {other}"
+    )
 
 
 def take_prior_choice(
@@ -296,12 +314,17 @@ def take_prior_choice(
     if est.left_out == 0:
         say("take prior not used: the take is too short to read it on frames of its own")
         return None
-    unit = model.units or "model units"
     kept = "" if est.prior is None else f" ({est.prior.kept} of {est.prior.directions} directions)"
     say(
-        f"take prior {'used' if est.use else 'not used'}{kept}: {est.left_out} markers left "
-        f"out one at a time on {est.frames} frames are {est.error_with:.4g} {unit} from the "
-        f"surface with it, {est.error_without:.4g} without"
+        _reading(
+            f"take prior {'used' if est.use else 'not used'}{kept}",
+            est.left_out,
+            est.frames,
+            f"{est.error_with:.4g}",
+            model,
+            "it",
+            f"{est.error_without:.4g} without",
+        )
     )
     return est.prior
 
@@ -325,16 +348,21 @@ def local_fits_choice(
     assert sigma is not None  # checked above
     est = estimate_local_fits(frames, model, marker_noise=sigma, jaw=jaw, fit=fit)
     chosen = {False: "not used", True: "used", UNBOUNDED: "used, unbounded"}[est.local_fits]
-    unit = model.units or "model units"
     read = [
         f"{x:.4g}{kind}"
         for x, kind in ((est.error_with, ""), (est.error_unbounded, " unbounded"))
         if np.isfinite(x)
     ]
     say(
-        f"local fits {chosen}: {est.left_out} markers left out one at a time on {est.frames} "
-        f"frames are {' and '.join(read)} {unit} from the surface with them, "
-        f"{est.error_without:.4g} without"
+        _reading(
+            f"local fits {chosen}",
+            est.left_out,
+            est.frames,
+            " and ".join(read),
+            model,
+            "them",
+            f"{est.error_without:.4g} without",
+        )
     )
     return est.local_fits
 
