@@ -12,6 +12,7 @@ takes."""
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
@@ -30,6 +31,7 @@ from lgi.leave_out import (
 from lgi.local import UNBOUNDED
 
 if TYPE_CHECKING:
+    from lgi._lgi import SolveResult
     from lgi.model import Model
 
 __all__ = ["UnboundedFitEstimate", "estimate_unbounded_fit"]
@@ -93,15 +95,20 @@ def estimate_unbounded_fit(
     def read(rows: NDArray[np.int64]) -> None:
         """The left-out distances of `rows`, solved boxed (column 0) and unbounded (1)."""
         part = out.subset(rows)
-        for kind, fit in enumerate((None, UNBOUNDED)):
-            if kind == 1 and held is not None:
-                for mine, res in held.solved(model, out, rows, jaw=jaw, marker_noise=marker_noise):
-                    err[mine, 1] = looks.distances(mine, res.bundle_positions)
-                continue
-            for at, solved in solved_in_chunks(
-                model, part, jaw=jaw, marker_noise=marker_noise, fit=fit
-            ):
-                err[rows[at], kind] = looks.distances(rows[at], solved.bundle_positions)
+        for at, solved in solved_in_chunks(model, part, jaw=jaw, marker_noise=marker_noise):
+            err[rows[at], 0] = looks.distances(rows[at], solved.bundle_positions)
+        unbounded: Iterator[tuple[NDArray[np.int64], SolveResult]]
+        if held is None:
+            unbounded = (
+                (rows[at], res)
+                for at, res in solved_in_chunks(
+                    model, part, jaw=jaw, marker_noise=marker_noise, fit=UNBOUNDED
+                )
+            )
+        else:
+            unbounded = held.solved(model, out, rows, jaw=jaw, marker_noise=marker_noise)
+        for mine, res in unbounded:
+            err[mine, 1] = looks.distances(mine, res.bundle_positions)
 
     use = looks.first_clearing(read, err[:, 0], err[:, 1]) is not None
     done = np.isfinite(err[:, 0])
