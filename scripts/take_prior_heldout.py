@@ -1,9 +1,10 @@
 """The take's prior (`lgi.estimate_take_prior`, issue 34) on the capture protocol with a quarter
 of ICT's FACS shapes held out: both Live Link recordings drive ICT with a rotating jaw (200
 frames, 2 % dropouts, markers_120, seed 3, as `scripts/peer_results.py`), and the peers, LGI's
-boxed call and its local fits, the unbounded fit, and the unbounded fit with the take prior
-alone and with unbounded local fits solve it. Each line: the recording, sigma (cm), the best peer's
-mean face-skin error (cm) and every method's ratio to it (docs/results.md).
+boxed call and its local fits, the unbounded fit alone and with unbounded local fits, and the
+unbounded fit with the take prior alone and with unbounded local fits solve it. Each line: the
+recording, sigma (cm), the best peer's mean face-skin error (cm) and every method's ratio to it
+(docs/results.md).
 
 Usage: python scripts/take_prior_heldout.py [--frames 200] (from the checkout, ../shared
 beside it)
@@ -22,6 +23,7 @@ from lgi.lab.capture import HingeJaw
 from lgi.lab.evaluate import (
     LOCAL_FITS,
     LOCAL_FITS_TAKE_PRIOR,
+    LOCAL_FITS_UNBOUNDED,
     TAKE_PRIOR,
     UNBOUNDED_FIT,
     _add_unbounded,
@@ -33,7 +35,15 @@ from lgi.lab.evaluate import (
 ICT = "../shared/data/ict-facekit"
 RECORDINGS = [f"../shared/data/livelinkface/{r}.csv" for r in ("alex_rom_4", "jmtechart_myslate_3")]
 PEERS = ("fit + jaw", "fit + jaw + residual")
-METHODS = (*PEERS, "LGI", LOCAL_FITS, UNBOUNDED_FIT, TAKE_PRIOR, LOCAL_FITS_TAKE_PRIOR)
+METHODS = (
+    *PEERS,
+    "LGI",
+    LOCAL_FITS,
+    UNBOUNDED_FIT,
+    LOCAL_FITS_UNBOUNDED,
+    TAKE_PRIOR,
+    LOCAL_FITS_TAKE_PRIOR,
+)
 
 
 def main() -> None:
