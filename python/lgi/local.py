@@ -180,14 +180,15 @@ class LocalPieces:
             unskinned[missing] = np.nan
         starts = np.asarray(res.fit_weights, dtype=np.float64)
         disp = unskinned - self.rest[None]
-        if not bounded and missing.any():
+        lacking = np.flatnonzero(missing.any(axis=1)) if not bounded else np.empty(0, int)
+        if lacking.size:
             # An unbounded window that loses a marker extrapolates its fit to that marker's
             # place unchecked (a dropped marker moved the surface by up to 7 cm there on the
             # scans protocol, docs/results.md): its rows take the frame's global fit instead,
             # as the take prior's reading refills them. Bounded windows keep the box instead.
-            f, b = disp.shape[:2]
-            fitted = (starts @ self._a.T).reshape(f, b, 3)
-            disp = np.where(missing[..., None], fitted, disp)
+            fitted = (starts[lacking] @ self._a.T).reshape(lacking.size, -1, 3)
+            gone = missing[lacking][..., None]
+            disp[lacking] = np.where(gone, fitted, disp[lacking])
         # A chunk of frames per call, so Ctrl-C (seen between calls) stops a long take at once.
         fits = self.fits_for(bounded)
         parts = [
