@@ -525,7 +525,8 @@ def test_a_dropped_marker_does_not_throw_unbounded_local_fits_off_the_face(ict_d
     # The scans protocol's setting (docs/results.md, "A dropped marker"): 120 whole-face scans
     # from one Live Link recording, frames of the other on 160 random markers. Without their
     # rows refilled by the global fit, unbounded windows that lost a marker extrapolated to its
-    # place: up to 7 cm of error where the unbounded global fit had 0.7.
+    # place: up to 7 cm of error where the unbounded global fit had 0.7 (on these 12 frames
+    # 1.21 against 0.58 cm; refilled 0.59).
     from lgi.io.livelink import read_livelinkface
     from lgi.lab.capture import HingeJaw, make_capture, random_layout
     from lgi.lab.scans import scan_session
