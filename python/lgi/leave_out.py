@@ -25,6 +25,7 @@ __all__ = [
     "LOOKS",
     "LOOK_SIGNIFICANCE",
     "SOLVE_ROWS",
+    "Comparison",
     "LeftOut",
     "Looks",
     "leave_markers_out",
@@ -89,6 +90,22 @@ class LeftOut:
         )
 
 
+@dataclass(frozen=True)
+class Comparison:
+    """Two solves of the same left-out rows read look by look (`Looks.compare`)."""
+
+    use: bool
+    """The option saved left-out distance significantly at one of the looks."""
+    base: float
+    """Mean distance of the rows read from the surface without the option."""
+    option: float
+    """The same with it."""
+    left_out: int
+    """Rows read (markers left out, one per solved frame)."""
+    frames: int
+    """Take frames they were left out of."""
+
+
 class Looks:
     """`LOOKS` looks at the rows of a `LeftOut`: look k reads every `LOOKS`-th of its picked
     frames from the k-th, so every look spans the take."""
@@ -142,6 +159,21 @@ class Looks:
             if mean < 0:
                 break
         return None
+
+    def compare(self, read: Callable[[NDArray[np.int64], NDArray[np.float64]], None]) -> Comparison:
+        """Reads the looks (`first_clearing`) with `read(rows, err)` filling the left-out
+        distances of `rows` in `err` (R, 2): column 0 without the option, column 1 with it;
+        then their means over the rows read."""
+        err = np.full((self.left_out.marker.size, 2), np.nan)
+        look = self.first_clearing(lambda rows: read(rows, err), err[:, 0], err[:, 1])
+        done = np.isfinite(err[:, 0])
+        return Comparison(
+            use=look is not None,
+            base=float(err[done, 0].mean()),
+            option=float(err[done, 1].mean()),
+            left_out=int(done.sum()),
+            frames=int(np.unique(self.left_out.frame[done]).size),
+        )
 
     def distances(self, rows: NDArray[np.int64], positions: ArrayLike) -> NDArray[np.float64]:
         """Each of `rows`' left-out marker's distance from its position in `positions` (the

@@ -345,9 +345,8 @@ def estimate_take_prior_use(
     if held is None:
         return TakePriorEstimate(False, nan, nan, 0, 0, None)
     looks = Looks(out)
-    err = np.full((out.marker.size, 2), np.nan)
 
-    def read(rows: NDArray[np.int64]) -> None:
+    def read(rows: NDArray[np.int64], err: NDArray[np.float64]) -> None:
         """The left-out distances of `rows`: without the prior (column 0) and with it (1)."""
         part = out.subset(rows)
         for at, solved in solved_in_chunks(
@@ -357,13 +356,12 @@ def estimate_take_prior_use(
         for mine, solved in held.solved(model, out, rows, jaw=jaw, marker_noise=marker_noise):
             err[mine, 1] = looks.distances(mine, solved.bundle_positions)
 
-    use = looks.first_clearing(read, err[:, 0], err[:, 1]) is not None
-    done = np.isfinite(err[:, 0])
+    read_out = looks.compare(read)
     return TakePriorEstimate(
-        use=use,
-        error_without=float(err[done, 0].mean()),
-        error_with=float(err[done, 1].mean()),
-        left_out=int(done.sum()),
-        frames=int(np.unique(out.frame[done]).size),
-        prior=estimate_take_prior(model, arr, marker_noise, jaw=jaw) if use else None,
+        use=read_out.use,
+        error_without=read_out.base,
+        error_with=read_out.option,
+        left_out=read_out.left_out,
+        frames=read_out.frames,
+        prior=estimate_take_prior(model, arr, marker_noise, jaw=jaw) if read_out.use else None,
     )

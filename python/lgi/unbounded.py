@@ -89,10 +89,8 @@ def estimate_unbounded_fit(
     if take_prior and marker_noise:
         held = HeldOutPriors.of(model, arr, out, marker_noise, jaw)
     looks = Looks(out)
-    # Left-out distances: the boxed fit's solve (column 0) and the unbounded one's (column 1).
-    err = np.full((out.marker.size, 2), np.nan)
 
-    def read(rows: NDArray[np.int64]) -> None:
+    def read(rows: NDArray[np.int64], err: NDArray[np.float64]) -> None:
         """The left-out distances of `rows`, solved boxed (column 0) and unbounded (1)."""
         part = out.subset(rows)
         for at, solved in solved_in_chunks(model, part, jaw=jaw, marker_noise=marker_noise):
@@ -110,12 +108,11 @@ def estimate_unbounded_fit(
         for mine, res in unbounded:
             err[mine, 1] = looks.distances(mine, res.bundle_positions)
 
-    use = looks.first_clearing(read, err[:, 0], err[:, 1]) is not None
-    done = np.isfinite(err[:, 0])
+    read_out = looks.compare(read)
     return UnboundedFitEstimate(
-        use=use,
-        error_boxed=float(err[done, 0].mean()),
-        error_unbounded=float(err[done, 1].mean()),
-        left_out=int(done.sum()),
-        frames=int(np.unique(out.frame[done]).size),
+        use=read_out.use,
+        error_boxed=read_out.base,
+        error_unbounded=read_out.option,
+        left_out=read_out.left_out,
+        frames=read_out.frames,
     )
