@@ -17,7 +17,7 @@ import ict_captures
 import lgi
 from lgi.lab import ict
 from lgi.lab.capture import make_capture
-from lgi.model import fit_noise_bound
+from lgi.noise import fit_noise_bound
 
 STEP = 20
 

@@ -37,6 +37,32 @@ def ict_dataset(ict_path: Path):  # type: ignore[no-untyped-def]
 
 
 @pytest.fixture(scope="session")
+def rom_scans(ict_dataset):  # type: ignore[no-untyped-def]
+    """The scans protocol's setting (docs/results.md): a model of 120 whole-face scans picked
+    from the shared slate recording on 160 random markers (cm), and what makes takes of the
+    other recording for it: (dataset, jaw hinge, ROM curves, markers, model)."""
+    import lgi
+    from lgi.io.livelink import read_livelinkface
+    from lgi.lab import ict
+    from lgi.lab.capture import HingeJaw, random_layout
+    from lgi.lab.scans import scan_session
+    from lgi.model import _auto_rig
+
+    folder = ict_dir().parent / "livelinkface"
+    recordings = [folder / f"{r}.csv" for r in ("alex_rom_4", "jmtechart_myslate_3")]
+    if not all(r.is_file() for r in recordings):
+        pytest.skip(f"needs the two shared Live Link recordings in {folder}")
+    data = ict_dataset
+    hinge = HingeJaw.fit(data, ict.lower_teeth())
+    rig, theta = _auto_rig(data)
+    rom, slate = (read_livelinkface(r).for_dataset(data.names) for r in recordings)
+    session = scan_session(data, slate, 120, hinge, theta, nonlinear=None)
+    markers = random_layout(data, 160, 1, np.arange(ict.NARROW_FACE))
+    model = lgi.Model.build(session.dataset, markers, jaw=rig, shape_theta=session.theta)
+    return data, hinge, rom, markers, model
+
+
+@pytest.fixture(scope="session")
 def ict_markers(ict_path: Path) -> np.ndarray:
     from lgi.lab import ict
 

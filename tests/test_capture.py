@@ -124,7 +124,7 @@ def test_the_fit_bound_caps_a_noise_estimate_that_reads_motion_between_distant_f
     sample_model,
 ) -> None:  # type: ignore[no-untyped-def]
     from lgi.errors import LgiWarning
-    from lgi.model import fit_noise_bound
+    from lgi.noise import fit_noise_bound
 
     _, sample_model = sample_model
     sample_dataset = sample_model.dataset

@@ -15,7 +15,6 @@ from hypothesis import strategies as st
 from scipy.optimize import minimize
 
 import lgi
-from conftest import ict_dir
 from lgi import _lgi
 from lgi.errors import InputError
 from lgi.io.settings import SolveSettings
@@ -521,27 +520,15 @@ def test_cli_local_fits_auto_says_its_choice_and_records_it(
     assert "--local-fits: expected no value, 'unbounded' or 'auto', got 'maybe'" in err, err
 
 
-def test_a_dropped_marker_does_not_throw_unbounded_local_fits_off_the_face(ict_dataset) -> None:  # type: ignore[no-untyped-def]
+def test_a_dropped_marker_does_not_throw_unbounded_local_fits_off_the_face(rom_scans) -> None:  # type: ignore[no-untyped-def]
     # The scans protocol's setting (docs/results.md, "A dropped marker"): 120 whole-face scans
     # from one Live Link recording, frames of the other on 160 random markers. Without their
     # rows refilled by the global fit, unbounded windows that lost a marker extrapolated to its
     # place: up to 7 cm of error where the unbounded global fit had 0.7 (on these 12 frames
     # 1.21 against 0.58 cm; refilled 0.59).
-    from lgi.io.livelink import read_livelinkface
-    from lgi.lab.capture import HingeJaw, make_capture, random_layout
-    from lgi.lab.scans import scan_session
-    from lgi.model import _auto_rig
+    from lgi.lab.capture import make_capture
 
-    folder = ict_dir().parent / "livelinkface"
-    recordings = [folder / f"{r}.csv" for r in ("alex_rom_4", "jmtechart_myslate_3")]
-    if not all(r.is_file() for r in recordings):
-        pytest.skip(f"needs the two shared Live Link recordings in {folder}")
-    data = ict_dataset
-    hinge = HingeJaw.fit(data, ict.lower_teeth())
-    rig, theta = _auto_rig(data)
-    rom, slate = (read_livelinkface(r).for_dataset(data.names) for r in recordings)
-    session = scan_session(data, slate, 120, hinge, theta, nonlinear=None)
-    markers = random_layout(data, 160, 1, np.arange(ict.NARROW_FACE))
+    data, hinge, rom, markers, model = rom_scans
     take = make_capture(
         data,
         rom[:: rom.shape[0] // 12][:12],
@@ -552,7 +539,6 @@ def test_a_dropped_marker_does_not_throw_unbounded_local_fits_off_the_face(ict_d
         seed=3,
         jaw=hinge,
     )
-    model = lgi.Model.build(session.dataset, markers, jaw=rig, shape_theta=session.theta)
     frames = take.frames.copy()
     frames[np.arange(12), (72 + 13 * np.arange(12)) % 160] = np.nan  # one marker a frame
     skin = ict.skin()

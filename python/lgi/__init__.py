@@ -30,7 +30,8 @@ from lgi.errors import (
     ModelFormatError,
 )
 from lgi.local import LocalFitsEstimate, estimate_local_fits
-from lgi.model import BuildConfig, Model, estimate_marker_noise
+from lgi.model import BuildConfig, Model
+from lgi.noise import estimate_marker_noise
 from lgi.take_prior import (
     TakePrior,
     TakePriorEstimate,

@@ -29,7 +29,8 @@ from lgi.io.atomic import atomic_path, writable_folder
 from lgi.io.settings import SolveSettings
 from lgi.io.topology import topology
 from lgi.local import UNBOUNDED
-from lgi.model import Model, estimate_marker_noise
+from lgi.model import Model
+from lgi.noise import estimate_marker_noise
 
 __all__ = [
     "MANIFEST",

@@ -19,9 +19,8 @@ import lgi._lgi as _lgi
 from lgi._lgi import BuildConfig, SolveResult
 from lgi.dataset import Dataset
 from lgi.detail import blend_detail, check_detail_weight
-from lgi.errors import InputError, LgiWarning
+from lgi.errors import InputError
 from lgi.jaw import JawRig, estimate_rig
-from lgi.leave_out import take_frames
 from lgi.local import UNBOUNDED, local_bounds, local_pieces
 from lgi.take_prior import TakePrior
 
@@ -59,94 +58,6 @@ def _bin_edges(jaw_bins: int | ArrayLike, shape_theta: NDArray[np.float64]) -> N
             f"jaw_bins: expected an int or a 1-D sequence of edges (radians), got {jaw_bins!r}"
         )
     return edges.astype(np.float64)
-
-
-def estimate_marker_noise(frames: ArrayLike, model: Model | None = None) -> float:
-    """Estimates the markers' noise sigma (data units, per coordinate) from a take (F, B, 3), NaN
-    rows missing.
-
-    From the take's tracks: the second difference of a sample, x[f+1] - 2 x[f] + x[f-1],
-    holds 6 sigma^2 of independent noise and almost none of a face's motion at capture frame
-    rates; its median absolute value (robust to the odd jump) gives sigma. When frames are far
-    apart (a take sampled sparsely, every n-th frame), motion changes within three frames and
-    this reads motion as noise.
-
-    With `model`, also from what the dataset's global fit leaves at the markers (each frame's
-    jaw pose from the fit, as `solve` finds it; up to 100 frames spread over the take): noise
-    is part of that residual, so its scale (the residual's root mean square per coordinate,
-    over the rows less the fit's rank) bounds sigma from above whatever the frame spacing. The
-    estimate is the smaller of the two, with a warning when the tracks' one is more than 1.5
-    times the bound (frames too far apart to tell noise from motion). With a model, one frame
-    is enough; without, at least 3 are needed."""
-    arr = np.asarray(frames, dtype=np.float64)
-    if arr.ndim != 3 or arr.shape[2] != 3:
-        raise InputError(f"frames: expected shape (F, B, 3), got {arr.shape}")
-    if np.isinf(arr).any():
-        raise InputError("frames: infinite coordinate")
-    if model is None and arr.shape[0] < 3:
-        raise InputError(f"frames: need at least 3 frames to estimate noise, got {arr.shape[0]}")
-    tracks = _track_noise(arr) if arr.shape[0] >= 3 else None
-    if model is None:
-        if tracks is None:
-            raise InputError("frames: no marker is present in 3 consecutive frames")
-        return tracks
-    bound = fit_noise_bound(model, arr)
-    if tracks is None:
-        if bound is None:
-            raise InputError("frames: too few markers to estimate noise from the take or the fit")
-        return bound
-    if bound is None:
-        return tracks
-    if tracks > 1.5 * bound:
-        unit = f" {model.units}" if model.units else " data units"
-        warnings.warn(
-            f"marker noise: the take's tracks give {tracks:.4g}{unit}, more than the "
-            f"dataset's fit leaves at the markers ({bound:.4g}{unit}): frames too far apart "
-            f"to tell noise from motion; using {bound:.4g}{unit}",
-            LgiWarning,
-            stacklevel=2,
-        )
-    return float(min(tracks, bound))
-
-
-def _track_noise(arr: NDArray[np.float64]) -> float | None:
-    """Sigma from the second differences of the tracks (F >= 3); None when no marker is
-    present in 3 consecutive frames."""
-    d2 = (arr[2:] - 2.0 * arr[1:-1] + arr[:-2]).ravel()
-    d2 = d2[np.isfinite(d2)]
-    if d2.size == 0:
-        return None
-    # 1.4826 MAD is the standard deviation of a normal variable; the median of |d2| is its MAD.
-    return float(1.4826 * np.median(np.abs(d2)) / np.sqrt(6.0))
-
-
-#: Frames of a take the fit's noise bound reads at most (spread evenly over the take).
-NOISE_BOUND_FRAMES = 100
-
-
-def fit_noise_bound(model: Model, frames: ArrayLike) -> float | None:
-    """The scale of what the dataset's global fit leaves at the markers of `frames` (F, B, 3),
-    per coordinate: sqrt(sum of squared residuals / (rows - the fit's rank)), over up to
-    `NOISE_BOUND_FRAMES` frames spread over the take, each with its jaw pose from the fit (as
-    `solve` finds it). Independent marker noise is part of the residual, so this bounds the
-    noise sigma from above; what the dataset cannot explain adds to it. None when no frame
-    has more present rows than the fit's rank, or none has the solve's minimum of present
-    markers."""
-    arr = take_frames(frames, model)
-    # Frames the fit can read (the solve's minimum of present markers), spread over the take.
-    usable = np.flatnonzero(np.isfinite(arr).all(axis=2).sum(axis=1) >= _lgi.MIN_PRESENT_MARKERS)
-    if usable.size == 0:
-        return None
-    at = np.unique(np.linspace(0, usable.size - 1, NOISE_BOUND_FRAMES).round().astype(int))
-    pick = usable[at]
-    jaw = "fit" if model.jaw_rig is not None else None
-    residuals, ranks = model.core.fit_residuals(arr[pick], jaw=jaw)
-    present = np.isfinite(residuals[..., 0])
-    rows = 3 * present.sum(axis=1)
-    dof = np.maximum(rows - np.minimum(ranks, rows), 0)
-    if dof.sum() == 0:
-        return None
-    return float(np.sqrt(np.nansum(residuals**2) / dof.sum()))
 
 
 def _labels(marker_names: Sequence[str] | None, units: str | None) -> dict[str, Any]:

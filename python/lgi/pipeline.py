@@ -33,7 +33,8 @@ from lgi.io.settings import SolveSettings
 from lgi.io.sink import FrameSink
 from lgi.io.topology import Topology, topology
 from lgi.local import UNBOUNDED, estimate_local_fits
-from lgi.model import PROGRESS_DELAY, Model, estimate_marker_noise
+from lgi.model import PROGRESS_DELAY, Model
+from lgi.noise import estimate_marker_noise
 from lgi.placement import ScaleFit, check_scale, describe_scale
 from lgi.take_prior import TakePrior, estimate_take_prior, estimate_take_prior_use
 from lgi.unbounded import estimate_unbounded_fit

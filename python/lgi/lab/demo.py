@@ -19,7 +19,8 @@ from lgi.io.obj import write_obj
 from lgi.io.result import write_sequence_npz
 from lgi.lab import helmet
 from lgi.lab.sample import describe, make_sample, sample_dataset
-from lgi.model import Model, estimate_marker_noise
+from lgi.model import Model
+from lgi.noise import estimate_marker_noise
 
 F64 = NDArray[np.float64]
 

@@ -26,7 +26,8 @@ from lgi.lab.capture import (
     make_capture,
     marker_samples,
 )
-from lgi.model import Model, estimate_marker_noise
+from lgi.model import Model
+from lgi.noise import estimate_marker_noise
 from lgi.take_prior import estimate_take_prior
 
 F64 = NDArray[np.float64]
