@@ -42,7 +42,7 @@ NOISE_BOUND_FRAMES = 100
 
 MOTION_CORRELATION = 0.3
 """Correlation of neighbouring markers' second differences above which the tracks read motion:
-independent noise gives about 0 (0.00-0.17 measured on takes at capture rate with 0.2-0.5 mm
+independent noise gives about 0 (0.00-0.18 measured on takes at capture rate with 0.2-0.5 mm
 noise), motion between frames far apart 0.45-0.91 (docs/results.md)."""
 
 NOISE_LEFT_OUT_FRAMES = 12
