@@ -297,3 +297,39 @@ def test_cli_capture_protocol_mistakes_are_lgi_errors_with_exit_2(
     assert code == 2
     err = capsys.readouterr().err
     assert message in err and ("lgi: error:" in err or "error: argument" in err)
+
+
+def test_lgi_solve_says_the_noise_warning_in_one_line_of_its_own_words(
+    sample_model, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:  # type: ignore[no-untyped-def]
+    import warnings
+
+    from lgi import cli
+
+    _, model = sample_model
+    frames = _independent_frames(model, model.dataset, 30, 0.02, 5)
+    model.save(tmp_path / "m.lgi")
+    take = tmp_path / "take.npz"
+    np.savez(take, markers=frames, names=np.array(model.marker_names), fps=60.0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("always")  # shown, as on the command line, not raised
+        code = cli.main(
+            [
+                "solve",
+                str(tmp_path / "m.lgi"),
+                str(take),
+                "-o",
+                str(tmp_path / "out.npz"),
+                "--marker-noise",
+                "auto",
+                "-q",
+            ]
+        )
+    err = capsys.readouterr().err
+    assert code == 0, err
+    said = [line for line in err.splitlines() if "marker noise" in line]
+    assert len(said) == 1 and said[0].startswith("lgi: warning: marker noise: the take's tracks"), (
+        err
+    )
+    assert "frames too far apart to tell noise from motion" in said[0]
+    assert ".py:" not in err and "Warning:" not in err, err

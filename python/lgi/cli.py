@@ -11,6 +11,7 @@ from __future__ import annotations
 import argparse
 import os
 import sys
+import warnings
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any, NoReturn
@@ -882,6 +883,18 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
+def _say_warning(
+    message: Warning | str,
+    category: type[Warning],
+    filename: str,
+    lineno: int,
+    file: Any = None,
+    line: str | None = None,
+) -> None:
+    """A warning as one line in lgi's words (not Python's file, line and source)."""
+    print(f"lgi: warning: {message}", file=sys.stderr)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
@@ -891,7 +904,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         if any(str(a).lower().endswith((".usd", ".usda", ".usdc")) for a in argv or sys.argv):
             import_usd()  # up front, so a Ctrl-C during pxr's import cannot be swallowed
-        return int(args.func(args))
+        with warnings.catch_warnings():
+            warnings.showwarning = _say_warning
+            return int(args.func(args))
     except KeyboardInterrupt:
         print("lgi: interrupted", file=sys.stderr)
         return 130

@@ -105,19 +105,19 @@ def estimate_marker_noise(frames: ArrayLike, model: Model | None = None) -> floa
     if bound is None:
         return tracks
     sigma = min(tracks, bound)
-    how = "the dataset's fit leaves at the markers"
+    how = "more than the dataset's fit leaves at the markers"
     floor = NOISE_FLOOR * model.diagonal
     if sigma > floor and tracks_correlation(arr, model.markers_rest) > MOTION_CORRELATION:
         try:
             sigma = _left_out_noise(model, arr, sigma, floor)
-            how = "the markers left out of the solve are predicted best with"
+            how = "but markers left out of the solve are predicted best with"
         except InputError:
             pass  # no frame can spare a marker: the two readings stand
     if tracks > 1.5 * sigma:
         unit = f" {model.units}" if model.units else " data units"
         warnings.warn(
-            f"marker noise: the take's tracks give {tracks:.4g}{unit}, more than {how} "
-            f"({sigma:.4g}{unit}): frames too far apart to tell noise from motion; using "
+            f"marker noise: the take's tracks give {tracks:.4g}{unit}, {how} "
+            f"{sigma:.4g}{unit}: frames too far apart to tell noise from motion; using "
             f"{sigma:.4g}{unit}",
             LgiWarning,
             stacklevel=2,
