@@ -18,6 +18,7 @@ from lgi.io.result import Result
 
 __all__ = [
     "FLOOR",
+    "NOISE_SIGMAS",
     "OUTLIER_MADS",
     "SPIKE_FRAMES",
     "Finding",
@@ -27,6 +28,11 @@ __all__ = [
     "finding_lines",
     "summary",
 ]
+
+NOISE_SIGMAS = 5.0
+"""With the solve's marker noise sigma known, a residual must also exceed this many sigma to
+count: a Gaussian marker's distance from its true place exceeds 5 sigma once in 65,000 samples
+(chi with 3 degrees of freedom), so a noisy take's ordinary corrections are no finding."""
 
 OUTLIER_MADS = 8.0
 """How many scaled MADs (1.4826 x MAD: sigma for Gaussian residuals) above the median a
@@ -182,12 +188,14 @@ def diagnose(
     *,
     size: float,
     markers: ArrayLike | None = None,
+    noise: float | None = None,
 ) -> list[Finding]:
     """The findings of a solved take: `residuals` and `missing` (F, B), the marker `names`,
     the face's `size` (its bounding-box diagonal, in the residuals' unit) and, when known, the
-    take's `markers` (F, B, 3) for the swap test. Swaps first, then the worst first."""
+    take's `markers` (F, B, 3) for the swap test and the solve's marker `noise` sigma (a
+    residual under `NOISE_SIGMAS` of it is no outlier). Swaps first, then the worst first."""
     r = np.where(np.asarray(missing, dtype=bool), np.nan, np.asarray(residuals, dtype=np.float64))
-    limit = _threshold(r, size)
+    limit = max(_threshold(r, size), NOISE_SIGMAS * (noise or 0.0))
     with np.errstate(invalid="ignore"):
         out = r > limit
     runs = {b: _runs(out[:, b]) for b in range(r.shape[1])}
@@ -197,6 +205,10 @@ def diagnose(
         for b, ranges in _track_ranges(x, size).items():
             if b < 0:
                 face_jumps = [Finding("cut", (), k, k, float("nan")) for k, _ in ranges]
+                continue
+            if (noise or 0.0) > 0.0:
+                # A noise-aware solve's residuals say which markers it corrected and when;
+                # the tracks' jumps (motion, where frames are far apart) would only widen them.
                 continue
             known = runs[b]
             for s0, e0 in ranges:
@@ -258,6 +270,7 @@ def diagnose_result(r: Result) -> list[Finding]:
         r.marker_names,
         size=face_size(r.vertices[0]),
         markers=r.markers,
+        noise=None if r.settings is None else r.settings.marker_noise,
     )
 
 

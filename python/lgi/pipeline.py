@@ -730,11 +730,14 @@ def _say_findings(
     first_frame: np.ndarray,
     m: Model,
     start: int,
+    noise: float | None,
 ) -> list[Finding]:
     """The solve's summary (`lgi.diagnose`): residuals, then flagged markers and frames;
     returns the findings (measured as `lgi info` measures them on the file)."""
     names = m.marker_names
-    found = diagnose(residuals, missing, names, size=face_size(first_frame), markers=markers)
+    found = diagnose(
+        residuals, missing, names, size=face_size(first_frame), markers=markers, noise=noise
+    )
     for line in summary(residuals, missing, names, found, start=start, units=m.units):
         say(line)
     return found
@@ -997,7 +1000,9 @@ def solve_file(
             quiet=quiet,
             settings=settings,
         )
-        found = _say_findings(say, res.bundle_residuals, res.missing, x, res.vertices[0], m, start)
+        found = _say_findings(
+            say, res.bundle_residuals, res.missing, x, res.vertices[0], m, start, sigma
+        )
         if page is not None:
             _write_solve_report(
                 page, res, m, topo, x, found, fps=rate, start=start, source=dest, settings=settings
@@ -1063,7 +1068,9 @@ def solve_file(
         sink.abort()
         raise
     assert first_frame is not None  # a take has at least one frame (takes.read)
-    _say_findings(say, np.concatenate(residuals), np.concatenate(absent), x, first_frame, m, start)
+    _say_findings(
+        say, np.concatenate(residuals), np.concatenate(absent), x, first_frame, m, start, sigma
+    )
     return written, n
 
 
