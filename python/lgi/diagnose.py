@@ -199,16 +199,15 @@ def diagnose(
     with np.errstate(invalid="ignore"):
         out = r > limit
     runs = {b: _runs(out[:, b]) for b in range(r.shape[1])}
+    # With the solve's sigma known its residuals say which markers it corrected and when; the
+    # tracks' jumps (motion, where frames are far apart) then serve the swap test only.
+    residual_runs = {b: list(rs) for b, rs in runs.items()} if (noise or 0.0) > 0.0 else None
     x = None if markers is None else np.asarray(markers, dtype=np.float64)
     face_jumps: list[Finding] = []
     if x is not None:
         for b, ranges in _track_ranges(x, size).items():
             if b < 0:
                 face_jumps = [Finding("cut", (), k, k, float("nan")) for k, _ in ranges]
-                continue
-            if (noise or 0.0) > 0.0:
-                # A noise-aware solve's residuals say which markers it corrected and when;
-                # the tracks' jumps (motion, where frames are far apart) would only widen them.
                 continue
             known = runs[b]
             for s0, e0 in ranges:
@@ -237,10 +236,11 @@ def diagnose(
                     pair = tuple(sorted((names[a], names[b])))
                     findings.append(Finding("swap", pair, first, last, worst))
                     taken |= {(a, s1, e1), (b, s2, e2)}
+    swapped = {(names.index(n), f.first, f.last) for f in findings for n in f.markers}
     singles = []
-    for b, rs in runs.items():
+    for b, rs in (runs if residual_runs is None else residual_runs).items():
         for s, e in rs:
-            if (b, s, e) in taken:
+            if (b, s, e) in taken or any(k == b and s <= e1 and s1 <= e for k, s1, e1 in swapped):
                 continue
             backed = bool(out[s : e + 1, b].any())
             if not backed and (x is None or not _is_spike(x[:, b], s, e)):
