@@ -221,6 +221,7 @@ def diagnose(
             known.sort()
     findings: list[Finding] = []
     taken: set[tuple[int, int, int]] = set()
+    swapped: list[tuple[int, int, int]] = []  # (marker, first, last) of each named swap
     if x is not None:
         flat = [(b, s, e) for b, rs in runs.items() for s, e in rs]
         for i, (a, s1, e1) in enumerate(flat):
@@ -236,7 +237,7 @@ def diagnose(
                     pair = tuple(sorted((names[a], names[b])))
                     findings.append(Finding("swap", pair, first, last, worst))
                     taken |= {(a, s1, e1), (b, s2, e2)}
-    swapped = {(names.index(n), f.first, f.last) for f in findings for n in f.markers}
+                    swapped += [(a, first, last), (b, first, last)]
     singles = []
     for b, rs in (runs if residual_runs is None else residual_runs).items():
         for s, e in rs:

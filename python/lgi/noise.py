@@ -20,7 +20,7 @@ from numpy.typing import ArrayLike, NDArray
 
 import lgi._lgi as _lgi
 from lgi.errors import InputError, LgiWarning
-from lgi.leave_out import leave_markers_out, solved_in_chunks, take_frames
+from lgi.leave_out import LOOKS, Looks, leave_markers_out, solved_in_chunks, take_frames
 
 if TYPE_CHECKING:
     from lgi.model import Model
@@ -149,12 +149,17 @@ def tracks_correlation(frames: ArrayLike, rest: ArrayLike, neighbours: int = 3) 
     np.fill_diagonal(apart, np.inf)
     near = np.argsort(apart, axis=1)[:, : min(neighbours, at.shape[0] - 1)]
     d2 = arr[2:] - 2.0 * arr[1:-1] + arr[:-2]
-    own = np.broadcast_to(d2[:, :, None], (*d2.shape[:2], near.shape[1], 3))
-    other = d2[:, near]
-    both = np.isfinite(own) & np.isfinite(other)
-    a, b = own[both], other[both]
-    scale = float(np.sqrt((a * a).sum() * (b * b).sum()))
-    return float((a * b).sum() / scale) if scale > 0 else 0.0
+    # One neighbour rank at a time: a take's (F, B, 3) at most, not (F, B, neighbours, 3).
+    cross = own_sq = other_sq = 0.0
+    for rank in range(near.shape[1]):
+        other = d2[:, near[:, rank]]
+        both = np.isfinite(d2) & np.isfinite(other)
+        a, b = d2[both], other[both]
+        cross += float((a * b).sum())
+        own_sq += float((a * a).sum())
+        other_sq += float((b * b).sum())
+    scale = float(np.sqrt(own_sq * other_sq))
+    return cross / scale if scale > 0 else 0.0
 
 
 def _left_out_noise(model: Model, arr: NDArray[np.float64], start: float, floor: float) -> float:
@@ -164,15 +169,14 @@ def _left_out_noise(model: Model, arr: NDArray[np.float64], start: float, floor:
     keeps the larger sigma (too small a sigma costs more than too large: the solve then
     follows the noise)."""
     rows = leave_markers_out(arr, NOISE_LEFT_OUT_FRAMES, NOISE_LEFT_OUT_PER_FRAME, "marker noise")
-    jaw = "fit" if model.jaw_rig is not None else None
-    frame_of = np.unique(rows.frame, return_inverse=True)[1]
+    jaw = _fit_jaw(model)
+    looks = Looks(rows)
+    every = np.arange(rows.marker.size)
 
     def distances(sigma: float) -> NDArray[np.float64]:
         out = np.empty(rows.marker.size)
         for part, res in solved_in_chunks(model, rows, jaw=jaw, marker_noise=sigma):
-            left = rows.marker[part]
-            at = np.asarray(res.bundle_positions)[np.arange(left.size), left]
-            out[part] = np.linalg.norm(at - rows.given[part], axis=1)
+            out[part] = looks.distances(every[part], res.bundle_positions)
         return out
 
     best, at_best = start, distances(start)
@@ -180,13 +184,18 @@ def _left_out_noise(model: Model, arr: NDArray[np.float64], start: float, floor:
         if best / 2.0 < floor:
             break
         half = distances(best / 2.0)
-        saved = np.bincount(frame_of, at_best - half) / np.bincount(frame_of)
-        if saved.size < 2 or saved.mean() <= NOISE_STEP_SIGNIFICANCE * saved.std(ddof=1) / np.sqrt(
-            saved.size
-        ):
+        # Every look at once: the per-frame mean saving over all the rows' frames.
+        saved, spread, seen = looks.saving(at_best, half, LOOKS - 1)
+        if seen < 2 or saved <= NOISE_STEP_SIGNIFICANCE * spread:
             break
         best, at_best = best / 2.0, half
     return best
+
+
+def _fit_jaw(model: Model) -> str | None:
+    """The jaw the noise readings solve with: each frame's pose from the fit, as `solve`
+    finds it (none without a jaw rig)."""
+    return "fit" if model.jaw_rig is not None else None
 
 
 def fit_noise_bound(model: Model, frames: ArrayLike) -> float | None:
@@ -204,8 +213,7 @@ def fit_noise_bound(model: Model, frames: ArrayLike) -> float | None:
         return None
     at = np.unique(np.linspace(0, usable.size - 1, NOISE_BOUND_FRAMES).round().astype(int))
     pick = usable[at]
-    jaw = "fit" if model.jaw_rig is not None else None
-    residuals, ranks = model.core.fit_residuals(arr[pick], jaw=jaw)
+    residuals, ranks = model.core.fit_residuals(arr[pick], jaw=_fit_jaw(model))
     present = np.isfinite(residuals[..., 0])
     rows = 3 * present.sum(axis=1)
     dof = np.maximum(rows - np.minimum(ranks, rows), 0)
