@@ -13,7 +13,7 @@ import numpy as np
 
 import lgi
 from lgi.io.livelink import read_livelinkface
-from lgi.lab import ict
+from lgi.lab import evaluate, ict
 from lgi.lab.capture import HingeJaw
 
 ICT = "../shared/data/ict-facekit"
@@ -46,12 +46,7 @@ def by_recording(rows: list[dict[str, Any]]) -> dict[str, dict[str, dict[str, An
 
 #: The peers a TD has: the rig solve with the jaw as a joint and its residual corrective, and
 #: where a protocol has them (the scans'), the same with the weights unbounded.
-PEERS = (
-    "fit + jaw",
-    "fit + jaw + residual",
-    "fit + jaw (unbounded)",
-    "fit + jaw (unbounded) + residual",
-)
+PEERS = evaluate.PEER_NAMES
 
 
 def peer_ratio(means: dict[str, Any], method: str = "LGI") -> float:

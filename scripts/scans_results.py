@@ -24,7 +24,10 @@ import numpy as np
 from lgi.lab import evaluate, ict
 from lgi.lab.capture import random_layout
 from lgi.lab.evaluate import (
+    DENOISED,
+    DENOISED_PEER,
     LOCAL_FITS,
+    LOCAL_FITS_DENOISED,
     LOCAL_FITS_TAKE_PRIOR,
     LOCAL_FITS_UNBOUNDED,
     TAKE_PRIOR,
@@ -46,7 +49,12 @@ METHODS = (
     LOCAL_FITS_UNBOUNDED,
     TAKE_PRIOR,
     LOCAL_FITS_TAKE_PRIOR,
+    DENOISED,
+    LOCAL_FITS_DENOISED,
 )
+#: The peers given the same denoised markers (noisy takes only): how much of the denoised
+#: calls' gain is the denoising's.
+DENOISED_PEERS = tuple(DENOISED_PEER.format(p) for p in ict_captures.PEERS)
 
 
 def layout(name: str, dataset: object) -> np.ndarray:
@@ -57,8 +65,15 @@ def layout(name: str, dataset: object) -> np.ndarray:
 
 
 def ratio(m: dict[str, float], method: str) -> str:
-    """`method`'s ratio to the best peer, "—" where it was not run (noise-free takes)."""
+    """`method`'s ratio to the best peer, "—" where it was not run (noise-free takes, or left
+    out by `--denoised-only`)."""
     return f"{ict_captures.peer_ratio(m, method):.3f}" if method in m else "—"
+
+
+def denoised_ratio(m: dict[str, float], method: str) -> str:
+    """`method`'s ratio to the best peer given the denoised markers, "—" where not run."""
+    peers = [m[p] for p in DENOISED_PEERS if p in m]
+    return f"{m[method] / min(peers):.3f}" if method in m and peers else "—"
 
 
 def main() -> None:
@@ -68,15 +83,27 @@ def main() -> None:
     ap.add_argument("--layouts", nargs="+", default=["markers_120", "random:160:1"])
     ap.add_argument("--truth", choices=["linear", "nonlinear"], default="linear")
     ap.add_argument("--frames", type=int, default=200)
+    ap.add_argument(
+        "--denoised-only",
+        action="store_true",
+        help="the peers, LGI, its unbounded calls and the denoised calls only (the rest: as the "
+        "tables before)",
+    )
     args = ap.parse_args()
+    only = None
+    if args.denoised_only:
+        only = {*ict_captures.PEERS, *DENOISED_PEERS, "LGI", UNBOUNDED_FIT, LOCAL_FITS_UNBOUNDED}
+        only |= {DENOISED, LOCAL_FITS_DENOISED}
     warnings.filterwarnings("ignore")
     d = ict.load_dataset(ICT)
     print("| performance | layout | K | sigma (cm) | " + " | ".join(METHODS), end="")
     print(" | LGI bundles on the fit | LGI / best peer | local fits / best peer", end="")
     print(" | unbounded fit / best peer | unbounded local fits / best peer", end="")
     print(" | take prior / best peer | take prior + local fits / best peer", end="")
+    print(" | denoised / best peer | denoised + local fits / best peer", end="")
+    print(" | best peer on denoised markers | denoised + local fits / that", end="")
     print(" | truth from linear | seconds |")
-    print("|---" * (len(METHODS) + 13) + "|")
+    print("|---" * (len(METHODS) + 17) + "|")
     for name in args.layouts:
         markers = layout(name, d)
         for k in args.scans:
@@ -92,6 +119,7 @@ def main() -> None:
                     region=ict.skin(),
                     frames=args.frames,
                     nonlinear=args.truth == "nonlinear",
+                    only=None if only is None else sorted(only),
                 )
                 took = time.perf_counter() - t0
                 for rec, got in ict_captures.by_recording(rows).items():
@@ -99,13 +127,17 @@ def main() -> None:
                     # Noise-free takes have no take-prior rows (no prior is read): "—".
                     cells = " | ".join(f"{m[x]:.4f}" if x in m else "—" for x in METHODS)
                     lgi_row = got["LGI"]
+                    denoised_peer = min((m[p] for p in DENOISED_PEERS if p in m), default=np.nan)
                     print(
                         f"| {rec} | {name} | {k} | {sigma} | {cells} "
                         f"| {lgi_row['bundles_fit']:.0%} | {ict_captures.peer_ratio(m):.3f} "
-                        f"| {ict_captures.peer_ratio(m, LOCAL_FITS):.3f} "
-                        f"| {ict_captures.peer_ratio(m, UNBOUNDED_FIT):.3f} "
-                        f"| {ict_captures.peer_ratio(m, LOCAL_FITS_UNBOUNDED):.3f} "
+                        f"| {ratio(m, LOCAL_FITS)} "
+                        f"| {ratio(m, UNBOUNDED_FIT)} "
+                        f"| {ratio(m, LOCAL_FITS_UNBOUNDED)} "
                         f"| {ratio(m, TAKE_PRIOR)} | {ratio(m, LOCAL_FITS_TAKE_PRIOR)} "
+                        f"| {ratio(m, DENOISED)} | {ratio(m, LOCAL_FITS_DENOISED)} "
+                        f"| {denoised_peer:.4f} "
+                        f"| {denoised_ratio(m, LOCAL_FITS_DENOISED)} "
                         f"| {lgi_row['truth_departure']:.4f} | {took:.0f} |",
                         flush=True,
                     )

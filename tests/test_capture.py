@@ -266,6 +266,10 @@ def test_capture_protocol_recommended_lgi_beats_both_baselines_on_a_short_real_t
         "LGI (paper)",
         "LGI",
         "LGI + local fits",
+        "LGI (denoised)",
+        "LGI + local fits (denoised)",
+        "fit + jaw on denoised markers",
+        "fit + jaw + residual on denoised markers",
     }
     assert all(np.isfinite(r["mean"]) and np.isfinite(r["open_mean"]) for r in rows)
     best = min(by["displacement interpolation"]["mean"], by["blendshape fit"]["mean"])

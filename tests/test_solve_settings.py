@@ -44,6 +44,20 @@ def test_settings_round_trip_as_json_and_describe_themselves() -> None:
     assert SolveSettings.from_json(plain.to_json(), "x") == plain
     assert "no marker noise" in plain.describe(None)
     assert "all of the dataset's detail" in plain.describe(None)
+    # A denoised take's settings say the noise it was given and the directions it kept.
+    den = of(
+        has_jaw_rig=False,
+        jaw=None,
+        marker_noise=0.0168,
+        detail_weight=None,
+        denoised_from=0.05,
+        denoised_rank=15,
+    )
+    assert SolveSettings.from_json(den.to_json(), "x") == den
+    assert den.describe("cm").startswith(
+        "marker noise 0.0168 cm per coordinate (the take denoised from 0.05 cm, 15 directions of "
+        "motion kept)"
+    )
 
 
 @pytest.mark.parametrize(
@@ -62,6 +76,16 @@ def test_settings_round_trip_as_json_and_describe_themselves() -> None:
         (
             '{"marker_noise": null, "jaw": null, "detail_weight": NaN, "version": "1"}',
             "detail_weight must be a finite number or null",
+        ),
+        (
+            '{"marker_noise": 0.1, "jaw": null, "detail_weight": null, "version": "1", '
+            '"denoised_from": 0.2, "denoised_rank": -3}',
+            "denoised_rank must be a whole number >= 0 or null, got -3",
+        ),
+        (
+            '{"marker_noise": 0.1, "jaw": null, "detail_weight": null, "version": "1", '
+            '"denoised_from": "much", "denoised_rank": 3}',
+            "denoised_from must be a finite number or null, got 'much'",
         ),
     ],
 )

@@ -18,6 +18,7 @@ from lgi._lgi import (
     set_num_threads,
 )
 from lgi.dataset import Dataset
+from lgi.denoise import DenoisedTake, denoise_take
 from lgi.detail import estimate_detail_weight
 from lgi.errors import (
     DatasetError,
@@ -46,6 +47,7 @@ __all__ = [
     "Dataset",
     "DatasetError",
     "DatasetFileError",
+    "DenoisedTake",
     "FileWriteError",
     "InputError",
     "LgiError",
@@ -60,6 +62,7 @@ __all__ = [
     "UnboundedFitEstimate",
     "__version__",
     "capture",
+    "denoise_take",
     "estimate_detail_weight",
     "estimate_local_fits",
     "estimate_marker_noise",

@@ -94,6 +94,7 @@ def _cmd_solve(args: argparse.Namespace) -> int:
         local_fits=args.local_fits,
         unbounded_fit=args.unbounded_fit,
         take_prior=args.take_prior,
+        denoise=args.denoise,
         frames=args.frames,
         fps=args.fps,
         allow_missing=args.allow_missing,
@@ -520,6 +521,13 @@ def _add_pipeline_commands(sub: Any) -> None:
     )
     _add_unbounded_fit_argument(s)
     _add_take_prior_argument(s)
+    s.add_argument(
+        "--denoise",
+        action="store_true",
+        help="first remove the markers' noise as far as the take's own low-rank motion allows "
+        "(lgi.denoise_take; needs --marker-noise above 0), then solve with the noise it "
+        "leaves; residuals and findings stay the given markers'",
+    )
     s.add_argument("--frames", default=None, metavar="A:B", help="take frames A..B-1 (0-based)")
     s.add_argument("--fps", type=float, default=None, help="frame rate (default: the take's)")
     s.add_argument(

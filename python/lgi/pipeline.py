@@ -21,6 +21,7 @@ import numpy as np
 
 from lgi._lgi import BuildConfig, SolveResult
 from lgi.dataset import Dataset
+from lgi.denoise import DenoisedTake, denoise_take
 from lgi.detail import estimate_detail_weight
 from lgi.diagnose import Finding, diagnose, diagnose_result, face_size, summary
 from lgi.errors import InputError, MarkerError
@@ -412,6 +413,34 @@ def marker_noise(spec: str | None, frames: np.ndarray, model: Model | None) -> f
     return sigma
 
 
+def take_denoised(
+    asked: bool, frames: np.ndarray, sigma: float | None, say: Say
+) -> DenoisedTake | None:
+    """`--denoise`: the take denoised by its own low-rank structure (`lgi.denoise_take`) with
+    the marker noise `sigma`, said in one line; None when not asked. An InputError without a
+    marker noise above 0 (there is nothing to remove)."""
+    if not asked:
+        return None
+    if sigma is None or sigma <= 0.0:
+        raise InputError(
+            "--denoise needs the markers' noise above 0: pass --marker-noise SIGMA or auto"
+        )
+    den = denoise_take(frames, sigma)
+    say(
+        f"denoised the take: {den.rank} of {den.directions} directions of motion kept, "
+        f"marker noise {sigma:.4g} -> {den.marker_noise:.4g}"
+    )
+    return den
+
+
+def input_residuals(positions: np.ndarray, markers: np.ndarray) -> np.ndarray:
+    """Each given marker's distance (F, B) from its position on the surface `positions`
+    (F, B, 3); 0 where it is missing: the residuals of a solve of other (denoised) markers,
+    measured against the markers the user gave."""
+    d = np.linalg.norm(np.asarray(markers, dtype=np.float64) - positions, axis=2)
+    return np.where(np.isnan(d), 0.0, d)
+
+
 def output_kind(path: str) -> str:
     """`--out`'s format by suffix: 'usd', 'obj' (a sequence), 'npz', 'pc2' or 'mdd'."""
     suffix = Path(path).suffix.lower()
@@ -510,14 +539,16 @@ def write_solved(
     frame: OutputFrame | None = None,
     quiet: bool = False,
     settings: SolveSettings | None = None,
+    residuals: np.ndarray | None = None,
 ) -> Path:
-    """`write_output` of a whole `SolveResult` of model `m` (its marker names and unit)."""
+    """`write_output` of a whole `SolveResult` of model `m` (its marker names and unit);
+    `residuals` in place of the result's (e.g. from the markers given, `input_residuals`)."""
     return write_output(
         kind,
         out,
         topo,
         res.vertices,
-        residuals=res.bundle_residuals,
+        residuals=res.bundle_residuals if residuals is None else residuals,
         missing=res.missing,
         names=m.marker_names,
         fps=fps,
@@ -697,16 +728,18 @@ def _write_solve_report(
     start: int,
     source: Path,
     settings: SolveSettings | None = None,
+    residuals: np.ndarray | None = None,
 ) -> None:
     """`lgi solve --report`: `lgi report`'s page of the solve just made, from memory, with
-    the findings the summary printed and the settings it was solved with."""
+    the findings the summary printed and the settings it was solved with (`residuals` as
+    `write_solved`'s)."""
     from lgi.io.atomic import atomic_path
     from lgi.io.result import Result
     from lgi.report import render_report
 
     solved = Result(
         vertices=np.asarray(res.vertices, dtype=np.float32),
-        bundle_residuals=res.bundle_residuals,
+        bundle_residuals=res.bundle_residuals if residuals is None else residuals,
         missing=res.missing,
         marker_names=list(m.marker_names),
         fps=fps,
@@ -880,10 +913,13 @@ def solve_file(
     local_fits: bool | str = False,
     unbounded_fit: bool | str = False,
     take_prior: bool | str = False,
+    denoise: bool = False,
 ) -> tuple[Path, int]:
     """`lgi solve`: the take file solved with the model file, written by `out`'s suffix
     (`output_kind`). `noise` is `--marker-noise` (a number, 'auto' or 'none'; 'auto' looks at
-    the whole range), `detail` `--detail-weight` (the same forms, `detail_weight`),
+    the whole range), `denoise` `--denoise` (`take_denoised`: the range denoised first and
+    solved with the noise it leaves; residuals and findings are the given markers'),
+    `detail` `--detail-weight` (the same forms, `detail_weight`),
     `local_fits` `--local-fits` (`Model.solve(local_fits=True)`; 'auto': `local_fits_choice`),
     `unbounded_fit` `--unbounded-fit` (`Model.solve(fit="unbounded")`; 'auto':
     `unbounded_fit_choice`), `take_prior` `--take-prior` (`lgi.estimate_take_prior`; 'auto':
@@ -938,7 +974,12 @@ def solve_file(
     check_take_scale(t, x, m, stated=take_units is not None)
     head = None if t.head is None else t.head[rng]
     rate = frame_rate(fps, t.fps, kind)
-    sigma = marker_noise(noise, x, m)
+    given_sigma = marker_noise(noise, x, m)
+    den = take_denoised(denoise, x, given_sigma, say)
+    # What is solved: the given markers, or the take denoised with the noise it leaves. The
+    # residuals written and the findings are always the given markers' (`given`).
+    given = x
+    x, sigma = (x, given_sigma) if den is None else (den.frames, den.marker_noise)
     check_local_fits_noise(local_fits, sigma)
     if local_fits and m.jaw_bins is not None:
         raise InputError(f"--local-fits: the model {model} has jaw bins; build it without them")
@@ -959,6 +1000,8 @@ def solve_file(
         local_fits=local_fits,
         unbounded_fit=unbounded_fit,
         take_prior=prior is not None,
+        denoised_from=None if den is None else given_sigma,
+        denoised_rank=None if den is None else den.rank,
     )
     missing = np.isnan(x).any(axis=2)
     say(
@@ -986,6 +1029,7 @@ def solve_file(
                 curves_out, res.fit_weights, res.jaw_theta, m, fps=rate, start=start, frame=frame
             )
             say(f"wrote the curves {curves_out}")
+        given_residuals = None if den is None else input_residuals(res.bundle_positions, given)
         written = write_solved(
             kind,
             dest,
@@ -995,17 +1039,35 @@ def solve_file(
             fps=rate,
             start=start,
             head=head,
-            markers=x,
+            markers=given,
             frame=frame,
             quiet=quiet,
             settings=settings,
+            residuals=given_residuals,
         )
         found = _say_findings(
-            say, res.bundle_residuals, res.missing, x, res.vertices[0], m, start, sigma
+            say,
+            res.bundle_residuals if given_residuals is None else given_residuals,
+            res.missing,
+            given,
+            res.vertices[0],
+            m,
+            start,
+            given_sigma,
         )
         if page is not None:
             _write_solve_report(
-                page, res, m, topo, x, found, fps=rate, start=start, source=dest, settings=settings
+                page,
+                res,
+                m,
+                topo,
+                given,
+                found,
+                fps=rate,
+                start=start,
+                source=dest,
+                settings=settings,
+                residuals=given_residuals,
             )
             say(f"wrote the report {page}")
         return written, int(x.shape[0])
@@ -1045,17 +1107,22 @@ def solve_file(
                 b = min(n, a + size)
                 if first_frame is None:
                     first_frame = res.vertices[0].copy()
-                residuals.append(res.bundle_residuals.copy())
+                chunk_residuals = (
+                    res.bundle_residuals.copy()
+                    if den is None
+                    else input_residuals(res.bundle_positions, given[a:b])
+                )
+                residuals.append(chunk_residuals)
                 absent.append(res.missing.copy())
                 fits.append(None if res.fit_weights is None else res.fit_weights.copy())
                 jaws.append(None if res.jaw_theta is None else res.jaw_theta.copy())
                 sink.add(
                     res.vertices,
-                    res.bundle_residuals,
+                    chunk_residuals,
                     res.missing,
                     res.jaw_theta,
                     None if head is None else head[a:b],
-                    x[a:b],
+                    given[a:b],
                 )
                 bar.update(b - a)
         if curves_out is not None:
@@ -1069,7 +1136,14 @@ def solve_file(
         raise
     assert first_frame is not None  # a take has at least one frame (takes.read)
     _say_findings(
-        say, np.concatenate(residuals), np.concatenate(absent), x, first_frame, m, start, sigma
+        say,
+        np.concatenate(residuals),
+        np.concatenate(absent),
+        given,
+        first_frame,
+        m,
+        start,
+        given_sigma,
     )
     return written, n
 

@@ -34,7 +34,10 @@ class SolveSettings:
     False); `unbounded_fit`: the frame's global fit was not held to [0, 1]
     (`Model.solve(fit="unbounded")`, and always with unbounded local fits; files written
     before it was recorded read as False); `take_prior`: that fit took the take's own prior
-    (`lgi.estimate_take_prior`; older files read as False)."""
+    (`lgi.estimate_take_prior`; older files read as False); `denoised_from`: the markers'
+    noise before the take was denoised (`lgi.denoise_take`; `marker_noise` is then the noise
+    it left) and `denoised_rank` the directions of motion it kept (None: not denoised, as
+    older files read)."""
 
     marker_noise: float | None
     jaw: str | None
@@ -43,6 +46,8 @@ class SolveSettings:
     local_fits: bool | str = False
     unbounded_fit: bool = False
     take_prior: bool = False
+    denoised_from: float | None = None
+    denoised_rank: int | None = None
 
     @staticmethod
     def of(
@@ -54,6 +59,8 @@ class SolveSettings:
         local_fits: bool | str = False,
         unbounded_fit: bool = False,
         take_prior: bool = False,
+        denoised_from: float | None = None,
+        denoised_rank: int | None = None,
     ) -> SolveSettings:
         """The settings of a `Model.solve` call: `jaw` as passed (None, the rest pose, is
         recorded as 'rest' and a pose array as 'given'; None for a model without a jaw rig),
@@ -74,6 +81,8 @@ class SolveSettings:
             local_fits=local_fits if local_fits == "unbounded" else bool(local_fits),
             unbounded_fit=bool(unbounded_fit) or local_fits == "unbounded",
             take_prior=bool(take_prior),
+            denoised_from=None if denoised_from is None else float(denoised_from),
+            denoised_rank=None if denoised_rank is None else int(denoised_rank),
         )
 
     def to_json(self) -> str:
@@ -86,6 +95,8 @@ class SolveSettings:
                 "local_fits": self.local_fits,
                 "unbounded_fit": self.unbounded_fit,
                 "take_prior": self.take_prior,
+                "denoised_from": self.denoised_from,
+                "denoised_rank": self.denoised_rank,
             },
             sort_keys=True,
         )
@@ -99,11 +110,12 @@ class SolveSettings:
         except ValueError:
             raise InputError(f"{where}: not the JSON text lgi writes: {text[:60]!r}") from None
         keys = {"marker_noise", "jaw", "detail_weight", "version"}
-        optional = {"local_fits", "unbounded_fit", "take_prior"}
+        optional = {"local_fits", "unbounded_fit", "take_prior", "denoised_from", "denoised_rank"}
         if not isinstance(d, dict) or not keys <= set(d) <= keys | optional:
             raise InputError(
                 f"{where}: expected the keys marker_noise, jaw, detail_weight, version and "
-                "(optionally) local_fits, unbounded_fit and take_prior"
+                "(optionally) local_fits, unbounded_fit, take_prior, denoised_from and "
+                "denoised_rank"
             )
         local = d.get("local_fits", False)
         if not isinstance(local, bool) and local != "unbounded":
@@ -125,6 +137,11 @@ class SolveSettings:
                 raise InputError(f"{where}: {key} must be a finite number or null, got {x!r}")
             return float(x)
 
+        rank = d.get("denoised_rank")
+        if rank is not None and (isinstance(rank, bool) or not isinstance(rank, int) or rank < 0):
+            raise InputError(
+                f"{where}: denoised_rank must be a whole number >= 0 or null, got {rank!r}"
+            )
         for key in ("jaw", "version"):
             if d[key] is not None and not isinstance(d[key], str):
                 raise InputError(f"{where}: {key} must be text or null, got {d[key]!r}")
@@ -136,6 +153,8 @@ class SolveSettings:
             local_fits=local,
             unbounded_fit=unbounded,
             take_prior=prior,
+            denoised_from=number("denoised_from") if "denoised_from" in d else None,
+            denoised_rank=rank,
         )
 
     def describe(self, units: str | None) -> str:
@@ -147,6 +166,11 @@ class SolveSettings:
             if self.marker_noise is None
             else f"marker noise {self.marker_noise:.4g}{unit} per coordinate"
         )
+        if self.denoised_from is not None:
+            noise += (
+                f" (the take denoised from {self.denoised_from:.4g}{unit}, "
+                f"{self.denoised_rank} directions of motion kept)"
+            )
         jaw = "no jaw rig" if self.jaw is None else f"jaw pose '{self.jaw}'"
         detail = (
             "all of the dataset's detail"

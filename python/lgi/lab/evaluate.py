@@ -15,7 +15,9 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from lgi._lgi import JawRig, SolveResult
+from lgi.baselines import FitJaw, FitJawResidual, FitJawUnbounded, FitJawUnboundedResidual
 from lgi.dataset import Dataset, without_shapes
+from lgi.denoise import denoise_take
 from lgi.errors import InputError
 from lgi.lab.capture import (
     CaptureTake,
@@ -272,7 +274,9 @@ class Recommended:
     solved, with the same sigma) is kept too, the call for a performer the dataset is not
     (`last_detail_weight` says which); with `local_fits`, the pieces are local fits
     (`lgi.local`); `fit` is `Model.solve`'s (e.g. "unbounded"); with `take_prior`, the
-    unbounded fit takes the prior read from the frames solved (`lgi.estimate_take_prior`)."""
+    unbounded fit takes the prior read from the frames solved (`lgi.estimate_take_prior`); with
+    `denoise`, the frames are first denoised by the take's own low-rank structure
+    (`lgi.denoise_take`) and solved with the noise it leaves."""
 
     def __init__(
         self,
@@ -282,30 +286,36 @@ class Recommended:
         local_fits: bool | str = False,
         fit: bool | str | None = None,
         take_prior: bool = False,
+        denoise: bool = False,
     ) -> None:
         self.model, self.marker_noise, self.detail = model, marker_noise, detail
         self.local_fits, self.fit, self.take_prior = local_fits, fit, take_prior
+        self.denoise = denoise
         self.last_detail_weight: float | None = None
 
     def solve(self, frames: ArrayLike, *, temporal: bool = True, quiet: bool = True) -> SolveResult:
         from lgi.detail import estimate_detail_weight
 
+        sigma = self.marker_noise
+        if self.denoise:
+            if sigma is None:
+                raise InputError("denoising a take needs the markers' noise")
+            den = denoise_take(frames, sigma)
+            frames, sigma = den.frames, den.marker_noise
         weight = None
         if self.detail == "auto":
-            weight = estimate_detail_weight(
-                frames, self.model, marker_noise=self.marker_noise, fit=self.fit
-            )
+            weight = estimate_detail_weight(frames, self.model, marker_noise=sigma, fit=self.fit)
             self.last_detail_weight = weight
         prior = None
         if self.take_prior:
-            if self.marker_noise is None:
+            if sigma is None:
                 raise InputError("a take prior needs the markers' noise")
-            prior = estimate_take_prior(self.model, frames, self.marker_noise)
+            prior = estimate_take_prior(self.model, frames, sigma)
         return self.model.solve(
             frames,
             temporal=temporal,
             quiet=quiet,
-            marker_noise=self.marker_noise,
+            marker_noise=sigma,
             detail_weight=weight,
             local_fits=self.local_fits,
             fit=self.fit,
@@ -324,6 +334,51 @@ UNBOUNDED_FIT = "LGI (unbounded fit)"
 TAKE_PRIOR = "LGI (take prior)"
 #: Unbounded local fits from the unbounded fit with the take's prior.
 LOCAL_FITS_TAKE_PRIOR = "LGI + local fits (take prior)"
+#: LGI's recommended call (and with local fits) on the take denoised by its own low-rank
+#: structure (`lgi.denoise_take`): bounded where the protocol's LGI is (FACS shapes), with the
+#: unbounded fit and unbounded local fits in the scans protocol.
+DENOISED = "LGI (denoised)"
+LOCAL_FITS_DENOISED = "LGI + local fits (denoised)"
+#: A peer's name when it is given the same denoised markers (not a peer a TD has: it says how
+#: much of a denoised method's gain is the denoising's).
+DENOISED_PEER = "{} on denoised markers"
+#: The peers a TD has (`lgi.baselines`): the rig solve with the jaw as a joint and its residual
+#: corrective, boxed and (the scans protocol's) unbounded.
+PEER_NAMES = (
+    FitJaw.label,
+    FitJawResidual.label,
+    FitJawUnbounded.label,
+    FitJawUnboundedResidual.label,
+)
+
+
+class OnDenoised:
+    """A compared method given the take denoised by `lgi.denoise_take` with `sigma`."""
+
+    def __init__(self, method: Solver, sigma: float) -> None:
+        self.method, self.sigma = method, sigma
+
+    def solve(self, frames: ArrayLike, *, temporal: bool = True, quiet: bool = True) -> Any:
+        den = denoise_take(frames, self.sigma)
+        return self.method.solve(den.frames, temporal=temporal, quiet=quiet)
+
+
+def add_denoised(methods: dict[str, Solver], peers: Sequence[str], unbounded: bool) -> None:
+    """`DENOISED` and `LOCAL_FITS_DENOISED` beside a protocol's noisy LGI (`unbounded`: with
+    the unbounded fit and unbounded local fits, the scans' calls; else the boxed ones), and
+    each of `peers` on the denoised markers (`DENOISED_PEER`)."""
+    lgi = methods["LGI"]
+    if not isinstance(lgi, Recommended) or not lgi.marker_noise:
+        return
+    sigma, model = lgi.marker_noise, lgi.model
+    fit = "unbounded" if unbounded else None
+    methods[DENOISED] = Recommended(model, sigma, fit=fit, denoise=True)
+    if model.jaw_bins is None:
+        local: bool | str = "unbounded" if unbounded else True
+        methods[LOCAL_FITS_DENOISED] = Recommended(model, sigma, local_fits=local, denoise=True)
+    for name in peers:
+        if name in methods:
+            methods[DENOISED_PEER.format(name)] = OnDenoised(methods[name], sigma)
 
 
 def capture_methods(
@@ -474,6 +529,7 @@ def capture_protocol(
             region=region,
         )
         methods = capture_methods(take.dataset, markers, sigma)
+        add_denoised(methods, PEER_NAMES, unbounded=False)
         if panel is not None and i == 0:
             f = _most_expressive(take.truth, np.asarray(dataset.neutral))
             error_panel(panel, methods, take.frames[f], take.truth[f], dataset.triangles, region)
@@ -498,6 +554,7 @@ def scans_protocol(
     seed: int = 3,
     nonlinear: bool = False,
     quiet: bool = True,
+    only: Sequence[str] | None = None,
 ) -> list[Row]:
     """The whole-face-scans protocol (`lgi.lab.scans`): for each Live Link Face recording as
     the performance, `scans` scans picked from the other recordings' curves and made by the
@@ -508,7 +565,7 @@ def scans_protocol(
     ("performance: method", `CAPTURE_COLUMNS`) plus `bundles_fit`, the share of LGI's bundles
     that took the global fit. With `nonlinear`, the scans and the performance are
     `lgi.lab.capture.NonlinearTruth`'s meshes (`truth_departure`: the performance's mean
-    distance from the linear rig)."""
+    distance from the linear rig). `only`: the methods run, by name (None: all)."""
     from lgi.io.livelink import read_livelinkface
     from lgi.lab.scans import scan_session
     from lgi.model import _auto_rig
@@ -547,6 +604,9 @@ def scans_protocol(
         given = None if rig is None or session.theta is None else (rig, session.theta)
         methods = capture_methods(session.dataset, markers, sigma, jaw=given)
         _add_unbounded(methods)
+        add_denoised(methods, PEER_NAMES, unbounded=True)
+        if only is not None:
+            methods = {k: v for k, v in methods.items() if k in only}
         shares.clear()
         got = capture(methods, take.frames, take.truth, take.jaw_open, region, bundles_fit)
         share = shares.get("LGI", float("nan"))
