@@ -390,6 +390,23 @@ def test_a_batch_with_local_fits_auto_records_the_takes_own_choice(
     assert written.settings is not None and written.settings.local_fits is use
 
 
+def test_a_batch_with_denoise_solves_the_denoised_take_and_records_it(
+    client, named_model, shots, tmp_path
+):  # type: ignore[no-untyped-def]
+    take = shots["sh040"]
+    written = _one_shot(client, named_model, take, tmp_path / "o", marker_noise=0.01, denoise=True)
+    den = lgi.denoise_take(take, 0.01)
+    ref = named_model.solve(den.frames, quiet=True, marker_noise=den.marker_noise)
+    assert np.array_equal(written.vertices, ref.vertices.astype(np.float32))
+    assert written.settings is not None and written.settings.denoised_from == 0.01
+    assert written.settings.marker_noise == den.marker_noise < 0.01
+    assert written.settings.denoised_rank == den.rank
+    # The residuals written are the given markers' distances from that surface.
+    on_surface = named_model.bundle_positions(np.asarray(written.vertices, dtype=np.float64))
+    expected = np.nan_to_num(np.linalg.norm(np.asarray(take) - on_surface, axis=2))
+    np.testing.assert_allclose(written.bundle_residuals, expected, atol=1e-5)
+
+
 def test_solve_shots_refuses_bad_arguments_before_starting_anything(named_model, tmp_path):  # type: ignore[no-untyped-def]
     take = np.zeros((2, named_model.num_bundles, 3))
     cases = [
@@ -409,6 +426,9 @@ def test_solve_shots_refuses_bad_arguments_before_starting_anything(named_model,
         ),
         ({"fit": "free"}, "fit must be True, False, None, .unbounded. or .auto."),
         ({"take_prior": "yes"}, "take_prior must be True, False or .auto."),
+        ({"denoise": "yes", "marker_noise": 0.01}, "denoise must be True or False"),
+        ({"denoise": True}, "denoise needs marker_noise above 0"),
+        ({"denoise": True, "marker_noise": 0.0}, "denoise needs marker_noise above 0"),
         ({"model": tmp_path / "none.lgi"}, "no such model file"),
         ({"client": 3}, "client: expected"),
         ({"client": "tcp://127.0.0.1:8786", "workers": 2}, "workers sizes the embedded"),

@@ -126,7 +126,7 @@ def _solve_keywords() -> set[str]:
 def _check_options(options: dict[str, Any]) -> str:
     """The solve options as canonical JSON (hashed into the settings); unknown names and
     values that a manifest cannot record are `InputError`s."""
-    unknown = sorted(set(options) - _solve_keywords())
+    unknown = sorted(set(options) - _solve_keywords() - {"denoise"})
     if unknown:
         raise InputError(
             f"solve_shots: unknown solve options {unknown} (Model.solve takes "
@@ -155,6 +155,14 @@ def _check_options(options: dict[str, Any]) -> str:
     prior = options.get("take_prior", False)
     if not (isinstance(prior, bool) or prior == "auto"):
         raise InputError(f"solve_shots: take_prior must be True, False or 'auto', got {prior!r}")
+    denoise = options.get("denoise", False)
+    if not isinstance(denoise, bool):
+        raise InputError(f"solve_shots: denoise must be True or False, got {denoise!r}")
+    if denoise and (noise is None or (not isinstance(noise, str) and noise <= 0)):
+        raise InputError(
+            "solve_shots: denoise needs marker_noise above 0 (a number or 'auto'): there is "
+            "nothing to remove"
+        )
     if local and noise is None:
         raise InputError(
             "solve_shots: local_fits needs marker_noise (a number, 'auto', or 0 for clean "
@@ -294,6 +302,14 @@ def solve_shot(
         opts = dict(options)
         if opts.get("marker_noise") == "auto":
             opts["marker_noise"] = estimate_marker_noise(x, m)
+        # The take denoised first (`lgi.denoise_take`), solved with the noise it leaves; the
+        # residuals written stay the given markers' (`given`).
+        from lgi.pipeline import input_residuals, take_denoised
+
+        given, given_sigma = x, opts.get("marker_noise")
+        den = take_denoised(opts.pop("denoise", False), x, given_sigma, lambda _message: None)
+        if den is not None:
+            x, opts["marker_noise"] = den.frames, den.marker_noise
         if "auto" in (opts.get("fit"), opts.get("local_fits")):
             from lgi.pipeline import fits_choice
 
@@ -345,9 +361,20 @@ def solve_shot(
             local_fits=opts.get("local_fits", False),
             unbounded_fit=opts.get("fit") == UNBOUNDED,
             take_prior=opts.get("take_prior") is not None,
+            denoised_from=None if den is None else given_sigma,
+            denoised_rank=None if den is None else den.rank,
         )
         written = write_solved(
-            kind, Path(dest), topo, res, m, fps=rate, start=start, quiet=True, settings=settings
+            kind,
+            Path(dest),
+            topo,
+            res,
+            m,
+            fps=rate,
+            start=start,
+            quiet=True,
+            settings=settings,
+            residuals=None if den is None else input_residuals(res.bundle_positions, given),
         )
         return {
             "status": "done",

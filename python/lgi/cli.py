@@ -218,6 +218,8 @@ def _cmd_batch(args: argparse.Namespace) -> int:
         options["fit"] = "auto" if args.unbounded_fit == "auto" else "unbounded"
     if args.take_prior:
         options["take_prior"] = args.take_prior
+    if args.denoise:
+        options["denoise"] = True
     if args.jaw != "auto":
         options["jaw"] = None if args.jaw == "rest" else args.jaw
     model = pipeline.existing_file(args.model, "MODEL")
@@ -313,6 +315,17 @@ def _add_take_prior_argument(parser: argparse.ArgumentParser) -> None:
     )
 
 
+def _add_denoise_argument(parser: argparse.ArgumentParser) -> None:
+    """`--denoise` (`lgi solve`, `lgi batch`): `lgi.denoise_take` before the solve."""
+    parser.add_argument(
+        "--denoise",
+        action="store_true",
+        help="first remove the markers' noise as far as the take's own low-rank motion allows "
+        "(lgi.denoise_take; needs --marker-noise above 0), then solve with the noise it "
+        "leaves; the residuals written stay the given markers'",
+    )
+
+
 def _add_unbounded_fit_argument(parser: argparse.ArgumentParser) -> None:
     """`--unbounded-fit [auto]` (`lgi solve`, `lgi batch`): `Model.solve(fit="unbounded")`,
     or 'auto' (`lgi.estimate_unbounded_fit`)."""
@@ -394,6 +407,7 @@ def _add_batch_command(sub: Any) -> None:
     )
     _add_unbounded_fit_argument(b)
     _add_take_prior_argument(b)
+    _add_denoise_argument(b)
     b.add_argument(
         "--jaw",
         choices=list(pipeline.JAW_POSES),
@@ -521,13 +535,7 @@ def _add_pipeline_commands(sub: Any) -> None:
     )
     _add_unbounded_fit_argument(s)
     _add_take_prior_argument(s)
-    s.add_argument(
-        "--denoise",
-        action="store_true",
-        help="first remove the markers' noise as far as the take's own low-rank motion allows "
-        "(lgi.denoise_take; needs --marker-noise above 0), then solve with the noise it "
-        "leaves; residuals and findings stay the given markers'",
-    )
+    _add_denoise_argument(s)
     s.add_argument("--frames", default=None, metavar="A:B", help="take frames A..B-1 (0-based)")
     s.add_argument("--fps", type=float, default=None, help="frame rate (default: the take's)")
     s.add_argument(
