@@ -7,7 +7,7 @@ from the surface with them (bounded, unbounded) and without; docs/results.md put
 choices beside the protocols' errors.
 
 Usage: python scripts/local_fits_choices.py [--layouts markers_120 random:160:1 random:140:7]
-[--sigma 0 0.02 0.05] [--held-out 0 0.25] [--no-lomo] [--unbounded-fit-auto
+[--sigma 0 0.02 0.05] [--held-out 0 0.25] [--no-lomo] [--denoise] [--unbounded-fit-auto
 [--take-prior-auto]] (from the
 checkout, ../shared beside it). `--unbounded-fit-auto`: every take is read as `--unbounded-fit
 auto --local-fits auto` reads it (`lgi.pipeline.fits_choice`): the two choices and the lines
@@ -91,6 +91,12 @@ def main() -> None:
     ap.add_argument(
         "--take-prior-auto", action="store_true", help="with --unbounded-fit-auto: the prior too"
     )
+    ap.add_argument(
+        "--denoise",
+        action="store_true",
+        help="each take denoised first (`lgi.denoise_take`, as `--denoise` does) and read with "
+        "the noise it leaves",
+    )
     args = ap.parse_args()
     warnings.filterwarnings("ignore")
     d = ict.load_dataset(ICT)
@@ -132,10 +138,14 @@ def main() -> None:
                     kind = "scans K=120" if held == 0.0 else "capture, 25 % held out"
                     what = f"{kind}, {name}, {NAMES[i]}, sigma {sigma}"
                     model = methods["LGI"].model
+                    frames, noise = take.frames, sigma
+                    if args.denoise and sigma > 0:
+                        den = lgi.denoise_take(frames, sigma)
+                        frames, noise = den.frames, den.marker_noise
                     if args.unbounded_fit_auto:
-                        choose_both(take.frames, model, sigma, what, args.take_prior_auto)
+                        choose_both(frames, model, noise, what, args.take_prior_auto)
                         continue
-                    est = lgi.estimate_local_fits(take.frames, model, marker_noise=sigma)
+                    est = lgi.estimate_local_fits(frames, model, marker_noise=noise)
                     line(what, est, time.perf_counter() - t0)
     if args.no_lomo:
         return
