@@ -145,12 +145,20 @@ def test_lgi_solve_denoise_says_what_it_kept_and_measures_residuals_on_the_given
     assert main([*argv, "--denoise"]) == 0
     said = capsys.readouterr().err
     assert "denoised the take:" in said and f"marker noise {float(noise):.4g} ->" in said, said
-    assert f"spike: {model.marker_names[spiking]}, time codes 40-42" in said, said
+    spike = f"spike: {model.marker_names[spiking]}, time codes 40-42"
+    assert spike in said, said
+    findings = [line for line in said.splitlines() if "spike:" in line or "swap:" in line]
     r = read_result_npz(out)
     assert r.settings is not None and r.settings.denoised_from == pytest.approx(float(noise))
     assert r.settings.marker_noise is not None and r.settings.marker_noise < float(noise)
     assert r.settings.denoised_rank is not None and r.settings.denoised_rank > 0
     assert "the take denoised from" in r.settings.describe(r.units)
+    # `lgi info` reads the file's residuals with the given markers' noise, as the solve did:
+    # the same findings.
+    assert main(["info", str(out)]) == 0
+    info = capsys.readouterr().out
+    assert spike in info
+    assert sum("spike:" in line or "swap:" in line for line in info.splitlines()) == len(findings)
     # The residuals written are the given markers' distances from the surface written.
     on_surface = model.bundle_positions(np.asarray(r.vertices, dtype=np.float64))
     expected = np.nan_to_num(np.linalg.norm(markers - on_surface, axis=2))  # 0: missing

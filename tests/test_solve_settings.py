@@ -54,6 +54,12 @@ def test_settings_round_trip_as_json_and_describe_themselves() -> None:
         denoised_rank=15,
     )
     assert SolveSettings.from_json(den.to_json(), "x") == den
+    # The residuals a denoised solve writes are the given markers': read with their noise.
+    assert den.given_noise == 0.05 and plain.given_noise is None
+    assert (
+        SolveSettings(marker_noise=0.02, jaw=None, detail_weight=None, version="1").given_noise
+        == 0.02
+    )
     assert den.describe("cm").startswith(
         "marker noise 0.0168 cm per coordinate (the take denoised from 0.05 cm, 15 directions of "
         "motion kept)"

@@ -271,7 +271,7 @@ def diagnose_result(r: Result) -> list[Finding]:
         r.marker_names,
         size=face_size(r.vertices[0]),
         markers=r.markers,
-        noise=None if r.settings is None else r.settings.marker_noise,
+        noise=None if r.settings is None else r.settings.given_noise,
     )
 
 

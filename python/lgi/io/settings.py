@@ -85,6 +85,12 @@ class SolveSettings:
             denoised_rank=None if denoised_rank is None else int(denoised_rank),
         )
 
+    @property
+    def given_noise(self) -> float | None:
+        """The noise of the markers the user gave (the residuals written are theirs): the
+        noise before denoising where the take was denoised, else `marker_noise`."""
+        return self.marker_noise if self.denoised_from is None else self.denoised_from
+
     def to_json(self) -> str:
         return json.dumps(
             {
