@@ -11,14 +11,13 @@ Usage: python scripts/denoise_lomo.py (from the checkout, ../shared beside it)
 
 from __future__ import annotations
 
+import sys
 import warnings
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from lgi.io.takes import read_raw
-from lgi.lab import ict, lomo
 from lgi.lab.evaluate import (
     DENOISED,
     DENOISED_PEER,
@@ -27,7 +26,9 @@ from lgi.lab.evaluate import (
     capture_methods,
 )
 
-ICT = "../shared/data/ict-facekit"
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+import ict_captures
+
 OTHERS = ("displacement interpolation", "fit + jaw + residual")
 #: Each solve's estimated noise (cm), for the line of its take.
 NOISE: list[float] = []
@@ -49,25 +50,13 @@ def methods_for(dataset: Any, rest: np.ndarray, frames: np.ndarray) -> dict[str,
 
 def main() -> None:
     warnings.filterwarnings("ignore")
-    d = ict.load_dataset(ICT)
-    lm = np.asarray(ict.load_landmarks(ICT), dtype=np.int64)
-    marks = {n: int(lm[k]) for n, k in lomo.ANIMFACE_IBUG.items()}
-    face = ict.face_triangles(d)
     every: dict[str, list[np.ndarray]] = {}
-    for path in ict.animface(Path(ICT).parent):
-        NOISE.clear()
-        take = lomo.retarget(read_raw(path), d.neutral, face, marks)
-        step = max(1, take.frames.shape[0] // 250)
-        cand = [i for i, n in enumerate(take.names) if n not in set(lomo.RIGID)]
-        picked = lomo.held_out_markers(take.rest, take.frames, cand, 8)
-        got = lomo.lomo(d, take, picked, methods_for, step=step)
-        errs = {m: np.concatenate(list(e.values())) for m, e in got.errors.items()}
+    for stem, errs in ict_captures.lomo_errors(methods_for):
         for m, e in errs.items():
             every.setdefault(m, []).append(e)
         noise = f"noise {min(NOISE):.5f}-{max(NOISE):.5f} cm"
-        print(
-            Path(path).stem, noise, " ".join(f"{m}={10 * e.mean():.3f} mm" for m, e in errs.items())
-        )
+        print(stem, noise, " ".join(f"{m}={10 * e.mean():.3f} mm" for m, e in errs.items()))
+        NOISE.clear()
     both = {m: 10 * np.concatenate(e).mean() for m, e in every.items()}
     print("both takes", " ".join(f"{m}={v:.3f} mm" for m, v in both.items()))
 

@@ -6,7 +6,8 @@ protocol's rows read per recording."""
 
 from __future__ import annotations
 
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -52,3 +53,26 @@ PEERS = evaluate.PEER_NAMES
 def peer_ratio(means: dict[str, Any], method: str = "LGI") -> float:
     """`method`'s mean error over the best of the peers' the protocol ran (`PEERS`)."""
     return float(means[method] / min(means[p] for p in PEERS if p in means))
+
+
+def lomo_errors(
+    methods_for: Callable[[Any, np.ndarray, np.ndarray], dict[str, Any]],
+) -> Iterator[tuple[str, dict[str, np.ndarray]]]:
+    """The lomo protocol as the issue's scripts run it: each shared AnimFace take retargeted
+    onto ICT, 8 of its non-skull markers left out one at a time (`lgi.lab.lomo`), every
+    method of `methods_for` built and solved without the one left out on about 250 frames;
+    per take its stem and each method's distances (cm) from the left-out markers."""
+    from lgi.io.takes import read_raw
+    from lgi.lab import lomo
+
+    d = ict.load_dataset(ICT)
+    lm = np.asarray(ict.load_landmarks(ICT), dtype=np.int64)
+    marks = {n: int(lm[k]) for n, k in lomo.ANIMFACE_IBUG.items()}
+    face = ict.face_triangles(d)
+    for path in ict.animface(Path(ICT).parent):
+        take = lomo.retarget(read_raw(path), d.neutral, face, marks)
+        step = max(1, take.frames.shape[0] // 250)
+        cand = [i for i, n in enumerate(take.names) if n not in set(lomo.RIGID)]
+        picked = lomo.held_out_markers(take.rest, take.frames, cand, 8)
+        got = lomo.lomo(d, take, picked, methods_for, step=step)
+        yield Path(path).stem, {m: np.concatenate(list(e.values())) for m, e in got.errors.items()}

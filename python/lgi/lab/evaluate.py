@@ -363,10 +363,10 @@ class OnDenoised:
         return self.method.solve(den.frames, temporal=temporal, quiet=quiet)
 
 
-def add_denoised(methods: dict[str, Solver], peers: Sequence[str], unbounded: bool) -> None:
+def add_denoised(methods: dict[str, Solver], unbounded: bool) -> None:
     """`DENOISED` and `LOCAL_FITS_DENOISED` beside a protocol's noisy LGI (`unbounded`: with
     the unbounded fit and unbounded local fits, the scans' calls; else the boxed ones), and
-    each of `peers` on the denoised markers (`DENOISED_PEER`)."""
+    each of the protocol's peers (`PEER_NAMES`) on the denoised markers (`DENOISED_PEER`)."""
     lgi = methods["LGI"]
     if not isinstance(lgi, Recommended) or not lgi.marker_noise:
         return
@@ -376,7 +376,7 @@ def add_denoised(methods: dict[str, Solver], peers: Sequence[str], unbounded: bo
     if model.jaw_bins is None:
         local: bool | str = "unbounded" if unbounded else True
         methods[LOCAL_FITS_DENOISED] = Recommended(model, sigma, local_fits=local, denoise=True)
-    for name in peers:
+    for name in PEER_NAMES:
         if name in methods:
             methods[DENOISED_PEER.format(name)] = OnDenoised(methods[name], sigma)
 
@@ -529,7 +529,7 @@ def capture_protocol(
             region=region,
         )
         methods = capture_methods(take.dataset, markers, sigma)
-        add_denoised(methods, PEER_NAMES, unbounded=False)
+        add_denoised(methods, unbounded=False)
         if panel is not None and i == 0:
             f = _most_expressive(take.truth, np.asarray(dataset.neutral))
             error_panel(panel, methods, take.frames[f], take.truth[f], dataset.triangles, region)
@@ -604,7 +604,7 @@ def scans_protocol(
         given = None if rig is None or session.theta is None else (rig, session.theta)
         methods = capture_methods(session.dataset, markers, sigma, jaw=given)
         _add_unbounded(methods)
-        add_denoised(methods, PEER_NAMES, unbounded=True)
+        add_denoised(methods, unbounded=True)
         if only is not None:
             methods = {k: v for k, v in methods.items() if k in only}
         shares.clear()
