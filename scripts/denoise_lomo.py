@@ -50,15 +50,14 @@ def methods_for(dataset: Any, rest: np.ndarray, frames: np.ndarray) -> dict[str,
 
 def main() -> None:
     warnings.filterwarnings("ignore")
-    every: dict[str, list[np.ndarray]] = {}
-    for stem, errs in ict_captures.lomo_errors(methods_for):
-        for m, e in errs.items():
-            every.setdefault(m, []).append(e)
+
+    def label(stem: str) -> str:
+        """The take's stem and the noise its solves estimated (then read afresh)."""
         noise = f"noise {min(NOISE):.5f}-{max(NOISE):.5f} cm"
-        print(stem, noise, " ".join(f"{m}={10 * e.mean():.3f} mm" for m, e in errs.items()))
         NOISE.clear()
-    both = {m: 10 * np.concatenate(e).mean() for m, e in every.items()}
-    print("both takes", " ".join(f"{m}={v:.3f} mm" for m, v in both.items()))
+        return f"{stem} {noise}"
+
+    ict_captures.print_lomo(methods_for, label)
 
 
 if __name__ == "__main__":

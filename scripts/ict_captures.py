@@ -76,3 +76,18 @@ def lomo_errors(
         picked = lomo.held_out_markers(take.rest, take.frames, cand, 8)
         got = lomo.lomo(d, take, picked, methods_for, step=step)
         yield Path(path).stem, {m: np.concatenate(list(e.values())) for m, e in got.errors.items()}
+
+
+def print_lomo(
+    methods_for: Callable[[Any, np.ndarray, np.ndarray], dict[str, Any]],
+    label: Callable[[str], str] = str,
+) -> None:
+    """`lomo_errors` printed: a line per take (`label` of its stem, then each method's mean
+    distance in mm from the left-out markers) and one over both takes."""
+    every: dict[str, list[np.ndarray]] = {}
+    for stem, errs in lomo_errors(methods_for):
+        for m, e in errs.items():
+            every.setdefault(m, []).append(e)
+        print(label(stem), " ".join(f"{m}={10 * e.mean():.3f} mm" for m, e in errs.items()))
+    both = {m: 10 * np.concatenate(e).mean() for m, e in every.items()}
+    print("both takes", " ".join(f"{m}={v:.3f} mm" for m, v in both.items()))

@@ -37,13 +37,7 @@ def methods_for(dataset: Any, rest: np.ndarray, frames: np.ndarray) -> dict[str,
 
 def main() -> None:
     warnings.filterwarnings("ignore")
-    every: dict[str, list[np.ndarray]] = {}
-    for stem, errs in ict_captures.lomo_errors(methods_for):
-        for m, e in errs.items():
-            every.setdefault(m, []).append(e)
-        print(stem, " ".join(f"{m}={10 * e.mean():.3f} mm" for m, e in errs.items()))
-    both = {m: 10 * np.concatenate(e).mean() for m, e in every.items()}
-    print("both takes", " ".join(f"{m}={v:.3f} mm" for m, v in both.items()))
+    ict_captures.print_lomo(methods_for)
 
 
 if __name__ == "__main__":
