@@ -45,13 +45,15 @@ def test_settings_round_trip_as_json_and_describe_themselves() -> None:
     assert "no marker noise" in plain.describe(None)
     assert "all of the dataset's detail" in plain.describe(None)
     # A denoised take's settings say the noise it was given and the directions it kept.
+    from lgi.denoise import DenoisedTake
+
+    taken = DenoisedTake(np.zeros((2, 1, 3)), 0.0168, 0.05, 15, 1)
     den = of(
         has_jaw_rig=False,
         jaw=None,
-        marker_noise=0.0168,
+        marker_noise=taken.marker_noise,
         detail_weight=None,
-        denoised_from=0.05,
-        denoised_rank=15,
+        denoised=taken,
     )
     assert SolveSettings.from_json(den.to_json(), "x") == den
     # The residuals a denoised solve writes are the given markers': read with their noise.

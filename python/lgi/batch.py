@@ -304,10 +304,12 @@ def solve_shot(
             opts["marker_noise"] = estimate_marker_noise(x, m)
         # The take denoised first (`lgi.denoise_take`), solved with the noise it leaves; the
         # residuals written stay the given markers' (`given`).
-        from lgi.pipeline import input_residuals, take_denoised
+        from lgi.pipeline import solved_residuals, take_denoised
 
-        given, given_sigma = x, opts.get("marker_noise")
-        den = take_denoised(opts.pop("denoise", False), x, given_sigma, lambda _message: None)
+        given = x
+        den = take_denoised(
+            opts.pop("denoise", False), x, opts.get("marker_noise"), lambda _message: None
+        )
         if den is not None:
             x, opts["marker_noise"] = den.frames, den.marker_noise
         if "auto" in (opts.get("fit"), opts.get("local_fits")):
@@ -361,8 +363,7 @@ def solve_shot(
             local_fits=opts.get("local_fits", False),
             unbounded_fit=opts.get("fit") == UNBOUNDED,
             take_prior=opts.get("take_prior") is not None,
-            denoised_from=None if den is None else given_sigma,
-            denoised_rank=None if den is None else den.rank,
+            denoised=den,
         )
         written = write_solved(
             kind,
@@ -374,7 +375,7 @@ def solve_shot(
             start=start,
             quiet=True,
             settings=settings,
-            residuals=None if den is None else input_residuals(res.bundle_positions, given),
+            residuals=solved_residuals(res, given, den),
         )
         return {
             "status": "done",

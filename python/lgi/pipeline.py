@@ -433,11 +433,13 @@ def take_denoised(
     return den
 
 
-def input_residuals(positions: np.ndarray, markers: np.ndarray) -> np.ndarray:
-    """Each given marker's distance (F, B) from its position on the surface `positions`
-    (F, B, 3); 0 where it is missing: the residuals of a solve of other (denoised) markers,
-    measured against the markers the user gave."""
-    d = np.linalg.norm(np.asarray(markers, dtype=np.float64) - positions, axis=2)
+def solved_residuals(res: SolveResult, given: np.ndarray, den: DenoisedTake | None) -> np.ndarray:
+    """The residuals (F, B) a solve of the markers `given` writes and is read by: the result's
+    own (a copy), or where the take was denoised first (`den`: other markers were solved), each
+    given marker's distance from its position on the surface; 0 where it is missing."""
+    if den is None:
+        return np.array(res.bundle_residuals)
+    d = np.linalg.norm(np.asarray(given, dtype=np.float64) - res.bundle_positions, axis=2)
     return np.where(np.isnan(d), 0.0, d)
 
 
@@ -542,7 +544,7 @@ def write_solved(
     residuals: np.ndarray | None = None,
 ) -> Path:
     """`write_output` of a whole `SolveResult` of model `m` (its marker names and unit);
-    `residuals` in place of the result's (e.g. from the markers given, `input_residuals`)."""
+    `residuals` in place of the result's (e.g. the given markers', `solved_residuals`)."""
     return write_output(
         kind,
         out,
@@ -1000,8 +1002,7 @@ def solve_file(
         local_fits=local_fits,
         unbounded_fit=unbounded_fit,
         take_prior=prior is not None,
-        denoised_from=None if den is None else given_sigma,
-        denoised_rank=None if den is None else den.rank,
+        denoised=den,
     )
     missing = np.isnan(x).any(axis=2)
     say(
@@ -1029,7 +1030,7 @@ def solve_file(
                 curves_out, res.fit_weights, res.jaw_theta, m, fps=rate, start=start, frame=frame
             )
             say(f"wrote the curves {curves_out}")
-        given_residuals = None if den is None else input_residuals(res.bundle_positions, given)
+        given_residuals = solved_residuals(res, given, den)
         written = write_solved(
             kind,
             dest,
@@ -1047,7 +1048,7 @@ def solve_file(
         )
         found = _say_findings(
             say,
-            res.bundle_residuals if given_residuals is None else given_residuals,
+            given_residuals,
             res.missing,
             given,
             res.vertices[0],
@@ -1107,11 +1108,7 @@ def solve_file(
                 b = min(n, a + size)
                 if first_frame is None:
                     first_frame = res.vertices[0].copy()
-                chunk_residuals = (
-                    res.bundle_residuals.copy()
-                    if den is None
-                    else input_residuals(res.bundle_positions, given[a:b])
-                )
+                chunk_residuals = solved_residuals(res, given[a:b], den)
                 residuals.append(chunk_residuals)
                 absent.append(res.missing.copy())
                 fits.append(None if res.fit_weights is None else res.fit_weights.copy())

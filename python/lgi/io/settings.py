@@ -10,9 +10,12 @@ from __future__ import annotations
 import json
 import math
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from lgi.errors import InputError
+
+if TYPE_CHECKING:
+    from lgi.denoise import DenoisedTake
 
 __all__ = ["LOCAL_FITS_WORDS", "SolveSettings"]
 
@@ -59,11 +62,11 @@ class SolveSettings:
         local_fits: bool | str = False,
         unbounded_fit: bool = False,
         take_prior: bool = False,
-        denoised_from: float | None = None,
-        denoised_rank: int | None = None,
+        denoised: DenoisedTake | None = None,
     ) -> SolveSettings:
         """The settings of a `Model.solve` call: `jaw` as passed (None, the rest pose, is
         recorded as 'rest' and a pose array as 'given'; None for a model without a jaw rig),
+        `denoised` the take `lgi.denoise_take` made of the given one (its noise and rank),
         this lgi's version."""
         from lgi._lgi import __version__
 
@@ -81,8 +84,8 @@ class SolveSettings:
             local_fits=local_fits if local_fits == "unbounded" else bool(local_fits),
             unbounded_fit=bool(unbounded_fit) or local_fits == "unbounded",
             take_prior=bool(take_prior),
-            denoised_from=None if denoised_from is None else float(denoised_from),
-            denoised_rank=None if denoised_rank is None else int(denoised_rank),
+            denoised_from=None if denoised is None else float(denoised.input_noise),
+            denoised_rank=None if denoised is None else int(denoised.rank),
         )
 
     @property
