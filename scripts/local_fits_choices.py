@@ -10,7 +10,7 @@ Usage: python scripts/local_fits_choices.py [--layouts markers_120 random:160:1 
 [--sigma 0 0.02 0.05] [--held-out 0 0.25] [--no-lomo] [--denoise] [--unbounded-fit-auto
 [--take-prior-auto]] (from the
 checkout, ../shared beside it). `--unbounded-fit-auto`: every take is read as `--unbounded-fit
-auto --local-fits auto` reads it (`lgi.pipeline.fits_choice`): the two choices and the lines
+auto --local-fits auto` reads it (`lgi.choices.fits_choice`): the two choices and the lines
 `lgi solve` says about them; `--take-prior-auto` with it: then `--take-prior auto` too.
 """
 
@@ -57,11 +57,11 @@ def line(what: str, est: lgi.LocalFitsEstimate, seconds: float) -> None:
 def choose_both(
     frames: np.ndarray, model: lgi.Model, sigma: float | None, what: str, prior: bool
 ) -> None:
-    """What `--unbounded-fit auto --local-fits auto` chooses (`lgi.pipeline.fits_choice`; with
-    `prior`, then `--take-prior auto`: `lgi.pipeline.take_prior_choice`), and the distances it
+    """What `--unbounded-fit auto --local-fits auto` chooses (`lgi.choices.fits_choice`; with
+    `prior`, then `--take-prior auto`: `lgi.choices.take_prior_choice`), and the distances it
     read, as one line."""
+    from lgi.choices import fits_choice, take_prior_choice
     from lgi.local import UNBOUNDED
-    from lgi.pipeline import fits_choice, take_prior_choice
 
     said: list[str] = []
     t0 = time.perf_counter()

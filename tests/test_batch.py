@@ -407,6 +407,22 @@ def test_a_batch_with_denoise_solves_the_denoised_take_and_records_it(
     np.testing.assert_allclose(written.bundle_residuals, expected, atol=1e-5)
 
 
+def test_a_batch_recommended_solves_the_plan_lgi_solve_reads_and_records_it(
+    client, named_model, shots, tmp_path
+):  # type: ignore[no-untyped-def]
+    from lgi.choices import plan_solve
+
+    take = shots["sh040"]
+    written = _one_shot(client, named_model, take, tmp_path / "o", recommended=True)
+    plan = plan_solve(np.asarray(take, dtype=np.float64), named_model, recommended=True)
+    ref = named_model.solve(plan.frames, quiet=True, **plan.solve_options())
+    assert np.array_equal(written.vertices, ref.vertices.astype(np.float32))
+    assert written.settings is not None
+    assert written.settings.marker_noise == plan.marker_noise
+    assert written.settings.denoised_from == plan.given_noise
+    assert written.settings.local_fits == plan.local_fits
+
+
 def test_solve_shots_refuses_bad_arguments_before_starting_anything(named_model, tmp_path):  # type: ignore[no-untyped-def]
     take = np.zeros((2, named_model.num_bundles, 3))
     cases = [
@@ -428,6 +444,7 @@ def test_solve_shots_refuses_bad_arguments_before_starting_anything(named_model,
         ({"take_prior": "yes"}, "take_prior must be True, False or .auto."),
         ({"denoise": "yes", "marker_noise": 0.01}, "denoise must be True or False"),
         ({"denoise": True}, "denoise needs marker_noise above 0"),
+        ({"recommended": "yes"}, "recommended must be True or False"),
         ({"denoise": True, "marker_noise": 0.0}, "denoise needs marker_noise above 0"),
         ({"model": tmp_path / "none.lgi"}, "no such model file"),
         ({"client": 3}, "client: expected"),

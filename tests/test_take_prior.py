@@ -342,7 +342,7 @@ def test_cli_take_prior_writes_what_model_solve_gives_and_says_its_reading(
 
 
 def test_take_prior_auto_says_why_it_was_not_read(two_directions: Any) -> None:
-    from lgi.pipeline import take_prior_choice
+    from lgi.choices import take_prior_choice
 
     model, frames, _, _ = two_directions
     said: list[str] = []

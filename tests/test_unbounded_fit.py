@@ -234,7 +234,7 @@ def test_both_auto_read_the_local_fits_first_and_the_fit_only_without_them(
     want: tuple[bool | str, bool],
     reads: list[str],
 ) -> None:
-    from lgi import pipeline
+    from lgi import choices
 
     calls: list[str] = []
 
@@ -248,22 +248,22 @@ def test_both_auto_read_the_local_fits_first_and_the_fit_only_without_them(
         assert spec == "auto" and prior is False  # no --take-prior here
         return fit_read
 
-    monkeypatch.setattr(pipeline, "local_fits_choice", local_choice)
-    monkeypatch.setattr(pipeline, "unbounded_fit_choice", fit_choice)
-    got = pipeline.fits_choice("auto", "auto", np.zeros((1, 1, 3)), None, 0.1, "auto", print)  # type: ignore[arg-type]
+    monkeypatch.setattr(choices, "local_fits_choice", local_choice)
+    monkeypatch.setattr(choices, "unbounded_fit_choice", fit_choice)
+    got = choices.fits_choice("auto", "auto", np.zeros((1, 1, 3)), None, 0.1, "auto", print)  # type: ignore[arg-type]
     assert got == want and calls == reads
 
 
 def test_unbounded_local_fits_given_bring_the_unbounded_fit_without_reading_anything(
     outside_the_box,  # type: ignore[no-untyped-def]
 ) -> None:
-    from lgi import pipeline
+    from lgi import choices
 
     model, frames, _ = outside_the_box
     said: list[str] = []
-    got = pipeline.fits_choice("unbounded", False, frames, model, 0.01, "auto", said.append)
+    got = choices.fits_choice("unbounded", False, frames, model, 0.01, "auto", said.append)
     assert got == ("unbounded", True) and said == []
-    assert pipeline.fits_choice(True, False, frames, model, 0.01, "auto", said.append) == (
+    assert choices.fits_choice(True, False, frames, model, 0.01, "auto", said.append) == (
         True,
         False,
     )

@@ -22,15 +22,13 @@ from typing import Any
 
 import numpy as np
 
-from lgi.detail import check_detail_weight, estimate_detail_weight
+from lgi.detail import check_detail_weight
 from lgi.errors import InputError
 from lgi.io import takes as take_files
 from lgi.io.atomic import atomic_path, writable_folder
-from lgi.io.settings import SolveSettings
 from lgi.io.topology import topology
 from lgi.local import UNBOUNDED
 from lgi.model import Model
-from lgi.noise import estimate_marker_noise
 
 __all__ = [
     "MANIFEST",
@@ -126,7 +124,7 @@ def _solve_keywords() -> set[str]:
 def _check_options(options: dict[str, Any]) -> str:
     """The solve options as canonical JSON (hashed into the settings); unknown names and
     values that a manifest cannot record are `InputError`s."""
-    unknown = sorted(set(options) - _solve_keywords() - {"denoise"})
+    unknown = sorted(set(options) - _solve_keywords() - {"denoise", "recommended"})
     if unknown:
         raise InputError(
             f"solve_shots: unknown solve options {unknown} (Model.solve takes "
@@ -158,6 +156,10 @@ def _check_options(options: dict[str, Any]) -> str:
     denoise = options.get("denoise", False)
     if not isinstance(denoise, bool):
         raise InputError(f"solve_shots: denoise must be True or False, got {denoise!r}")
+    if not isinstance(options.get("recommended", False), bool):
+        raise InputError(
+            f"solve_shots: recommended must be True or False, got {options['recommended']!r}"
+        )
     if denoise and (noise is None or (not isinstance(noise, str) and noise <= 0)):
         raise InputError(
             "solve_shots: denoise needs marker_noise above 0 (a number or 'auto'): there is "
@@ -299,72 +301,38 @@ def solve_shot(
         else:
             x, rate, start = take, fps, 0
         frames = int(x.shape[0])
+        # What is solved and how, each option as given or read from the take
+        # (`lgi.choices.plan_solve`, as `lgi solve` plans it); the residuals written stay the
+        # given markers' (`given`) where the take is denoised first.
+        from lgi.choices import plan_solve
+        from lgi.pipeline import solved_residuals
+
         opts = dict(options)
-        if opts.get("marker_noise") == "auto":
-            opts["marker_noise"] = estimate_marker_noise(x, m)
-        # The take denoised first (`lgi.denoise_take`), solved with the noise it leaves; the
-        # residuals written stay the given markers' (`given`).
-        from lgi.pipeline import solved_residuals, take_denoised
-
-        given = x
-        den = take_denoised(
-            opts.pop("denoise", False), x, opts.get("marker_noise"), lambda _message: None
+        fit = opts.pop("fit", None)
+        jaw = opts.pop("jaw", "auto")
+        plan = plan_solve(
+            x,
+            m,
+            noise=opts.pop("marker_noise", None),
+            denoise=opts.pop("denoise", False),
+            local_fits=opts.pop("local_fits", False),
+            unbounded_fit="auto" if fit == "auto" else fit == UNBOUNDED,
+            take_prior=opts.pop("take_prior", False),
+            detail=opts.pop("detail_weight", None),
+            jaw=jaw,
+            recommended=opts.pop("recommended", False),
         )
-        if den is not None:
-            x, opts["marker_noise"] = den.frames, den.marker_noise
-        if "auto" in (opts.get("fit"), opts.get("local_fits")):
-            from lgi.pipeline import fits_choice
-
-            fit = opts.get("fit")
-            local, free = fits_choice(
-                opts.get("local_fits", False),
-                "auto" if fit == "auto" else fit == UNBOUNDED,
-                x,
-                m,
-                opts.get("marker_noise"),
-                opts.get("jaw", "auto"),
-                lambda _message: None,
-                opts.get("take_prior", False),
-            )
-            opts["local_fits"] = local
-            opts["fit"] = UNBOUNDED if free else (None if fit == "auto" else fit)
-        if "take_prior" in opts:
-            from lgi.pipeline import take_prior_choice
-
-            unbounded = opts.get("fit") == UNBOUNDED or opts.get("local_fits") == UNBOUNDED
-            opts["take_prior"] = take_prior_choice(
-                opts["take_prior"],
-                x,
-                m,
-                opts.get("marker_noise"),
-                opts.get("jaw", "auto"),
-                lambda _message: None,
-                unbounded,
-            )
-        if opts.get("detail_weight") == "auto":
-            opts["detail_weight"] = estimate_detail_weight(
-                x,
-                m,
-                marker_noise=opts.get("marker_noise"),
-                jaw=opts.get("jaw", "auto"),
-                fit=opts.get("fit"),
-            )
+        given, x = x, plan.frames
+        opts.update(plan.solve_options(), jaw=jaw)
+        if not plan.unbounded_fit and fit != "auto":
+            opts["fit"] = fit  # True, False (no global fit) or None, as given
         if kind == "usd" and rate is None:
             raise InputError("the take has no frame rate; a USD point cache needs fps=")
         res = m.solve(x, quiet=True, **opts)
         from lgi.pipeline import write_solved
 
         topo = topology(m.dataset)
-        settings = SolveSettings.of(
-            has_jaw_rig=m.jaw_rig is not None,
-            jaw=opts.get("jaw", "auto"),
-            marker_noise=opts.get("marker_noise"),
-            detail_weight=opts.get("detail_weight"),
-            local_fits=opts.get("local_fits", False),
-            unbounded_fit=opts.get("fit") == UNBOUNDED,
-            take_prior=opts.get("take_prior") is not None,
-            denoised=den,
-        )
+        settings = plan.settings(has_jaw_rig=m.jaw_rig is not None, jaw=jaw)
         written = write_solved(
             kind,
             Path(dest),
@@ -375,7 +343,7 @@ def solve_shot(
             start=start,
             quiet=True,
             settings=settings,
-            residuals=solved_residuals(res, given, den),
+            residuals=solved_residuals(res, given, plan.denoised),
         )
         return {
             "status": "done",

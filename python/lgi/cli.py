@@ -17,7 +17,7 @@ from pathlib import Path
 from typing import Any, NoReturn
 
 import lgi
-from lgi import pipeline
+from lgi import choices, pipeline
 from lgi.interrupt import import_usd
 from lgi.io.atomic import ready_folder
 
@@ -95,6 +95,7 @@ def _cmd_solve(args: argparse.Namespace) -> int:
         unbounded_fit=args.unbounded_fit,
         take_prior=args.take_prior,
         denoise=args.denoise,
+        recommended=args.recommended,
         frames=args.frames,
         fps=args.fps,
         allow_missing=args.allow_missing,
@@ -212,7 +213,7 @@ def _cmd_batch(args: argparse.Namespace) -> int:
     if args.detail_weight is not None:
         options["detail_weight"] = args.detail_weight
     if args.local_fits:
-        pipeline.check_local_fits_noise(args.local_fits, args.marker_noise)
+        choices.check_local_fits_noise(args.local_fits, args.marker_noise)
         options["local_fits"] = args.local_fits
     if args.unbounded_fit:
         options["fit"] = "auto" if args.unbounded_fit == "auto" else "unbounded"
@@ -220,6 +221,8 @@ def _cmd_batch(args: argparse.Namespace) -> int:
         options["take_prior"] = args.take_prior
     if args.denoise:
         options["denoise"] = True
+    if args.recommended:
+        options["recommended"] = True
     if args.jaw != "auto":
         options["jaw"] = None if args.jaw == "rest" else args.jaw
     model = pipeline.existing_file(args.model, "MODEL")
@@ -326,6 +329,17 @@ def _add_denoise_argument(parser: argparse.ArgumentParser) -> None:
     )
 
 
+def _add_recommended_argument(parser: argparse.ArgumentParser) -> None:
+    """`--recommended` (`lgi solve`, `lgi batch`): `lgi.choices.plan_solve(recommended=True)`."""
+    parser.add_argument(
+        "--recommended",
+        action="store_true",
+        help="read every choice from the take: --marker-noise, --denoise, --unbounded-fit, "
+        "--local-fits and --take-prior auto, and --detail-weight auto where no local fits are "
+        "used; options given keep their values (docs/results.md measures this call)",
+    )
+
+
 def _add_unbounded_fit_argument(parser: argparse.ArgumentParser) -> None:
     """`--unbounded-fit [auto]` (`lgi solve`, `lgi batch`): `Model.solve(fit="unbounded")`,
     or 'auto' (`lgi.estimate_unbounded_fit`)."""
@@ -408,6 +422,7 @@ def _add_batch_command(sub: Any) -> None:
     _add_unbounded_fit_argument(b)
     _add_take_prior_argument(b)
     _add_denoise_argument(b)
+    _add_recommended_argument(b)
     b.add_argument(
         "--jaw",
         choices=list(pipeline.JAW_POSES),
@@ -536,6 +551,7 @@ def _add_pipeline_commands(sub: Any) -> None:
     _add_unbounded_fit_argument(s)
     _add_take_prior_argument(s)
     _add_denoise_argument(s)
+    _add_recommended_argument(s)
     s.add_argument("--frames", default=None, metavar="A:B", help="take frames A..B-1 (0-based)")
     s.add_argument("--fps", type=float, default=None, help="frame rate (default: the take's)")
     s.add_argument(

@@ -20,9 +20,9 @@ from typing import Any
 import numpy as np
 
 from lgi._lgi import BuildConfig, SolveResult
+from lgi.choices import marker_noise, plan_solve
 from lgi.dataset import Dataset
-from lgi.denoise import DenoisedTake, denoise_take
-from lgi.detail import estimate_detail_weight
+from lgi.denoise import DenoisedTake
 from lgi.diagnose import Finding, diagnose, diagnose_result, face_size, summary
 from lgi.errors import InputError, MarkerError
 from lgi.io import takes
@@ -33,22 +33,17 @@ from lgi.io.result import Result, read_result_npz
 from lgi.io.settings import SolveSettings
 from lgi.io.sink import FrameSink
 from lgi.io.topology import Topology, topology
-from lgi.local import UNBOUNDED, estimate_local_fits
 from lgi.model import PROGRESS_DELAY, Model
 from lgi.noise import estimate_marker_noise
 from lgi.placement import ScaleFit, check_scale, describe_scale
-from lgi.take_prior import TakePrior, estimate_take_prior, estimate_take_prior_use
-from lgi.unbounded import estimate_unbounded_fit
 
 __all__ = [
     "CHUNK_FRAMES",
     "JAW_POSES",
     "build_file",
     "describe",
-    "detail_weight",
     "export_file",
     "frame_range",
-    "marker_noise",
     "output_kind",
     "read_dataset",
     "rig_file",
@@ -183,254 +178,6 @@ def frame_range(spec: str | None, count: int) -> slice:
             f"--frames {spec}: the take has frames 0:{count}; START must be < END within it"
         )
     return slice(a, b)
-
-
-def check_local_fits_noise(spec: bool | str, sigma: float | str | None) -> None:
-    """`--local-fits` (on or 'auto') without `--marker-noise`: an InputError saying why."""
-    if spec and sigma is None:
-        raise InputError(
-            "--local-fits needs --marker-noise (SIGMA or auto; 0 for clean markers): the local "
-            "fits fit the noise-aware targets"
-        )
-
-
-def fits_choice(
-    local: bool | str,
-    unbounded: bool | str,
-    frames: np.ndarray,
-    model: Model,
-    sigma: float | None,
-    jaw: str | None,
-    say: Say,
-    prior: bool | str = False,
-) -> tuple[bool | str, bool]:
-    """`--local-fits` and `--unbounded-fit` as given or read from the take (`local_fits_choice`,
-    `unbounded_fit_choice`): `local_fits` and whether the global fit is unbounded. When both
-    are 'auto', the local fits are read first, on the boxed solve (bounded, then unbounded ones
-    with the unbounded fit they start from): unbounded ones chosen bring the unbounded fit,
-    bounded ones keep the box, and with neither the unbounded fit is read on its own
-    (docs/concepts.md). Otherwise the fit is decided first and the local fits read on it.
-    With `prior` (`--take-prior`, given or 'auto') the unbounded fit is read as it would be
-    solved, with the take's prior."""
-    if local == "auto" and unbounded == "auto":
-        chosen = local_fits_choice(local, frames, model, sigma, jaw, say)
-        if chosen:
-            return chosen, chosen == UNBOUNDED
-        return False, unbounded_fit_choice(unbounded, frames, model, sigma, jaw, say, prior)
-    free = unbounded_fit_choice(unbounded, frames, model, sigma, jaw, say, prior)
-    chosen = local_fits_choice(local, frames, model, sigma, jaw, say, UNBOUNDED if free else None)
-    # Unbounded local fits start from the unbounded fit whatever was asked of the fit.
-    return chosen, free or chosen == UNBOUNDED
-
-
-def unbounded_fit_choice(
-    spec: bool | str,
-    frames: np.ndarray,
-    model: Model,
-    sigma: float | None,
-    jaw: str | None,
-    say: Say,
-    prior: bool | str = False,
-) -> bool:
-    """`--unbounded-fit`: True, False or 'auto' (read from the take's own markers left out,
-    `lgi.estimate_unbounded_fit`, and said with its numbers; with `prior`, the unbounded fit
-    with the take's prior, as it would be solved)."""
-    if spec is True or spec is False:
-        return spec
-    if spec != "auto":
-        raise InputError(f"--unbounded-fit {spec!r}: expected no value or 'auto'")
-    with_prior = bool(prior) and sigma is not None and sigma > 0.0
-    est = estimate_unbounded_fit(frames, model, marker_noise=sigma, jaw=jaw, take_prior=with_prior)
-    which = " (with the take prior)" if with_prior else ""
-    say(
-        _reading(
-            f"unbounded fit{which} {'used' if est.use else 'not used'}",
-            est.left_out,
-            est.frames,
-            f"{est.error_unbounded:.4g}",
-            model,
-            "it",
-            f"{est.error_boxed:.4g} with the fit held to [0, 1]",
-        )
-    )
-    return est.use
-
-
-def _reading(
-    what: str, left_out: int, frames: int, near: str, model: Model, them: str, other: str
-) -> str:
-    """The line a left-out reading says: `what` (the choice), how many markers were left out on
-    how many frames, their distance `near` from the surface with `them` (the option read) in
-    the model's units, and `other`, the distance without it."""
-    unit = model.units or "model units"
-    return (
-        f"{what}: {left_out} markers left out one at a time on {frames} frames are {near} "
-        f"{unit} from the surface with {them}, {other}"
-    )
-
-
-def take_prior_choice(
-    spec: bool | str,
-    frames: np.ndarray,
-    model: Model,
-    sigma: float | None,
-    jaw: str | None,
-    say: Say,
-    unbounded: bool,
-) -> TakePrior | None:
-    """`--take-prior`: True, False or 'auto' (read from the take's own markers left out,
-    `lgi.estimate_take_prior_use`, and said with its numbers), on the unbounded fit
-    (`unbounded`, as chosen) and with the markers' noise `sigma`: the prior to solve with, or
-    None."""
-    if spec is False:
-        return None
-    if spec is not True and spec != "auto":
-        raise InputError(f"--take-prior {spec!r}: expected no value or 'auto'")
-    noisy = sigma is not None and sigma > 0.0
-    if spec is True:
-        if not unbounded:
-            raise InputError(
-                "--take-prior is a prior on the unbounded global fit: add --unbounded-fit (or "
-                "--local-fits unbounded)"
-            )
-        if not noisy:
-            raise InputError(
-                "--take-prior needs the markers' noise: --marker-noise with a distance > 0 "
-                "or auto (noise-free markers need no prior)"
-            )
-        assert sigma is not None
-        prior = estimate_take_prior(model, frames, sigma, jaw=jaw)
-        say(f"take prior: {prior.kept} of {prior.directions} directions move above the noise")
-        return prior
-    if not unbounded or not noisy:
-        if not unbounded:
-            why = "the fit is held to [0, 1]"
-        elif sigma is None:
-            why = "no --marker-noise (every marker interpolated as given)"
-        else:
-            why = "the markers are noise-free"
-        say(f"take prior not read: {why}")
-        return None
-    assert sigma is not None
-    est = estimate_take_prior_use(frames, model, marker_noise=sigma, jaw=jaw)
-    if est.left_out == 0:
-        say("take prior not used: the take is too short to read it on frames of its own")
-        return None
-    kept = "" if est.prior is None else f" ({est.prior.kept} of {est.prior.directions} directions)"
-    say(
-        _reading(
-            f"take prior {'used' if est.use else 'not used'}{kept}",
-            est.left_out,
-            est.frames,
-            f"{est.error_with:.4g}",
-            model,
-            "it",
-            f"{est.error_without:.4g} without",
-        )
-    )
-    return est.prior
-
-
-def local_fits_choice(
-    spec: bool | str,
-    frames: np.ndarray,
-    model: Model,
-    sigma: float | None,
-    jaw: str | None,
-    say: Say,
-    fit: str | None = None,
-) -> bool | str:
-    """`--local-fits`: True, False, 'unbounded' or 'auto' (read from the take's own markers
-    left out, `lgi.estimate_local_fits` with `fit`, and said with its numbers)."""
-    check_local_fits_noise(spec, sigma)
-    if spec is True or spec is False or spec == UNBOUNDED:
-        return spec
-    if spec != "auto":
-        raise InputError(f"--local-fits {spec!r}: expected no value, 'unbounded' or 'auto'")
-    assert sigma is not None  # checked above
-    est = estimate_local_fits(frames, model, marker_noise=sigma, jaw=jaw, fit=fit)
-    chosen = {False: "not used", True: "used", UNBOUNDED: "used, unbounded"}[est.local_fits]
-    read = [
-        f"{x:.4g}{kind}"
-        for x, kind in ((est.error_with, ""), (est.error_unbounded, " unbounded"))
-        if np.isfinite(x)
-    ]
-    say(
-        _reading(
-            f"local fits {chosen}",
-            est.left_out,
-            est.frames,
-            " and ".join(read),
-            model,
-            "them",
-            f"{est.error_without:.4g} without",
-        )
-    )
-    return est.local_fits
-
-
-def detail_weight(
-    spec: str | None,
-    frames: np.ndarray,
-    model: Model,
-    sigma: float | None,
-    jaw: str | None,
-    fit: str | None = None,
-) -> float | None:
-    """`--detail-weight`: a weight in [0, 1], 'auto' (read from `frames` solved with `sigma`,
-    `jaw` and `fit`, `lgi.estimate_detail_weight`) or 'none'/None (all of the dataset's
-    detail)."""
-    if spec is None or spec == "none":
-        return None
-    if spec == "auto":
-        return estimate_detail_weight(frames, model, marker_noise=sigma, jaw=jaw, fit=fit)
-    try:
-        w = float(spec)
-    except ValueError:
-        raise InputError(
-            f"--detail-weight {spec!r}: expected a number in [0, 1], 'auto' or 'none'"
-        ) from None
-    if not 0.0 <= w <= 1.0:
-        raise InputError(f"--detail-weight {spec}: must be a number in [0, 1]")
-    return w
-
-
-def marker_noise(spec: str | None, frames: np.ndarray, model: Model | None) -> float | None:
-    """`--marker-noise`: a sigma >= 0 (model units), 'auto' (estimated from `frames`, bounded
-    by what `model`'s fit leaves at the markers) or 'none'/None (exact interpolation)."""
-    if spec is None or spec == "none":
-        return None
-    if spec == "auto":
-        return estimate_marker_noise(frames, model)
-    try:
-        sigma = float(spec)
-    except ValueError:
-        raise InputError(
-            f"--marker-noise {spec!r}: expected a number (data units), 'auto' or 'none'"
-        ) from None
-    if not np.isfinite(sigma) or sigma < 0:
-        raise InputError(f"--marker-noise {spec}: must be a finite number >= 0")
-    return sigma
-
-
-def take_denoised(
-    asked: bool, frames: np.ndarray, sigma: float | None, say: Say
-) -> DenoisedTake | None:
-    """`--denoise`: the take denoised by its own low-rank structure (`lgi.denoise_take`) with
-    the marker noise `sigma`, said in one line; None when not asked. An InputError without a
-    marker noise above 0 (there is nothing to remove)."""
-    if not asked:
-        return None
-    if sigma is None or sigma <= 0.0:
-        raise InputError(
-            "--denoise needs the markers' noise above 0: pass --marker-noise SIGMA or auto"
-        )
-    den = denoise_take(frames, sigma)
-    say(
-        f"denoised the take: {den.rank} of {den.directions} directions of motion kept, "
-        f"marker noise {sigma:.4g} -> {den.marker_noise:.4g}"
-    )
-    return den
 
 
 def solved_residuals(res: SolveResult, given: np.ndarray, den: DenoisedTake | None) -> np.ndarray:
@@ -915,7 +662,8 @@ def solve_file(
     local_fits: bool | str = False,
     unbounded_fit: bool | str = False,
     take_prior: bool | str = False,
-    denoise: bool = False,
+    denoise: bool | str = False,
+    recommended: bool = False,
 ) -> tuple[Path, int]:
     """`lgi solve`: the take file solved with the model file, written by `out`'s suffix
     (`output_kind`). `noise` is `--marker-noise` (a number, 'auto' or 'none'; 'auto' looks at
@@ -925,11 +673,11 @@ def solve_file(
     `local_fits` `--local-fits` (`Model.solve(local_fits=True)`; 'auto': `local_fits_choice`),
     `unbounded_fit` `--unbounded-fit` (`Model.solve(fit="unbounded")`; 'auto':
     `unbounded_fit_choice`), `take_prior` `--take-prior` (`lgi.estimate_take_prior`; 'auto':
-    `take_prior_choice`),
-    `frames` is `--frames A:B`. By default the range is solved in one
-    `Model.solve` (frames prefer their predecessor's choices across the whole range), then
-    written chunk by chunk; `chunk` (`--chunk N`) solves and writes N frames at a time into
-    one reused buffer, so the solve's memory stays that of N frames (each chunk continues
+    `take_prior_choice`), `recommended` `--recommended` (every option left at its default read
+    from the take: `lgi.choices.plan_solve`), `frames` is `--frames A:B`. By default the range
+    is solved in one `Model.solve` (frames prefer their predecessor's choices across the whole
+    range), then written chunk by chunk; `chunk` (`--chunk N`) solves and writes N frames at a
+    time into one reused buffer, so the solve's memory stays that of N frames (each chunk continues
     from the last frame of the one before: the same frames as one solve, except with
     `--jaw track`, tracked chunk by chunk). Returns the path written (the `NAME.NNNN.obj`
     pattern for OBJ sequences) and the frame count."""
@@ -976,34 +724,25 @@ def solve_file(
     check_take_scale(t, x, m, stated=take_units is not None)
     head = None if t.head is None else t.head[rng]
     rate = frame_rate(fps, t.fps, kind)
-    given_sigma = marker_noise(noise, x, m)
-    den = take_denoised(denoise, x, given_sigma, say)
-    # What is solved: the given markers, or the take denoised with the noise it leaves. The
-    # residuals written and the findings are always the given markers' (`given`).
-    given = x
-    x, sigma = (x, given_sigma) if den is None else (den.frames, den.marker_noise)
-    check_local_fits_noise(local_fits, sigma)
-    if local_fits and m.jaw_bins is not None:
-        raise InputError(f"--local-fits: the model {model} has jaw bins; build it without them")
     jaw_mode = None if m.jaw_rig is None or jaw == "rest" else jaw
-    local_fits, unbounded_fit = fits_choice(
-        local_fits, unbounded_fit, x, m, sigma, jaw_mode, say, take_prior
-    )
-    fit = UNBOUNDED if unbounded_fit else None
-    prior = take_prior_choice(
-        take_prior, x, m, sigma, jaw_mode, say, unbounded_fit or local_fits == UNBOUNDED
-    )
-    weight = detail_weight(detail, x, m, sigma, jaw_mode, fit)
-    settings = SolveSettings.of(
-        has_jaw_rig=m.jaw_rig is not None,
-        jaw=jaw,
-        marker_noise=sigma,
-        detail_weight=weight,
+    plan = plan_solve(
+        x,
+        m,
+        noise=noise,
+        denoise=denoise,
         local_fits=local_fits,
         unbounded_fit=unbounded_fit,
-        take_prior=prior is not None,
-        denoised=den,
+        take_prior=take_prior,
+        detail=detail,
+        jaw=jaw_mode,
+        recommended=recommended,
+        say=say,
     )
+    # What is solved: the given markers, or the take denoised with the noise it leaves. The
+    # residuals written and the findings are always the given markers' (`given`).
+    given, given_sigma, den = x, plan.given_noise, plan.denoised
+    x, sigma, weight = plan.frames, plan.marker_noise, plan.detail_weight
+    settings = plan.settings(has_jaw_rig=m.jaw_rig is not None, jaw=jaw)
     missing = np.isnan(x).any(axis=2)
     say(
         f"{x.shape[0]} frames of {x.shape[1]} markers "
@@ -1015,14 +754,7 @@ def solve_file(
     topo = topology(m.dataset)
     start = t.first_frame + rng.start
     # What both ways of solving (one call, or chunk by chunk) are given.
-    how: dict[str, Any] = {
-        "jaw": jaw_mode,
-        "marker_noise": sigma,
-        "detail_weight": weight,
-        "local_fits": local_fits,
-        "fit": fit,
-        "take_prior": prior,
-    }
+    how: dict[str, Any] = {"jaw": jaw_mode, **plan.solve_options()}
     if chunk is None:
         res = m.solve(x, quiet=quiet, **how)
         if curves_out is not None:
