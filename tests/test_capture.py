@@ -270,8 +270,12 @@ def test_capture_protocol_recommended_lgi_beats_both_baselines_on_a_short_real_t
         "LGI + local fits (denoised)",
         "fit + jaw on denoised markers",
         "fit + jaw + residual on denoised markers",
+        "LGI --recommended",
     }
     assert all(np.isfinite(r["mean"]) and np.isfinite(r["open_mean"]) for r in rows)
+    # The plan `--recommended` read is in its row (and only there).
+    assert by["LGI --recommended"]["plan"].startswith("noise ")
+    assert all(r["plan"] == "" for name, r in by.items() if name != "LGI --recommended")
     best = min(by["displacement interpolation"]["mean"], by["blendshape fit"]["mean"])
     # Measured here: 0.0285 cm against 0.0291 (blendshape fit) and 0.0926 (paper mode).
     assert by["LGI"]["mean"] < best

@@ -218,7 +218,7 @@ def test_cli_lomo_scores_every_method_on_the_real_takes_and_each_beats_no_motion
     for label in ("cheeks", "nose", "all takes"):
         rest = rows[f"{label}: no motion"]
         others = [v for k, v in rows.items() if k.startswith(f"{label}: ") and "no motion" not in k]
-        assert len(others) == 8 and max(others) < rest
+        assert len(others) == 9 and max(others) < rest
 
 
 def test_cli_lomo_names_a_take_without_the_animface_markers(tmp_path: Path, capsys) -> None:  # type: ignore[no-untyped-def]

@@ -17,6 +17,7 @@ from lgi._lgi import (
     get_num_threads,
     set_num_threads,
 )
+from lgi.choices import SolvePlan, plan_solve
 from lgi.dataset import Dataset
 from lgi.denoise import DenoisedTake, denoise_take
 from lgi.detail import estimate_detail_weight
@@ -56,6 +57,7 @@ __all__ = [
     "MarkerError",
     "Model",
     "ModelFormatError",
+    "SolvePlan",
     "SolveResult",
     "TakePrior",
     "TakePriorEstimate",
@@ -72,6 +74,7 @@ __all__ = [
     "get_num_threads",
     "io",
     "jaw",
+    "plan_solve",
     "rig",
     "set_num_threads",
 ]

@@ -323,7 +323,7 @@ def solve_shot(
             recommended=opts.pop("recommended", False),
         )
         given, x = x, plan.frames
-        opts.update(plan.solve_options(), jaw=jaw)
+        opts.update(plan.solve_options())
         if not plan.unbounded_fit and fit != "auto":
             opts["fit"] = fit  # True, False (no global fit) or None, as given
         if kind == "usd" and rate is None:

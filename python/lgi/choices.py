@@ -302,7 +302,8 @@ def take_denoised(
 class SolvePlan:
     """What a take is solved as (`plan_solve`): `frames` (the given markers, or the take
     denoised), the noise `given_noise` of the given markers and `marker_noise` of those
-    solved, and the solve's options as given or read from the take."""
+    solved, and the solve's options as given or read from the take. The solve is
+    `model.solve(plan.frames, **plan.solve_options())`."""
 
     frames: np.ndarray
     given_noise: float | None
@@ -312,15 +313,30 @@ class SolvePlan:
     unbounded_fit: bool
     take_prior: TakePrior | None
     detail_weight: float | None
+    jaw: str | None = "auto"
 
     @property
     def fit(self) -> str | None:
         """`Model.solve`'s `fit`: "unbounded" or None (the default, boxed fit)."""
         return UNBOUNDED if self.unbounded_fit else None
 
+    def summary(self) -> str:
+        """The plan in one line: the noise (and what denoising left), the fit, the local fits,
+        the take prior and the detail weight."""
+        noise = "none" if self.given_noise is None else f"{self.given_noise:.4g}"
+        if self.denoised is not None:
+            noise += f" -> {self.marker_noise:.4g} (denoised, {self.denoised.rank} directions)"
+        local = {False: "none", True: "bounded", UNBOUNDED: "unbounded"}[self.local_fits]
+        return (
+            f"noise {noise}; fit {'unbounded' if self.unbounded_fit else 'boxed'}; local fits "
+            f"{local}; take prior {'yes' if self.take_prior is not None else 'no'}; detail "
+            f"weight {'-' if self.detail_weight is None else f'{self.detail_weight:.3f}'}"
+        )
+
     def solve_options(self) -> dict[str, Any]:
         """`Model.solve`'s keywords for this plan (with `frames`: the solve)."""
         return {
+            "jaw": self.jaw,
             "marker_noise": self.marker_noise,
             "detail_weight": self.detail_weight,
             "local_fits": self.local_fits,
@@ -403,4 +419,5 @@ def plan_solve(
         unbounded_fit=free,
         take_prior=prior,
         detail_weight=weight,
+        jaw=jaw,
     )

@@ -754,7 +754,7 @@ def solve_file(
     topo = topology(m.dataset)
     start = t.first_frame + rng.start
     # What both ways of solving (one call, or chunk by chunk) are given.
-    how: dict[str, Any] = {"jaw": jaw_mode, **plan.solve_options()}
+    how: dict[str, Any] = plan.solve_options()
     if chunk is None:
         res = m.solve(x, quiet=quiet, **how)
         if curves_out is not None:

@@ -7,6 +7,7 @@ from __future__ import annotations
 import csv
 import os
 import time
+import warnings
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any, Protocol
@@ -16,9 +17,10 @@ from numpy.typing import ArrayLike, NDArray
 
 from lgi._lgi import JawRig, SolveResult
 from lgi.baselines import FitJaw, FitJawResidual, FitJawUnbounded, FitJawUnboundedResidual
+from lgi.choices import SolvePlan, plan_solve
 from lgi.dataset import Dataset, without_shapes
 from lgi.denoise import denoise_take
-from lgi.errors import InputError
+from lgi.errors import InputError, LgiWarning
 from lgi.lab.capture import (
     CaptureTake,
     HingeJaw,
@@ -381,6 +383,47 @@ def add_denoised(methods: dict[str, Solver], unbounded: bool) -> None:
             methods[DENOISED_PEER.format(name)] = OnDenoised(methods[name], sigma)
 
 
+#: LGI as `lgi solve --recommended` solves a take: every choice read from the take given, its
+#: marker noise included (`lgi.choices.plan_solve`), not the protocol's sigma.
+AS_RECOMMENDED = "LGI --recommended"
+
+
+class AsRecommended:
+    """`AS_RECOMMENDED` as a compared method: the plan `lgi solve --recommended` reads from the
+    frames given (with `take`: from that whole take, of which the frames given are every
+    `step`-th, as a TD gives a whole take and the protocol scores some of its frames), then
+    `model.solve` of it. `last_plan` is the plan of the last solve."""
+
+    def __init__(self, model: Model, take: ArrayLike | None = None, step: int = 1) -> None:
+        self.model, self.step = model, step
+        self.take = None if take is None else np.asarray(take, dtype=np.float64)
+        self.last_plan: SolvePlan | None = None
+
+    def solve(self, frames: ArrayLike, *, temporal: bool = True, quiet: bool = True) -> Any:
+        x = np.asarray(frames, dtype=np.float64)
+        whole = x if self.take is None else self.take
+        with warnings.catch_warnings():
+            # Only the noise estimate's frames-too-far-apart warning is silenced (the row's
+            # plan gives the noise read); anything else still shows.
+            warnings.filterwarnings("ignore", message="marker noise:", category=LgiWarning)
+            plan = plan_solve(whole, self.model, recommended=True)
+        solved = plan.frames if self.take is None else plan.frames[:: self.step]
+        if solved.shape != x.shape:
+            raise InputError(
+                f"as recommended: {x.shape[0]} frames given are not every {self.step}-th of "
+                f"the take's {whole.shape[0]}"
+            )
+        self.last_plan = plan
+        return self.model.solve(solved, temporal=temporal, quiet=quiet, **plan.solve_options())
+
+
+def add_as_recommended(methods: dict[str, Solver]) -> None:
+    """`AS_RECOMMENDED` beside a protocol's LGI (its model)."""
+    lgi = methods["LGI"]
+    if isinstance(lgi, Recommended):
+        methods[AS_RECOMMENDED] = AsRecommended(lgi.model)
+
+
 def capture_methods(
     dataset: Dataset,
     markers: ArrayLike,
@@ -499,6 +542,7 @@ def capture_protocol(
     panel: str | os.PathLike[str] | None = None,
     nonlinear: bool = False,
     quiet: bool = True,
+    only: Sequence[str] | None = None,
 ) -> list[Row]:
     """The capture protocol: each Live Link Face recording (`lgi.io.livelink.read_livelinkface`,
     subsampled to about `frames` frames) drives `dataset`, its jaw-open shape turning about the
@@ -508,7 +552,7 @@ def capture_protocol(
     `panel`, the first recording's most expressive frame as a heatmap panel (`error_panel`);
     with `nonlinear`, the truth is `lgi.lab.capture.NonlinearTruth`'s (rows then say how far
     it is from the linear rig: `truth_departure`); a progress bar over the recordings unless
-    `quiet`."""
+    `quiet`. `only`: the methods run, by name (None: all)."""
     from lgi.io.livelink import read_livelinkface
 
     hinge = HingeJaw.fit(dataset, jaw_rigid)
@@ -530,6 +574,9 @@ def capture_protocol(
         )
         methods = capture_methods(take.dataset, markers, sigma)
         add_denoised(methods, unbounded=False)
+        add_as_recommended(methods)
+        if only is not None:
+            methods = {k: v for k, v in methods.items() if k in only}
         if panel is not None and i == 0:
             f = _most_expressive(take.truth, np.asarray(dataset.neutral))
             error_panel(panel, methods, take.frames[f], take.truth[f], dataset.triangles, region)
@@ -605,6 +652,7 @@ def scans_protocol(
         methods = capture_methods(session.dataset, markers, sigma, jaw=given)
         _add_unbounded(methods)
         add_denoised(methods, unbounded=True)
+        add_as_recommended(methods)
         if only is not None:
             methods = {k: v for k, v in methods.items() if k in only}
         shares.clear()
@@ -651,6 +699,7 @@ def lomo_protocol(
         }
         lgi = methods["LGI"]
         methods["LGI + detail weight"] = Recommended(lgi.model, lgi.marker_noise, detail="auto")
+        methods[AS_RECOMMENDED] = AsRecommended(lgi.model, fr, step)
         return methods
 
     rows: list[Row] = []
@@ -883,6 +932,7 @@ CAPTURE_COLUMNS = [
     "open_mean",
     "open_p95",
     "ms_per_frame",
+    "plan",
 ]
 """Row keys of the capture protocol: per-vertex error over all frames, and over the jaw-open
 frames (`open_*`, NaN when the take has none), in data units."""
@@ -898,7 +948,8 @@ def capture(
 ) -> list[Row]:
     """Scores each method's solve of a capture take (`lgi.lab.capture.make_capture`): the `score`
     row (mean, p95 and max per-vertex error over `region`, residual, jitter, speed) plus the
-    error on the `jaw_open` frames (F,) bool (`CAPTURE_COLUMNS`). `on_result(name, result)`,
+    error on the `jaw_open` frames (F,) bool and, for `AsRecommended`, the plan it read
+    (`SolvePlan.summary`; "" for the others) (`CAPTURE_COLUMNS`). `on_result(name, result)`,
     when given, sees each method's solve before it is let go (for what the rows do not hold)."""
     fr = np.asarray(frames, dtype=np.float64)
     tr = np.asarray(truth, dtype=np.float64)
@@ -914,5 +965,7 @@ def capture(
         err = np.linalg.norm(np.asarray(res.vertices)[opened][:, idx] - tr[opened][:, idx], axis=2)
         row["open_mean"] = float(err.mean()) if opened.any() else float("nan")
         row["open_p95"] = float(np.percentile(err, 95)) if opened.any() else float("nan")
+        plan = m.last_plan if isinstance(m, AsRecommended) else None
+        row["plan"] = "" if plan is None else plan.summary()
         rows.append(row)
     return rows
