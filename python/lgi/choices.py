@@ -211,7 +211,7 @@ def local_fits_choice(
     chosen = {False: "not used", True: "used", UNBOUNDED: "used, unbounded"}[est.local_fits]
     read = [
         f"{x:.4g}{kind}"
-        for x, kind in ((est.error_with, ""), (est.error_unbounded, " unbounded"))
+        for x, kind in ((est.error_with, " (bounded)"), (est.error_unbounded, " (unbounded)"))
         if np.isfinite(x)
     ]
     say(

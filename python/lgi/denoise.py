@@ -32,7 +32,7 @@ from numpy.typing import ArrayLike, NDArray
 from lgi.errors import InputError
 from lgi.take_prior import shrinkage_factors
 
-__all__ = ["DenoisedTake", "denoise_take"]
+__all__ = ["DenoisedTake", "bulk_noise", "denoise_take"]
 
 F64 = NDArray[np.float64]
 
@@ -47,6 +47,11 @@ IMPUTE_SETTLED = 1e-6
 #: over-relaxation: the same fixed point in 25-45 % fewer rounds on the sample and the
 #: synthetic take; 1.9 was slower on one of them).
 IMPUTE_RELAXATION = 1.5
+
+#: `bulk_noise` reads at most this many frames, spread over the take (a spectrum of 400 frames
+#: reads white noise to about 2 %; frame spacing does not enter it; a 3,809-frame take's
+#: reading then costs 2 s instead of 38).
+BULK_FRAMES = 400
 
 
 @dataclass(frozen=True)
@@ -104,6 +109,89 @@ def _shrink(centred: F64, sigma: float) -> tuple[F64, int, float]:
     return est, int(kept.sum()), error
 
 
+def _filled(flat: F64, missing: NDArray[np.bool_], sigma: float) -> tuple[F64, F64, int, float]:
+    """The take `flat` (F, p) with its `missing` samples filled by hard impute at noise `sigma`
+    (> 0): the filled take (present samples as given), its shrunk
+    estimate, the directions kept and the shrinker's error per entry (`_shrink`)."""
+    # A sample's first fill is its marker's mean over the frames it is present in (a marker
+    # missing everywhere: 0, and it stays missing).
+    counts = (~missing).sum(axis=0)
+    means = np.where(counts > 0, np.nansum(flat, axis=0) / np.maximum(counts, 1), 0.0)
+    filled = np.where(missing, means, flat)
+    estimate, rank, error = filled, 0, 0.0
+    for _ in range(IMPUTE_ROUNDS if missing.any() else 1):
+        mean = filled.mean(axis=0)
+        low, rank, error = _shrink(filled - mean, sigma)
+        estimate = low + mean
+        before = filled[missing]
+        after = before + IMPUTE_RELAXATION * (estimate[missing] - before)
+        filled[missing] = after
+        change = float(np.linalg.norm(after - before))
+        if change <= IMPUTE_SETTLED * max(float(np.linalg.norm(after)), 1e-300):
+            break
+    return filled, estimate, rank, error
+
+
+def _mp_median(beta: float) -> float:
+    """The median of the Marchenko-Pastur law of aspect `beta` (0 < beta <= 1) at unit noise:
+    the squared singular values of a p x n (p <= n) white-noise matrix over n, by its density's
+    cumulative integral on a fine grid (to about 1e-5)."""
+    lo, hi = (1.0 - np.sqrt(beta)) ** 2, (1.0 + np.sqrt(beta)) ** 2
+    # x = lo + (hi - lo) t²: the density's 1/sqrt(x) at beta = 1 becomes finite in t.
+    t = np.linspace(0.0, 1.0, 100_001)
+    x = lo + (hi - lo) * t**2
+    dx_dt = 2.0 * (hi - lo) * t
+    root = np.sqrt(np.maximum(hi - x, 0.0)) * np.sqrt(hi - lo) * t  # sqrt((hi - x)(x - lo))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        per_t = np.where(x > 0.0, root * dx_dt / (2.0 * np.pi * beta * x), 0.0)
+    if lo == 0.0:
+        per_t[0] = 2.0 * np.sqrt(hi) * np.sqrt(hi) / (2.0 * np.pi * beta)  # the limit at t = 0
+    cdf = np.concatenate([[0.0], np.cumsum(0.5 * (per_t[1:] + per_t[:-1]) * np.diff(t))])
+    return float(np.interp(0.5 * cdf[-1], cdf, x))
+
+
+def bulk_noise(frames: ArrayLike, fill_noise: float) -> float | None:
+    """The markers' white noise sigma per coordinate read from the take's own spectrum (F, B,
+    3; NaN missing): what its directions of motion leave. The centred take's squared singular
+    values beyond its r strongest directions are, for white noise of sigma, those of an (m - r)
+    x (n - r) noise matrix (m <= n its sides), whose median is sigma² (n - r) times the
+    Marchenko-Pastur law's median (Gavish & Donoho 2014's estimate, deflated by the directions
+    above the noise's bulk edge, r read again at each sigma until it stays; at most half the
+    spectrum, so the median is the bulk's). Missing samples are first filled by hard impute at
+    `fill_noise` (`_filled`: a fill's error only raises the reading). Frame spacing does not
+    enter: motion between frames far apart is still motion in the take's few directions. A
+    face's motion that is not low rank (a real performer's small motions, markers beyond the
+    take's directions) counts as noise: an upper reading like the tracks'. None for fewer than
+    4 frames or 2 coordinates."""
+    arr = np.asarray(frames, dtype=np.float64)
+    if arr.shape[0] > BULK_FRAMES:  # frames spread over the take: spacing does not matter
+        arr = arr[np.linspace(0, arr.shape[0] - 1, BULK_FRAMES).round().astype(int)]
+    n_frames = arr.shape[0]
+    flat = arr.reshape(n_frames, -1)
+    missing = np.isnan(flat)
+    keep = ~missing.all(axis=0)
+    flat, missing = flat[:, keep], missing[:, keep]
+    m, n = min(n_frames - 1, flat.shape[1]), max(n_frames - 1, flat.shape[1])
+    if n_frames < 4 or flat.shape[1] < 2:
+        return None
+    if missing.any() and fill_noise > 0.0:
+        flat = _filled(flat, missing, fill_noise)[0]
+    elif missing.any():
+        flat = np.where(missing, np.nanmean(flat, axis=0), flat)
+    _, sv, _ = _svd(flat - flat.mean(axis=0))
+    ev = np.sort(sv**2)[::-1][:m]
+    r, sigma2 = 0, 0.0
+    for _ in range(m):
+        rows, cols = m - r, n - r
+        sigma2 = float(np.median(ev[r:])) / (cols * _mp_median(rows / cols))
+        edge = sigma2 * cols * (1.0 + np.sqrt(rows / cols)) ** 2
+        above = min(int(np.sum(ev > edge)), m // 2)
+        if above == r:
+            break
+        r = above
+    return float(np.sqrt(max(sigma2, 0.0)))
+
+
 def denoise_take(frames: ArrayLike, marker_noise: float) -> DenoisedTake:
     """The take `frames` (F, B, 3; NaN: a missing marker) with its markers' white noise of
     `marker_noise` per coordinate (data units) removed as far as the take's own low-rank
@@ -127,22 +215,7 @@ def denoise_take(frames: ArrayLike, marker_noise: float) -> DenoisedTake:
     directions = min(n_frames - 1, 3 * b)
     if sigma == 0.0 or missing.all():
         return DenoisedTake(arr.copy(), sigma, sigma, directions, directions)
-    # A sample's first fill is its marker's mean over the frames it is present in (a marker
-    # missing everywhere: 0, and it stays missing).
-    counts = (~missing).sum(axis=0)
-    means = np.where(counts > 0, np.nansum(flat, axis=0) / np.maximum(counts, 1), 0.0)
-    filled = np.where(missing, means, flat)
-    rank, error = 0, 0.0
-    for _ in range(IMPUTE_ROUNDS if missing.any() else 1):
-        mean = filled.mean(axis=0)
-        low, rank, error = _shrink(filled - mean, sigma)
-        estimate = low + mean
-        before = filled[missing]
-        after = before + IMPUTE_RELAXATION * (estimate[missing] - before)
-        filled[missing] = after
-        change = float(np.linalg.norm(after - before))
-        if change <= IMPUTE_SETTLED * max(float(np.linalg.norm(after)), 1e-300):
-            break
+    _, estimate, rank, error = _filled(flat, missing, sigma)
     # The asymptotic error can exceed sigma where nearly every direction is kept (a few
     # frames): no shrinker leaves more noise than it was given.
     left = min(float(np.sqrt(error + sigma**2 / n_frames)), sigma)

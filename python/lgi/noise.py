@@ -19,6 +19,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 import lgi._lgi as _lgi
+from lgi.denoise import bulk_noise
 from lgi.errors import InputError, LgiWarning
 from lgi.leave_out import LOOKS, Looks, leave_markers_out, solved_in_chunks, take_frames
 
@@ -107,7 +108,12 @@ def estimate_marker_noise(frames: ArrayLike, model: Model | None = None) -> floa
     sigma = min(tracks, bound)
     how = "more than the dataset's fit leaves at the markers"
     floor = NOISE_FLOOR * model.diagonal
-    if sigma > floor and tracks_correlation(arr, model.markers_rest) > MOTION_CORRELATION:
+    bulk = bulk_noise(arr, sigma)
+    if bulk is not None and bulk < sigma:
+        # What the take's own directions of motion leave: frame spacing does not enter it, so
+        # no left-out reading follows.
+        sigma, how = bulk, "but what the take's own directions of motion leave is"
+    elif sigma > floor and tracks_correlation(arr, model.markers_rest) > MOTION_CORRELATION:
         try:
             sigma = _left_out_noise(model, arr, sigma, floor)
             how = "but markers left out of the solve are predicted best with"
