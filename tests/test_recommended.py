@@ -86,6 +86,13 @@ def test_recommended_keeps_the_options_given_and_leaves_noise_free_markers_as_gi
     assert plan.unbounded_fit and plan.fit == "unbounded"
     assert plan.frames is x
     assert not any(line.startswith("marker noise read") for line in said)
+    # --marker-noise none (every marker interpolated as given): nothing to denoise, and local
+    # fits (which fit the noise-aware targets) are not read; said, not an error.
+    said.clear()
+    exact = plan_solve(x, model, noise="none", recommended=True, say=said.append)
+    assert exact.marker_noise is None and exact.denoised is None and exact.local_fits is False
+    assert "not denoised: no marker noise (nothing to remove)" in said
+    assert any(line.startswith("local fits not read: no marker noise") for line in said)
     # Without --recommended, --denoise asked for noise-free markers is an error, as before.
     with pytest.raises(lgi.InputError, match="--denoise needs the markers' noise above 0"):
         plan_solve(x, model, noise=0.0, denoise=True)

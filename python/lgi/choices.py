@@ -285,7 +285,8 @@ def take_denoised(
         raise InputError(f"--denoise {asked!r}: expected no value or 'auto'")
     if sigma is None or sigma <= 0.0:
         if asked == "auto":
-            say("not denoised: the markers' noise is 0 (nothing to remove)")
+            why = "no marker noise" if sigma is None else "the markers' noise is 0"
+            say(f"not denoised: {why} (nothing to remove)")
             return None
         raise InputError(
             "--denoise needs the markers' noise above 0: pass --marker-noise SIGMA or auto"
@@ -395,6 +396,9 @@ def plan_solve(
         say(f"marker noise read from the take: {given_noise:.4g}")
     den = take_denoised(denoise, frames, given_noise, say)
     x, sigma = (frames, given_noise) if den is None else (den.frames, den.marker_noise)
+    if recommended and sigma is None and local_fits == "auto":
+        say("local fits not read: no marker noise (every marker interpolated as given)")
+        local_fits = False
     check_local_fits_noise(local_fits, sigma)
     if local_fits and model.jaw_bins is not None:
         raise InputError("--local-fits: the model has jaw bins; build it without them")

@@ -1,10 +1,12 @@
 """The markers' noise sigma, estimated from a take (`estimate_marker_noise`, what
 `--marker-noise auto` and `lgi batch` use).
 
-Three readings. The tracks': a sample's second difference holds 6 sigma^2 of independent noise
+Four readings. The tracks': a sample's second difference holds 6 sigma^2 of independent noise
 and almost none of a face's motion at capture rates. The fit's bound: what the dataset's
 global fit leaves at the markers holds the noise, so it bounds sigma from above at any frame
-spacing. And when the tracks read motion (frames far apart; independent noise moves one marker,
+spacing. The take's spectrum (`lgi.denoise.bulk_noise`): what the take's own few directions of
+motion leave, which frame spacing does not enter; where it is the smallest it is the estimate.
+Otherwise, when the tracks read motion (frames far apart; independent noise moves one marker,
 motion moves its neighbours with it, so their second differences are correlated), the markers
 left out: the sigma with which the noise-aware solve best predicts markers left out of it, no
 larger than the other two (what the dataset cannot explain, which both of them count as
@@ -78,7 +80,9 @@ def estimate_marker_noise(frames: ArrayLike, model: Model | None = None) -> floa
     jaw pose from the fit, as `solve` finds it; up to 100 frames spread over the take): noise
     is part of that residual, so its scale (the residual's root mean square per coordinate,
     over the rows less the fit's rank) bounds sigma from above whatever the frame spacing.
-    The smaller of the two is the estimate, unless the tracks read motion (their second
+    The smaller of the two is the estimate, unless what the take's own directions of motion
+    leave (`lgi.denoise.bulk_noise`, its dropouts filled at that estimate) is smaller still:
+    then that is the estimate. Otherwise, where the tracks read motion (their second
     differences correlated between neighbouring markers above `MOTION_CORRELATION`) and it is
     above `NOISE_FLOOR` of the face: then markers are left out of `NOISE_LEFT_OUT_FRAMES`
     frames and that sigma is halved while the noise-aware solve, given the halved sigma,
