@@ -160,7 +160,8 @@ def test_a_full_rate_take_keeps_its_track_estimate_under_the_fit_bound(
     _, sample_model = sample_model
     sample_dataset = sample_model.dataset
     # Slow motion sampled densely (60 fps) between two dataset poses: the tracks see the
-    # noise alone and the bound is not lower, so the estimate is the tracks' and no warning.
+    # noise alone and the bound is not lower, so the estimate is the tracks' or, a little
+    # lower, the take spectrum's (its motion lies in one direction), and no warning.
     import warnings
 
     rng = np.random.default_rng(7)
@@ -175,7 +176,8 @@ def test_a_full_rate_take_keeps_its_track_estimate_under_the_fit_bound(
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         got = lgi.estimate_marker_noise(frames, sample_model)
-    assert got == lgi.estimate_marker_noise(frames)
+    tracks = lgi.estimate_marker_noise(frames)
+    assert 0.95 * tracks <= got <= tracks
     assert got == pytest.approx(0.03, rel=0.2)
 
 
