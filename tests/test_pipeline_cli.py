@@ -199,7 +199,7 @@ def test_csv_and_trc_takes_solve_like_model_solve_with_noise_auto(
         for k in range(len(x))
     ]
     csv.write_text("\n".join(rows) + "\n")
-    sigma = lgi.estimate_marker_noise(x)
+    sigma = lgi.estimate_marker_noise(x, model)  # what --marker-noise auto reads
     ref = model.solve(x, marker_noise=sigma, quiet=True)
     out = tmp_path / "csv.usd"
     r = lgi_cli("solve", model_path, csv, "-o", out, "--marker-noise", "auto", "-q")
