@@ -28,16 +28,40 @@ def solved(sample, sample_dataset, noise_aware_sample):  # type: ignore[no-untyp
     return sample_dataset, model, sample.performance[:24], sigma
 
 
-def _window(rest: np.ndarray, b: int) -> tuple[np.ndarray, np.ndarray]:
+def _window(
+    rest: np.ndarray, b: int, lengths: float = _lgi.LOCAL_LENGTH
+) -> tuple[np.ndarray, np.ndarray]:
     """Bundle b's markers and weights, from the definition: the Gaussian of the rest distance
-    with one median nearest-marker distance as its length, markers within 3 lengths."""
+    with `lengths` (`LOCAL_LENGTH`) median nearest-marker distances as its length, markers
+    within 3 lengths."""
     d = np.linalg.norm(rest[:, None] - rest[None], axis=2)
     np.fill_diagonal(d, np.inf)
     nearest = np.sort(d.min(axis=1))
-    length = nearest[len(nearest) // 2]
+    length = lengths * nearest[len(nearest) // 2]
     dist = np.linalg.norm(rest - rest[b], axis=1)
     keep = np.flatnonzero(dist <= 3.0 * length * (1 + 1e-12))
     return keep, np.exp(-0.5 * (dist[keep] / length) ** 2)
+
+
+@pytest.mark.parametrize("lengths", [0.6, _lgi.LOCAL_LENGTH, 2.5])
+def test_windows_hold_the_markers_within_three_of_their_lengths_by_brute_force(
+    lengths: float,
+) -> None:
+    rng = np.random.default_rng(9)
+    rest = rng.uniform(-5, 5, size=(40, 3))
+    a = rng.standard_normal((120, 4))
+    fits = _lgi.LocalFits(a, rest, _lgi.FIT_L2, _lgi.FIT_PENALTY, lengths)
+    want = [_window(rest, k, lengths)[0].size for k in range(40)]
+    np.testing.assert_array_equal(fits.window_sizes, want)
+
+
+@pytest.mark.parametrize("lengths", [0.0, -1.0, float("nan"), float("inf")])
+def test_a_window_length_that_is_not_a_positive_number_is_refused_in_our_words(
+    lengths: float,
+) -> None:
+    rest = np.random.default_rng(2).uniform(-5, 5, size=(10, 3))
+    with pytest.raises(InputError, match="positive number of marker spacings"):
+        _lgi.LocalFits(np.ones((30, 2)), rest, _lgi.FIT_L2, 0.0, lengths)
 
 
 def test_each_local_fit_is_the_minimum_of_its_windowed_objective_found_by_scipy() -> None:

@@ -11,6 +11,7 @@ from typing_extensions import NotRequired, Self
 __all__ = [
     "FIT_L2",
     "FIT_PENALTY",
+    "LOCAL_LENGTH",
     "MAGNITUDE_LIMIT",
     "MAX_THREADS",
     "MIN_PRESENT_MARKERS",
@@ -38,6 +39,7 @@ __version__: str
 FIT_L2: float
 MIN_PRESENT_MARKERS: int
 FIT_PENALTY: float
+LOCAL_LENGTH: float
 MAGNITUDE_LIMIT: float
 MAX_THREADS: int
 
@@ -502,7 +504,10 @@ class LocalFits:
     """Each bundle's box-penalised blendshape fit of the markers in its Gaussian window
     (`lgi.local`)."""
 
-    def __new__(cls, a: ArrayLike, rest: ArrayLike, l2: float, penalty: float) -> LocalFits: ...
+    def __new__(
+        cls, a: ArrayLike, rest: ArrayLike, l2: float, penalty: float, lengths: float = ...
+    ) -> LocalFits:
+        """`lengths`: the windows' Gaussian length in median marker spacings (`LOCAL_LENGTH`)."""
     @property
     def num_bundles(self) -> int: ...
     @property

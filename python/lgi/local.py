@@ -5,8 +5,8 @@ A dataset of whole-face scans rarely holds the whole frame being solved, but aro
 some blend of the scans usually matches: the global fit has to trade the mouth against the
 brows, a fit of one neighbourhood does not. Bundle b's piece is the box-penalised fit (the
 global fit's ridge and penalty, relative to its own matrix) of the markers weighted by the
-Gaussian of their rest distance from b, with the length the noise-aware targets use
-(`RESIDUAL_LENGTH` median marker spacings; markers beyond `WINDOW_REACH` lengths left out).
+Gaussian of their rest distance from b, `LOCAL_LENGTH` median marker spacings long (markers
+beyond `WINDOW_REACH` lengths left out).
 It fits the solve's noise-aware targets in the jaw's unskinned space, each window starting
 from its fit of the frame before (a call's first frame: the frame's global fit). The pieces'
 weights are blended over the mesh by the sewing weights (a vertex's weights are its bundles'

@@ -53,7 +53,7 @@ pub use augment::{augment, recipes, Recipe};
 pub use basis::ShapeBasis;
 pub use dataset::Dataset;
 pub use error::{LgiError, Result};
-pub use local_fit::{blend_local, LocalFits, LocalWeights, SewingRows, WINDOW_REACH};
+pub use local_fit::{blend_local, LocalFits, LocalWeights, SewingRows, LOCAL_LENGTH, WINDOW_REACH};
 pub use magnitude::{
     check_dataset, Extent, Naming, MAGNITUDE_LIMIT, MAX_COORDINATE, MIN_PRESENT_MARKERS,
 };

@@ -498,6 +498,12 @@ pub fn fit_scale(a: &[f64], cols: usize) -> f64 {
 /// Gaussian correlation of the bundles' rest positions with length [`RESIDUAL_LENGTH`] times
 /// the median nearest-neighbour distance (B × B, unit diagonal).
 pub(crate) fn correlation(rest: &[DVec3]) -> Vec<f64> {
+    correlation_over(rest, RESIDUAL_LENGTH)
+}
+
+/// Gaussian correlation of the bundles' rest positions with length `lengths` times the median
+/// nearest-neighbour distance (B × B, unit diagonal).
+pub(crate) fn correlation_over(rest: &[DVec3], lengths: f64) -> Vec<f64> {
     let b = rest.len();
     let mut nearest: Vec<f64> = rest
         .iter()
@@ -513,7 +519,7 @@ pub(crate) fn correlation(rest: &[DVec3]) -> Vec<f64> {
         .collect();
     nearest.sort_by(f64::total_cmp);
     let median = nearest.get(nearest.len() / 2).copied().unwrap_or(1.0);
-    let length = (RESIDUAL_LENGTH * median).max(f64::MIN_POSITIVE);
+    let length = (lengths * median).max(f64::MIN_POSITIVE);
     let mut out = vec![0.0; b * b];
     for i in 0..b {
         for j in 0..b {

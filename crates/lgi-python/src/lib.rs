@@ -24,6 +24,7 @@ fn _lgi(m: &Bound<'_, PyModule>) -> PyResult<()> {
     // The global fit's ridge and box penalty (relative to the mean squared column norm): the
     // blendshape baseline's defaults on the Python side.
     m.add("FIT_L2", lgi_core::FIT_L2)?;
+    m.add("LOCAL_LENGTH", lgi_core::LOCAL_LENGTH)?;
     m.add("MIN_PRESENT_MARKERS", lgi_core::MIN_PRESENT_MARKERS)?;
     m.add("FIT_PENALTY", lgi_core::FIT_PENALTY)?;
     m.add_class::<dataset::Dataset>()?;

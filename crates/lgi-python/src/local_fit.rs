@@ -20,21 +20,26 @@ pub struct LocalFits {
 impl LocalFits {
     /// `a` (3B, S): the shapes' displacements at the markers (marker b's x, y, z in rows
     /// 3b..3b+3); `rest` (B, 3); `l2` and `penalty` relative to each window's mean squared
-    /// column norm.
+    /// column norm; `lengths`: the windows' Gaussian length in median marker spacings
+    /// (`LOCAL_LENGTH`).
     #[new]
+    #[pyo3(signature = (a, rest, l2, penalty, lengths = lgi_core::LOCAL_LENGTH))]
     fn new(
         py: Python<'_>,
         a: &Bound<'_, PyAny>,
         rest: &Bound<'_, PyAny>,
         l2: f64,
         penalty: f64,
+        lengths: f64,
     ) -> PyResult<Self> {
         let rest = read_points(rest, "rest", None, false)?;
         let m = float_array(a, "a", &[Some(3 * rest.len()), None])?;
         let s = m.shape()[1];
         let flat: Vec<f64> = m.iter().copied().collect();
-        let inner = threads::detach(py, || CoreLocal::new(&flat, s, &rest, l2, penalty))
-            .map_err(PyLgiError)?;
+        let inner = threads::detach(py, || {
+            CoreLocal::with_length(&flat, s, &rest, l2, penalty, lengths)
+        })
+        .map_err(PyLgiError)?;
         Ok(LocalFits { inner })
     }
 

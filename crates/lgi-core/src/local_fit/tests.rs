@@ -1,8 +1,11 @@
 use super::*;
 use crate::{FIT_L2, FIT_PENALTY};
 
+/// A window's reach in units where the median spacing is 1.
+const REACH: f64 = WINDOW_REACH * LOCAL_LENGTH;
+
 /// Markers on a line one unit apart, two groups `gap` apart: the median spacing is 1, so a
-/// window reaches 3 units.
+/// window reaches `REACH` units.
 fn two_groups(per_group: usize, gap: f64) -> Vec<DVec3> {
     (0..2 * per_group)
         .map(|i| {
@@ -31,15 +34,26 @@ fn a_window_holds_exactly_the_markers_within_three_lengths() {
     let rest: Vec<DVec3> = (0..12).map(|i| DVec3::new(i as f64, 0.0, 0.0)).collect();
     let a = matrix(&[rest.iter().map(|_| DVec3::Z).collect()]);
     let fits = LocalFits::new(&a, 1, &rest, FIT_L2, FIT_PENALTY).unwrap();
-    // Median nearest distance 1, so the window is every marker within 3 units (brute force).
-    let want: Vec<usize> = (0..12)
-        .map(|b| {
-            (0..12)
-                .filter(|&m| rest[b].distance(rest[m]) <= 3.0 + 1e-12)
-                .count()
-        })
-        .collect();
-    assert_eq!(fits.window_sizes(), want);
+    // Median nearest distance 1, so the window is every marker within `REACH` units (brute
+    // force), and `lengths` spacings wide with `with_length`.
+    let within = |reach: f64| -> Vec<usize> {
+        (0..12)
+            .map(|b| {
+                (0..12)
+                    .filter(|&m| rest[b].distance(rest[m]) <= reach + 1e-12)
+                    .count()
+            })
+            .collect()
+    };
+    assert_eq!(fits.window_sizes(), within(REACH));
+    for lengths in [0.5, 1.0, 2.0] {
+        let wide = LocalFits::with_length(&a, 1, &rest, FIT_L2, FIT_PENALTY, lengths).unwrap();
+        assert_eq!(wide.window_sizes(), within(WINDOW_REACH * lengths));
+    }
+    for bad in [0.0, -1.0, f64::NAN, f64::INFINITY] {
+        let e = LocalFits::with_length(&a, 1, &rest, FIT_L2, FIT_PENALTY, bad).unwrap_err();
+        assert!(e.to_string().contains("marker spacings"), "{e}");
+    }
 }
 
 #[test]
@@ -56,7 +70,7 @@ fn a_whole_face_scan_split_by_local_fits_matches_each_side_where_the_global_fit_
     assert_eq!(got.kept_start, 0);
     // Closed form of a one-shape ridge fit inside the box, the window's own scale:
     // w = Σ g t / (Σ g (1 + l2)), the window's mean squared column norm being Σ g.
-    let weights = correlation(&rest);
+    let weights = correlation_over(&rest, LOCAL_LENGTH);
     for b in 0..10 {
         let (mut num, mut den) = (0.0, 0.0);
         for m in 0..10 {
@@ -110,7 +124,7 @@ fn local_fits_equal_the_weighted_normal_equations_inside_the_box() {
         })
         .collect();
     let got = fits.solve(&target, &[0.0; 3]).unwrap();
-    let weights = correlation(&rest);
+    let weights = correlation_over(&rest, LOCAL_LENGTH);
     for b in 0..12 {
         let mut m = [[0.0f64; 4]; 3];
         let mut scale = 0.0;
