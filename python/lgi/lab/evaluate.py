@@ -30,9 +30,9 @@ from lgi.lab.capture import (
     make_capture,
     marker_samples,
 )
+from lgi.local import UNBOUNDED
 from lgi.model import Model
 from lgi.noise import estimate_marker_noise
-from lgi.take_prior import estimate_take_prior
 
 F64 = NDArray[np.float64]
 Row = dict[str, Any]
@@ -278,7 +278,8 @@ class Recommended:
     (`lgi.local`); `fit` is `Model.solve`'s (e.g. "unbounded"); with `take_prior`, the
     unbounded fit takes the prior read from the frames solved (`lgi.estimate_take_prior`); with
     `denoise`, the frames are first denoised by the take's own low-rank structure
-    (`lgi.denoise_take`) and solved with the noise it leaves."""
+    (`lgi.denoise_take`) and solved with the noise it leaves. The steps are `lgi.plan_solve`'s
+    with these options given (as `lgi solve` takes them)."""
 
     def __init__(
         self,
@@ -286,43 +287,32 @@ class Recommended:
         marker_noise: float | None,
         detail: str | None = None,
         local_fits: bool | str = False,
-        fit: bool | str | None = None,
+        fit: str | None = None,
         take_prior: bool = False,
         denoise: bool = False,
     ) -> None:
+        if fit not in (None, UNBOUNDED):
+            raise InputError(f"fit: expected None or {UNBOUNDED!r}, got {fit!r}")
         self.model, self.marker_noise, self.detail = model, marker_noise, detail
         self.local_fits, self.fit, self.take_prior = local_fits, fit, take_prior
         self.denoise = denoise
         self.last_detail_weight: float | None = None
 
     def solve(self, frames: ArrayLike, *, temporal: bool = True, quiet: bool = True) -> SolveResult:
-        from lgi.detail import estimate_detail_weight
-
-        sigma = self.marker_noise
-        if self.denoise:
-            if sigma is None:
-                raise InputError("denoising a take needs the markers' noise")
-            den = denoise_take(frames, sigma)
-            frames, sigma = den.frames, den.marker_noise
-        weight = None
-        if self.detail == "auto":
-            weight = estimate_detail_weight(frames, self.model, marker_noise=sigma, fit=self.fit)
-            self.last_detail_weight = weight
-        prior = None
-        if self.take_prior:
-            if sigma is None:
-                raise InputError("a take prior needs the markers' noise")
-            prior = estimate_take_prior(self.model, frames, sigma)
-        return self.model.solve(
-            frames,
-            temporal=temporal,
-            quiet=quiet,
-            marker_noise=sigma,
-            detail_weight=weight,
+        # The plan `lgi solve` makes with these options given (one definition of the steps).
+        plan = plan_solve(
+            np.asarray(frames, dtype=np.float64),
+            self.model,
+            noise=self.marker_noise,
+            denoise=self.denoise,
             local_fits=self.local_fits,
-            fit=self.fit,
-            take_prior=prior,
+            unbounded_fit=self.fit == UNBOUNDED,
+            take_prior=self.take_prior,
+            detail=self.detail,
         )
+        if self.detail == "auto":
+            self.last_detail_weight = plan.detail_weight
+        return self.model.solve(plan.frames, temporal=temporal, quiet=quiet, **plan.solve_options())
 
 
 #: The name of LGI with local fits (`Model.solve(local_fits=True)`) among compared methods.
@@ -373,7 +363,7 @@ def add_denoised(methods: dict[str, Solver], unbounded: bool) -> None:
     if not isinstance(lgi, Recommended) or not lgi.marker_noise:
         return
     sigma, model = lgi.marker_noise, lgi.model
-    fit = "unbounded" if unbounded else None
+    fit = UNBOUNDED if unbounded else None
     methods[DENOISED] = Recommended(model, sigma, fit=fit, denoise=True)
     if model.jaw_bins is None:
         local: bool | str = "unbounded" if unbounded else True
