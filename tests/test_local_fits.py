@@ -283,7 +283,7 @@ def test_ctrl_c_during_the_local_fits_stops_them_within_a_chunk(solved) -> None:
     _, model, frames, sigma = solved
     res = model.solve(frames, marker_noise=sigma, quiet=True)
     pieces = LocalPieces(model)
-    real = pieces.fits
+    real = pieces.fits_for(True)
     calls: list[int] = []
 
     class Counting:
@@ -297,7 +297,8 @@ def test_ctrl_c_during_the_local_fits_stops_them_within_a_chunk(solved) -> None:
                 time.sleep(0.05)
             return got
 
-    pieces.fits = Counting()  # type: ignore[assignment]
+    counting = Counting()
+    pieces.fits_for = lambda bounded, lengths=None: counting  # type: ignore[method-assign,assignment]
     many = type(res)(
         vertices=np.repeat(np.asarray(res.vertices), 4, axis=0),
         bundle_residuals=np.repeat(np.asarray(res.bundle_residuals), 4, axis=0),

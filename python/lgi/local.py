@@ -133,10 +133,9 @@ class LocalPieces:
         at = np.einsum("sbjd,bj->bds", unskinned[:, tris], bary, dtype=np.float64)
         a = at.reshape(3 * model.num_bundles, s_count)
         del unskinned
-        self.fits = _lgi.LocalFits(a, self.rest, _lgi.FIT_L2, _lgi.FIT_PENALTY)
-        # Kept (3B x S doubles: 6 MB at 2,000 scans) for the unbounded fits, made when asked for.
+        # Kept (3B x S doubles: 6 MB at 2,000 scans) for the windows' fits, made when asked for.
         self._a = a
-        self._unbounded: _lgi.LocalFits | None = None
+        self._fits_made: dict[tuple[bool, float], _lgi.LocalFits] = {}
         sw = model.core.sew_weights()
         v, b = self.neutral.shape[0], model.num_bundles
         sewing = sp.csr_matrix((sw["data"], sw["indices"], sw["indptr"]), shape=(v, b))
@@ -156,16 +155,20 @@ class LocalPieces:
             self.neutral[corners], self._corner_tris, bary
         )
 
-    def fits_for(self, bounded: bool) -> _lgi.LocalFits:
+    def fits_for(self, bounded: bool, lengths: float = _lgi.LOCAL_LENGTH) -> _lgi.LocalFits:
         """The windows' fits with weights held to [0, 1] (`bounded`) or not (`UNBOUNDED`: the
-        same ridge, no penalty)."""
-        if bounded:
-            return self.fits
-        if self._unbounded is None:
-            self._unbounded = _lgi.LocalFits(self._a, self.rest, _lgi.FIT_L2, 0.0)
-        return self._unbounded
+        same ridge, no penalty), the windows `lengths` median marker spacings long."""
+        key = (bounded, float(lengths))
+        made = self._fits_made.get(key)
+        if made is None:
+            penalty = _lgi.FIT_PENALTY if bounded else 0.0
+            made = _lgi.LocalFits(self._a, self.rest, _lgi.FIT_L2, penalty, lengths)
+            self._fits_made[key] = made
+        return made
 
-    def _fits(self, res: SolveResult, bounded: bool) -> tuple[F64, F64, F64 | None]:
+    def _fits(
+        self, res: SolveResult, bounded: bool, lengths: float = _lgi.LOCAL_LENGTH
+    ) -> tuple[F64, F64, F64 | None]:
         """The solve's targets (F, B, 3; NaN: missing), each frame's local weights per bundle
         (F, B, q: over the shape basis where there is one; `bounded`: held to [0, 1]) and the
         jaw poses."""
@@ -190,7 +193,7 @@ class LocalPieces:
             gone = missing[lacking][..., None]
             disp[lacking] = np.where(gone, fitted, disp[lacking])
         # A chunk of frames per call, so Ctrl-C (seen between calls) stops a long take at once.
-        fits = self.fits_for(bounded)
+        fits = self.fits_for(bounded, lengths)
         parts = [
             fits.solve(disp[a : a + FITS_CHUNK], starts[a : a + FITS_CHUNK])
             for a in range(0, disp.shape[0], FITS_CHUNK)
@@ -215,12 +218,20 @@ class LocalPieces:
             return blend
         return self.rig.skin(blend, theta, weights=jaw)
 
-    def surface(self, res: SolveResult, out: F64 | None = None, *, bounded: bool = True) -> F64:
+    def surface(
+        self,
+        res: SolveResult,
+        out: F64 | None = None,
+        *,
+        bounded: bool = True,
+        lengths: float = _lgi.LOCAL_LENGTH,
+    ) -> F64:
         """The local fits' surface (F, V, 3) of a noise-aware solve `res` (its targets, jaw
-        poses and global fits), into `out` when given; `bounded`: as `fits_for`."""
+        poses and global fits), into `out` when given; `bounded` and `lengths`: as
+        `fits_for`."""
         if np.asarray(res.missing).shape[0] == 0:
             return np.asarray(res.vertices, dtype=np.float64) if out is None else out
-        targets, weights, theta = self._fits(res, bounded)
+        targets, weights, theta = self._fits(res, bounded, lengths)
         blend = _blend(self.neutral, self.shapes, self._sew_rows, weights)
         posed = self._posed(blend, theta, None)
         misses = targets - self._bundle_positions(posed)
