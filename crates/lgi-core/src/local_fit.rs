@@ -55,9 +55,10 @@ pub struct LocalWeights {
 }
 
 impl LocalFits {
-    /// Windows [`LOCAL_LENGTH`] spacings wide. `a`: the shapes' displacements at the markers, row-major (3B × S, marker b's x, y, z in
-    /// rows 3b..3b+3); `rest`: the markers' rest positions (B); `l2` and `penalty` relative to
-    /// each window's mean squared column norm, as the global fit's are to its own.
+    /// Windows [`LOCAL_LENGTH`] spacings wide. `a`: the shapes' displacements at the markers,
+    /// row-major (3B × S, marker b's x, y, z in rows 3b..3b+3); `rest`: the markers' rest
+    /// positions (B); `l2` and `penalty` relative to each window's mean squared column norm,
+    /// as the global fit's are to its own.
     pub fn new(a: &[f64], shapes: usize, rest: &[DVec3], l2: f64, penalty: f64) -> Result<Self> {
         Self::with_length(a, shapes, rest, l2, penalty, LOCAL_LENGTH)
     }
