@@ -6,8 +6,8 @@
 //!
 //! The public API is the list of re-exports below; the modules themselves are private, so a
 //! type's home can move without breaking users (docs/architecture.md maps the modules).
-// `deny`, not `forbid`: the one measured exception is the cache prefetch hint in `prefetch.rs`
-// (serial choice 2.31 -> 1.99 ms per frame on ICT-300, docs/performance.md).
+// `deny`, not `forbid`: the one exception is the cache prefetch hint in `prefetch.rs`, kept
+// because it measurably speeds up the choice (docs/journal/undated.md).
 #![deny(unsafe_code)]
 #![warn(missing_docs)]
 // Every type reachable through the public API is in the list below.

@@ -13,13 +13,10 @@ use crate::prior::{correlation_over, fit_scale};
 use glam::DVec3;
 use rayon::prelude::*;
 
-/// The windows' Gaussian length in median nearest-marker distances. Measured on the scans
-/// protocol (two layouts, both recordings, σ 0, 0.02 and 0.05 cm; docs/concepts.md): 1.2 had
-/// the smallest worst cell against the noise-aware targets' own length of 1 (+0.6 %, and
-/// −7 % where a layout's windows were too narrow); 1.4, 1.7 and 2 lost more on the
-/// 120-marker layout (worst +1.1, +3.4 and +7.5 %), 0.7 lost in every cell. On 15 cells not
-/// used for the choice it was neutral (−2.3 to +1.0 %). A take's left-out markers cannot
-/// choose it: a marker left out leaves a hole that wider windows always fill better.
+/// The windows' Gaussian length in median nearest-marker distances: a little wider than the
+/// noise-aware targets' own length of 1, which was too narrow on some layouts, and no worse
+/// than it anywhere measured (docs/concepts.md; the study: docs/journal/2026-12-06.md). A
+/// constant, not read from the take: a take's left-out markers always prefer wider windows.
 pub const LOCAL_LENGTH: f64 = 1.2;
 
 /// A window keeps the markers within this many lengths of its bundle (weight ≥ e^-4.5, about

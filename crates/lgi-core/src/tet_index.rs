@@ -481,9 +481,8 @@ impl TetIndex {
     /// Splits the cells listing more than [`DENSE`] tets into [`SPLIT`]³ sub-cells, each
     /// listing the tets of its cell registered there as in [`build_grid`](Self::build_grid)
     /// (the same exactness argument on the finer grid). The most crowded cells go first, until
-    /// the sub-cell lists would outgrow half the cells' own (the memory budget: ICT-300's
-    /// queries past the hull test then test 122 tets instead of 206, noise-aware 242 instead
-    /// of ~690, for 20 % more index memory; docs/performance.md).
+    /// the sub-cell lists would outgrow half the cells' own: a memory budget, as each doubling
+    /// of it saves fewer tested tets (docs/journal/2026-12-02.md has the trade measured).
     fn split_dense_cells(&mut self, grown: &[Option<(DVec3, DVec3)>]) {
         let grid = self.grid;
         // (Never for usable tets, which have volume: a cell of no size has nothing to split.)

@@ -19,9 +19,8 @@ const SET_ROWS: usize = 1 << 18;
 const MERGE_PIECES: usize = 4;
 
 /// Most bundles a kept row is without: rows that more missing bundles touch are recomputed
-/// for each plan. Two, measured: with a fresh random 10 % of ICT's markers missing on every
-/// frame, keeping triples (3) or quadruples (4) too made frames slower (1.52 and 1.70 x the
-/// clean frames' CPU time against 1.40), as such sets seldom repeat.
+/// for each plan. Two: sets of three or more missing markers seldom repeat, so keeping their
+/// rows too made frames slower (measured: docs/journal/2026-12-02.md).
 pub(crate) const MAX_GONE: usize = 2;
 
 /// Which bundles a kept row is without: one to [`MAX_GONE`], ascending.
