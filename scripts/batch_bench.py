@@ -1,4 +1,4 @@
-"""Throughput of `lgi.batch.solve_shots` (docs/scale.md): the same shots solved by a plain
+"""Throughput of `lgi.app.batch.solve_shots` (docs/scale.md): the same shots solved by a plain
 loop in this process, then on a LocalCluster of 1 and of 2 worker processes, all in one run.
 Each shot is a C3D take of the built-in sample's held-out performance (its own noise seed; with
 `--ict`, ICT-FaceKit performing a Live Link Face recording, `scripts/ict_take.py`) solved on
@@ -21,10 +21,10 @@ from pathlib import Path
 import numpy as np
 
 import lgi
-from lgi import batch
+from lgi.app import batch
+from lgi.app.write import write_output
 from lgi.io.topology import topology
 from lgi.lab.sample import make_sample, sample_dataset
-from lgi.pipeline import write_output
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))
 from pipeline_files import write_c3d  # the tests' ezc3d writer
@@ -52,7 +52,7 @@ def make_ict_takes(folder: Path, shots: int) -> tuple[lgi.Model, dict[str, Path]
     own extra 0.005 cm of noise."""
     import subprocess
 
-    from lgi import pipeline
+    from lgi.app import pipeline
     from lgi.lab import ict
 
     data = ict.find(os.environ.get(ict.ENV), start=Path(__file__).resolve().parents[1])

@@ -417,7 +417,7 @@ def writing(data: Any, vertices: np.ndarray) -> dict[str, Any]:
 def baselines(data: Any, markers: np.ndarray, frames: np.ndarray, n: int) -> dict[str, Any]:
     """Setup time and per-frame solve time of every baseline on the first `n` frames (one call
     over all n frames, as a pipeline would; per frame = total / n)."""
-    from lgi.baselines import BlendshapeFit, DisplacementInterpolation, LgiRbf
+    from lgi.lab.baselines import BlendshapeFit, DisplacementInterpolation, LgiRbf
 
     out: dict[str, Any] = {}
     for key, make in [

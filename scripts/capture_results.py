@@ -16,6 +16,7 @@ import numpy as np
 
 from lgi.io.livelink import read_livelinkface
 from lgi.lab import evaluate, ict
+from lgi.lab import methods as lab_methods
 from lgi.lab.capture import HingeJaw, make_capture, random_layout
 
 SIGMAS = (0.0, 0.05, 0.1)
@@ -68,7 +69,7 @@ def main() -> None:
                 take = make_capture(
                     data, w, markers, sigma=sigma, dropout=0.02, holdout=hold, seed=seed, jaw=jaw
                 )
-                methods = evaluate.capture_methods(take.dataset, markers, sigma)
+                methods = lab_methods.capture_methods(take.dataset, markers, sigma)
                 keys = dict(zip(methods, ("disp", "bsfit", "paper", "lgi"), strict=True))
                 rows = {
                     keys[r["method"]]: r

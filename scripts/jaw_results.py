@@ -13,8 +13,8 @@ import time
 import numpy as np
 
 import lgi
-from lgi.jaw import JawRig, estimate_rig
 from lgi.lab.sample import make_sample, sample_dataset
+from lgi.solve.jaw import JawRig, estimate_rig
 
 
 def jitter(v: np.ndarray) -> float:

@@ -4,11 +4,11 @@ and markers sampled on ICT's five identity meshes against the generic layout."""
 
 import numpy as np
 
-from lgi.dataset import Dataset
+from lgi.data.dataset import Dataset
 from lgi.io.livelink import read_livelinkface
 from lgi.lab import ict
 from lgi.lab.capture import make_capture, marker_samples
-from lgi.placement import take_scale
+from lgi.solve.placement import take_scale
 
 D = "../shared/data/ict-facekit"
 d = ict.load_dataset(D)

@@ -28,8 +28,8 @@ import lgi
 from lgi.lab import ict
 from lgi.lab.capture import make_capture
 from lgi.lab.scans import scan_session
-from lgi.model import _auto_rig
-from lgi.noise import _track_noise, fit_noise_bound, tracks_correlation
+from lgi.plan.noise import _track_noise, fit_noise_bound, tracks_correlation
+from lgi.solve.jaw import auto_rig
 from scans_results import layout
 
 STEP = 20
@@ -38,7 +38,7 @@ STEP = 20
 def scans(layouts: list[str]) -> None:
     d, _, jaw, _ = ict_captures.setup()
     skin = ict.skin()
-    rig, theta = _auto_rig(d)
+    rig, theta = auto_rig(d)
     rom, slate = (w for _, w in ict_captures.recordings(d))
     session = scan_session(d, slate, 120, jaw, theta, nonlinear=None)
     print(

@@ -1,5 +1,5 @@
 """LGI's recommended call against the strongest peer a TD has, the fit with the jaw as a joint
-(`lgi.baselines.FitJaw`) and the same with its residual corrective (`FitJawResidual`), in the
+(`lgi.lab.baselines.FitJaw`) and the same with its residual corrective (`FitJawResidual`), in the
 capture protocol (`lgi.lab.evaluate.capture_protocol`: both
 shared Live Link recordings driving ICT with a rotating jaw, 200 frames each, 2 % dropouts,
 markers_120), at two noise levels and with a quarter of the shapes held out or none; mean
@@ -24,7 +24,7 @@ import warnings
 from pathlib import Path
 
 from lgi.lab import evaluate, ict
-from lgi.lab.evaluate import DENOISED, DENOISED_PEER, LOCAL_FITS, LOCAL_FITS_DENOISED
+from lgi.lab.methods import DENOISED, DENOISED_PEER, LOCAL_FITS, LOCAL_FITS_DENOISED
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import ict_captures

@@ -20,7 +20,7 @@ from pathlib import Path
 from typing import Any
 
 from lgi.lab import evaluate, ict
-from lgi.lab.evaluate import AS_RECOMMENDED
+from lgi.lab.methods import AS_RECOMMENDED
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import ict_captures

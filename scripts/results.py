@@ -1,8 +1,8 @@
-"""Writes docs/results.md: LGI and the baselines on the sample's held-out performance, the ICT
-verification frames under marker noise, and ICT leave-one-shape-out. Numbers are as measured on
-the machine that runs it (timings included).
+"""Writes a page of tables (`--out FILE`): LGI and the baselines on the sample's held-out
+performance, the ICT verification frames under marker noise, and ICT leave-one-shape-out.
+Numbers are as measured on the machine that runs it (timings included).
 
-    python scripts/results.py [--ict-dir ../shared/data/ict-facekit] [--loo-shapes N]
+    python scripts/results.py --out FILE [--ict-dir ../shared/data/ict-facekit] [--loo-shapes N]
 """
 
 from __future__ import annotations
@@ -14,8 +14,9 @@ import time
 from pathlib import Path
 
 import lgi
-from lgi.lab import evaluate as ev
 from lgi.lab import ict as ict_data
+from lgi.lab import methods as lab_methods
+from lgi.lab import scoring
 from lgi.lab.sample import make_sample, sample_dataset
 
 ICT_SKIN = ict_data.skin()
@@ -27,7 +28,11 @@ def main() -> int:
     found = ict_data.find(os.environ.get(ict_data.ENV), start=root)
     p.add_argument("--ict-dir", default=str(found) if found else None)
     p.add_argument("--loo-shapes", type=int, default=0, help="0: every shape")
-    p.add_argument("--out", default=str(root / "docs" / "results.md"))
+    p.add_argument(
+        "--out",
+        required=True,
+        help="the page to write (a reference page is not overwritten by default)",
+    )
     args = p.parse_args()
     t_start = time.perf_counter()
     parts = [
@@ -40,7 +45,7 @@ def main() -> int:
         "second difference of vertex positions, cm) and solve time per frame (ms; LGI-RBF "
         "includes its LGI solve).",
         "",
-        "Methods (`lgi.baselines`): *displacement interpolation* spreads the markers' "
+        "Methods (`lgi.lab.baselines`): *displacement interpolation* spreads the markers' "
         "displacements with a 3D biharmonic RBF (phi(r) = r plus a linear polynomial); "
         "*blendshape fit* solves box-penalised least-squares shape weights per frame; "
         "*LGI-RBF* spreads LGI's per-bundle choices with normalised Gaussian weights over UV "
@@ -50,20 +55,20 @@ def main() -> int:
     ]
     s = make_sample(0)
     ds = sample_dataset(s)
-    rows = ev.evaluate(ev.default_methods(ds, s.markers_rest), s.performance, s.truth)
+    rows = scoring.evaluate(lab_methods.default_methods(ds, s.markers_rest), s.performance, s.truth)
     parts += [
         "## Sample: held-out performance (all methods)",
         "",
         f"{s.performance.shape[0]} frames with marker noise and dropouts; every vertex.",
         "",
-        ev.to_markdown(rows),
+        scoring.to_markdown(rows),
     ]
     if args.ict_dir is not None and ict_data.is_ict(args.ict_dir):
         ict = ict_data.load_dataset(args.ict_dir)
         markers = ict_data.load_markers(args.ict_dir)
-        frames, truth = ev.verification(ict, markers)
-        methods = ev.default_methods(ict, markers)
-        rows = ev.noise_sweep(
+        frames, truth = scoring.verification(ict, markers)
+        methods = lab_methods.default_methods(ict, markers)
+        rows = scoring.noise_sweep(
             methods, frames, truth, sigmas=(0.0, 0.05, 0.1, 0.2), region=ICT_SKIN, temporal=False
         )
         for r in rows:
@@ -74,10 +79,12 @@ def main() -> int:
             f"The markers on each of the {ict.num_shapes} dataset shapes, plus Gaussian noise of "
             "standard deviation sigma (cm; 0.2 cm = 2 mm); face skin vertices 0..9408.",
             "",
-            ev.to_markdown(rows),
+            scoring.to_markdown(rows),
         ]
         shapes = None if args.loo_shapes <= 0 else list(range(args.loo_shapes))
-        rows = ev.leave_one_out(ict, markers, ev.default_methods, shapes=shapes, region=ICT_SKIN)
+        rows = scoring.leave_one_out(
+            ict, markers, lab_methods.default_methods, shapes=shapes, region=ICT_SKIN
+        )
         n = ict.num_shapes if shapes is None else len(shapes)
         parts += [
             "## ICT-FaceKit: leave one shape out",
@@ -85,7 +92,7 @@ def main() -> int:
             f"For each of {n} shapes, every method is built without it and solves the markers on "
             "it; errors pooled over the held-out shapes, face skin only.",
             "",
-            ev.to_markdown(rows),
+            scoring.to_markdown(rows),
         ]
     else:
         parts += [f"ICT-FaceKit not found at {args.ict_dir}: ICT sections skipped.", ""]

@@ -2,9 +2,9 @@
 
 1. `rig`: each ICT identity is an actor (its neutral + the ICT expression displacements, the
    FaceKit's own identity + expression composition); the generic ICT rig is the template,
-   deformation-transferred to the actor (`lgi.rig.on_actor`). For combinations of template
+   deformation-transferred to the actor (`lgi.solve.rig.on_actor`). For combinations of template
    shapes: the template rig's linear combination on the actor against LGI's reconstruction
-   (`lgi.rig.actor_rig`, i.e. the rig's shapes plus the corrective), with mesh-quality figures
+   (`lgi.solve.rig.actor_rig`, i.e. the rig's shapes plus the corrective), with mesh-quality figures
    (`lgi.lab.quality`) on the face skin; a Fig. 8-like picture for identity 0.
 2. `volume`: volume of rotating parts (lower teeth in jawOpen, eyeballs in eyeLookUp) at the
    halfway in-between, linear vs ARAP (`Dataset.augmented(method=...)`).
@@ -28,10 +28,11 @@ from pathlib import Path
 import numpy as np
 
 import lgi
-from lgi import rig
 from lgi.io.livelink import read_livelinkface
-from lgi.lab import evaluate, ict, quality
+from lgi.lab import evaluate, ict, quality, scoring
+from lgi.lab import methods as lab_methods
 from lgi.lab.capture import HingeJaw, make_capture
+from lgi.solve import rig
 
 COMBINATIONS = [
     ["noseSneer_L", "mouthUpperUp_L", "cheekSquint_L"],  # Fig. 8: sneer + snarl + lip raiser
@@ -306,8 +307,10 @@ def part_capture(folder: Path, frames: int, quiet: bool) -> list[str]:
                 )
                 for label, ds in augmentations(take.dataset).items():
                     methods = {
-                        "paper": evaluate.Recommended(lgi.Model.build(ds, markers, jaw=None), None),
-                        "lgi": evaluate.Recommended(lgi.Model.build(ds, markers), sigma),
+                        "paper": lab_methods.Recommended(
+                            lgi.Model.build(ds, markers, jaw=None), None
+                        ),
+                        "lgi": lab_methods.Recommended(lgi.Model.build(ds, markers), sigma),
                     }
                     rows = {
                         r["method"]: r
@@ -335,12 +338,12 @@ def part_loo(folder: Path, quiet: bool) -> list[str]:
     ]
     for label in ("as is", "+ linear in-betweens", "+ ARAP in-betweens"):
 
-        def factory(ds: lgi.Dataset, mk: object, label: str = label) -> dict[str, evaluate.Solver]:
+        def factory(ds: lgi.Dataset, mk: object, label: str = label) -> dict[str, scoring.Solver]:
             aug = augmentations_one(ds, label)
             return {label: lgi.Model.build(aug, np.asarray(mk), jaw=None)}
 
         t0 = time.perf_counter()
-        (row,) = evaluate.leave_one_out(data, markers, factory, shapes=ks, region=ict.skin())
+        (row,) = scoring.leave_one_out(data, markers, factory, shapes=ks, region=ict.skin())
         lines.append(f"| {label} | {row['mean']:.4f} | {row['p95']:.4f} | {row['max']:.4f} |")
         if not quiet:
             print(lines[-1], f"({time.perf_counter() - t0:.0f} s)", file=sys.stderr)

@@ -39,13 +39,13 @@ def one(k: int, frames: int) -> dict[str, float]:
     from lgi.lab import ict
     from lgi.lab.capture import HingeJaw, make_capture
     from lgi.lab.scans import scan_session
-    from lgi.model import _auto_rig
+    from lgi.solve.jaw import auto_rig
 
     warnings.filterwarnings("ignore")
     d = ict.load_dataset(ICT)
     markers = ict.load_markers(ICT)
     hinge = HingeJaw.fit(d, ict.lower_teeth())
-    rig, theta = _auto_rig(d)
+    rig, theta = auto_rig(d)
     rom = read_livelinkface(f"{LIVELINK}/alex_rom_4.csv").for_dataset(d.names)
     perf = read_livelinkface(f"{LIVELINK}/jmtechart_myslate_3.csv").for_dataset(d.names)
     t0 = time.perf_counter()
@@ -83,7 +83,7 @@ def one(k: int, frames: int) -> dict[str, float]:
             # What the model's first solve does once (the fit's shape basis per jaw bin; the
             # unbounded fit's solver).
             out[name.replace("_ms", "_first_extra_s")] = times[0] - min(times)
-    from lgi.local import local_pieces
+    from lgi.solve.local import local_pieces
 
     t0 = time.perf_counter()
     local_pieces(model)

@@ -23,7 +23,7 @@ import numpy as np
 
 from lgi.lab import evaluate, ict
 from lgi.lab.capture import random_layout
-from lgi.lab.evaluate import (
+from lgi.lab.methods import (
     DENOISED,
     DENOISED_PEER,
     LOCAL_FITS,

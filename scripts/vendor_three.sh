@@ -2,7 +2,7 @@
 # Vendors three.js for `lgi view` from the npm registry: scripts/vendor_three.sh [VERSION].
 set -euo pipefail
 version="${1:-0.187.0}"
-dest="$(cd "$(dirname "$0")/.." && pwd)/python/lgi/viewer/three"
+dest="$(cd "$(dirname "$0")/.." && pwd)/python/lgi/review/viewer/three"
 work="$(mktemp -d)"
 trap 'rm -rf "$work"' EXIT
 (cd "$work" && npm pack "three@$version" --silent >/dev/null && tar xzf "three-$version.tgz")

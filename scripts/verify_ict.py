@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 
 import lgi
-from lgi.dataset import without_shapes
+from lgi.data.dataset import without_shapes
 from lgi.lab import ict as ict_data
 
 SKIN = ict_data.SKIN_VERTICES

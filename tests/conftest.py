@@ -46,7 +46,7 @@ def rom_scans(ict_dataset):  # type: ignore[no-untyped-def]
     from lgi.lab import ict
     from lgi.lab.capture import HingeJaw, random_layout
     from lgi.lab.scans import scan_session
-    from lgi.model import _auto_rig
+    from lgi.solve.jaw import auto_rig
 
     folder = ict_dir().parent / "livelinkface"
     recordings = [folder / f"{r}.csv" for r in ("alex_rom_4", "jmtechart_myslate_3")]
@@ -54,7 +54,7 @@ def rom_scans(ict_dataset):  # type: ignore[no-untyped-def]
         pytest.skip(f"needs the two shared Live Link recordings in {folder}")
     data = ict_dataset
     hinge = HingeJaw.fit(data, ict.lower_teeth())
-    rig, theta = _auto_rig(data)
+    rig, theta = auto_rig(data)
     rom, slate = (read_livelinkface(r).for_dataset(data.names) for r in recordings)
     session = scan_session(data, slate, 120, hinge, theta, nonlinear=None)
     markers = random_layout(data, 160, 1, np.arange(ict.NARROW_FACE))

@@ -1,5 +1,5 @@
 """The jaw skinning formula (paper Eq. 2) written out in numpy: the test oracle of the core's
-skinning (`lgi.jaw.JawRig`, `lgi_core::jaw`), which the library itself no longer repeats.
+skinning (`lgi.solve.jaw.JawRig`, `lgi_core::jaw`), which the library itself no longer repeats.
 
 theta = (open, lateral, forward) maps p to F R F^T (p - pivot) + pivot + F (0, 0, forward) with
 R = R_y(lateral) @ R_x(open) and F the rig's frame; a point with jaw weight w moves to

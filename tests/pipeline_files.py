@@ -91,7 +91,7 @@ def write_actor(folder: Path, sample, num_shapes: int | None = None) -> ActorFil
 def build_actor(folder: Path, sample, num_shapes: int = 8) -> tuple[ActorFiles, Path]:  # type: ignore[no-untyped-def]
     """`write_actor`'s files in `folder` and their model `folder/actor.lgi`, built in cm
     through the CLI (`lgi build ... --units cm`)."""
-    from lgi import cli
+    from lgi.app import cli
 
     actor = write_actor(folder, sample, num_shapes=num_shapes)
     model = folder / "actor.lgi"
@@ -128,7 +128,7 @@ def write_c3d(
 def lgi_cli(*args: str | Path) -> subprocess.CompletedProcess[str]:
     """Runs `lgi ARGS…` as a TD would, in a subprocess (warnings are errors)."""
     return subprocess.run(
-        [sys.executable, "-m", "lgi.cli", *map(str, args)],
+        [sys.executable, "-m", "lgi.app.cli", *map(str, args)],
         capture_output=True,
         text=True,
         env={**os.environ, "PYTHONWARNINGS": "error"},

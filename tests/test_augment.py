@@ -1,5 +1,5 @@
 """ARAP in-betweens (`Dataset.augmented(n, method="arap")`) and the Poisson solve under them
-(`lgi.deform`), against closed forms: a rotated closed mesh keeps its volume, a linear
+(`lgi.data.deform`), against closed forms: a rotated closed mesh keeps its volume, a linear
 in-between loses the fraction the closed form says; affine maps are reproduced exactly."""
 
 from __future__ import annotations
@@ -11,7 +11,7 @@ from hypothesis import strategies as st
 
 import lgi
 from closed_mesh import ellipsoid, rot_z, volume
-from lgi.deform import PoissonMesh, polar
+from lgi.data.deform import PoissonMesh, polar
 
 
 @pytest.fixture(scope="module")

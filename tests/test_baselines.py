@@ -10,7 +10,7 @@ import pytest
 
 import lgi
 from lgi import _lgi
-from lgi.baselines import BlendshapeFit, DisplacementInterpolation, LgiRbf
+from lgi.lab.baselines import BlendshapeFit, DisplacementInterpolation, LgiRbf
 
 
 def test_rbf_kernel_matches_scipy_linear_rbf_with_linear_polynomial() -> None:
@@ -176,7 +176,7 @@ def test_ict_displacement_interpolation_is_exact_and_blendshape_fit_explains_sha
     ict_dataset,  # type: ignore[no-untyped-def]
     ict_markers,  # type: ignore[no-untyped-def]
 ) -> None:
-    from lgi.lab.evaluate import verification
+    from lgi.lab.scoring import verification
 
     frames, _truth = verification(ict_dataset, ict_markers)
     diag = np.linalg.norm(np.ptp(np.asarray(ict_dataset.neutral), axis=0))
@@ -188,7 +188,7 @@ def test_ict_displacement_interpolation_is_exact_and_blendshape_fit_explains_sha
 
 
 def test_fit_jaw_recovers_frames_made_by_its_own_rig_where_a_box_fit_cannot() -> None:
-    from lgi.baselines import BlendshapeFit, FitJaw
+    from lgi.lab.baselines import BlendshapeFit, FitJaw
     from lgi.lab.sample import make_sample, sample_dataset
 
     s = make_sample(0)
@@ -222,7 +222,7 @@ def test_fit_jaw_recovers_frames_made_by_its_own_rig_where_a_box_fit_cannot() ->
 def test_fit_jaw_unbounded_recovers_weights_outside_the_box_where_fit_jaw_cannot(
     outside_the_box,  # type: ignore[no-untyped-def]
 ) -> None:
-    from lgi.baselines import FitJaw, FitJawUnbounded, FitJawUnboundedResidual
+    from lgi.lab.baselines import FitJaw, FitJawUnbounded, FitJawUnboundedResidual
 
     # Weights in [-1, 2] on the shapes that do not turn the jaw, at the rest pose.
     model, frames, truth = outside_the_box
@@ -237,7 +237,7 @@ def test_fit_jaw_unbounded_recovers_weights_outside_the_box_where_fit_jaw_cannot
 
 
 def test_fit_jaw_residual_left_out_errors_equal_refits_without_each_marker() -> None:
-    from lgi.baselines import FitJaw, FitJawResidual
+    from lgi.lab.baselines import FitJaw, FitJawResidual
     from lgi.lab.sample import make_sample, sample_dataset
 
     s = make_sample(0)
@@ -269,7 +269,7 @@ def test_fit_jaw_residual_left_out_errors_equal_refits_without_each_marker() -> 
 def test_ridge_weights_are_the_normal_equations_solution_with_more_columns_than_rows() -> None:
     from scipy.linalg import lstsq
 
-    from lgi.baselines import ridge_weights
+    from lgi.lab.baselines import ridge_weights
 
     rng = np.random.default_rng(8)
     for rows, cols in ((30, 7), (12, 40)):

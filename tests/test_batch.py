@@ -1,4 +1,4 @@
-"""`lgi.batch.solve_shots` on a `LocalCluster` of two worker processes, as a farm would run
+"""`lgi.app.batch.solve_shots` on a `LocalCluster` of two worker processes, as a farm would run
 it: every take's output equals `Model.solve` on the same frames (read back from the written
 files), a corrupt take fails alone and is recorded in the manifest, a rerun skips the shots that
 are done with the same input and retries the others, a model given as a shared path is loaded
@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 
 import lgi
-from lgi import batch
+from lgi.app import batch
 from pipeline_files import lgi_cli, write_c3d
 
 FPS = 30.0
@@ -410,12 +410,12 @@ def test_a_batch_with_denoise_solves_the_denoised_take_and_records_it(
 def test_a_batch_recommended_solves_the_plan_lgi_solve_reads_and_records_it(
     client, named_model, shots, tmp_path
 ):  # type: ignore[no-untyped-def]
-    from lgi.choices import plan_solve
+    from lgi.plan.choices import plan_solve
 
     take = shots["sh040"]
     written = _one_shot(client, named_model, take, tmp_path / "o", recommended=True)
     plan = plan_solve(np.asarray(take, dtype=np.float64), named_model, recommended=True)
-    ref = named_model.solve(plan.frames, quiet=True, **plan.solve_options())
+    ref = named_model.solve(plan.frames, quiet=True, options=plan.options)
     assert np.array_equal(written.vertices, ref.vertices.astype(np.float32))
     assert written.settings is not None
     assert written.settings.marker_noise == plan.marker_noise

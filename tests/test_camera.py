@@ -13,9 +13,9 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 import lgi
+from lgi.capture.calibration import load_cameras, save_cameras
 from lgi.capture.camera import FisheyeCamera, PinholeCamera, rodrigues
 from lgi.capture.triangulation import triangulate
-from lgi.io.calibration import load_cameras, save_cameras
 
 try:
     import cv2

@@ -124,7 +124,7 @@ def test_the_fit_bound_caps_a_noise_estimate_that_reads_motion_between_distant_f
     sample_model,
 ) -> None:  # type: ignore[no-untyped-def]
     from lgi.errors import LgiWarning
-    from lgi.noise import fit_noise_bound
+    from lgi.plan.noise import fit_noise_bound
 
     _, sample_model = sample_model
     sample_dataset = sample_model.dataset
@@ -298,7 +298,7 @@ def test_capture_protocol_recommended_lgi_beats_both_baselines_on_a_short_real_t
 def test_cli_capture_protocol_mistakes_are_lgi_errors_with_exit_2(
     tmp_path: Path, capsys, argv, message
 ) -> None:  # type: ignore[no-untyped-def]
-    from lgi.cli import main
+    from lgi.app.cli import main
 
     try:
         code = main(["evaluate", *argv, "--out", str(tmp_path / "out")])
@@ -314,7 +314,7 @@ def test_lgi_solve_says_the_noise_warning_in_one_line_of_its_own_words(
 ) -> None:  # type: ignore[no-untyped-def]
     import warnings
 
-    from lgi import cli
+    from lgi.app import cli
 
     _, model = sample_model
     frames = _independent_frames(model, model.dataset, 30, 0.02, 5)

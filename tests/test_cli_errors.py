@@ -1,6 +1,6 @@
 """Every user mistake on the command line ends as `lgi: error: ...` on stderr and exit status 2
 (no traceback): missing, garbled or wrong-kind files, bad options, names that do not match,
-outputs that cannot be written. Run in-process (`lgi.cli.main`); the subprocess path is
+outputs that cannot be written. Run in-process (`lgi.app.cli.main`); the subprocess path is
 `test_pipeline_cli.py`'s."""
 
 from __future__ import annotations
@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from lgi import cli
+from lgi.app import cli
 from pipeline_files import build_actor, write_c3d
 
 

@@ -12,8 +12,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import lgi
-from lgi.denoise import _mp_median, _signal, bulk_noise
 from lgi.errors import InputError
+from lgi.plan.denoise import _mp_median, _signal, bulk_noise
 
 
 def low_rank_take(frames: int, markers: int, rank: int, seed: int) -> np.ndarray:
@@ -126,7 +126,7 @@ def test_denoise_take_refuses_bad_input_in_its_own_words(
 def test_lgi_solve_denoise_says_what_it_kept_and_measures_residuals_on_the_given_markers(
     sample, noise_aware_sample, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:  # type: ignore[no-untyped-def]
-    from lgi.cli import main
+    from lgi.app.cli import main
     from lgi.io.result import read_result_npz
 
     model, sigma = noise_aware_sample

@@ -1,4 +1,4 @@
-"""The detail weight (`lgi.detail`): a solve keeping w of the dataset's detail between the
+"""The detail weight (`lgi.plan.detail`): a solve keeping w of the dataset's detail between the
 markers is `w * solved + (1 - w) * smooth`, the smooth part the biharmonic interpolation of the
 solve's own marker positions (checked against `DisplacementInterpolation`, the baseline that
 interpolates markers by that rule); the estimate from left-out markers is ~1 on the dataset's
@@ -12,8 +12,8 @@ import numpy as np
 import pytest
 
 import lgi
-from lgi.baselines import DisplacementInterpolation
 from lgi.errors import InputError
+from lgi.lab.baselines import DisplacementInterpolation
 
 
 @pytest.fixture(scope="module")
@@ -106,7 +106,7 @@ def test_a_take_with_too_few_markers_or_the_wrong_shape_is_refused(solved) -> No
 def test_cli_solve_reads_the_detail_weight_from_the_take_or_takes_a_number(
     tmp_path: Path, sample, capsys
 ) -> None:  # type: ignore[no-untyped-def]
-    from lgi import cli
+    from lgi.app import cli
     from pipeline_files import build_actor, write_c3d
 
     actor, model = build_actor(tmp_path, sample)

@@ -1,5 +1,5 @@
 """Bad markers named: a swapped label pair and a spiking marker planted in a capture of ICT
-driven by a real Live Link recording are named with their frames, by `lgi.diagnose` and by
+driven by a real Live Link recording are named with their frames, by `lgi.review.diagnose` and by
 `lgi solve` / `lgi info` on the command line; a clean take of the same capture is not
 flagged."""
 
@@ -11,8 +11,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from lgi import cli
-from lgi.diagnose import Finding, diagnose, summary
+from lgi.app import cli
+from lgi.review.diagnose import Finding, diagnose, summary
 from pipeline_files import write_solve
 
 

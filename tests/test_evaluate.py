@@ -7,8 +7,8 @@ from pathlib import Path
 import numpy as np
 
 from lgi import SolveResult
-from lgi.baselines import DisplacementInterpolation
 from lgi.lab import evaluate as ev
+from lgi.lab.baselines import DisplacementInterpolation
 
 
 def test_score_matches_hand_computed_statistics() -> None:
@@ -58,7 +58,7 @@ def test_markdown_and_csv_round_trip(tmp_path: Path) -> None:
 
 
 def test_cli_evaluate_writes_results_and_a_heatmap_panel_of_every_method(tmp_path: Path) -> None:
-    from lgi.cli import main
+    from lgi.app.cli import main
 
     argv = ["evaluate", "--data", "sample", "--protocol", "performance", "--out", str(tmp_path)]
     assert main([*argv, "-q"]) == 0

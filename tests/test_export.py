@@ -194,7 +194,7 @@ def test_export_inputs_are_checked(quads, tmp_path: Path) -> None:  # type: igno
 def test_source_polygons_survive_a_dataset_npz_and_leaving_shapes_out(
     quads, tmp_path: Path
 ) -> None:  # type: ignore[no-untyped-def]
-    from lgi.dataset import without_shapes
+    from lgi.data.dataset import without_shapes
 
     with_shape = lgi.Dataset.from_arrays(
         quads.neutral,

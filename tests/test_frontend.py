@@ -9,11 +9,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from lgi import cli
+from lgi.app import cli
 from lgi.capture import frontend
+from lgi.capture.calibration import save_cameras
 from lgi.capture.stabilize import align, despike, stable_weights
 from lgi.capture.triangulation import triangulate
-from lgi.io.calibration import save_cameras
 from lgi.lab.helmet import head_motion, helmet_cameras, make_helmet_take
 
 

@@ -26,7 +26,7 @@ from hypothesis import strategies as st
 
 import lgi
 from lgi import _lgi
-from lgi.baselines import BlendshapeFit, DisplacementInterpolation, LgiRbf
+from lgi.lab.baselines import BlendshapeFit, DisplacementInterpolation, LgiRbf
 from lgi.lab.sample import make_sample
 from lgi.lab.sample import sample_dataset as dataset_of
 
@@ -474,7 +474,7 @@ def test_fuzzed_c3d_bytes_read_as_a_take_or_raise_input_error(
 def test_fuzzed_takes_pass_the_size_check_or_raise_input_error(
     values: list[float], frames: int
 ) -> None:
-    from lgi.placement import check_scale
+    from lgi.solve.placement import check_scale
 
     rest = _small()[0].markers_rest[:6]
     x = np.tile(np.asarray(values, dtype=np.float64).reshape(1, 6, 3), (frames, 1, 1))

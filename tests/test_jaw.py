@@ -1,4 +1,4 @@
-"""Jaw rig tooling (lgi.jaw): the core's skinning against the numpy oracle, exact unskinning,
+"""Jaw rig tooling (lgi.solve.jaw): the core's skinning against the numpy oracle, exact unskinning,
 the core's pose fit (`JawRig.fit_pose`), rig and theta estimation from synthetic and sample
 shapes, the model's tracked pose on the sample performance, and the ICT-FaceKit jaw (skipped
 when the shared data is absent)."""
@@ -14,12 +14,13 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from jaw_oracle import jaw_transform, skin_jaw, unskin_jaw
-from lgi import _lgi, jaw
+from lgi import _lgi
 from lgi.errors import InputError
 from lgi.lab.ict import ENV as ICT_ENV
 from lgi.lab.ict import LOWER_TEETH
 from lgi.lab.ict import find as find_ict
 from lgi.lab.sample import make_sample
+from lgi.solve import jaw
 
 PIVOT = np.array([0.3, -1.2, 2.5])
 

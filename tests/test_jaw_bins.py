@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 import lgi
-from lgi.jaw import JawRig
+from lgi.solve.jaw import JawRig
 
 OVERLAP = 0.05
 

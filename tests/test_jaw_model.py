@@ -11,7 +11,7 @@ from numpy.typing import ArrayLike
 
 import lgi
 from jaw_oracle import skin_jaw, unskin_jaw
-from lgi.jaw import JawRig, estimate_rig
+from lgi.solve.jaw import JawRig, estimate_rig
 
 
 @pytest.fixture(scope="module")
@@ -241,7 +241,7 @@ def test_jaw_frame_argument_is_checked(sample, sample_dataset):  # type: ignore[
 def test_default_build_estimates_a_jaw_rig_from_the_jaw_shapes_and_jaw_none_turns_it_off(
     sample, sample_dataset
 ) -> None:  # type: ignore[no-untyped-def]
-    from lgi.dataset import without_shapes
+    from lgi.data.dataset import without_shapes
 
     auto = lgi.Model.build(sample_dataset, sample.markers_rest)
     assert auto.jaw_rig is not None

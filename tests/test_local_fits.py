@@ -1,4 +1,4 @@
-"""Local fits (`lgi.local`, `Model.solve(local_fits=True)`): each bundle's piece is the
+"""Local fits (`lgi.plan.local`, `Model.solve(local_fits=True)`): each bundle's piece is the
 box-penalised blendshape fit of the markers in its Gaussian window. Checked against an
 independent minimiser of that objective (scipy), for exact interpolation of every present
 target, for giving back a dataset shape from its own markers, for chunks and `out` buffers,
@@ -19,7 +19,7 @@ from lgi import _lgi
 from lgi.errors import InputError
 from lgi.io.settings import SolveSettings
 from lgi.lab import ict
-from lgi.local import local_pieces
+from lgi.solve.local import local_pieces
 
 
 @pytest.fixture(scope="module")
@@ -209,7 +209,7 @@ def test_local_fits_without_marker_noise_or_with_jaw_bins_are_input_errors(solve
         model.solve(frames, quiet=True, local_fits=True)
     with pytest.raises(InputError, match="fit=False"):
         model.solve(frames, quiet=True, local_fits=True, marker_noise=0.01, fit=False)
-    with pytest.raises(InputError, match="True, False or 'unbounded'"):
+    with pytest.raises(InputError, match="local_fits must be True, False, 'unbounded'"):
         model.solve(frames, quiet=True, local_fits="yes", marker_noise=0.01)  # type: ignore[arg-type]
     binned = lgi.Model.build(data, sample.markers_rest, jaw_bins=2)
     with pytest.raises(InputError, match="jaw bins"):
@@ -253,7 +253,7 @@ def test_cli_local_fits_needs_marker_noise_and_writes_what_model_solve_gives(
     sample,
     capsys,  # type: ignore[no-untyped-def]
 ) -> None:
-    from lgi import cli
+    from lgi.app import cli
 
     model_path, take, out, frames = _c3d_take(tmp_path, sample)
     rc = cli.main(["solve", str(model_path), str(take), "-o", str(out), "--local-fits", "-q"])
@@ -278,7 +278,7 @@ def test_ctrl_c_during_the_local_fits_stops_them_within_a_chunk(solved) -> None:
     import time
 
     from interrupts import python_sigint_handler
-    from lgi.local import FITS_CHUNK, LocalPieces
+    from lgi.solve.local import FITS_CHUNK, LocalPieces
 
     _, model, frames, sigma = solved
     res = model.solve(frames, marker_noise=sigma, quiet=True)
@@ -372,8 +372,8 @@ def test_local_fits_over_a_shape_basis_give_the_surface_of_every_shape(  # type:
         len(shapes) + 3,
         len(shapes),
     )
-    monkeypatch.setattr("lgi.local._lgi.shape_basis", lambda _: None)
-    every = lgi.local.LocalPieces(model)
+    monkeypatch.setattr("lgi.solve.local._lgi.shape_basis", lambda _: None)
+    every = lgi.solve.local.LocalPieces(model)
     assert every.basis_map is None and every.shapes.shape[2] == len(shapes) + 3
     motion = np.abs(shapes).max()
     np.testing.assert_allclose(basis.surface(res), every.surface(res), rtol=0, atol=1e-5 * motion)
@@ -394,7 +394,8 @@ def test_local_fits_at_the_bundles_are_the_surface_sampled_there(solved) -> None
 
 
 def test_the_local_fits_estimate_is_the_left_out_markers_distance_every_way(solved) -> None:  # type: ignore[no-untyped-def]
-    from lgi.local import LEFT_OUT_PER_FRAME, LOOK_SIGNIFICANCE, LOOKS, UNBOUNDED
+    from lgi.plan.local import LEFT_OUT_PER_FRAME, LOOK_SIGNIFICANCE, LOOKS
+    from lgi.solve.local import UNBOUNDED
 
     _, model, frames, sigma = solved
     per_look = 2
@@ -469,8 +470,8 @@ def test_the_local_fits_estimate_is_the_left_out_markers_distance_every_way(solv
 def test_the_looks_boundary_is_crossed_by_chance_as_often_as_one_look_at_significance() -> None:
     from scipy.stats import norm
 
-    from lgi.detail import SIGNIFICANCE
-    from lgi.local import LOOK_SIGNIFICANCE, LOOKS
+    from lgi.plan.detail import SIGNIFICANCE
+    from lgi.plan.local import LOOK_SIGNIFICANCE, LOOKS
 
     # With no saving, the looks' cumulative means are a random walk's scaled partial sums.
     steps = np.random.default_rng(5).standard_normal((1_000_000, LOOKS))
@@ -487,8 +488,8 @@ def test_unbounded_local_fits_that_save_nothing_are_chosen_by_chance_no_more_tha
 ):
     from scipy.stats import norm
 
-    from lgi.detail import SIGNIFICANCE
-    from lgi.local import LOOK_SIGNIFICANCE, LOOKS
+    from lgi.plan.detail import SIGNIFICANCE
+    from lgi.plan.local import LOOK_SIGNIFICANCE, LOOKS
 
     # Bounded local fits that save (their walk drifts up, so they cross), unbounded ones that
     # save no more than nothing: the unbounded kind is chosen only when its own walk crosses,
@@ -505,7 +506,7 @@ def test_unbounded_local_fits_that_save_nothing_are_chosen_by_chance_no_more_tha
 
 
 def test_the_local_fits_estimate_says_what_it_cannot_read() -> None:
-    from lgi.leave_out import leave_markers_out
+    from lgi.plan.leave_out import leave_markers_out
 
     x = np.zeros((3, 5, 3))
     with pytest.raises(InputError, match="local fits: no frame has more than"):
@@ -524,7 +525,7 @@ def test_cli_local_fits_auto_says_its_choice_and_records_it(
     sample,
     capsys,  # type: ignore[no-untyped-def]
 ) -> None:
-    from lgi import cli
+    from lgi.app import cli
 
     model_path, take, out, frames = _c3d_take(tmp_path, sample)
     argv = ["solve", str(model_path), str(take), "-o", str(out), "--local-fits", "auto"]

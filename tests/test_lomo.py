@@ -203,7 +203,7 @@ def test_animface_takes_retarget_onto_ict_at_the_performers_scale_with_a_rigid_s
 def test_cli_lomo_scores_every_method_on_the_real_takes_and_each_beats_no_motion(
     tmp_path: Path,
 ) -> None:
-    from lgi.cli import main
+    from lgi.app.cli import main
 
     _animface()
     out = tmp_path / "lomo"
@@ -222,7 +222,7 @@ def test_cli_lomo_scores_every_method_on_the_real_takes_and_each_beats_no_motion
 
 
 def test_cli_lomo_names_a_take_without_the_animface_markers(tmp_path: Path, capsys) -> None:  # type: ignore[no-untyped-def]
-    from lgi.cli import main
+    from lgi.app.cli import main
 
     d = ict_dir()
     trc = tmp_path / "other.trc"

@@ -134,11 +134,11 @@ def test_verification_with_the_default_jaw_rig_reproduces_observed_skin_to_1e_4(
     from scipy import sparse
 
     import lgi
-    from lgi.lab import evaluate, ict
+    from lgi.lab import ict, scoring
 
     model = lgi.Model.build(ict_dataset, ict_markers)
     assert model.jaw_rig is not None
-    frames, truth = evaluate.verification(ict_dataset, ict_markers)
+    frames, truth = scoring.verification(ict_dataset, ict_markers)
     res = model.solve(frames, temporal=False, quiet=True, marker_noise=0.0)
     w = model.core.sew_weights()
     skin = ict.SKIN_VERTICES

@@ -9,15 +9,10 @@ import numpy as np
 import pytest
 
 import lgi
-from lgi.denoise import bulk_noise
 from lgi.errors import LgiWarning
 from lgi.lab import ict
-from lgi.noise import (
-    MOTION_CORRELATION,
-    _track_noise,
-    fit_noise_bound,
-    tracks_correlation,
-)
+from lgi.plan.denoise import bulk_noise
+from lgi.plan.noise import MOTION_CORRELATION, _track_noise, fit_noise_bound, tracks_correlation
 
 SIGMA = 0.02
 
@@ -106,7 +101,7 @@ def test_a_sparse_noisy_take_flags_only_the_planted_spike(rom_scans) -> None:  #
     # Found trying `lgi solve --marker-noise auto` on this setting: 30-39 "spikes" were listed
     # on a take with no bad marker (ordinary noise corrections, and the tracks' away-and-back
     # between frames a second apart).
-    from lgi.diagnose import diagnose
+    from lgi.review.diagnose import diagnose
 
     _, _, rom, _, model = rom_scans
     take = _take(rom_scans, rom[:: rom.shape[0] // 40][:40])

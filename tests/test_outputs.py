@@ -16,8 +16,8 @@ import numpy as np
 import pytest
 
 import lgi
-from lgi import cli
-from lgi.interrupt import deferred_interrupt
+from lgi.app import cli
+from lgi.app.interrupt import deferred_interrupt
 from lgi.io import sink as sink_module
 from lgi.io.result import read_result_npz
 from pipeline_files import build_actor, write_c3d
@@ -159,7 +159,7 @@ def test_ctrl_c_during_a_deferred_block_is_raised_after_it_never_swallowed() -> 
 _DRIVER = """
 import os, signal, sys
 import lgi
-from lgi import cli
+from lgi.app import cli
 real = lgi.Model.solve
 def solve_then_ctrl_c(*a, **k):
     os.kill(os.getpid(), signal.SIGINT)

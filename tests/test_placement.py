@@ -12,9 +12,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.spatial.transform import Rotation
 
-from lgi import cli
+from lgi.app import cli
 from lgi.errors import InputError
-from lgi.placement import SCALE_TOLERANCE, check_scale, take_scale
+from lgi.solve.placement import SCALE_TOLERANCE, check_scale, take_scale
 from pipeline_files import build_actor, write_c3d
 
 

@@ -1,4 +1,4 @@
-"""`--recommended` (`lgi.choices.plan_solve(recommended=True)`): every solve option read from
+"""`--recommended` (`lgi.plan.choices.plan_solve(recommended=True)`): every solve option read from
 the take, checked against the readings it is made of, called one at a time, and `lgi solve
 --recommended` end to end against `Model.solve` of the plan."""
 
@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 
 import lgi
-from lgi import choices
-from lgi.choices import plan_solve
+from lgi.plan import choices
+from lgi.plan.choices import plan_solve
 
 
 def test_recommended_is_the_readings_it_is_made_of_called_one_after_another(
@@ -64,14 +64,14 @@ def test_recommended_reads_the_detail_weight_only_where_no_local_fits_are_used(
     monkeypatch.setattr(choices, "fits_choice", fits)
     monkeypatch.setattr(choices, "detail_weight", weight)
     monkeypatch.setattr(choices, "take_prior_choice", lambda *a, **k: None)
-    plan = plan_solve(x, model, noise=sigma, recommended=True)
+    plan = plan_solve(x, model, marker_noise=sigma, recommended=True)
     assert plan.local_fits == local
     assert read == ([] if local else ["auto"])
     assert plan.detail_weight == (None if local else 0.5)
     # A detail weight given is kept, local fits or not.
     read.clear()
-    given = plan_solve(x, model, noise=sigma, detail="0.25", recommended=True)
-    assert read == ["0.25"] and given.detail_weight == 0.5
+    given = plan_solve(x, model, marker_noise=sigma, detail_weight="0.25", recommended=True)
+    assert read == [0.25] and given.detail_weight == 0.5
 
 
 def test_recommended_keeps_the_options_given_and_leaves_noise_free_markers_as_given(
@@ -80,7 +80,9 @@ def test_recommended_keeps_the_options_given_and_leaves_noise_free_markers_as_gi
     model, _ = noise_aware_sample
     x = np.asarray(sample.performance, dtype=np.float64)[:30]
     said: list[str] = []
-    plan = plan_solve(x, model, noise=0.0, unbounded_fit=True, recommended=True, say=said.append)
+    plan = plan_solve(
+        x, model, marker_noise=0.0, fit="unbounded", recommended=True, say=said.append
+    )
     assert plan.denoised is None and plan.given_noise == plan.marker_noise == 0.0
     assert "not denoised: the markers' noise is 0 (nothing to remove)" in said
     assert plan.unbounded_fit and plan.fit == "unbounded"
@@ -89,19 +91,19 @@ def test_recommended_keeps_the_options_given_and_leaves_noise_free_markers_as_gi
     # --marker-noise none (every marker interpolated as given): nothing to denoise, and local
     # fits (which fit the noise-aware targets) are not read; said, not an error.
     said.clear()
-    exact = plan_solve(x, model, noise="none", recommended=True, say=said.append)
+    exact = plan_solve(x, model, marker_noise="none", recommended=True, say=said.append)
     assert exact.marker_noise is None and exact.denoised is None and exact.local_fits is False
     assert "not denoised: no marker noise (nothing to remove)" in said
     assert any(line.startswith("local fits not read: no marker noise") for line in said)
     # Without --recommended, --denoise asked for noise-free markers is an error, as before.
-    with pytest.raises(lgi.InputError, match="--denoise needs the markers' noise above 0"):
-        plan_solve(x, model, noise=0.0, denoise=True)
+    with pytest.raises(lgi.InputError, match="denoise needs marker_noise above 0"):
+        plan_solve(x, model, marker_noise=0.0, denoise=True)
 
 
 def test_lgi_solve_recommended_writes_model_solve_of_its_plan_and_records_it(
     sample, noise_aware_sample, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:  # type: ignore[no-untyped-def]
-    from lgi.cli import main
+    from lgi.app.cli import main
     from lgi.io.result import read_result_npz
 
     model, _ = noise_aware_sample
@@ -115,7 +117,7 @@ def test_lgi_solve_recommended_writes_model_solve_of_its_plan_and_records_it(
     said = capsys.readouterr().err
     assert choices.RECOMMENDED in said and "denoised the take:" in said, said
     plan = plan_solve(markers, model, recommended=True)
-    ref = model.solve(plan.frames, quiet=True, **plan.solve_options())
+    ref = model.solve(plan.frames, quiet=True, options=plan.options)
     r = read_result_npz(out)
     np.testing.assert_array_equal(r.vertices, ref.vertices.astype(np.float32))
     assert r.settings is not None

@@ -13,10 +13,10 @@ import pytest
 import lgi
 from interrupts import python_sigint_handler, sigint_at
 from lgi import _lgi
-from lgi.baselines import BlendshapeFit, DisplacementInterpolation, LgiRbf
-from lgi.jaw import JawRig
+from lgi.lab.baselines import BlendshapeFit, DisplacementInterpolation, LgiRbf
 from lgi.lab.sample import make_sample
 from lgi.lab.sample import sample_dataset as dataset_of
+from lgi.solve.jaw import JawRig
 
 
 @pytest.fixture(scope="module")

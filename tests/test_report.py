@@ -13,7 +13,7 @@ import pytest
 from lgi.errors import InputError
 from lgi.io.result import Result, read_result_npz, write_result_npz
 from lgi.io.topology import Topology
-from lgi.report import compare, marker_stats, render_report
+from lgi.review.report import compare, marker_stats, render_report
 from pipeline_files import lgi_cli, spiked_sample_take, write_solve
 
 
@@ -173,7 +173,7 @@ def test_lgi_solve_report_writes_the_page_of_the_solve_naming_a_swap(
 
 
 def test_a_report_and_a_view_read_a_usd_cache_lgi_solve_wrote(spiked: Path, tmp_path: Path) -> None:
-    from lgi.view import load
+    from lgi.review.view import load
 
     usd = tmp_path / "spiked.usd"
     assert lgi_cli("export", spiked, "-o", usd, "-q").returncode == 0
@@ -188,3 +188,35 @@ def test_a_report_and_a_view_read_a_usd_cache_lgi_solve_wrote(spiked: Path, tmp_
     npz = read_result_npz(spiked)
     np.testing.assert_array_equal(view.solved.vertices, npz.vertices)
     np.testing.assert_allclose(view.solved.bundle_residuals, npz.bundle_residuals, rtol=1e-6)
+
+
+def test_the_viewer_answers_its_own_address_and_refuses_a_foreign_host(spiked: Path) -> None:
+    """DNS rebinding: a request that reaches the port under another name gets 403, nothing of
+    the take; the address `serve` printed (and `localhost` at its port) gets the page."""
+    import http.client
+
+    from lgi.review.view import load, serve
+
+    server, url = serve(load(spiked))
+    try:
+        port = server.server_address[1]
+
+        def get(host: str, path: str = "/meta.json") -> tuple[int, bytes]:
+            conn = http.client.HTTPConnection("127.0.0.1", port, timeout=30)
+            try:
+                conn.request("GET", path, headers={"Host": host})
+                r = conn.getresponse()
+                return r.status, r.read()
+            finally:
+                conn.close()
+
+        assert url == f"http://127.0.0.1:{port}/"
+        status, body = get(f"127.0.0.1:{port}")
+        assert status == 200 and b'"frames"' in body
+        assert get(f"localhost:{port}")[0] == 200
+        for foreign in (f"evil.example:{port}", "127.0.0.1", f"127.0.0.1:{port + 1}", ""):
+            status, body = get(foreign)
+            assert status == 403 and b'"frames"' not in body, foreign
+    finally:
+        server.shutdown()
+        server.server_close()

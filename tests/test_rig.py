@@ -1,4 +1,4 @@
-"""Actor rigs from a template (`lgi.rig.actor_rig`, paper §7.7): with the actor's own shapes
+"""Actor rigs from a template (`lgi.solve.rig.actor_rig`, paper §7.7): with the actor's own shapes
 as the template the rig reproduces them on observed skin (the verification notion of
 test_model_ict.py), correctives vanish for combinations the dataset holds, deformation transfer
 from a moved copy of the template gives the same rig, and bad templates are clear errors."""
@@ -11,9 +11,9 @@ from scipy import sparse
 
 import lgi
 from closed_mesh import ellipsoid, rot_z
-from lgi import rig
-from lgi.dataset import with_shapes
+from lgi.data.dataset import with_shapes
 from lgi.lab import ict
+from lgi.solve import rig
 
 
 def observed(model: lgi.Model, meshes: np.ndarray) -> np.ndarray:

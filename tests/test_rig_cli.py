@@ -1,5 +1,5 @@
 """`lgi rig MODEL NEUTRAL SHAPES -o OUT`: the actor rig written as USD, glTF or `.npz` equals
-`lgi.rig.actor_rig` on the same inputs; every mistake is `lgi: error: ...` and exit 2."""
+`lgi.solve.rig.actor_rig` on the same inputs; every mistake is `lgi: error: ...` and exit 2."""
 
 from __future__ import annotations
 
@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 
 import lgi
-from lgi import cli, rig
+from lgi.app import cli
+from lgi.solve import rig
 from pipeline_files import write_actor
 
 

@@ -12,8 +12,8 @@ import numpy as np
 import pytest
 
 import lgi
-from lgi import rig
 from lgi.io.rig import gltf_vertices, write_gltf_rig, write_usd_rig
+from lgi.solve import rig
 
 
 @pytest.fixture(scope="module")
@@ -95,7 +95,7 @@ def test_usd_rig_deforms_like_the_weighted_sum_under_pxr(small_rig, tmp_path: Pa
 def test_gltf_splits_ict_vertices_at_uv_seams_and_keeps_each_corners_uv(
     ict_dataset, tmp_path: Path
 ) -> None:  # type: ignore[no-untyped-def]
-    small = lgi.dataset.with_shapes(ict_dataset, ict_dataset.shapes[:2], ict_dataset.names[:2])
+    small = lgi.data.dataset.with_shapes(ict_dataset, ict_dataset.shapes[:2], ict_dataset.names[:2])
     back = lgi.Dataset.from_gltf(write_gltf_rig(tmp_path / "ict.glb", small))
     source, tris = gltf_vertices(small)
     assert back.num_vertices == len(source) > small.num_vertices  # ICT has seams

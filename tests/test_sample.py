@@ -13,8 +13,8 @@ from numpy.typing import NDArray
 from scipy.spatial.transform import Rotation
 
 from lgi.errors import DatasetError, DatasetFileError, InputError
-from lgi.jaw import JawRig
 from lgi.lab.sample import Sample, describe, load_sample, make_sample, save_sample
+from lgi.solve.jaw import JawRig
 
 F64 = NDArray[np.float64]
 

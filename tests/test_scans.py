@@ -65,7 +65,7 @@ def test_each_scan_is_the_capture_truth_of_its_picked_frame(ict_dataset) -> None
 
 
 def test_cli_scans_protocol_scores_every_method_on_both_recordings(tmp_path: Path) -> None:
-    from lgi.cli import main
+    from lgi.app.cli import main
 
     folder = ict_dir().parent / "livelinkface"
     if len(list(folder.glob("*.csv"))) < 2:

@@ -45,7 +45,7 @@ def test_settings_round_trip_as_json_and_describe_themselves() -> None:
     assert "no marker noise" in plain.describe(None)
     assert "all of the dataset's detail" in plain.describe(None)
     # A denoised take's settings say the noise it was given and the directions it kept.
-    from lgi.denoise import DenoisedTake
+    from lgi.plan.denoise import DenoisedTake
 
     taken = DenoisedTake(np.zeros((2, 1, 3)), 0.0168, 0.05, 15, 1)
     den = of(
@@ -106,7 +106,7 @@ def test_damaged_settings_are_refused_naming_the_file_and_key(text: str, message
 def test_lgi_solve_records_its_settings_in_the_npz_and_info_and_report_show_them(
     files, tmp_path: Path, capsys
 ) -> None:  # type: ignore[no-untyped-def]
-    from lgi import cli
+    from lgi.app import cli
 
     model, take = files
     out = tmp_path / "o.npz"
@@ -138,7 +138,7 @@ def test_the_usd_cache_keeps_the_settings_and_export_carries_them_on(
 ) -> None:  # type: ignore[no-untyped-def]
     from pxr import Usd
 
-    from lgi import cli
+    from lgi.app import cli
     from lgi.io.usd import read_usd_cache
 
     model, take = files
@@ -167,7 +167,7 @@ def test_the_usd_cache_keeps_the_settings_and_export_carries_them_on(
 def test_a_result_written_before_settings_were_kept_reads_and_reports_not_recorded(
     sample_dataset, tmp_path: Path
 ) -> None:  # type: ignore[no-untyped-def]
-    from lgi.report import render_report
+    from lgi.review.report import render_report
 
     topo = topology(sample_dataset)
     f, b = 2, 5

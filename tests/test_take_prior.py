@@ -18,7 +18,8 @@ from hypothesis import strategies as st
 import lgi
 from fit_reference import fit_reference
 from lgi.io.settings import SolveSettings
-from lgi.take_prior import TakePrior, shrinkage_factors, with_ridge
+from lgi.plan.take_prior import shrinkage_factors, with_ridge
+from lgi.solve.take_prior import TakePrior
 
 SIGMA = 0.02
 
@@ -165,7 +166,7 @@ def test_solve_iter_with_the_take_prior_equals_one_solve(two_directions: Any) ->
 def _rows_read(out: Any, frames_read: int) -> np.ndarray:
     """The left-out rows the looks read to reach `frames_read` frames: look k reads every
     LOOKS-th picked frame from the k-th."""
-    from lgi.leave_out import LOOKS
+    from lgi.plan.leave_out import LOOKS
 
     ordinal = np.arange(out.picked.size) % LOOKS
     seen = next(
@@ -195,8 +196,8 @@ def _left_out_error(
 def _left_out_with_held_rows(model: Any, frames: np.ndarray) -> tuple[Any, Any]:
     """The rows the estimates leave out at `frames_used=2` and the prior's rows read from the
     frames none of them leaves a marker out of."""
-    from lgi.leave_out import LOOKS, leave_markers_out
-    from lgi.take_prior import TakeRows
+    from lgi.plan.leave_out import LOOKS, leave_markers_out
+    from lgi.plan.take_prior import TakeRows
 
     out = leave_markers_out(np.asarray(frames), LOOKS * 2, 30)
     others = np.setdiff1d(np.arange(len(frames)), out.picked)
@@ -235,7 +236,7 @@ def test_the_unbounded_fits_reading_with_the_take_prior_solves_it_as_it_would_be
 
 
 def test_a_prior_read_without_a_marker_does_not_depend_on_its_track(two_directions: Any) -> None:
-    from lgi.take_prior import TakeRows
+    from lgi.plan.take_prior import TakeRows
 
     model, frames, _, _ = two_directions
     rows = TakeRows(model, frames, SIGMA)
@@ -264,7 +265,7 @@ def test_take_prior_errors_say_what_is_wrong(two_directions: Any) -> None:
         lgi.estimate_take_prior(model, frames[:1], SIGMA)
     with pytest.raises(lgi.InputError, match=r"fit='unbounded'"):
         model.solve(frames, marker_noise=SIGMA, take_prior=prior, quiet=True)
-    with pytest.raises(lgi.InputError, match=r"expected an lgi\.TakePrior"):
+    with pytest.raises(lgi.InputError, match=r"or an lgi\.TakePrior"):
         model.solve(frames, marker_noise=SIGMA, fit="unbounded", take_prior=(1, 2), quiet=True)  # type: ignore[arg-type]
     other = TakePrior(prior.mean[:-1], prior.factor[:-1], SIGMA, prior.directions, 2)
     with pytest.raises(lgi.InputError, match=r"made for .* shapes"):
@@ -297,7 +298,7 @@ def test_cli_take_prior_writes_what_model_solve_gives_and_says_its_reading(
     sample: Any,
     capsys: pytest.CaptureFixture[str],
 ) -> None:
-    from lgi import cli
+    from lgi.app import cli
     from pipeline_files import build_actor, write_c3d
 
     actor, model_path = build_actor(tmp_path, sample)
@@ -342,7 +343,7 @@ def test_cli_take_prior_writes_what_model_solve_gives_and_says_its_reading(
 
 
 def test_take_prior_auto_says_why_it_was_not_read(two_directions: Any) -> None:
-    from lgi.choices import take_prior_choice
+    from lgi.plan.choices import take_prior_choice
 
     model, frames, _, _ = two_directions
     said: list[str] = []
@@ -354,5 +355,6 @@ def test_take_prior_auto_says_why_it_was_not_read(two_directions: Any) -> None:
         "take prior not read: no --marker-noise (every marker interpolated as given)",
         "take prior not read: the markers are noise-free",
     ]
-    with pytest.raises(lgi.InputError, match="expected no value or 'auto'"):
-        take_prior_choice("Auto", frames, model, SIGMA, "auto", said.append, True)
+    # A take_prior that is none of these is refused where the options are built, once.
+    with pytest.raises(lgi.InputError, match=r"take_prior must be True, False or .auto."):
+        lgi.SolveOptions(take_prior="Auto")

@@ -72,7 +72,7 @@ def test_solve_iter_with_the_unbounded_fit_equals_one_solve(outside_the_box) -> 
 def test_a_fit_argument_lgi_does_not_know_is_an_input_error(outside_the_box) -> None:  # type: ignore[no-untyped-def]
     model, frames, _ = outside_the_box
     for bad in ("Unbounded", "free", 2.0):
-        with pytest.raises(lgi.InputError, match="fit: expected True, False, None or 'unbounded'"):
+        with pytest.raises(lgi.InputError, match="fit must be True, False, None, 'unbounded'"):
             model.solve(frames, fit=bad, quiet=True)  # type: ignore[arg-type]
 
 
@@ -100,7 +100,7 @@ def test_cli_unbounded_fit_writes_what_model_solve_gives_and_records_it(
     sample,
     capsys,  # type: ignore[no-untyped-def]
 ) -> None:
-    from lgi import cli
+    from lgi.app import cli
     from pipeline_files import build_actor, write_c3d
 
     actor, model_path = build_actor(tmp_path, sample)
@@ -157,7 +157,7 @@ def _brute_force_choice(model, frames, sigma, per_look):  # type: ignore[no-unty
     own with the boxed and the unbounded fit; the looks read every LOOKS-th picked frame; used
     when the mean per-frame saving clears LOOK_SIGNIFICANCE standard errors, stopped when it is
     negative. Returns (use, frames read, mean distances boxed and unbounded over them)."""
-    from lgi.local import LEFT_OUT_PER_FRAME, LOOK_SIGNIFICANCE, LOOKS
+    from lgi.plan.local import LEFT_OUT_PER_FRAME, LOOK_SIGNIFICANCE, LOOKS
 
     present = np.isfinite(frames).all(axis=2)
     usable = np.flatnonzero(present.sum(axis=1) > _lgi.MIN_PRESENT_MARKERS)
@@ -234,7 +234,7 @@ def test_both_auto_read_the_local_fits_first_and_the_fit_only_without_them(
     want: tuple[bool | str, bool],
     reads: list[str],
 ) -> None:
-    from lgi import choices
+    from lgi.plan import choices
 
     calls: list[str] = []
 
@@ -257,7 +257,7 @@ def test_both_auto_read_the_local_fits_first_and_the_fit_only_without_them(
 def test_unbounded_local_fits_given_bring_the_unbounded_fit_without_reading_anything(
     outside_the_box,  # type: ignore[no-untyped-def]
 ) -> None:
-    from lgi import choices
+    from lgi.plan import choices
 
     model, frames, _ = outside_the_box
     said: list[str] = []

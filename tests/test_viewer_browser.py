@@ -41,7 +41,7 @@ def solved_pair(sample, sample_model, tmp_path_factory):  # type: ignore[no-unty
 
 @pytest.fixture(scope="module")
 def page(solved_pair) -> Iterator[tuple[Any, str]]:  # type: ignore[no-untyped-def]
-    from lgi import view
+    from lgi.review import view
 
     driver = _browser()
     server, url = view.serve(view.load(solved_pair[0], solved_pair[1]))

@@ -502,7 +502,7 @@ class RbfInterpolator:
 @final
 class LocalFits:
     """Each bundle's box-penalised blendshape fit of the markers in its Gaussian window
-    (`lgi.local`)."""
+    (`lgi.plan.local`)."""
 
     def __new__(
         cls, a: ArrayLike, rest: ArrayLike, l2: float, penalty: float, lengths: float = ...

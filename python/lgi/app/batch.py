@@ -7,8 +7,8 @@ address or a `Client` runs the same code on a real cluster (docs/scale.md)."""
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
-import inspect
 import json
 import os
 import re
@@ -22,13 +22,13 @@ from typing import Any
 
 import numpy as np
 
-from lgi.detail import check_detail_weight
+from lgi.app.pipeline import check_take_scale, plan_take, read_take
+from lgi.app.write import write_solved
 from lgi.errors import InputError
-from lgi.io import takes as take_files
 from lgi.io.atomic import atomic_path, writable_folder
 from lgi.io.topology import topology
-from lgi.local import UNBOUNDED
-from lgi.model import Model
+from lgi.solve.model import Model
+from lgi.solve.options import SolveOptions
 
 __all__ = [
     "MANIFEST",
@@ -115,66 +115,34 @@ def _sha256_array(a: np.ndarray) -> str:
     return h.hexdigest()
 
 
-def _solve_keywords() -> set[str]:
-    """The options `Model.solve` takes that a batch passes on (not `quiet` or `out`)."""
-    params = inspect.signature(Model.solve).parameters
-    return {n for n, p in params.items() if p.kind is p.KEYWORD_ONLY} - {"quiet", "out"}
-
-
-def _check_options(options: dict[str, Any]) -> str:
-    """The solve options as canonical JSON (hashed into the settings); unknown names and
-    values that a manifest cannot record are `InputError`s."""
-    unknown = sorted(set(options) - _solve_keywords() - {"denoise", "recommended"})
+def _options(options: SolveOptions | None, given: dict[str, Any]) -> SolveOptions:
+    """The batch's solve options, built once (`SolveOptions`) from `options` or the keywords
+    `given`; unknown names are an InputError naming the known ones."""
+    if options is not None:
+        if given:
+            raise InputError("solve_shots: give the solve options as options= or as keywords")
+        if not isinstance(options, SolveOptions):
+            raise InputError(
+                f"solve_shots: options must be an lgi.SolveOptions, got {type(options).__name__}"
+            )
+        return options
+    known = {f.name for f in dataclasses.fields(SolveOptions)} - {"cli"}
+    unknown = sorted(set(given) - known)
     if unknown:
         raise InputError(
-            f"solve_shots: unknown solve options {unknown} (Model.solve takes "
-            f"{', '.join(sorted(_solve_keywords()))})"
+            f"solve_shots: unknown solve options {unknown} (it takes {', '.join(sorted(known))})"
         )
-    if "jaw" in options and options["jaw"] is not None and not isinstance(options["jaw"], str):
-        raise InputError("solve_shots: jaw must be a mode ('auto', 'fit', 'track') or None")
-    noise = options.get("marker_noise")
-    if isinstance(noise, str) and noise != "auto":
-        raise InputError(
-            f"solve_shots: marker_noise must be a number, 'auto' or None, got {noise!r}"
-        )
-    detail = options.get("detail_weight")
-    if detail is not None and detail != "auto":
-        check_detail_weight(detail)
-    local = options.get("local_fits", False)
-    if not isinstance(local, bool) and local not in ("auto", UNBOUNDED):
-        raise InputError(
-            f"solve_shots: local_fits must be True, False, 'unbounded' or 'auto', got {local!r}"
-        )
-    fit = options.get("fit")
-    if not (fit is None or isinstance(fit, bool) or fit in (UNBOUNDED, "auto")):
-        raise InputError(
-            f"solve_shots: fit must be True, False, None, 'unbounded' or 'auto', got {fit!r}"
-        )
-    prior = options.get("take_prior", False)
-    if not (isinstance(prior, bool) or prior == "auto"):
-        raise InputError(f"solve_shots: take_prior must be True, False or 'auto', got {prior!r}")
-    denoise = options.get("denoise", False)
-    if not isinstance(denoise, bool):
-        raise InputError(f"solve_shots: denoise must be True or False, got {denoise!r}")
-    if not isinstance(options.get("recommended", False), bool):
-        raise InputError(
-            f"solve_shots: recommended must be True or False, got {options['recommended']!r}"
-        )
-    if denoise and (noise is None or (not isinstance(noise, str) and noise <= 0)):
-        raise InputError(
-            "solve_shots: denoise needs marker_noise above 0 (a number or 'auto'): there is "
-            "nothing to remove"
-        )
-    if local and noise is None:
-        raise InputError(
-            "solve_shots: local_fits needs marker_noise (a number, 'auto', or 0 for clean "
-            "markers): the local fits fit the noise-aware targets"
-        )
+    return SolveOptions(**given)
+
+
+def _recorded(options: SolveOptions) -> str:
+    """The options given as canonical JSON (hashed into the settings); a value a manifest
+    cannot record (a `TakePrior`: read one per take with take_prior=True) is an InputError."""
     try:
-        return json.dumps(options, sort_keys=True, allow_nan=False)
+        return json.dumps(options.record(), sort_keys=True, allow_nan=False)
     except (TypeError, ValueError):
         raise InputError(
-            f"solve_shots: solve options must be plain values, got {options!r}"
+            f"solve_shots: solve options must be plain values, got {options.record()!r}"
         ) from None
 
 
@@ -269,7 +237,7 @@ def solve_shot(
     dest: str,
     *,
     kind: str,
-    options: dict[str, Any],
+    options: SolveOptions,
     allow_missing: bool = False,
     take_units: str | None = None,
     fps: float | None = None,
@@ -287,63 +255,29 @@ def solve_shot(
             lgi.set_num_threads(threads)
         m = _worker_model(model)
         if isinstance(take, str):
-            t = take_files.read(
-                take,
-                m.marker_names,
-                units=m.units,
-                take_units=take_units,
-                allow_missing=allow_missing,
-            )
+            t = read_take(take, m, take_units=take_units, allow_missing=allow_missing)
             x, rate, start = t.frames, fps if fps is not None else t.fps, t.first_frame
-            from lgi.pipeline import check_take_scale
-
             check_take_scale(t, t.frames, m, stated=take_units is not None)
         else:
             x, rate, start = take, fps, 0
         frames = int(x.shape[0])
-        # What is solved and how, each option as given or read from the take
-        # (`lgi.choices.plan_solve`, as `lgi solve` plans it); the residuals written stay the
-        # given markers' (`given`) where the take is denoised first.
-        from lgi.choices import plan_solve
-        from lgi.pipeline import solved_residuals
-
-        opts = dict(options)
-        fit = opts.pop("fit", None)
-        jaw = opts.pop("jaw", "auto")
-        plan = plan_solve(
-            x,
-            m,
-            noise=opts.pop("marker_noise", None),
-            denoise=opts.pop("denoise", False),
-            local_fits=opts.pop("local_fits", False),
-            unbounded_fit="auto" if fit == "auto" else fit == UNBOUNDED,
-            take_prior=opts.pop("take_prior", False),
-            detail=opts.pop("detail_weight", None),
-            jaw=jaw,
-            recommended=opts.pop("recommended", False),
-        )
-        given, x = x, plan.frames
-        opts.update(plan.solve_options())
-        if not plan.unbounded_fit and fit != "auto":
-            opts["fit"] = fit  # True, False (no global fit) or None, as given
+        # What is solved and how, each option as given or read from the take, as `lgi solve`
+        # plans it (`lgi.app.pipeline.plan_take`); the residuals written stay the given markers'.
+        planned = plan_take(x, m, options)
         if kind == "usd" and rate is None:
             raise InputError("the take has no frame rate; a USD point cache needs fps=")
-        res = m.solve(x, quiet=True, **opts)
-        from lgi.pipeline import write_solved
-
-        topo = topology(m.dataset)
-        settings = plan.settings(has_jaw_rig=m.jaw_rig is not None, jaw=jaw)
+        res = m.solve(planned.plan.frames, quiet=True, options=planned.plan.options)
         written = write_solved(
             kind,
             Path(dest),
-            topo,
+            topology(m.dataset),
             res,
             m,
             fps=rate,
             start=start,
             quiet=True,
-            settings=settings,
-            residuals=solved_residuals(res, given, plan.denoised),
+            settings=planned.settings,
+            residuals=planned.residuals(res),
         )
         return {
             "status": "done",
@@ -427,6 +361,7 @@ def solve_shots(
     allow_missing: bool = False,
     take_units: str | None = None,
     quiet: bool = False,
+    options: SolveOptions | None = None,
     **solve_options: Any,
 ) -> BatchResult:
     """Solves every take of `takes` (shot name -> a take file `lgi.io.takes.read` reads, or an
@@ -442,12 +377,9 @@ def solve_shots(
     (`lgi.set_num_threads`); default: the cores shared among the local workers, or the
     worker's own default on a given cluster.
 
-    `solve_options` go to `Model.solve` (`marker_noise`, `detail_weight`, `local_fits` and
-    `fit` may also be "auto": estimated per take, the detail weight, the local fits' choice
-    (`lgi.estimate_local_fits`) and the fit's (`lgi.estimate_unbounded_fit`: "unbounded" or
-    None), with the take's noise; `take_prior` is True, False or "auto": the take's prior on
-    the unbounded fit read per take, `lgi.estimate_take_prior`, or where it predicts the take's
-    left-out markers better, `lgi.estimate_take_prior_use`); `fps` is the
+    `options` (a `SolveOptions`, or its fields as keywords `solve_options`) are planned per
+    take as `lgi solve` plans them (`lgi.plan_solve`: 'auto' values read from each take,
+    `recommended` every default); `fps` is the
     output's frame rate when the take has none (arrays); `allow_missing` and `take_units` are
     `lgi.io.takes.read`'s.
 
@@ -470,7 +402,8 @@ def solve_shots(
     if fps is not None and not (isinstance(fps, (int, float)) and np.isfinite(fps) and fps > 0):
         raise InputError(f"fps must be a positive number, got {fps!r}")
     _check_client(client, workers)
-    options_json = _check_options(solve_options)
+    options = _options(options, solve_options)
+    options_json = _recorded(options)
     if isinstance(model, Model):
         the_model: Model = model
         model_bytes = model.to_bytes()
@@ -559,7 +492,7 @@ def solve_shots(
                 take,
                 os.fspath(dest.resolve()),
                 kind=output,
-                options=dict(solve_options),
+                options=options,
                 allow_missing=allow_missing,
                 take_units=take_units,
                 fps=fps,

@@ -2,10 +2,11 @@
 docs/capture-front-end.md): `camera` (OpenCV-convention fisheye and pinhole cameras),
 `triangulation` (tracks to 3D points, single-view markers as rays), `stabilize` (the head's
 motion removed: robust rigid alignment, stable weights, despike), `rays` (single-view markers
-as ray constraints around `Model.solve`) and `frontend` (the chain in one call). Calibration
-and track files are `lgi.io`'s.
+as ray constraints around `Model.solve`), `frontend` (the chain in one call) and
+`calibration` (camera calibration files, OpenCV FileStorage YAML/JSON). Track files are
+`lgi.io.tracks`'.
 """
 
-from lgi.capture import camera, frontend, rays, stabilize, triangulation
+from lgi.capture import calibration, camera, frontend, rays, stabilize, triangulation
 
-__all__ = ["camera", "frontend", "rays", "stabilize", "triangulation"]
+__all__ = ["calibration", "camera", "frontend", "rays", "stabilize", "triangulation"]

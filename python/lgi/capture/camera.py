@@ -2,7 +2,7 @@
 
 `FisheyeCamera` is `cv2.fisheye`'s Kannala-Brandt model and `PinholeCamera` `cv2.projectPoints`'s
 radial-tangential model; both map world points with `x_cam = R X + t` (R, t world to camera, as
-OpenCV's rvec/tvec), so calibrations from OpenCV drop in (their files: `lgi.io.calibration`).
+OpenCV's rvec/tvec), so calibrations from OpenCV drop in (their files: `lgi.capture.calibration`).
 Everything is vectorised numpy; OpenCV itself is only the tests' reference. Un-projection
 inverts the distortion by Newton's method to machine precision (OpenCV's fixed-count iteration
 is weak near the image border).

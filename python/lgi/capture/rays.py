@@ -17,7 +17,7 @@ from lgi._lgi import SolveResult
 from lgi.capture.camera import Rays
 from lgi.capture.stabilize import Alignment
 from lgi.errors import InputError
-from lgi.model import Model
+from lgi.solve.model import Model
 
 F64 = NDArray[np.float64]
 

@@ -1,7 +1,7 @@
 """Nonlinear in-betweens and combinations: the shapes of `Dataset.augmented(n, method="arap")`.
 The recipes (which shapes, which weights, which names) are the core's, the same as the linear
 `Dataset.augmented(n)`; each augmented shape interpolates its shapes' per-triangle rotations in
-the log and their stretches linearly (`lgi.deform.blend`), then a Poisson solve on the neutral
+the log and their stretches linearly (`lgi.data.deform.blend`), then a Poisson solve on the neutral
 turns the gradients into positions. A rotating part (an eyeball, the lower teeth, a lip
 rolling) keeps its size where the linear sum shrinks it (a rotation by angle a, halfway,
 scales the linear mesh by cos(a/2) across the axis)."""
@@ -12,7 +12,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 import lgi._lgi as _lgi
-from lgi.deform import PoissonMesh, Polar, blend
+from lgi.data.deform import PoissonMesh, Polar, blend
 from lgi.errors import DatasetError
 
 STILL = 1e-6

@@ -1,8 +1,8 @@
 """`lgi.Dataset`: a neutral mesh and its shapes. A Python class holding the core's dataset
 (`lgi._lgi.Dataset`, `Dataset.core`), the way `lgi.Model` holds the core's model: files the
 core reads (OBJ, glTF, bytes) and arrays go through the core, the `.npz` layout is
-`lgi.io.npz_dataset`'s and the ARAP in-betweens are `lgi.augment`'s. Also the built-in sample as
-a dataset and datasets with shapes left out (leave-one-out protocols)."""
+`lgi.io.npz_dataset`'s and the ARAP in-betweens are `lgi.data.augment`'s. Also the built-in
+sample as a dataset and datasets with shapes left out (leave-one-out protocols)."""
 
 from __future__ import annotations
 
@@ -97,13 +97,13 @@ class Dataset:
         """A new dataset with in-between shapes (`name@0.5`, ...) and pairwise combinations
         added to the shapes (`augment_recipes`), at least `min_shapes` when there are enough
         pairs (the neutral is shared). `method="linear"` (default) sums displacements (the
-        core's); `"arap"` interpolates rotations instead (`lgi.augment.arap_shapes`, a
+        core's); `"arap"` interpolates rotations instead (`lgi.data.augment.arap_shapes`, a
         progress bar unless `quiet`)."""
         n = _lgi.check_count(min_shapes, "min_shapes")
         if method is None or method == "linear":
             return Dataset(self._core.augmented(n))
         if method == "arap":
-            from lgi.augment import arap_shapes
+            from lgi.data.augment import arap_shapes
 
             return with_shapes(self, *arap_shapes(self._core, n, quiet))
         raise InputError(f"method must be 'linear' or 'arap', got {method!r}")

@@ -1,6 +1,6 @@
 """Deformation gradients on a triangle mesh and the Poisson solve that turns per-triangle
-gradients back into positions: the one machinery behind ARAP in-betweens (`lgi.augment`) and
-deformation transfer onto another neutral (`lgi.rig`, Sumner & Popovic 2004).
+gradients back into positions: the one machinery behind ARAP in-betweens (`lgi.data.augment`) and
+deformation transfer onto another neutral (`lgi.solve.rig`, Sumner & Popovic 2004).
 
 A triangle's deformation gradient is Sumner's: the 3x3 map of its two edges and its scaled
 normal. The solve minimises the area-weighted squared difference between the mesh's piecewise

@@ -10,16 +10,18 @@ import os
 import warnings
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from lgi.dataset import Dataset
 from lgi.errors import InputError, LgiWarning
 from lgi.io.atomic import atomic_path
 from lgi.io.frame import OutputFrame
 from lgi.io.livelink import arkit_to_dataset
 from lgi.io.rig import RigAnimation, write_usd_rig
+
+if TYPE_CHECKING:
+    from lgi.data.dataset import Dataset
 
 __all__ = [
     "ARKIT_CURVES",

@@ -5,16 +5,18 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray
 
-from lgi.dataset import Dataset
 from lgi.errors import InputError
 from lgi.io.atomic import atomic_path
 from lgi.io.paths import output_file
 from lgi.io.topology import Topology, topology, vertex_frames
+
+if TYPE_CHECKING:
+    from lgi.data.dataset import Dataset
 
 __all__ = ["write_obj", "write_obj_sequence"]
 

@@ -1,7 +1,7 @@
 """Blendshape rigs out, so a DCC or engine loads them: glTF 2.0 morph targets
 (`write_gltf_rig`: `.gltf` with the buffer embedded, or binary `.glb`) and USD blendshapes
 (`write_usd_rig`: `UsdSkel.BlendShape` prims bound to the mesh under a `SkelRoot`). Every
-shape of the dataset becomes a target with its name; a corrective (`lgi.rig`) is a target
+shape of the dataset becomes a target with its name; a corrective (`lgi.solve.rig`) is a target
 like any other, its combination recorded beside it."""
 
 from __future__ import annotations
@@ -12,22 +12,28 @@ import os
 import struct
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray
 
-from lgi.dataset import Dataset
 from lgi.errors import FileWriteError, InputError
 from lgi.io.atomic import atomic_path, temporary_beside
 from lgi.io.frame import OutputFrame
 from lgi.io.paths import output_file
+from lgi.io.served import is_a
 from lgi.io.topology import topology
 from lgi.io.units import METERS_PER_UNIT, normalize_unit
 from lgi.io.usd import define_usd_mesh, new_stage, save_stage
-from lgi.rig import CORRECTIVE_PREFIX
+
+if TYPE_CHECKING:
+    from lgi.data.dataset import Dataset
 
 __all__ = ["RigAnimation", "gltf_vertices", "write_gltf_rig", "write_usd_rig"]
+
+CORRECTIVE_PREFIX = "corrective_"
+"""Correctives are named `corrective_` + the combination's shape names joined by `_`: how a rig
+file tells a corrective from a shape (`lgi.solve.rig` names them)."""
 
 _FLOAT, _UINT = 5126, 5125  # glTF componentType codes
 _ARRAY_BUFFER, _ELEMENT_ARRAY_BUFFER = 34962, 34963
@@ -38,7 +44,7 @@ def _checked(
 ) -> tuple[NDArray[np.float64], NDArray[np.float32]]:
     """The neutral and the shapes' offsets, in `frame` (scaled and turned; offsets are
     vectors, so they take the same linear map as the points)."""
-    if not isinstance(dataset, Dataset):
+    if not is_a(dataset, "lgi.data.dataset.Dataset"):
         raise InputError(f"expected an lgi.Dataset, got {type(dataset).__name__}")
     if dataset.num_shapes == 0:
         raise InputError("the dataset has no shapes to export as blendshapes")
@@ -156,7 +162,7 @@ def write_gltf_rig(
 
 
 def _combination(name: str, names: list[str]) -> list[str] | None:
-    """The shapes a corrective's name combines, when they are the dataset's (`lgi.rig`)."""
+    """The shapes a corrective's name combines, when they are the dataset's (`lgi.solve.rig`)."""
     if not name.startswith(CORRECTIVE_PREFIX):
         return None
     rest = name[len(CORRECTIVE_PREFIX) :]

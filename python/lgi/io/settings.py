@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING, Any
 from lgi.errors import InputError
 
 if TYPE_CHECKING:
-    from lgi.denoise import DenoisedTake
+    from lgi.plan.denoise import DenoisedTake
 
 __all__ = ["LOCAL_FITS_WORDS", "SolveSettings"]
 
@@ -32,9 +32,9 @@ class SolveSettings:
     """`marker_noise`: sigma per coordinate in the model's units (None: the exact
     interpolation); `jaw`: the jaw pose mode ('fit', 'track', ...; None without a jaw rig);
     `detail_weight`: the weight in [0, 1] (None: all of the dataset's detail); `version`:
-    lgi's version that solved; `local_fits`: the pieces were local fits (`lgi.local`; True,
-    or 'unbounded' for `lgi.local.UNBOUNDED` ones; files written before it was recorded read as
-    False); `unbounded_fit`: the frame's global fit was not held to [0, 1]
+    lgi's version that solved; `local_fits`: the pieces were local fits (`lgi.plan.local`; True,
+    or 'unbounded' for `lgi.solve.local.UNBOUNDED` ones; files written before it was
+    recorded read as False); `unbounded_fit`: the frame's global fit was not held to [0, 1]
     (`Model.solve(fit="unbounded")`, and always with unbounded local fits; files written
     before it was recorded read as False); `take_prior`: that fit took the take's own prior
     (`lgi.estimate_take_prior`; older files read as False); `denoised_from`: the markers'

@@ -6,13 +6,15 @@ vertex frames a writer is given."""
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray
 
-from lgi.dataset import Dataset
 from lgi.errors import InputError
+
+if TYPE_CHECKING:
+    from lgi.data.dataset import Dataset
 
 I64 = NDArray[np.int64]
 F64 = NDArray[np.float64]

@@ -7,27 +7,28 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, cast
 
 import numpy as np
 
-from lgi.dataset import Dataset
 from lgi.errors import FileWriteError, InputError
 from lgi.io.atomic import temporary_beside
 from lgi.io.paths import output_file
 from lgi.io.result import Result
+from lgi.io.served import is_a
 from lgi.io.settings import SolveSettings
 from lgi.io.topology import Topology, topology, vertex_frames
 from lgi.io.units import METERS_PER_UNIT, normalize_unit
 
 if TYPE_CHECKING:
-    from lgi.model import Model
+    from lgi.data.dataset import Dataset
+    from lgi.solve.model import Model
 
 __all__ = ["UsdCache", "define_usd_mesh", "new_stage", "read_usd_cache", "write_usd"]
 
 
 def new_stage(usd: Any, sdf: Any, path: Path) -> Any:
-    """A new stage whose root layer will be saved to `path` (Save is ~2.5x faster than
+    """A new stage whose root layer will be saved to `path` (saving it is faster than
     exporting an in-memory layer). A layer of that path already open in this process (an
     earlier cache, a stage a caller holds) is emptied and reused: USD keeps one per path."""
     layer = sdf.Layer.Find(str(path))
@@ -347,12 +348,12 @@ def write_usd(
     `frames`: vertices (F, V, 3), a `SolveResult` (its vertices, jaw poses and marker
     residuals), or an iterable of (F_i, V, 3) chunks."""
     from lgi._lgi import SolveResult
-    from lgi.model import Model
 
-    if isinstance(source, Model):
-        units = source.units if units is None else units
-        source = source.dataset
-    t = source if isinstance(source, Topology) else topology(source)
+    if is_a(source, "lgi.solve.model.Model"):
+        model = cast("Model", source)
+        units = model.units if units is None else units
+        source = model.dataset
+    t = source if isinstance(source, Topology) else topology(cast("Dataset", source))
     cache = UsdCache(path, t, fps=fps, units=units, start=start)
     if isinstance(frames, SolveResult):
         cache.add(

@@ -33,9 +33,9 @@ from numpy.typing import ArrayLike, NDArray
 
 import lgi._lgi as _lgi
 from lgi._lgi import BuildConfig, Choices, SolveResult
-from lgi.dataset import Dataset
+from lgi.data.dataset import Dataset
 from lgi.errors import InputError
-from lgi.model import Model
+from lgi.solve.model import Model
 
 F64 = NDArray[np.float64]
 

@@ -19,10 +19,10 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 import lgi._lgi as _lgi
-from lgi.dataset import Dataset, without_shapes
+from lgi.data.dataset import Dataset, without_shapes
 from lgi.errors import InputError
-from lgi.jaw import fit_rigid, rotation_axis_angle
 from lgi.lab.sample import dropout_mask
+from lgi.solve.jaw import fit_rigid, rotation_axis_angle
 
 F64 = NDArray[np.float64]
 I64 = NDArray[np.int64]
@@ -146,8 +146,8 @@ def capture_truth(dataset: Dataset, weights: ArrayLike, jaw: HingeJaw | None) ->
 
 class NonlinearTruth:
     """A truth that does not combine linearly: each frame blends the shapes' per-triangle
-    deformation gradients, rotations in the log and stretches linearly (`lgi.deform.blend`,
-    the ARAP in-betweens' rule, `lgi.augment`), and a Poisson solve on the neutral turns them
+    deformation gradients, rotations in the log and stretches linearly (`lgi.data.deform.blend`,
+    the ARAP in-betweens' rule, `lgi.data.augment`), and a Poisson solve on the neutral turns them
     into positions, holding the vertices no shape moves and placing parts without such
     vertices (the lower teeth, the eyes) at the linear blend's centroid. A rotating part
     keeps its size where the linear sum shrinks it, and simultaneous shapes compose their
@@ -155,8 +155,8 @@ class NonlinearTruth:
     rotations (no separate hinge). `departure` says how far it is from the linear rig."""
 
     def __init__(self, dataset: Dataset) -> None:
-        from lgi.augment import still_vertices
-        from lgi.deform import PoissonMesh, Polar
+        from lgi.data.augment import still_vertices
+        from lgi.data.deform import PoissonMesh, Polar
 
         self.neutral = np.asarray(dataset.neutral, dtype=np.float64)
         self.shapes = np.asarray(dataset.shapes)
@@ -176,7 +176,7 @@ class NonlinearTruth:
 
     def meshes(self, weights: ArrayLike) -> F64:
         """(F, V, 3) the nonlinear truth's meshes for weights (F, S)."""
-        from lgi.deform import blend
+        from lgi.data.deform import blend
 
         w = self._weights(weights)
         lin = self.linear(w)

@@ -11,16 +11,16 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
+from lgi.capture.calibration import save_cameras
 from lgi.capture.frontend import process
-from lgi.dataset import Dataset
+from lgi.data.dataset import Dataset
 from lgi.io.atomic import atomic_path, write_text
-from lgi.io.calibration import save_cameras
 from lgi.io.obj import write_obj
 from lgi.io.result import write_sequence_npz
 from lgi.lab import helmet
 from lgi.lab.sample import describe, make_sample, sample_dataset
-from lgi.model import Model
-from lgi.noise import estimate_marker_noise
+from lgi.plan.noise import estimate_marker_noise
+from lgi.solve.model import Model
 
 F64 = NDArray[np.float64]
 
@@ -108,8 +108,8 @@ def run(out: Path, seed: int = 0, quiet: bool = False) -> int:
 
 def _compare(out: Path, sample, data: Dataset, model: Model, result, t_solve: float, quiet: bool):  # type: ignore[no-untyped-def]
     """All methods on the held-out performance: the evaluation table and an error panel."""
-    from lgi.baselines import BlendshapeFit, DisplacementInterpolation, LgiRbf
-    from lgi.lab import evaluate, render
+    from lgi.lab import render, scoring
+    from lgi.lab.baselines import BlendshapeFit, DisplacementInterpolation, LgiRbf
 
     _say(quiet, "comparing with the baselines ...")
     methods: dict[str, DisplacementInterpolation | BlendshapeFit | LgiRbf] = {
@@ -122,12 +122,12 @@ def _compare(out: Path, sample, data: Dataset, model: Model, result, t_solve: fl
     for name, m in methods.items():
         t0 = time.perf_counter()
         res = m.solve(perf, quiet=True)
-        rows.append(evaluate.score(name, res, truth, time.perf_counter() - t0))
+        rows.append(scoring.score(name, res, truth, time.perf_counter() - t0))
         verts[name] = res.vertices
-    rows.append(evaluate.score("LGI", result, truth, t_solve))
+    rows.append(scoring.score("LGI", result, truth, t_solve))
     verts["LGI"] = result.vertices
-    table = evaluate.to_markdown(rows)
-    evaluate.to_csv(rows, out / "results.csv")
+    table = scoring.to_markdown(rows)
+    scoring.to_csv(rows, out / "results.csv")
     write_text(
         out / "results.md",
         "# Held-out performance, all methods (errors in cm; residual relative to diagonal)\n\n"
@@ -149,7 +149,7 @@ def _qc_report(out: Path, data: Dataset, model: Model, result, truth) -> None:  
     """`lgi report`'s page of the demo's LGI solve, compared with the ground truth."""
     from lgi.io.result import Result
     from lgi.io.topology import topology
-    from lgi.report import render_report
+    from lgi.review.report import render_report
 
     topo = topology(data)
     names = list(model.marker_names)

@@ -1,490 +1,60 @@
-"""Evaluation of LGI and the baselines against ground truth: per-vertex error statistics, bundle
-residuals, temporal jitter and speed, on the protocols of the paper's comparisons (held-out
-performance, verification on the dataset's own shapes, leave-one-shape-out, noise, dropouts)."""
+"""The protocols of `lgi evaluate`: LGI and the peers (`lgi.lab.methods`) scored
+(`lgi.lab.scoring`) against ground truth on the capture protocol (real motion on a dataset with a
+hinged jaw, shapes held out), the scans protocol (whole-face scans of the performer), the real
+takes' leave-markers-out protocol and the built-in sample's, with `run_protocol` choosing one."""
 
 from __future__ import annotations
 
-import csv
 import os
 import time
-import warnings
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
-from typing import Any, Protocol
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from lgi._lgi import JawRig, SolveResult
-from lgi.baselines import FitJaw, FitJawResidual, FitJawUnbounded, FitJawUnboundedResidual
-from lgi.choices import SolvePlan, plan_solve
-from lgi.dataset import Dataset, without_shapes
-from lgi.denoise import denoise_take
-from lgi.errors import InputError, LgiWarning
+from lgi._lgi import SolveResult
+from lgi.data.dataset import Dataset
+from lgi.errors import InputError
 from lgi.lab.capture import (
     CaptureTake,
     HingeJaw,
     NonlinearTruth,
-    box_diagonal,
     departure,
     make_capture,
-    marker_samples,
 )
-from lgi.local import UNBOUNDED
-from lgi.model import Model
-from lgi.noise import estimate_marker_noise
+from lgi.lab.methods import (
+    AS_RECOMMENDED,
+    AsRecommended,
+    Recommended,
+    add_as_recommended,
+    add_denoised,
+    add_unbounded,
+    capture_methods,
+    default_methods,
+)
+from lgi.lab.scoring import (
+    Solver,
+    dropout_sweep,
+    evaluate,
+    leave_one_out,
+    noise_sweep,
+    score,
+    steps,
+    to_csv,
+    to_markdown,
+    verification,
+    without,
+)
 
 F64 = NDArray[np.float64]
 Row = dict[str, Any]
 
-__all__ = [
-    "COLUMNS",
-    "Solver",
-    "dropout_sweep",
-    "evaluate",
-    "leave_one_out",
-    "noise_sweep",
-    "score",
-    "to_csv",
-    "to_markdown",
-    "verification",
-]
-
-COLUMNS = [
-    "method",
-    "frames",
-    "mean",
-    "p95",
-    "max",
-    "max_residual_rel",
-    "jitter",
-    "ms_per_frame",
-]
-"""Row keys: errors (mean, p95, max of per-vertex distances) and jitter (mean norm of the second
-difference of vertex positions over time) are in data units; the bundle residual is relative to
-the bounding-box diagonal."""
+__all__ = ["capture", "capture_protocol", "lomo_protocol", "run_protocol", "scans_protocol"]
 
 
-class Solver(Protocol):
-    def solve(self, frames: ArrayLike, *, temporal: bool = ..., quiet: bool = ...) -> Any: ...
-
-
-def score(
-    name: str,
-    result: SolveResult,
-    truth: F64,
-    seconds: float,
-    region: ArrayLike | None = None,
-    diagonal: float | None = None,
-) -> Row:
-    """One row for a solved sequence against `truth` (F, V, 3)."""
-    verts = np.asarray(result.vertices)
-    idx = slice(None) if region is None else np.asarray(region)
-    err = np.linalg.norm(verts[:, idx] - truth[:, idx], axis=2)
-    diag = diagonal if diagonal is not None else box_diagonal(truth[0])
-    nf = verts.shape[0]
-    jitter = (
-        float(np.linalg.norm(np.diff(verts[:, idx], n=2, axis=0), axis=2).mean())
-        if nf >= 3
-        else float("nan")
-    )
-    return {
-        "method": name,
-        "frames": nf,
-        "mean": float(err.mean()),
-        "p95": float(np.percentile(err, 95)),
-        "max": float(err.max()),
-        "max_residual_rel": float(np.max(result.bundle_residuals)) / diag,
-        "jitter": jitter,
-        "ms_per_frame": 1e3 * seconds / max(nf, 1),
-    }
-
-
-def evaluate(
-    methods: Mapping[str, Solver],
-    frames: ArrayLike,
-    truth: ArrayLike,
-    region: ArrayLike | None = None,
-    diagonal: float | None = None,
-    temporal: bool = True,
-    quiet: bool = True,
-) -> list[Row]:
-    """Solves `frames` (F, B, 3) with every method and scores it against `truth` (F, V, 3) on
-    the vertices `region` (default all; ICT: the face skin, `lgi.lab.ict.skin()`); a progress bar
-    over the methods unless `quiet`."""
-    fr = np.asarray(frames, dtype=np.float64)
-    tr = np.asarray(truth, dtype=np.float64)
-    rows = []
-    for name, m in _steps(list(methods.items()), "lgi evaluate", quiet):
-        t0 = time.perf_counter()
-        res = m.solve(fr, temporal=temporal, quiet=True)
-        rows.append(score(name, res, tr, time.perf_counter() - t0, region, diagonal))
-    return rows
-
-
-def verification(dataset: Dataset, markers: ArrayLike) -> tuple[F64, F64]:
-    """Frames (S, B, 3): the markers on each dataset shape, and the shapes (S, V, 3) as truth."""
-    truth = np.asarray(dataset.neutral)[None] + np.asarray(dataset.shapes, dtype=np.float64)
-    return marker_samples(dataset, markers, truth), truth
-
-
-def _without(dataset: Dataset, k: int) -> Dataset:
-    return without_shapes(dataset, [k])
-
-
-def leave_one_out(
-    dataset: Dataset,
-    markers: ArrayLike,
-    method_factory: Callable[[Dataset, ArrayLike], Mapping[str, Solver]],
-    shapes: Sequence[int] | None = None,
-    region: ArrayLike | None = None,
-    quiet: bool = True,
-) -> list[Row]:
-    """For each shape k: methods built without k solve the markers on shape k; the rows pool
-    all held-out shapes (build time not counted; jitter is not meaningful and is NaN); a
-    progress bar over the shapes unless `quiet`."""
-    frames, truth = verification(dataset, markers)
-    ks = list(range(dataset.num_shapes)) if shapes is None else list(shapes)
-    verts: dict[str, list[F64]] = {}
-    res_max: dict[str, float] = {}
-    secs: dict[str, float] = {}
-    for k in _steps(ks, "lgi evaluate: leave one out", quiet):
-        methods = method_factory(_without(dataset, k), markers)
-        for name, m in methods.items():
-            t0 = time.perf_counter()
-            r = m.solve(frames[k : k + 1], temporal=False, quiet=True)
-            secs[name] = secs.get(name, 0.0) + time.perf_counter() - t0
-            verts.setdefault(name, []).append(np.asarray(r.vertices)[0])
-            res_max[name] = max(res_max.get(name, 0.0), float(np.max(r.bundle_residuals)))
-    rows = []
-    diag = box_diagonal(np.asarray(dataset.neutral))
-    for name, vs in verts.items():
-        fake = SolveResult(
-            vertices=np.stack(vs),
-            bundle_residuals=np.array([[res_max[name]]]),
-            bundle_positions=np.zeros((0, 0, 3)),
-            missing=np.zeros((0, 0), dtype=bool),
-            choices=None,  # type: ignore[arg-type]
-        )
-        row = score(name, fake, truth[ks], secs[name], region, diag)
-        row["jitter"] = float("nan")
-        rows.append(row)
-    return rows
-
-
-def _sweep(
-    methods: Mapping[str, Solver],
-    frames: ArrayLike,
-    truth: ArrayLike,
-    key: str,
-    values: Sequence[float],
-    perturb: Callable[[F64, float, np.random.Generator], F64],
-    seed: int,
-    region: ArrayLike | None,
-    temporal: bool,
-) -> list[Row]:
-    """Evaluates every method on `perturb(frames, value, rng)` for each value; rows get `key`."""
-    fr = np.asarray(frames, dtype=np.float64)
-    rows = []
-    for v in values:
-        changed = perturb(fr, v, np.random.default_rng(seed))
-        for row in evaluate(methods, changed, truth, region, temporal=temporal):
-            rows.append({key: v, **row})
-    return rows
-
-
-def noise_sweep(
-    methods: Mapping[str, Solver],
-    frames: ArrayLike,
-    truth: ArrayLike,
-    sigmas: Sequence[float] = (0.0, 0.05, 0.1, 0.2),
-    seed: int = 0,
-    region: ArrayLike | None = None,
-    temporal: bool = True,
-) -> list[Row]:
-    """Gaussian marker noise of each standard deviation (data units; 0..0.2 cm = 0..2 mm)."""
-
-    def noisy(fr: F64, s: float, rng: np.random.Generator) -> F64:
-        return fr + rng.normal(scale=s, size=fr.shape)
-
-    return _sweep(methods, frames, truth, "sigma", sigmas, noisy, seed, region, temporal)
-
-
-def dropout_sweep(
-    methods: Mapping[str, Solver],
-    frames: ArrayLike,
-    truth: ArrayLike,
-    rates: Sequence[float] = (0.0, 0.05, 0.1, 0.2),
-    seed: int = 0,
-    region: ArrayLike | None = None,
-    temporal: bool = True,
-) -> list[Row]:
-    """A fraction `rate` of marker entries set missing (NaN), uniformly at random."""
-
-    def holey(fr: F64, r: float, rng: np.random.Generator) -> F64:
-        return np.where((rng.random(fr.shape[:2]) < r)[..., None], np.nan, fr)
-
-    return _sweep(methods, frames, truth, "dropout", rates, holey, seed, region, temporal)
-
-
-def _fmt(v: Any) -> str:
-    if isinstance(v, float):
-        return "nan" if np.isnan(v) else f"{v:.4g}"
-    return str(v)
-
-
-def to_markdown(rows: Sequence[Row]) -> str:
-    """A Markdown table of `rows` (columns in the order of the first row)."""
-    if not rows:
-        return ""
-    keys = list(rows[0])
-    lines = ["| " + " | ".join(keys) + " |", "|" + "---|" * len(keys)]
-    lines += ["| " + " | ".join(_fmt(r.get(k)) for k in keys) + " |" for r in rows]
-    return "\n".join(lines) + "\n"
-
-
-def to_csv(rows: Sequence[Row], path: str | os.PathLike[str]) -> None:
-    """Writes `rows` as CSV with a header, whole or not at all (`lgi.io.atomic`); nothing
-    for no rows."""
-    from lgi.io.atomic import atomic_path
-
-    if not rows:
-        return
-    with atomic_path(path) as tmp, open(tmp, "w", newline="") as f:
-        w = csv.DictWriter(f, fieldnames=list(rows[0]))
-        w.writeheader()
-        w.writerows(rows)
-
-
-def default_methods(dataset: Dataset, markers: ArrayLike) -> dict[str, Solver]:
-    """The four compared methods (LGI and LGI-RBF share one built model)."""
-    from lgi.baselines import BlendshapeFit, DisplacementInterpolation, LgiRbf
-
-    lgi_rbf = LgiRbf(dataset, markers)
-    return {
-        DisplacementInterpolation.label: DisplacementInterpolation(dataset, markers),
-        BlendshapeFit.label: BlendshapeFit(dataset, markers),
-        LgiRbf.label: lgi_rbf,
-        "LGI": lgi_rbf.model,
-    }
-
-
-class Recommended:
-    """LGI's recommended path as a compared method: `model.solve(frames, marker_noise=sigma)`
-    on a model built with defaults (`sigma` None: the paper's exact mode). With `detail`
-    "auto", the frames' detail weight (`lgi.estimate_detail_weight`, read from the frames
-    solved, with the same sigma) is kept too, the call for a performer the dataset is not
-    (`last_detail_weight` says which); with `local_fits`, the pieces are local fits
-    (`lgi.local`); `fit` is `Model.solve`'s (e.g. "unbounded"); with `take_prior`, the
-    unbounded fit takes the prior read from the frames solved (`lgi.estimate_take_prior`); with
-    `denoise`, the frames are first denoised by the take's own low-rank structure
-    (`lgi.denoise_take`) and solved with the noise it leaves. The steps are `lgi.plan_solve`'s
-    with these options given (as `lgi solve` takes them)."""
-
-    def __init__(
-        self,
-        model: Model,
-        marker_noise: float | None,
-        detail: str | None = None,
-        local_fits: bool | str = False,
-        fit: str | None = None,
-        take_prior: bool = False,
-        denoise: bool = False,
-    ) -> None:
-        if fit not in (None, UNBOUNDED):
-            raise InputError(f"fit: expected None or {UNBOUNDED!r}, got {fit!r}")
-        self.model, self.marker_noise, self.detail = model, marker_noise, detail
-        self.local_fits, self.fit, self.take_prior = local_fits, fit, take_prior
-        self.denoise = denoise
-        self.last_detail_weight: float | None = None
-
-    def solve(self, frames: ArrayLike, *, temporal: bool = True, quiet: bool = True) -> SolveResult:
-        # The plan `lgi solve` makes with these options given (one definition of the steps).
-        plan = plan_solve(
-            np.asarray(frames, dtype=np.float64),
-            self.model,
-            noise=self.marker_noise,
-            denoise=self.denoise,
-            local_fits=self.local_fits,
-            unbounded_fit=self.fit == UNBOUNDED,
-            take_prior=self.take_prior,
-            detail=self.detail,
-        )
-        if self.detail == "auto":
-            self.last_detail_weight = plan.detail_weight
-        return self.model.solve(plan.frames, temporal=temporal, quiet=quiet, **plan.solve_options())
-
-
-#: The name of LGI with local fits (`Model.solve(local_fits=True)`) among compared methods.
-LOCAL_FITS = "LGI + local fits"
-#: The same with unbounded local fits (`Model.solve(local_fits="unbounded")`, which start from
-#: the unbounded global fit).
-LOCAL_FITS_UNBOUNDED = "LGI + local fits (unbounded)"
-#: LGI's recommended call with the unbounded global fit (`Model.solve(fit="unbounded")`).
-UNBOUNDED_FIT = "LGI (unbounded fit)"
-#: The same with the take's prior on the unbounded fit (`lgi.estimate_take_prior`).
-TAKE_PRIOR = "LGI (take prior)"
-#: Unbounded local fits from the unbounded fit with the take's prior.
-LOCAL_FITS_TAKE_PRIOR = "LGI + local fits (take prior)"
-#: LGI's recommended call (and with local fits) on the take denoised by its own low-rank
-#: structure (`lgi.denoise_take`): bounded where the protocol's LGI is (FACS shapes), with the
-#: unbounded fit and unbounded local fits in the scans protocol.
-DENOISED = "LGI (denoised)"
-LOCAL_FITS_DENOISED = "LGI + local fits (denoised)"
-#: A peer's name when it is given the same denoised markers (not a peer a TD has: it says how
-#: much of a denoised method's gain is the denoising's).
-DENOISED_PEER = "{} on denoised markers"
-#: The peers a TD has (`lgi.baselines`): the rig solve with the jaw as a joint and its residual
-#: corrective, boxed and (the scans protocol's) unbounded.
-PEER_NAMES = (
-    FitJaw.label,
-    FitJawResidual.label,
-    FitJawUnbounded.label,
-    FitJawUnboundedResidual.label,
-)
-
-
-class OnDenoised:
-    """A compared method given the take denoised by `lgi.denoise_take` with `sigma`."""
-
-    def __init__(self, method: Solver, sigma: float) -> None:
-        self.method, self.sigma = method, sigma
-
-    def solve(self, frames: ArrayLike, *, temporal: bool = True, quiet: bool = True) -> Any:
-        den = denoise_take(frames, self.sigma)
-        return self.method.solve(den.frames, temporal=temporal, quiet=quiet)
-
-
-def add_denoised(methods: dict[str, Solver], unbounded: bool) -> None:
-    """`DENOISED` and `LOCAL_FITS_DENOISED` beside a protocol's noisy LGI (`unbounded`: with
-    the unbounded fit and unbounded local fits, the scans' calls; else the boxed ones), and
-    each of the protocol's peers (`PEER_NAMES`) on the denoised markers (`DENOISED_PEER`)."""
-    lgi = methods["LGI"]
-    if not isinstance(lgi, Recommended) or not lgi.marker_noise:
-        return
-    sigma, model = lgi.marker_noise, lgi.model
-    fit = UNBOUNDED if unbounded else None
-    methods[DENOISED] = Recommended(model, sigma, fit=fit, denoise=True)
-    if model.jaw_bins is None:
-        local: bool | str = "unbounded" if unbounded else True
-        methods[LOCAL_FITS_DENOISED] = Recommended(model, sigma, local_fits=local, denoise=True)
-    for name in PEER_NAMES:
-        if name in methods:
-            methods[DENOISED_PEER.format(name)] = OnDenoised(methods[name], sigma)
-
-
-#: LGI as `lgi solve --recommended` solves a take: every choice read from the take given, its
-#: marker noise included (`lgi.choices.plan_solve`), not the protocol's sigma.
-AS_RECOMMENDED = "LGI --recommended"
-
-
-class AsRecommended:
-    """`AS_RECOMMENDED` as a compared method: the plan `lgi solve --recommended` reads from the
-    frames given (with `take`: from that whole take, of which the frames given are every
-    `step`-th, as a TD gives a whole take and the protocol scores some of its frames), then
-    `model.solve` of it. `last_plan` is the plan of the last solve."""
-
-    def __init__(self, model: Model, take: ArrayLike | None = None, step: int = 1) -> None:
-        self.model, self.step = model, step
-        self.take = None if take is None else np.asarray(take, dtype=np.float64)
-        self.last_plan: SolvePlan | None = None
-
-    def solve(self, frames: ArrayLike, *, temporal: bool = True, quiet: bool = True) -> Any:
-        x = np.asarray(frames, dtype=np.float64)
-        whole = x if self.take is None else self.take
-        with warnings.catch_warnings():
-            # Only the noise estimate's frames-too-far-apart warning is silenced (the row's
-            # plan gives the noise read); anything else still shows.
-            warnings.filterwarnings("ignore", message="marker noise:", category=LgiWarning)
-            plan = plan_solve(whole, self.model, recommended=True)
-        solved = plan.frames if self.take is None else plan.frames[:: self.step]
-        if solved.shape != x.shape:
-            raise InputError(
-                f"as recommended: {x.shape[0]} frames given are not every {self.step}-th of "
-                f"the take's {whole.shape[0]}"
-            )
-        self.last_plan = plan
-        return self.model.solve(solved, temporal=temporal, quiet=quiet, **plan.solve_options())
-
-
-def add_as_recommended(methods: dict[str, Solver]) -> None:
-    """`AS_RECOMMENDED` beside a protocol's LGI (its model)."""
-    lgi = methods["LGI"]
-    if isinstance(lgi, Recommended):
-        methods[AS_RECOMMENDED] = AsRecommended(lgi.model)
-
-
-def capture_methods(
-    dataset: Dataset,
-    markers: ArrayLike,
-    sigma: float | None,
-    frames: ArrayLike | None = None,
-    *,
-    jaw: tuple[JawRig, ArrayLike] | None = None,
-) -> dict[str, Solver]:
-    """The methods of the capture protocol: the two baselines, the fit with the jaw as a joint
-    (`FitJaw`, the production rig solve, where the dataset gives a jaw rig) and the same with
-    its residual corrective (`FitJawResidual`), LGI in the paper's
-    exact mode (no jaw rig, no fit: tets only), LGI's recommended path (defaults,
-    `marker_noise` = `sigma`; None: estimated from `frames` with the model, as
-    `--marker-noise auto` does) and the same with local fits (`LOCAL_FITS`,
-    `lgi.local`). `jaw`: the rig and each shape's pose for a dataset without
-    ICT's jaw shapes (None: the rig `Model.build` finds, if any)."""
-    from lgi.baselines import BlendshapeFit, DisplacementInterpolation, FitJaw, FitJawResidual
-
-    if jaw is None:
-        recommended = Model.build(dataset, markers)
-    else:
-        recommended = Model.build(dataset, markers, jaw=jaw[0], shape_theta=jaw[1])
-    if sigma is None:
-        if frames is None:
-            raise InputError("capture methods: sigma None needs the frames to estimate it from")
-        sigma = estimate_marker_noise(frames, recommended)
-    methods: dict[str, Solver] = {
-        DisplacementInterpolation.label: DisplacementInterpolation(dataset, markers),
-        BlendshapeFit.label: BlendshapeFit(dataset, markers),
-    }
-    if recommended.jaw_rig is not None:
-        peer = FitJaw(recommended)
-        methods[FitJaw.label] = peer
-        methods[FitJawResidual.label] = FitJawResidual(peer)
-    methods["LGI (paper)"] = Recommended(Model.build(dataset, markers, jaw=None), None)
-    methods["LGI"] = Recommended(recommended, sigma)
-    if recommended.jaw_bins is None:
-        methods[LOCAL_FITS] = Recommended(recommended, sigma, local_fits=True)
-    return methods
-
-
-def _add_unbounded(methods: dict[str, Solver]) -> None:
-    """The scans protocol's unbounded methods beside the bounded ones: a scan's weight is no
-    activation, so the peers' fit without its [0, 1] bound is a peer too (`FitJawUnbounded`
-    and its corrective), and LGI without it: the recommended call (`UNBOUNDED_FIT`) and with
-    local fits (`LOCAL_FITS_UNBOUNDED`); with noisy markers, both with the take's prior on the
-    unbounded fit (`TAKE_PRIOR`, `LOCAL_FITS_TAKE_PRIOR`)."""
-    from lgi.baselines import FitJawUnbounded, FitJawUnboundedResidual
-
-    lgi = methods["LGI"]
-    if not isinstance(lgi, Recommended) or lgi.model.jaw_rig is None:
-        return
-    peer = FitJawUnbounded(lgi.model)
-    methods[FitJawUnbounded.label] = peer
-    methods[FitJawUnboundedResidual.label] = FitJawUnboundedResidual(peer)
-    methods[UNBOUNDED_FIT] = Recommended(lgi.model, lgi.marker_noise, fit="unbounded")
-    if lgi.model.jaw_bins is None:
-        methods[LOCAL_FITS_UNBOUNDED] = Recommended(
-            lgi.model, lgi.marker_noise, local_fits="unbounded"
-        )
-    if lgi.marker_noise and lgi.model.jaw_bins is None:
-        # Noise-free markers need no prior (the solve would be the unbounded fit's).
-        methods[TAKE_PRIOR] = Recommended(
-            lgi.model, lgi.marker_noise, fit="unbounded", take_prior=True
-        )
-        methods[LOCAL_FITS_TAKE_PRIOR] = Recommended(
-            lgi.model, lgi.marker_noise, local_fits="unbounded", take_prior=True
-        )
-
-
-def _performance(
+def performance_take(
     dataset: Dataset,
     curves: F64,
     markers: ArrayLike,
@@ -548,8 +118,8 @@ def capture_protocol(
     hinge = HingeJaw.fit(dataset, jaw_rigid)
     truth = NonlinearTruth(dataset) if nonlinear else None
     rows: list[Row] = []
-    for i, rec in enumerate(_steps(list(recordings), "lgi evaluate: capture", quiet)):
-        take, apart = _performance(
+    for i, rec in enumerate(steps(list(recordings), "lgi evaluate: capture", quiet)):
+        take, apart = performance_take(
             dataset,
             read_livelinkface(rec).for_dataset(dataset.names),
             markers,
@@ -605,12 +175,12 @@ def scans_protocol(
     distance from the linear rig). `only`: the methods run, by name (None: all)."""
     from lgi.io.livelink import read_livelinkface
     from lgi.lab.scans import scan_session
-    from lgi.model import _auto_rig
+    from lgi.solve.jaw import auto_rig
 
     if len(recordings) < 2:
         raise InputError("the scans protocol needs two recordings: scans from one, a performance")
     hinge = HingeJaw.fit(dataset, jaw_rigid)
-    rig, theta = _auto_rig(dataset)
+    rig, theta = auto_rig(dataset)
     truth = NonlinearTruth(dataset) if nonlinear else None
     curves = [read_livelinkface(r).for_dataset(dataset.names) for r in recordings]
     shares: dict[str, float] = {}
@@ -621,11 +191,11 @@ def scans_protocol(
             shares[name] = float(np.mean(res.choices.fit))
 
     rows: list[Row] = []
-    for i, rec in enumerate(_steps(list(recordings), "lgi evaluate: scans", quiet)):
+    for i, rec in enumerate(steps(list(recordings), "lgi evaluate: scans", quiet)):
         source = np.concatenate([c for k, c in enumerate(curves) if k != i])
         count = min(scans, source.shape[0])
         session = scan_session(dataset, source, count, hinge, theta, nonlinear=truth)
-        take, apart = _performance(
+        take, apart = performance_take(
             dataset,
             curves[i],
             markers,
@@ -640,7 +210,7 @@ def scans_protocol(
         )
         given = None if rig is None or session.theta is None else (rig, session.theta)
         methods = capture_methods(session.dataset, markers, sigma, jaw=given)
-        _add_unbounded(methods)
+        add_unbounded(methods)
         add_denoised(methods, unbounded=True)
         add_as_recommended(methods)
         if only is not None:
@@ -695,7 +265,7 @@ def lomo_protocol(
     rows: list[Row] = []
     markers: list[Row] = []
     measured: list[lomo.Scores] = []
-    for path in _steps(list(takes), "lgi evaluate: lomo", quiet):
+    for path in steps(list(takes), "lgi evaluate: lomo", quiet):
         take = lomo.retarget(read_raw(path), dataset.neutral, face, marks)
         step = max(1, take.frames.shape[0] // max(1, frames))
         rigid = set(lomo.RIGID)
@@ -712,13 +282,6 @@ def lomo_protocol(
     if len(measured) > 1:
         rows += lomo.rows(measured, "all takes")
     return rows, markers
-
-
-def _steps(items: Sequence[Any], desc: str, quiet: bool) -> Any:
-    """`items` with a progress bar on stderr (none when `quiet`)."""
-    from tqdm import tqdm
-
-    return tqdm(items, desc=desc, disable=quiet or len(items) < 2, leave=False)
 
 
 def error_panel(
@@ -870,7 +433,7 @@ def run_protocol(
         k = _most_expressive(truth, np.asarray(ds.neutral))
         error_panel(
             outp / "panel.png",
-            default_methods(_without(ds, k), markers),
+            default_methods(without(ds, k), markers),
             frames[k],
             truth[k],
             ds.triangles,

@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from lgi.dataset import Dataset
+from lgi.data.dataset import Dataset
 from lgi.io.takes import Layout, read_layout
 
 __all__ = [

@@ -32,7 +32,7 @@ from numpy.typing import ArrayLike, NDArray
 
 import lgi._lgi as _lgi
 from lgi.capture.stabilize import align
-from lgi.dataset import Dataset
+from lgi.data.dataset import Dataset
 from lgi.errors import InputError, LgiWarning
 from lgi.io.takes import RawTake
 

@@ -15,7 +15,7 @@ How the ground truth of the performance is made (per frame f, weights w = truth_
     truth[f]  = pre_f + jaw_weights * (T(theta_f)(pre_f) - pre_f)      (jaw skinning, LBS)
 
 with T(theta)(p) = R_y(theta[1]) @ R_x(theta[0]) @ (p - jaw_pivot) + jaw_pivot + (0, 0, theta[2]),
-computed by the core's skinning (`lgi.jaw.JawRig.skin` with the identity frame).
+computed by the core's skinning (`lgi.solve.jaw.JawRig.skin` with the identity frame).
 `shapes` and `wrinkles` enter promoted from their float32 storage, so the truth is reproducible
 from the saved arrays. The jaw shapes themselves are `T(shape_jaw_theta[k])` applied with full
 LBS to the neutral: a weight of 1 reproduces the shape, a weight of 0.5 is a rotation by half the
@@ -33,10 +33,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 import lgi._lgi as _lgi
-from lgi.dataset import Dataset
+from lgi.data.dataset import Dataset
 from lgi.errors import DatasetError, DatasetFileError, InputError
 from lgi.io.atomic import atomic_path
-from lgi.jaw import JawRig
 from lgi.lab.face import (
     EYE_A,
     EYE_B,
@@ -52,6 +51,7 @@ from lgi.lab.face import (
     expression_fields,
     lowerness,
 )
+from lgi.solve.jaw import JawRig
 
 F64 = NDArray[np.float64]
 I64 = NDArray[np.int64]

@@ -20,7 +20,7 @@ from collections.abc import Sequence
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from lgi.dataset import Dataset, with_shapes
+from lgi.data.dataset import Dataset, with_shapes
 from lgi.errors import InputError
 from lgi.lab.capture import HingeJaw, NonlinearTruth, capture_truth
 
@@ -52,7 +52,7 @@ def pick_scans(weights: ArrayLike, count: int) -> list[int]:
 
 def scan_theta(weights: ArrayLike, shape_theta: ArrayLike) -> F64:
     """Each scan's jaw pose (K, 3): its curve weights (K, S) times the dataset's shapes' poses
-    (S, 3) (`lgi.jaw.estimate_rig`'s theta), the jaw shapes' share of the expression."""
+    (S, 3) (`lgi.solve.jaw.estimate_rig`'s theta), the jaw shapes' share of the expression."""
     return np.asarray(weights, dtype=np.float64) @ np.asarray(shape_theta, dtype=np.float64)
 
 

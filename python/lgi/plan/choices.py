@@ -13,15 +13,17 @@ from typing import Any
 
 import numpy as np
 
-from lgi.denoise import DenoisedTake, denoise_take
-from lgi.detail import estimate_detail_weight
 from lgi.errors import InputError
 from lgi.io.settings import SolveSettings
-from lgi.local import UNBOUNDED, estimate_local_fits
-from lgi.model import Model
-from lgi.noise import estimate_marker_noise
-from lgi.take_prior import TakePrior, estimate_take_prior, estimate_take_prior_use
-from lgi.unbounded import estimate_unbounded_fit
+from lgi.plan.denoise import DenoisedTake, denoise_take
+from lgi.plan.detail import estimate_detail_weight
+from lgi.plan.local import estimate_local_fits
+from lgi.plan.noise import estimate_marker_noise
+from lgi.plan.take_prior import estimate_take_prior, estimate_take_prior_use
+from lgi.plan.unbounded import estimate_unbounded_fit
+from lgi.solve.model import Model
+from lgi.solve.options import AUTO, NONE, UNBOUNDED, SolveOptions
+from lgi.solve.take_prior import TakePrior
 
 __all__ = [
     "RECOMMENDED",
@@ -44,15 +46,6 @@ def _silent(_message: str) -> None:
     """A `say` that says nothing."""
 
 
-def check_local_fits_noise(spec: bool | str, sigma: float | str | None) -> None:
-    """`--local-fits` (on or 'auto') without `--marker-noise`: an InputError saying why."""
-    if spec and sigma is None:
-        raise InputError(
-            "--local-fits needs --marker-noise (SIGMA or auto; 0 for clean markers): the local "
-            "fits fit the noise-aware targets"
-        )
-
-
 def fits_choice(
     local: bool | str,
     unbounded: bool | str,
@@ -61,7 +54,7 @@ def fits_choice(
     sigma: float | None,
     jaw: str | None,
     say: Say,
-    prior: bool | str = False,
+    prior: TakePrior | bool | str = False,
 ) -> tuple[bool | str, bool]:
     """`--local-fits` and `--unbounded-fit` as given or read from the take (`local_fits_choice`,
     `unbounded_fit_choice`): `local_fits` and whether the global fit is unbounded. When both
@@ -89,15 +82,13 @@ def unbounded_fit_choice(
     sigma: float | None,
     jaw: str | None,
     say: Say,
-    prior: bool | str = False,
+    prior: TakePrior | bool | str = False,
 ) -> bool:
     """`--unbounded-fit`: True, False or 'auto' (read from the take's own markers left out,
     `lgi.estimate_unbounded_fit`, and said with its numbers; with `prior`, the unbounded fit
     with the take's prior, as it would be solved)."""
     if spec is True or spec is False:
         return spec
-    if spec != "auto":
-        raise InputError(f"--unbounded-fit {spec!r}: expected no value or 'auto'")
     with_prior = bool(prior) and sigma is not None and sigma > 0.0
     est = estimate_unbounded_fit(frames, model, marker_noise=sigma, jaw=jaw, take_prior=with_prior)
     which = " (with the take prior)" if with_prior else ""
@@ -129,7 +120,7 @@ def _reading(
 
 
 def take_prior_choice(
-    spec: bool | str,
+    spec: TakePrior | bool | str,
     frames: np.ndarray,
     model: Model,
     sigma: float | None,
@@ -137,14 +128,14 @@ def take_prior_choice(
     say: Say,
     unbounded: bool,
 ) -> TakePrior | None:
-    """`--take-prior`: True, False or 'auto' (read from the take's own markers left out,
-    `lgi.estimate_take_prior_use`, and said with its numbers), on the unbounded fit
-    (`unbounded`, as chosen) and with the markers' noise `sigma`: the prior to solve with, or
-    None."""
+    """`--take-prior`: a `TakePrior` (used as it is), True, False or 'auto' (read from the take's
+    own markers left out, `lgi.estimate_take_prior_use`, and said with its numbers), on the
+    unbounded fit (`unbounded`, as chosen) and with the markers' noise `sigma`: the prior to solve
+    with, or None."""
     if spec is False:
         return None
-    if spec is not True and spec != "auto":
-        raise InputError(f"--take-prior {spec!r}: expected no value or 'auto'")
+    if isinstance(spec, TakePrior):
+        return spec
     noisy = sigma is not None and sigma > 0.0
     if spec is True:
         if not unbounded:
@@ -200,13 +191,11 @@ def local_fits_choice(
     fit: str | None = None,
 ) -> bool | str:
     """`--local-fits`: True, False, 'unbounded' or 'auto' (read from the take's own markers
-    left out, `lgi.estimate_local_fits` with `fit`, and said with its numbers)."""
-    check_local_fits_noise(spec, sigma)
+    left out, `lgi.estimate_local_fits` with `fit`, and said with its numbers). Needs the
+    markers' noise `sigma` (`SolveOptions` and `plan_solve` see to it)."""
     if spec is True or spec is False or spec == UNBOUNDED:
         return spec
-    if spec != "auto":
-        raise InputError(f"--local-fits {spec!r}: expected no value, 'unbounded' or 'auto'")
-    assert sigma is not None  # checked above
+    assert sigma is not None
     est = estimate_local_fits(frames, model, marker_noise=sigma, jaw=jaw, fit=fit)
     chosen = {False: "not used", True: "used", UNBOUNDED: "used, unbounded"}[est.local_fits]
     read = [
@@ -229,47 +218,32 @@ def local_fits_choice(
 
 
 def detail_weight(
-    spec: str | float | None,
+    spec: float | str | None,
     frames: np.ndarray,
     model: Model,
     sigma: float | None,
     jaw: str | None,
     fit: str | None = None,
 ) -> float | None:
-    """`--detail-weight`: a weight in [0, 1], 'auto' (read from `frames` solved with `sigma`,
-    `jaw` and `fit`, `lgi.estimate_detail_weight`) or 'none'/None (all of the dataset's
-    detail)."""
-    if spec is None or spec == "none":
+    """`--detail-weight` as checked (`SolveOptions`): a weight in [0, 1], 'auto' (read from
+    `frames` solved with `sigma`, `jaw` and `fit`, `lgi.estimate_detail_weight`) or None/'none'
+    (all of the dataset's detail)."""
+    if spec is None or spec == NONE:
         return None
-    if spec == "auto":
+    if spec == AUTO:
         return estimate_detail_weight(frames, model, marker_noise=sigma, jaw=jaw, fit=fit)
-    try:
-        w = float(spec)
-    except ValueError:
-        raise InputError(
-            f"--detail-weight {spec!r}: expected a number in [0, 1], 'auto' or 'none'"
-        ) from None
-    if not 0.0 <= w <= 1.0:
-        raise InputError(f"--detail-weight {spec}: must be a number in [0, 1]")
-    return w
+    return float(spec)
 
 
-def marker_noise(spec: str | float | None, frames: np.ndarray, model: Model | None) -> float | None:
-    """`--marker-noise`: a sigma >= 0 (model units), 'auto' (estimated from `frames`, bounded
-    by what `model`'s fit leaves at the markers) or 'none'/None (exact interpolation)."""
-    if spec is None or spec == "none":
+def marker_noise(spec: float | str | None, frames: np.ndarray, model: Model | None) -> float | None:
+    """`--marker-noise` as checked (`SolveOptions`): a sigma >= 0 (model units), 'auto'
+    (estimated from `frames`, bounded by what `model`'s fit leaves at the markers) or
+    None/'none' (exact interpolation)."""
+    if spec is None or spec == NONE:
         return None
-    if spec == "auto":
+    if spec == AUTO:
         return estimate_marker_noise(frames, model)
-    try:
-        sigma = float(spec)
-    except ValueError:
-        raise InputError(
-            f"--marker-noise {spec!r}: expected a number (data units), 'auto' or 'none'"
-        ) from None
-    if not np.isfinite(sigma) or sigma < 0:
-        raise InputError(f"--marker-noise {spec}: must be a finite number >= 0")
-    return sigma
+    return float(spec)
 
 
 def take_denoised(
@@ -281,16 +255,13 @@ def take_denoised(
     such a take is solved as given, and said so."""
     if asked is False:
         return None
-    if asked not in (True, "auto"):
-        raise InputError(f"--denoise {asked!r}: expected no value or 'auto'")
     if sigma is None or sigma <= 0.0:
-        if asked == "auto":
+        if asked == AUTO:
             why = "no marker noise" if sigma is None else "the markers' noise is 0"
             say(f"not denoised: {why} (nothing to remove)")
             return None
-        raise InputError(
-            "--denoise needs the markers' noise above 0: pass --marker-noise SIGMA or auto"
-        )
+        why = "no marker noise is given" if sigma is None else "the markers read as noise-free"
+        raise InputError(f"--denoise: {why}, so there is nothing to remove; solve without it")
     den = denoise_take(frames, sigma)
     say(
         f"denoised the take: {den.rank} of {den.directions} directions of motion kept, "
@@ -302,24 +273,47 @@ def take_denoised(
 @dataclass(frozen=True)
 class SolvePlan:
     """What a take is solved as (`plan_solve`): `frames` (the given markers, or the take
-    denoised), the noise `given_noise` of the given markers and `marker_noise` of those
-    solved, and the solve's options as given or read from the take. The solve is
-    `model.solve(plan.frames, **plan.solve_options())`."""
+    denoised), the noise `given_noise` of the given markers, the take `denoised` (or None) and
+    the solve's `options`, resolved: each as given or read from the take. The solve is
+    `model.solve(plan.frames, options=plan.options)`."""
 
     frames: np.ndarray
     given_noise: float | None
     denoised: DenoisedTake | None
-    marker_noise: float | None
-    local_fits: bool | str
-    unbounded_fit: bool
-    take_prior: TakePrior | None
-    detail_weight: float | None
-    jaw: str | None = "auto"
+    options: SolveOptions
+
+    @property
+    def marker_noise(self) -> float | None:
+        """The noise of the markers solved (what denoising left, where the take was)."""
+        sigma = self.options.marker_noise
+        return None if sigma is None else float(sigma)
+
+    @property
+    def local_fits(self) -> bool | str:
+        return self.options.local_fits
+
+    @property
+    def unbounded_fit(self) -> bool:
+        return self.options.fit == UNBOUNDED
 
     @property
     def fit(self) -> str | None:
-        """`Model.solve`'s `fit`: "unbounded" or None (the default, boxed fit)."""
+        """The global fit as the readings solved it: 'unbounded' or None (boxed)."""
         return UNBOUNDED if self.unbounded_fit else None
+
+    @property
+    def take_prior(self) -> TakePrior | None:
+        prior = self.options.take_prior
+        return prior if isinstance(prior, TakePrior) else None
+
+    @property
+    def detail_weight(self) -> float | None:
+        w = self.options.detail_weight
+        return None if w is None else float(w)
+
+    @property
+    def jaw(self) -> str | None:
+        return self.options.jaw
 
     def summary(self) -> str:
         """The plan in one line: the noise (and what denoising left), the fit, the local fits,
@@ -334,22 +328,11 @@ class SolvePlan:
             f"weight {'-' if self.detail_weight is None else f'{self.detail_weight:.3f}'}"
         )
 
-    def solve_options(self) -> dict[str, Any]:
-        """`Model.solve`'s keywords for this plan (with `frames`: the solve)."""
-        return {
-            "jaw": self.jaw,
-            "marker_noise": self.marker_noise,
-            "detail_weight": self.detail_weight,
-            "local_fits": self.local_fits,
-            "fit": self.fit,
-            "take_prior": self.take_prior,
-        }
-
-    def settings(self, *, has_jaw_rig: bool, jaw: str | None) -> SolveSettings:
+    def settings(self, *, has_jaw_rig: bool) -> SolveSettings:
         """The settings a solve of this plan records in its output."""
         return SolveSettings.of(
             has_jaw_rig=has_jaw_rig,
-            jaw=jaw,
+            jaw=self.jaw,
             marker_noise=self.marker_noise,
             detail_weight=self.detail_weight,
             local_fits=self.local_fits,
@@ -362,66 +345,81 @@ class SolvePlan:
 def plan_solve(
     frames: np.ndarray,
     model: Model,
+    options: SolveOptions | None = None,
     *,
-    noise: str | float | None = None,
-    denoise: bool | str = False,
-    local_fits: bool | str = False,
-    unbounded_fit: bool | str = False,
-    take_prior: bool | str = False,
-    detail: str | float | None = None,
-    jaw: str | None = "auto",
-    recommended: bool = False,
     say: Say = _silent,
+    **given: Any,
 ) -> SolvePlan:
-    """The plan of a solve of `frames` (F, B, 3) with `model`: `noise` (`marker_noise`), then
-    `denoise` (`take_denoised`; 'auto': where that noise is above 0), then the fit and local
-    fits (`fits_choice`), the take prior (`take_prior_choice`) and the detail weight
-    (`detail_weight`), each read on what is solved. `jaw` is `Model.solve`'s jaw mode.
+    """The plan of a solve of `frames` (F, B, 3) with `model` and `options` (a `SolveOptions`,
+    or its fields as keywords `given`): the markers' noise (`marker_noise`), then denoising
+    (`take_denoised`; 'auto': where that noise is above 0), then the fit and local fits
+    (`fits_choice`), the take prior (`take_prior_choice`) and the detail weight
+    (`detail_weight`), each read on what is solved.
 
-    `recommended` (`--recommended`) reads every option left at its default from the take:
-    the noise, denoising, the fit, local fits and the take prior ('auto' each), and the detail
-    weight where no local fits are used (local fits chosen say the dataset suits the take
-    around each marker; the detail weight is for a dataset that does not: docs/concepts.md).
-    Options given keep their values; local fits are not read for a model with jaw bins."""
-    if recommended:
+    `recommended` reads every option left at its default from the take: the noise, denoising,
+    the fit, local fits and the take prior ('auto' each), and the detail weight where no local
+    fits are used (local fits chosen say the dataset suits the take around each marker; the
+    detail weight is for a dataset that does not: docs/concepts.md). Options given keep their
+    values ('none' included); local fits are not read for a model with jaw bins."""
+    if options is None:
+        options = SolveOptions(**given)
+    elif given:
+        raise InputError("plan_solve: give the options either as options= or as keywords")
+    options.check_model(model.jaw_bins is not None)
+    o = options
+    noise, denoise, local_fits, take_prior, detail = (
+        o.marker_noise,
+        o.denoise,
+        o.local_fits,
+        o.take_prior,
+        o.detail_weight,
+    )
+    unbounded_fit: bool | str = AUTO if o.fit == AUTO else o.fit == UNBOUNDED
+    if o.recommended:
         say(RECOMMENDED)
-        noise = "auto" if noise is None else noise
-        denoise = "auto" if denoise is False else denoise
+        noise = AUTO if noise is None else noise
+        denoise = AUTO if denoise is False else denoise
         if local_fits is False and model.jaw_bins is None:
-            local_fits = "auto"
-        unbounded_fit = "auto" if unbounded_fit is False else unbounded_fit
-        take_prior = "auto" if take_prior is False else take_prior
+            local_fits = AUTO
+        unbounded_fit = AUTO if unbounded_fit is False else unbounded_fit
+        take_prior = AUTO if take_prior is False else take_prior
     given_noise = marker_noise(noise, frames, model)
-    if recommended and noise == "auto":
+    if o.recommended and noise == AUTO:
         say(f"marker noise read from the take: {given_noise:.4g}")
     den = take_denoised(denoise, frames, given_noise, say)
     x, sigma = (frames, given_noise) if den is None else (den.frames, den.marker_noise)
-    if recommended and sigma is None and local_fits == "auto":
+    if o.recommended and sigma is None and local_fits == AUTO:
         say("local fits not read: no marker noise (every marker interpolated as given)")
         local_fits = False
-    check_local_fits_noise(local_fits, sigma)
-    if local_fits and model.jaw_bins is not None:
-        raise InputError("--local-fits: the model has jaw bins; build it without them")
-    chosen, free = fits_choice(local_fits, unbounded_fit, x, model, sigma, jaw, say, take_prior)
-    prior = take_prior_choice(take_prior, x, model, sigma, jaw, say, free or chosen == UNBOUNDED)
+    if local_fits and sigma is None:
+        raise InputError(
+            "--local-fits needs --marker-noise (SIGMA or auto; 0 for clean markers): the local "
+            "fits fit the noise-aware targets"
+        )
+    chosen, free = fits_choice(local_fits, unbounded_fit, x, model, sigma, o.jaw, say, take_prior)
+    prior = take_prior_choice(take_prior, x, model, sigma, o.jaw, say, free or chosen == UNBOUNDED)
     fit = UNBOUNDED if free else None
-    if recommended and detail is None:
+    if o.recommended and detail is None:
         if chosen:
             say("detail weight not read: local fits are used (the dataset suits the take)")
             weight = None
         else:
-            weight = detail_weight("auto", x, model, sigma, jaw, fit)
+            weight = detail_weight(AUTO, x, model, sigma, o.jaw, fit)
             say(f"detail weight read from the take: {weight:.3f}")
     else:
-        weight = detail_weight(detail, x, model, sigma, jaw, fit)
+        weight = detail_weight(detail, x, model, sigma, o.jaw, fit)
+    # `fit` True or False (offered, or none) as given where the fit is not unbounded.
+    solved_fit = UNBOUNDED if free else (None if o.fit in (AUTO, UNBOUNDED) else o.fit)
     return SolvePlan(
         frames=x,
         given_noise=given_noise,
         denoised=den,
-        marker_noise=sigma,
-        local_fits=chosen,
-        unbounded_fit=free,
-        take_prior=prior,
-        detail_weight=weight,
-        jaw=jaw,
+        options=SolveOptions(
+            marker_noise=sigma,
+            fit=solved_fit,
+            local_fits=chosen,
+            take_prior=False if prior is None else prior,
+            detail_weight=weight,
+            jaw=o.jaw,
+        ),
     )

@@ -6,7 +6,7 @@ take of F frames of B markers is, but for the noise, close to a matrix of low ra
 Marker noise of a known level sigma per coordinate is white in that matrix. The take's centred
 matrix is shrunk by the optimal singular-value shrinker for white noise of known level (Gavish
 & Donoho 2017, Frobenius loss; the same shrinker the take's prior uses,
-`lgi.take_prior.shrinkage_factors`): directions inside the noise's bulk edge `1 + √β` carry no
+`lgi.plan.take_prior.shrinkage_factors`): directions inside the noise's bulk edge `1 + √β` carry no
 motion that can be told from noise and are dropped, the others are shrunk to what the noise
 leaves of them. Nothing is read from the dataset or a solve: the take alone, and sigma.
 
@@ -30,7 +30,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from lgi.errors import InputError
-from lgi.take_prior import shrinkage_factors
+from lgi.plan.take_prior import shrinkage_factors
 
 __all__ = ["DenoisedTake", "bulk_noise", "denoise_take"]
 
@@ -38,19 +38,16 @@ F64 = NDArray[np.float64]
 
 #: Rounds of filling missing samples by the low-rank estimate at most, and the relative change
 #: of the filled samples in a round below which they have settled. Hard impute converges
-#: slowly where the first fill (each marker's mean) adds directions of its own: each round only
-#: shrinks them by their factor (a synthetic rank-8 take with 2 % dropouts kept 13 directions
-#: when stopped after 50 rounds, 8 when run until settled: 77 rounds).
+#: slowly where the first fill (each marker's mean) adds directions of its own, so it runs until
+#: settled, not for a fixed number of rounds.
 IMPUTE_ROUNDS = 1000
 IMPUTE_SETTLED = 1e-6
 #: Each round moves the missing samples this far past the new estimate (successive
-#: over-relaxation: the same fixed point in 25-45 % fewer rounds on the sample and the
-#: synthetic take; 1.9 was slower on one of them).
+#: over-relaxation: the same fixed point in fewer rounds).
 IMPUTE_RELAXATION = 1.5
 
-#: `bulk_noise` reads at most this many frames, spread over the take (a spectrum of 400 frames
-#: reads white noise to about 2 %; frame spacing does not enter it; a 3,809-frame take's
-#: reading then costs 2 s instead of 38).
+#: `bulk_noise` reads at most this many frames, spread over the take: enough to read white
+#: noise's spectrum (frame spacing does not enter it) at a cost that does not grow with the take.
 BULK_FRAMES = 400
 
 

@@ -17,8 +17,8 @@ from lgi.errors import InputError
 
 if TYPE_CHECKING:
     from lgi._lgi import SolveResult
-    from lgi.model import Model
-    from lgi.take_prior import TakePrior
+    from lgi.solve.model import Model
+    from lgi.solve.take_prior import TakePrior
 
 __all__ = [
     "LEFT_OUT_PER_FRAME",
@@ -49,7 +49,7 @@ significant (`LOOK_SIGNIFICANCE`) or negative."""
 
 LOOK_SIGNIFICANCE = 2.33
 """The standard errors a look's mean saving must exceed: with no saving, one of `LOOKS` looks
-at the cumulative frames crosses it as often as one look crosses `lgi.detail.SIGNIFICANCE`
+at the cumulative frames crosses it as often as one look crosses `lgi.plan.detail.SIGNIFICANCE`
 (2.3 % one-sided; Pocock's boundary for three looks, 1977; simulated in
 tests/test_local_fits.py)."""
 

@@ -4,7 +4,7 @@
 Four readings. The tracks': a sample's second difference holds 6 sigma^2 of independent noise
 and almost none of a face's motion at capture rates. The fit's bound: what the dataset's
 global fit leaves at the markers holds the noise, so it bounds sigma from above at any frame
-spacing. The take's spectrum (`lgi.denoise.bulk_noise`): what the take's own few directions of
+spacing. The take's spectrum (`lgi.plan.denoise.bulk_noise`): what the take's own few directions of
 motion leave, which frame spacing does not enter; where it is the smallest it is the estimate.
 Otherwise, when the tracks read motion (frames far apart; independent noise moves one marker,
 motion moves its neighbours with it, so their second differences are correlated), the markers
@@ -21,12 +21,12 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 import lgi._lgi as _lgi
-from lgi.denoise import bulk_noise
 from lgi.errors import InputError, LgiWarning
-from lgi.leave_out import LOOKS, Looks, leave_markers_out, solved_in_chunks, take_frames
+from lgi.plan.denoise import bulk_noise
+from lgi.plan.leave_out import LOOKS, Looks, leave_markers_out, solved_in_chunks, take_frames
 
 if TYPE_CHECKING:
-    from lgi.model import Model
+    from lgi.solve.model import Model
 
 __all__ = [
     "MOTION_CORRELATION",
@@ -81,7 +81,7 @@ def estimate_marker_noise(frames: ArrayLike, model: Model | None = None) -> floa
     is part of that residual, so its scale (the residual's root mean square per coordinate,
     over the rows less the fit's rank) bounds sigma from above whatever the frame spacing.
     The smaller of the two is the estimate, unless what the take's own directions of motion
-    leave (`lgi.denoise.bulk_noise`, its dropouts filled at that estimate) is smaller still:
+    leave (`lgi.plan.denoise.bulk_noise`, its dropouts filled at that estimate) is smaller still:
     then that is the estimate. Otherwise, where the tracks read motion (their second
     differences correlated between neighbouring markers above `MOTION_CORRELATION`) and it is
     above `NOISE_FLOOR` of the face: then markers are left out of `NOISE_LEFT_OUT_FRAMES`

@@ -39,10 +39,10 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from lgi import _lgi
-from lgi.detail import DETAIL_FRAMES
+import lgi._lgi as _lgi
 from lgi.errors import InputError
-from lgi.leave_out import (
+from lgi.plan.detail import DETAIL_FRAMES
+from lgi.plan.leave_out import (
     LEFT_OUT_PER_FRAME,
     LOOKS,
     LeftOut,
@@ -51,11 +51,12 @@ from lgi.leave_out import (
     solved_in_chunks,
     take_frames,
 )
-from lgi.local import UNBOUNDED
+from lgi.solve.local import UNBOUNDED
+from lgi.solve.take_prior import TakePrior
 
 if TYPE_CHECKING:
     from lgi._lgi import SolveResult
-    from lgi.model import Model
+    from lgi.solve.model import Model
 
 __all__ = [
     "HeldOutPriors",
@@ -75,30 +76,6 @@ DIRECTION_TOLERANCE = 1e-9
 
 #: Rounds of filling frames' missing rows by their fit under the prior and reading it again.
 REFILL_ROUNDS = 3
-
-
-@dataclass(frozen=True)
-class TakePrior:
-    """The prior on a take's global-fit weights: `w = mean + factor @ v`, `v ~ N(0, I)`.
-
-    `mean` (S,) and `factor` (S, q) are in the dataset's shape weights; `noise` the markers' sigma
-    (data units, per coordinate) it was read with; `directions` the fit's directions at the
-    markers (q's ceiling), `kept` the directions the take moves in above its noise (q), and
-    `frames` the frames it was read from."""
-
-    mean: F64
-    factor: F64
-    noise: float
-    directions: int
-    frames: int
-
-    @property
-    def kept(self) -> int:
-        return int(self.factor.shape[1])
-
-    def as_core(self) -> tuple[F64, F64, float]:
-        """The core's `take_prior` argument: (mean, factor, noise variance)."""
-        return self.mean, self.factor, self.noise**2
 
 
 def shrinkage_factors(singular_values: F64, beta: float) -> F64:

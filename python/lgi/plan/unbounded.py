@@ -19,8 +19,8 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from lgi.detail import DETAIL_FRAMES
-from lgi.leave_out import (
+from lgi.plan.detail import DETAIL_FRAMES
+from lgi.plan.leave_out import (
     LEFT_OUT_PER_FRAME,
     LOOKS,
     Looks,
@@ -28,11 +28,11 @@ from lgi.leave_out import (
     solved_in_chunks,
     take_frames,
 )
-from lgi.local import UNBOUNDED
+from lgi.solve.local import UNBOUNDED
 
 if TYPE_CHECKING:
     from lgi._lgi import SolveResult
-    from lgi.model import Model
+    from lgi.solve.model import Model
 
 __all__ = ["UnboundedFitEstimate", "estimate_unbounded_fit"]
 
@@ -79,9 +79,9 @@ def estimate_unbounded_fit(
     it does not and the saving is positive, `frames_used` more frames are read, up to `LOOKS`
     looks. Each look solves about `frames_used` x 30 frames twice. With `take_prior` (and a
     `marker_noise` > 0) the unbounded fit is read as it would be solved with the take's prior
-    (`lgi.take_prior`), each row's prior read without its left-out marker from the take's
-    frames none of the markers is left out of (`lgi.take_prior.HeldOutPriors`)."""
-    from lgi.take_prior import HeldOutPriors
+    (`lgi.plan.take_prior`), each row's prior read without its left-out marker from the take's
+    frames none of the markers is left out of (`lgi.plan.take_prior.HeldOutPriors`)."""
+    from lgi.plan.take_prior import HeldOutPriors
 
     arr = take_frames(frames, model)
     out = leave_markers_out(arr, LOOKS * frames_used, LEFT_OUT_PER_FRAME, what="unbounded fit")

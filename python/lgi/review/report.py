@@ -281,7 +281,7 @@ def _comparison_figures(solved: Result, cmp: Comparison, frames: F64) -> tuple[s
     from matplotlib.cm import ScalarMappable
     from matplotlib.colors import Normalize
 
-    from lgi.lab.render import draw_mesh
+    from lgi.review.render import draw_mesh
 
     fig = _figure(11, 3.0)
     ax = fig.add_subplot()
@@ -523,7 +523,7 @@ def write_report(
         reference_job = None if reference_path is None else pool.submit(read_solved, reference_path)
         solved = solved_job.result()
         reference = None if reference_job is None else reference_job.result()
-    from lgi.diagnose import finding_lines
+    from lgi.review.diagnose import finding_lines
 
     found = finding_lines(solved)
     text = render_report(

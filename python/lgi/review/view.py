@@ -1,5 +1,6 @@
 """`lgi view`: a solved take in the browser. A small HTTP server on 127.0.0.1 serves one page
-(`lgi/viewer/index.html`, three.js vendored beside it) and the take in pieces: the faces once,
+(`lgi/review/viewer/index.html`, three.js vendored beside it) and the take in pieces: the
+faces once,
 then frames in chunks as the page plays or seeks, so a 1,500-frame ICT take shows its first
 frame without sending half a gigabyte. Colours per vertex (displacement from the first frame,
 or the distance to a second solve: A/B) are computed here, per chunk. The page also carries the
@@ -17,7 +18,7 @@ from http import HTTPStatus
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 from importlib import resources
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 from urllib.parse import parse_qs, urlsplit
 
 import numpy as np
@@ -62,7 +63,7 @@ class ViewData:
         return int(self.solved.vertices.shape[0])
 
     def meta(self) -> dict[str, Any]:
-        from lgi.report import WORST_SHOWN, worst_frames
+        from lgi.review.report import WORST_SHOWN, worst_frames
 
         s = self.solved
         return {
@@ -127,10 +128,16 @@ def _page_file(name: str) -> bytes:
     parts = [p for p in name.split("/") if p]
     if not parts or any(p in (".", "..") or p.startswith(".") for p in parts):
         raise FileNotFoundError(name)
-    node = resources.files("lgi") / "viewer"
+    node = resources.files("lgi.review") / "viewer"
     for p in parts:
         node = node / p
     return node.read_bytes()
+
+
+def _own_host(host: str | None, port: int) -> bool:
+    """Whether a request's Host header names the viewer itself: the loopback address (or
+    `localhost`) and the port it serves, as the browser sends it for `serve`'s address."""
+    return host in {f"127.0.0.1:{port}", f"localhost:{port}"}
 
 
 def _handler(data: ViewData, report: Callable[[], str]) -> type[BaseHTTPRequestHandler]:
@@ -156,6 +163,12 @@ def _handler(data: ViewData, report: Callable[[], str]) -> type[BaseHTTPRequestH
             self.wfile.write(body)
 
         def do_GET(self) -> None:
+            port = cast("tuple[str, int]", self.server.server_address)[1]
+            if not _own_host(self.headers.get("Host"), port):
+                # DNS rebinding: a page elsewhere whose name now points at 127.0.0.1 reaches
+                # this port with its own Host; only the viewer's own address is served.
+                self._send(b"this host is not the viewer's", "text/plain", HTTPStatus.FORBIDDEN)
+                return
             url = urlsplit(self.path)
             q = {k: v[-1] for k, v in parse_qs(url.query).items()}
             try:
@@ -194,8 +207,8 @@ def serve(data: ViewData, *, port: int = 0) -> tuple[ThreadingHTTPServer, str]:
     """Starts the viewer's server on 127.0.0.1 (`port` 0: any free port) in a daemon thread;
     returns it and its address. `/report.html` is `lgi report`'s page of the take, its worst
     frames linking back to the viewer."""
-    from lgi.diagnose import finding_lines
-    from lgi.report import render_report
+    from lgi.review.diagnose import finding_lines
+    from lgi.review.report import render_report
 
     def report() -> str:
         data.wait(data.num_frames)
@@ -236,7 +249,7 @@ def load(solved: str | os.PathLike[str], compare: str | os.PathLike[str] | None 
 
 def _open(path: str | os.PathLike[str]) -> tuple[Result, Callable[[int], None]]:
     """A `.npz` streamed (`stream_result_npz`); a USD cache read whole (`read_usd_cache`)."""
-    from lgi.report import USD_SUFFIXES
+    from lgi.review.report import USD_SUFFIXES
 
     if Path(path).suffix.lower() in USD_SUFFIXES:
         from lgi.io.usd import read_usd_cache

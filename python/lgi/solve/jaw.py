@@ -17,9 +17,10 @@ blended affine map exactly, and `fit_pose` fits theta to points by Gauss-Newton.
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -27,11 +28,15 @@ from numpy.typing import ArrayLike, NDArray
 from lgi._lgi import JawRig
 from lgi.errors import InputError
 
+if TYPE_CHECKING:
+    from lgi.data.dataset import Dataset
+
 F64 = NDArray[np.float64]
 
 __all__ = [
     "JawRig",
     "RigReport",
+    "auto_rig",
     "estimate_rig",
     "fit_rigid",
     "rotation_axis_angle",
@@ -294,3 +299,16 @@ def estimate_rig(
         }
         return rig, shape_theta, RigReport(rigid, axis, float(angle), rms, named, explained)
     return rig, shape_theta
+
+
+def auto_rig(dataset: Dataset) -> tuple[JawRig | None, NDArray[np.float64] | None]:
+    """The rig `Model.build(jaw="auto")` uses: `estimate_rig` on the dataset's jaw shapes, or
+    none when it has no `jawOpen` shape (or no rigid jaw is found in it: then a warning)."""
+    if "jawOpen" not in dataset.names:
+        return None, None
+    try:
+        rig, theta = estimate_rig(dataset.neutral, dataset.shapes, dataset.names)
+    except InputError as e:
+        warnings.warn(f"jaw='auto': no jaw rig ({e}); building without one", stacklevel=3)
+        return None, None
+    return rig, np.asarray(theta, dtype=np.float64)

@@ -8,7 +8,6 @@ core's defaults and their documentation are defined there once), and so is the r
 from __future__ import annotations
 
 import os
-import warnings
 from collections.abc import Iterator, Sequence
 from typing import Any
 
@@ -17,12 +16,13 @@ from numpy.typing import ArrayLike, NDArray
 
 import lgi._lgi as _lgi
 from lgi._lgi import BuildConfig, SolveResult
-from lgi.dataset import Dataset
-from lgi.detail import blend_detail, check_detail_weight
+from lgi.data.dataset import Dataset
 from lgi.errors import InputError
-from lgi.jaw import JawRig, estimate_rig
-from lgi.local import UNBOUNDED, local_bounds, local_pieces
-from lgi.take_prior import TakePrior
+from lgi.solve.detail import blend_detail
+from lgi.solve.jaw import JawRig, auto_rig
+from lgi.solve.local import local_pieces
+from lgi.solve.options import UNBOUNDED, SolveOptions, local_bounds
+from lgi.solve.take_prior import TakePrior
 
 
 def _bin_edges(jaw_bins: int | ArrayLike, shape_theta: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -116,7 +116,7 @@ class Model:
     ) -> Model:
         """Builds the model for `dataset` and marker rest positions `markers_rest` (B, 3).
 
-        With a jaw rig (`lgi.jaw.estimate_rig` gives one and `shape_theta`, the jaw pose
+        With a jaw rig (`lgi.solve.jaw.estimate_rig` gives one and `shape_theta`, the jaw pose
         (open, lateral, forward) of every dataset shape), shapes are unskinned before indexing
         (paper Eq. 2) and `solve(frames, jaw=...)` unskins and reskins each frame.
 
@@ -130,7 +130,7 @@ class Model:
         one set of clouds with every shape.
 
         `jaw="auto"` (default): a dataset with a `jawOpen` shape gets the rig
-        `lgi.jaw.estimate_rig` finds in its jaw shapes (a warning and no rig when it finds
+        `lgi.solve.jaw.estimate_rig` finds in its jaw shapes (a warning and no rig when it finds
         none), so `solve` turns the jaw as a rotation rather than blending it linearly
         (docs/results.md measures what it gives); `jaw=None` builds without a rig.
 
@@ -144,7 +144,7 @@ class Model:
                 raise InputError(f"jaw must be 'auto', a JawRig or None, got {jaw!r}")
             if shape_theta is not None:
                 raise InputError("shape_theta goes with a JawRig, not jaw='auto'")
-            jaw, shape_theta = _auto_rig(dataset)
+            jaw, shape_theta = auto_rig(dataset)
             if jaw is None and jaw_bins is not None:
                 raise InputError("jaw_bins: the dataset has no jawOpen shape to bin by")
         if jaw is None:
@@ -266,6 +266,7 @@ class Model:
         detail_weight: float | None = None,
         local_fits: bool | str = False,
         take_prior: TakePrior | None = None,
+        options: SolveOptions | None = None,
     ) -> SolveResult:
         """Solves frames (F, B, 3) of marker positions (a single (B, 3) frame gives F = 1).
         NaN rows are missing markers. With `temporal` (a performance), frames are solved in
@@ -304,32 +305,39 @@ class Model:
         is given (`marker_noise=0` for noise-free markers), so the recommended call on real
         capture is `solve(frames, marker_noise=sigma)`. Not offered with `smooth_window`. The
         fit costs time with many shapes (docs/performance.md). `fit="unbounded"`
-        (`lgi.local.UNBOUNDED`): the fit is offered and its weights are not held to [0, 1]
+        (`lgi.solve.local.UNBOUNDED`): the fit is offered and its weights are not held to [0, 1]
         (least squares with the fit's ridge alone, at the jaw pose the boxed fit refined): for a
         dataset of whole-face scans, whose weights are no activations (docs/concepts.md).
 
         `detail_weight` in [0, 1]: how much of the dataset's detail between the markers to keep
-        (`lgi.detail`; `lgi.estimate_detail_weight` reads it from a take): the result is
+        (`lgi.plan.detail`; `lgi.estimate_detail_weight` reads it from a take): the result is
         `w * solved + (1 - w) * smooth`, the smooth part the biharmonic interpolation of the
         solve's own present marker positions. None or 1 (default): the solve as it is.
 
         `local_fits`: each bundle's piece is the blendshape fit of the markers around it
-        (`lgi.local`) instead of one of its tets or the frame's global fit; the pieces' blend is
-        put through the solve's targets by a biharmonic corrective. Needs `marker_noise` (its
-        targets, poses and global fits) and a model without jaw bins. With a dataset of
-        whole-face scans it is the most accurate path measured (docs/results.md); it costs a
-        fit per bundle and frame (docs/performance.md). Each window's weights are held to
+        (`lgi.solve.local`) instead of one of its tets or the frame's global fit; the pieces' blend
+        is put through the solve's targets by a biharmonic corrective. Needs `marker_noise` (its
+        targets, poses and global fits) and a model without jaw bins. With a dataset of whole-face
+        scans it is the most accurate path measured (docs/results.md); it costs a fit per bundle and
+        frame (docs/performance.md). Each window's weights are held to
         [0, 1] like the global fit's (a FACS rig's activations); `local_fits="unbounded"`
-        (`lgi.local.UNBOUNDED`) drops that bound, for a dataset of scans whose differences
+        (`lgi.solve.local.UNBOUNDED`) drops that bound, for a dataset of scans whose differences
         match a region as well as their sums (docs/concepts.md), and so does the frame's global
         fit the windows start from and the targets come from (as `fit="unbounded"`).
 
         `take_prior` (`lgi.estimate_take_prior`, with an unbounded global fit): the take's own
         prior on the fit's weights in place of its ridge, so a noisy frame keeps to the
         directions the take moves in (docs/concepts.md)."""
-        w = None if detail_weight is None else check_detail_weight(detail_weight)
-        offer, unbounded = self._fit_options(local_fits, marker_noise, fit)
-        prior = _take_prior_argument(take_prior, unbounded)
+        opts, jaw = self._options(
+            options,
+            jaw,
+            marker_noise=marker_noise,
+            fit=fit,
+            detail_weight=detail_weight,
+            local_fits=local_fits,
+            take_prior=take_prior,
+        )
+        offer, unbounded, prior, sigma = _core_fit(opts)
         arr = np.asarray(frames)
         if arr.ndim == 2:
             arr = arr[None]
@@ -343,56 +351,46 @@ class Model:
                 smooth_window=smooth_window,
                 out=out,
                 fit=offer,
-                marker_noise=marker_noise,
+                marker_noise=sigma,
                 unbounded_fit=unbounded,
                 take_prior=prior,
             )
-        return self._finish(res, arr, w, local_fits)
+        return self._finish(res, arr, opts)
 
-    def _fit_options(
-        self, local_fits: bool | str, marker_noise: float | None, fit: bool | str | None
-    ) -> tuple[bool | None, bool]:
-        """The core's `fit` and `unbounded_fit` for `fit` and `local_fits` (unbounded local
-        fits start from an unbounded global fit); an InputError where they cannot be given
-        (before any solving)."""
-        if isinstance(fit, (bool, np.bool_)) or fit is None:
-            offer, unbounded = (None if fit is None else bool(fit)), False
-        elif isinstance(fit, str) and fit == UNBOUNDED:
-            offer, unbounded = True, True
+    def _options(
+        self, options: SolveOptions | None, jaw: Any, **given: Any
+    ) -> tuple[SolveOptions, Any]:
+        """The solve's options, built and checked once (`SolveOptions`, from `options` or the
+        keywords `given`, not both), and the core's `jaw`: the options' mode, or the poses
+        given as an array."""
+        if options is None:
+            mode = jaw if jaw is None or isinstance(jaw, str) else "auto"
+            opts = SolveOptions(jaw=mode, **given)
+        elif not isinstance(options, SolveOptions):
+            raise InputError(f"options: expected an lgi.SolveOptions, got {type(options).__name__}")
         else:
-            raise InputError(f"fit: expected True, False, None or {UNBOUNDED!r}, got {fit!r}")
-        bounded = local_bounds(local_fits)
-        if bounded is None:
-            return offer, unbounded
-        if marker_noise is None:
-            raise InputError(
-                "local_fits needs marker_noise (the noise-aware solve's targets and global fits; "
-                "marker_noise=0 for clean markers)"
-            )
-        if fit is False:
-            raise InputError("local_fits needs the global fit: do not pass fit=False")
-        if self.jaw_bins is not None:
-            raise InputError(
-                "local_fits: the model has jaw bins (each bin fits its own re-posed shapes); "
-                "build it without jaw_bins"
-            )
-        return offer, unbounded or not bounded
+            # Every keyword left at its default (None or False) when options= is given.
+            if jaw != "auto" or any(v is not None and v is not False for v in given.values()):
+                raise InputError(
+                    "give a solve's options either as options= or as keywords, not both"
+                )
+            opts, jaw = options, options.jaw
+        opts.check_resolved()
+        opts.check_model(self.jaw_bins is not None)
+        return opts, jaw
 
-    def _finish(
-        self,
-        res: SolveResult,
-        frames: NDArray[Any],
-        weight: float | None,
-        local_fits: bool | str,
-    ) -> SolveResult:
-        """`res` with its local fits' surface (`local_fits`) and then `weight` of its detail."""
-        bounded = local_bounds(local_fits)
+    def _finish(self, res: SolveResult, frames: NDArray[Any], opts: SolveOptions) -> SolveResult:
+        """`res` with its local fits' surface and then the weight of its detail (`opts`)."""
+        bounded = local_bounds(opts.local_fits)
         if bounded is not None:
             res = self._with_local(res, frames, bounded)
-        return res if weight is None or weight == 1.0 else self._with_detail(res, frames, weight)
+        weight = opts.detail_weight
+        if weight is None or weight == 1.0:
+            return res
+        return self._with_detail(res, frames, float(weight))
 
     def _with_local(self, res: SolveResult, frames: NDArray[Any], bounded: bool) -> SolveResult:
-        """`res` with the local fits' surface (`lgi.local`) in place in its vertices (an `out`
+        """`res` with the local fits' surface (`lgi.plan.local`) in place in its vertices (an `out`
         buffer receives it), its marker positions and residuals measured again."""
         v = np.asarray(res.vertices)
         local_pieces(self).surface(res, out=v, bounded=bounded)
@@ -420,7 +418,7 @@ class Model:
         )
 
     def _with_detail(self, res: SolveResult, frames: NDArray[Any], weight: float) -> SolveResult:
-        """`res` with `weight` of its detail kept (`lgi.detail.blend_detail`, in place in its
+        """`res` with `weight` of its detail kept (`lgi.solve.detail.blend_detail`, in place in its
         vertices, so an `out` buffer receives the result), its marker positions and residuals
         measured again on the blended surface."""
         missing = np.asarray(res.missing)
@@ -441,6 +439,7 @@ class Model:
         detail_weight: float | None = None,
         local_fits: bool | str = False,
         take_prior: TakePrior | None = None,
+        options: SolveOptions | None = None,
     ) -> Iterator[SolveResult]:
         """Solves `frames` (F, B, 3; a numpy memmap keeps a long take on disk) `chunk` frames
         at a time and yields each chunk's `SolveResult`, so memory stays flat however long
@@ -452,14 +451,21 @@ class Model:
         (it needs frames beyond the chunk); give poses as arrays by solving chunks with
         `solve`. Other options as in `solve` (`detail_weight` applied chunk by chunk: each
         frame's blend is its own, and `local_fits` too; `take_prior` is the whole take's)."""
-        w = None if detail_weight is None else check_detail_weight(detail_weight)
-        offer, unbounded = self._fit_options(local_fits, marker_noise, fit)
-        prior = _take_prior_argument(take_prior, unbounded)
+        if jaw is not None and not isinstance(jaw, str):
+            raise InputError("solve_iter: jaw must be 'auto', 'fit', 'track' or None")
+        opts, jaw = self._options(
+            options,
+            jaw,
+            marker_noise=marker_noise,
+            fit=fit,
+            detail_weight=detail_weight,
+            local_fits=local_fits,
+            take_prior=take_prior,
+        )
+        offer, unbounded, prior, sigma = _core_fit(opts)
         n = _lgi.check_count(chunk, "chunk")
         if n < 1:
             raise InputError(f"chunk must be >= 1 frames, got {n}")
-        if jaw is not None and not isinstance(jaw, str):
-            raise InputError("solve_iter: jaw must be 'auto', 'fit', 'track' or None")
         arr = frames if isinstance(frames, np.ndarray) else np.asarray(frames)
         if arr.ndim != 3:
             raise InputError(f"frames must have shape (F, B, 3), got {arr.shape}")
@@ -475,13 +481,13 @@ class Model:
                     jaw=jaw,
                     out=buf,
                     fit=offer,
-                    marker_noise=marker_noise,
+                    marker_noise=sigma,
                     previous=state,
                     unbounded_fit=unbounded,
                     take_prior=prior,
                 )
                 state = res.state if temporal else None
-                yield self._finish(res, part, w, local_fits)
+                yield self._finish(res, part, opts)
 
     def bundle_positions(self, meshes: ArrayLike) -> NDArray[np.float64]:
         """Marker surface positions (F, B, 3) on meshes (F, V, 3) or (V, 3) -> (B, 3)."""
@@ -494,33 +500,21 @@ class Model:
         return f"Model(num_bundles={self.num_bundles}, num_vertices={self.num_vertices})"
 
 
-def _take_prior_argument(
-    prior: TakePrior | None, unbounded: bool
-) -> tuple[NDArray[np.float64], NDArray[np.float64], float] | None:
-    """The core's `take_prior` for `prior`, which is a prior on the unbounded fit alone."""
-    if prior is None:
-        return None
-    if not isinstance(prior, TakePrior):
-        raise InputError(
-            f"take_prior: expected an lgi.TakePrior (lgi.estimate_take_prior) or None, got "
-            f"{type(prior).__name__}"
-        )
-    if not unbounded:
-        raise InputError(
-            "take_prior is a prior on the unbounded global fit: solve with fit='unbounded' or "
-            "local_fits='unbounded'"
-        )
-    return prior.as_core()
-
-
-def _auto_rig(dataset: Dataset) -> tuple[JawRig | None, NDArray[np.float64] | None]:
-    """The rig `Model.build(jaw="auto")` uses: `estimate_rig` on the dataset's jaw shapes, or
-    none when it has no `jawOpen` shape (or no rigid jaw is found in it: then a warning)."""
-    if "jawOpen" not in dataset.names:
-        return None, None
-    try:
-        rig, theta = estimate_rig(dataset.neutral, dataset.shapes, dataset.names)
-    except InputError as e:
-        warnings.warn(f"jaw='auto': no jaw rig ({e}); building without one", stacklevel=3)
-        return None, None
-    return rig, np.asarray(theta, dtype=np.float64)
+def _core_fit(
+    opts: SolveOptions,
+) -> tuple[
+    bool | None,
+    bool,
+    tuple[NDArray[np.float64], NDArray[np.float64], float] | None,
+    float | None,
+]:
+    """The core's `fit`, `unbounded_fit`, `take_prior` and `marker_noise` for checked, resolved
+    options: unbounded local fits start from an unbounded global fit; the take prior is a prior
+    on that fit."""
+    fit = opts.fit
+    offer, unbounded = (True, True) if fit == UNBOUNDED else (fit, False)
+    if local_bounds(opts.local_fits) is False:
+        unbounded = True
+    prior = opts.take_prior.as_core() if isinstance(opts.take_prior, TakePrior) else None
+    sigma = None if opts.marker_noise is None else float(opts.marker_noise)
+    return offer, unbounded, prior, sigma  # type: ignore[return-value]

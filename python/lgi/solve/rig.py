@@ -13,10 +13,11 @@ from collections.abc import Sequence
 import numpy as np
 from numpy.typing import NDArray
 
-from lgi.dataset import Dataset, with_shapes
-from lgi.deform import PoissonMesh, deformation_gradients
+from lgi.data.dataset import Dataset, with_shapes
+from lgi.data.deform import PoissonMesh, deformation_gradients
 from lgi.errors import DatasetError, InputError
-from lgi.model import Model
+from lgi.io.rig import CORRECTIVE_PREFIX
+from lgi.solve.model import Model
 
 F64 = NDArray[np.float64]
 
@@ -28,9 +29,6 @@ __all__ = [
     "corrective_name",
     "on_actor",
 ]
-
-CORRECTIVE_PREFIX = "corrective_"
-"""Correctives are named `corrective_` + the combination's shape names joined by `_`."""
 
 SAME_NEUTRAL = 1e-6
 """The template's neutral is the actor's when no vertex differs by more than this fraction of
