@@ -128,7 +128,7 @@ def write_c3d(
 def lgi_cli(*args: str | Path) -> subprocess.CompletedProcess[str]:
     """Runs `lgi ARGS…` as a TD would, in a subprocess (warnings are errors)."""
     return subprocess.run(
-        [sys.executable, "-m", "lgi.app.cli", *map(str, args)],
+        [sys.executable, "-m", "lgi.app.main", *map(str, args)],
         capture_output=True,
         text=True,
         env={**os.environ, "PYTHONWARNINGS": "error"},

@@ -81,3 +81,15 @@ def test_cli_evaluate_writes_results_and_a_heatmap_panel_of_every_method(tmp_pat
     assert "| LGI |" in (tmp_path / "results.md").read_text()
     assert (tmp_path / "notes.txt").read_text() == "mine"
     assert not [p.name for p in tmp_path.iterdir() if ".tmp" in p.name]
+
+
+def test_pops_count_the_frames_where_some_vertexs_error_jumps_not_where_it_drifts() -> None:
+    from lgi.lab.scoring import pops
+
+    frames = np.arange(50, dtype=np.float64)
+    err = np.stack([0.01 * frames, np.full(50, 0.1)], axis=1)  # a drift and a constant
+    assert pops(err, 0.2) == 0
+    err[20, 1] = 0.45  # one frame 0.35 cm off and back: |e(t+1) - 2e(t) + e(t-1)| = 0.7 at 20
+    # ... and 0.35 at 19 and 21 (the frames either side see half the excursion)
+    assert pops(err, 0.2) == 3 and pops(err, 0.5) == 1
+    assert pops(err[:2], 0.0) == 0  # two frames have no second difference

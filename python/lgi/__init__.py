@@ -9,17 +9,14 @@ bundles), `plan` (the readings behind `--recommended`), `review` (findings, repo
 `app` (the command line and the pipeline of a take). `lab` is the evaluation harness, not the
 library. This module re-exports the library's faces: `Model`, `Dataset` and their results, the
 readings, the errors, the thread pool, and the subpackages `io`, `capture`, `jaw` and `rig`.
+Each is imported on first use (PEP 562), so `import lgi` and the `lgi` command start without
+loading numpy, the core or USD: a Ctrl-C then ends the command in lgi's words, however early.
 """
 
-from lgi import capture, io
-from lgi._lgi import (
-    Choices,
-    SolveResult,
-    __version__,
-    get_num_threads,
-    set_num_threads,
-)
-from lgi.data.dataset import Dataset
+from __future__ import annotations
+
+import importlib
+
 from lgi.errors import (
     DatasetError,
     DatasetFileError,
@@ -30,17 +27,26 @@ from lgi.errors import (
     MarkerError,
     ModelFormatError,
 )
-from lgi.plan.choices import SolvePlan, plan_solve
-from lgi.plan.denoise import DenoisedTake, denoise_take
-from lgi.plan.detail import estimate_detail_weight
-from lgi.plan.local import LocalFitsEstimate, estimate_local_fits
-from lgi.plan.noise import estimate_marker_noise
-from lgi.plan.take_prior import TakePriorEstimate, estimate_take_prior, estimate_take_prior_use
-from lgi.plan.unbounded import UnboundedFitEstimate, estimate_unbounded_fit
-from lgi.solve import jaw, rig
-from lgi.solve.model import BuildConfig, Model
-from lgi.solve.options import SolveOptions
-from lgi.solve.take_prior import TakePrior
+
+# `typing` itself costs ~17 ms at start: the names below are for type checkers only.
+TYPE_CHECKING = False
+if TYPE_CHECKING:
+    from typing import Any
+
+    from lgi import capture, io
+    from lgi._lgi import Choices, SolveResult, __version__, get_num_threads, set_num_threads
+    from lgi.data.dataset import Dataset
+    from lgi.plan.choices import SolvePlan, plan_solve
+    from lgi.plan.denoise import DenoisedTake, denoise_take
+    from lgi.plan.detail import estimate_detail_weight
+    from lgi.plan.local import LocalFitsEstimate, estimate_local_fits
+    from lgi.plan.noise import estimate_marker_noise
+    from lgi.plan.take_prior import TakePriorEstimate, estimate_take_prior, estimate_take_prior_use
+    from lgi.plan.unbounded import UnboundedFitEstimate, estimate_unbounded_fit
+    from lgi.solve import jaw, rig
+    from lgi.solve.model import BuildConfig, Model
+    from lgi.solve.options import SolveOptions
+    from lgi.solve.take_prior import TakePrior
 
 __all__ = [
     "BuildConfig",
@@ -79,3 +85,53 @@ __all__ = [
     "rig",
     "set_num_threads",
 ]
+
+# Where each face lives: imported on first use, then kept as this module's attribute.
+_FACES = {
+    "BuildConfig": "lgi.solve.model",
+    "Choices": "lgi._lgi",
+    "Dataset": "lgi.data.dataset",
+    "DenoisedTake": "lgi.plan.denoise",
+    "LocalFitsEstimate": "lgi.plan.local",
+    "Model": "lgi.solve.model",
+    "SolveOptions": "lgi.solve.options",
+    "SolvePlan": "lgi.plan.choices",
+    "SolveResult": "lgi._lgi",
+    "TakePrior": "lgi.solve.take_prior",
+    "TakePriorEstimate": "lgi.plan.take_prior",
+    "UnboundedFitEstimate": "lgi.plan.unbounded",
+    "__version__": "lgi._lgi",
+    "denoise_take": "lgi.plan.denoise",
+    "estimate_detail_weight": "lgi.plan.detail",
+    "estimate_local_fits": "lgi.plan.local",
+    "estimate_marker_noise": "lgi.plan.noise",
+    "estimate_take_prior": "lgi.plan.take_prior",
+    "estimate_take_prior_use": "lgi.plan.take_prior",
+    "estimate_unbounded_fit": "lgi.plan.unbounded",
+    "get_num_threads": "lgi._lgi",
+    "plan_solve": "lgi.plan.choices",
+    "set_num_threads": "lgi._lgi",
+}
+# The subpackages re-exported, and the rooms (`lgi.solve`, `lgi.plan`, ...) reached by attribute.
+_MODULES = {
+    "capture": "lgi.capture",
+    "io": "lgi.io",
+    "jaw": "lgi.solve.jaw",
+    "rig": "lgi.solve.rig",
+    **{room: f"lgi.{room}" for room in ("app", "data", "lab", "plan", "review", "solve")},
+}
+
+
+def __getattr__(name: str) -> Any:
+    if name in _MODULES:
+        value: Any = importlib.import_module(_MODULES[name])
+    elif name in _FACES:
+        value = getattr(importlib.import_module(_FACES[name]), name)
+    else:
+        raise AttributeError(f"module 'lgi' has no attribute {name!r}")
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted({*globals(), *__all__})

@@ -270,18 +270,3 @@ def main(argv: Sequence[str] | None = None) -> int:
     except OSError as e:  # a file the user named cannot be read or written
         print(f"lgi: error: {e}", file=sys.stderr)
         return 2
-
-
-def entry() -> None:
-    """The `lgi` command: `main`, with a Ctrl-C that arrives while Python is still loading the
-    package answered the same way (one line, exit 130)."""
-    try:
-        code = main()
-    except KeyboardInterrupt:
-        print("lgi: interrupted", file=sys.stderr)
-        code = 130
-    sys.exit(code)
-
-
-if __name__ == "__main__":
-    entry()

@@ -484,11 +484,14 @@ CAPTURE_COLUMNS = [
     "max",
     "open_mean",
     "open_p95",
+    "pops_2mm",
+    "pops_5mm",
     "ms_per_frame",
     "plan",
 ]
 """Row keys of the capture protocol: per-vertex error over all frames, and over the jaw-open
-frames (`open_*`, NaN when the take has none), in data units."""
+frames (`open_*`, NaN when the take has none), in data units; pops as `scoring.pops` counts
+them on the frames solved."""
 
 
 def capture(

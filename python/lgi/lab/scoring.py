@@ -32,11 +32,27 @@ COLUMNS = [
     "max",
     "max_residual_rel",
     "jitter",
+    "pops_2mm",
+    "pops_5mm",
     "ms_per_frame",
 ]
 """Row keys: errors (mean, p95, max of per-vertex distances) and jitter (mean norm of the second
 difference of vertex positions over time) are in data units; the bundle residual is relative to
-the bounding-box diagonal."""
+the bounding-box diagonal; pops are frames where some vertex's error jumps (`pops`)."""
+
+POP_CM = (0.2, 0.5)
+"""A pop: a frame where some vertex's error jumps by more than this in one frame (2 and 5 mm;
+the lab's data are in cm). An animator sees a pop before any mean error."""
+
+
+def pops(err: F64, limit: float) -> int:
+    """Frames of a sequence's per-vertex errors `err` (F, V) where some vertex's error jumps by
+    more than `limit`: its second difference in time, |e(t+1) - 2 e(t) + e(t-1)|, a one-frame
+    excursion (a steady drift is no pop)."""
+    if err.shape[0] < 3:
+        return 0
+    jump = np.abs(err[2:] - 2.0 * err[1:-1] + err[:-2]).max(axis=1)
+    return int((jump > limit).sum())
 
 
 class Solver(Protocol):
@@ -70,6 +86,8 @@ def score(
         "max": float(err.max()),
         "max_residual_rel": float(np.max(result.bundle_residuals)) / diag,
         "jitter": jitter,
+        "pops_2mm": pops(err, POP_CM[0]),
+        "pops_5mm": pops(err, POP_CM[1]),
         "ms_per_frame": 1e3 * seconds / max(nf, 1),
     }
 

@@ -1,13 +1,18 @@
 """Which markers misbehaved, and when: after a solve, marker samples whose residual (with
-`--marker-noise`, the correction the solve applied) is an outlier for the take's own spread
-are gathered per marker into frame ranges, short ones called spikes; two markers off over the
-same frames whose positions fit each other's tracks at the range's edges are a likely label
-swap. The rule (docs/reliability.md): a sample is an outlier when its residual exceeds the
-median of all present samples by `OUTLIER_MADS` scaled median absolute deviations, and is
-at least `FLOOR` of the face's size (an exact solve's residuals are round-off)."""
+`--marker-noise`, the correction the solve applied) is an outlier for the take's own spread are
+gathered per marker into frame ranges, short ones called spikes; two markers off over the same
+frames whose positions fit each other's tracks at the range's edges are a likely label swap. A
+marker fault leaves the marker's own track where its neighbours do not follow (its position
+relative to its neighbours steps at the range's edge); a residual that comes and goes smoothly
+while the marker moves with its neighbours is a model gap, where the dataset does not reach the
+motion: reported as such, never as a fault. The rule (docs/reliability.md): a sample is an
+outlier when its residual exceeds the median of all present samples by `OUTLIER_MADS` scaled
+median absolute deviations, and is at least `FLOOR` of the face's size (an exact solve's
+residuals are round-off)."""
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -17,6 +22,7 @@ from numpy.typing import ArrayLike, NDArray
 from lgi.io.result import Result
 
 __all__ = [
+    "FAULTS",
     "FLOOR",
     "NOISE_SIGMAS",
     "OUTLIER_MADS",
@@ -44,6 +50,17 @@ FLOOR = 1e-3
 SPIKE_FRAMES = 5
 """A marker off for at most this many frames is a spike; longer, a marker off."""
 
+FAULTS = ("swap", "spike", "off")
+"""The kinds of finding that are a marker's fault (a "gap" is the dataset's, a "cut" the take's)."""
+
+NEIGHBOURS = 4
+"""Markers whose mean a marker's track is read against (its nearest in the take's median
+pose): skin moves them together, a fault moves one alone."""
+
+STEP_MADS = 8.0
+"""How many scaled MADs above the median step of a marker's position relative to its
+neighbours a step must be to leave its track (as `OUTLIER_MADS` for residuals)."""
+
 _GAP = 1
 """Frames a range may skip and stay one range (a sample that dips under the threshold)."""
 
@@ -61,6 +78,11 @@ class Finding:
     last: int
     worst: float
 
+    @property
+    def fault(self) -> bool:
+        """A marker's fault (a swap, a spike, a marker off its track), not the dataset's."""
+        return self.kind in FAULTS
+
     def describe(self, start: int = 0, units: str | None = None) -> str:
         u = f" {units}" if units else ""
         span = (
@@ -73,6 +95,11 @@ class Finding:
         if self.kind == "swap":
             a, b = self.markers
             return f"likely label swap: {a} <-> {b}, {span} (residuals up to {self.worst:.3g}{u})"
+        if self.kind == "gap":
+            return (
+                f"the dataset does not follow {self.markers[0]} at {span}: up to "
+                f"{self.worst:.3g}{u} (the marker moves with its neighbours; not repaired)"
+            )
         what = "spike" if self.kind == "spike" else "marker off"
         return f"{what}: {self.markers[0]}, {span} (residual up to {self.worst:.3g}{u})"
 
@@ -181,6 +208,55 @@ def _track_ranges(x: NDArray[np.float64], size: float) -> dict[int, list[tuple[i
     return out
 
 
+def _relative_steps(x: NDArray[np.float64]) -> NDArray[np.float64]:
+    """(F, B) each marker's step between the frames it is seen in, less the median step of its
+    `NEIGHBOURS` nearest markers (nearest in the take's median pose) seen in both, per frame
+    elapsed; NaN where none of them is. Skin carries a marker with its neighbours; a fault
+    moves it alone. (A neighbour's dropout changes which neighbours are averaged, not the
+    step: each neighbour's own step is taken between the same two frames.)"""
+    f, b = x.shape[:2]
+    steps = np.full((f, b), np.nan)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # a marker never seen: NaN, left out
+        pose = np.nanmedian(x, axis=0) if f else np.full((b, 3), np.nan)
+    ok = np.isfinite(pose).all(axis=1)
+    if ok.sum() <= NEIGHBOURS:
+        return steps
+    idx = np.flatnonzero(ok)
+    d = np.linalg.norm(pose[idx, None] - pose[None, idx], axis=2)
+    np.fill_diagonal(d, np.inf)
+    near = idx[np.argsort(d, axis=1)[:, :NEIGHBOURS]]
+    present: NDArray[np.bool_] = np.asarray(np.isfinite(x).all(axis=2))
+    for i, k in enumerate(idx):
+        seen = np.flatnonzero(present[:, k])
+        if seen.size < 2:
+            continue
+        p, q = seen[:-1], seen[1:]
+        own = x[q, k] - x[p, k]  # (S, 3)
+        both = present[p][:, near[i]] & present[q][:, near[i]]  # (S, N)
+        moved = np.where(both[..., None], x[q][:, near[i]] - x[p][:, near[i]], np.nan)
+        keep = both.any(axis=1)
+        # The neighbours' median step: one faulty neighbour does not move the reference.
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
+            skin = np.nanmedian(moved[keep], axis=1)
+        steps[q[keep], k] = np.linalg.norm(own[keep] - skin, axis=1) / (q - p)[keep]
+    return steps
+
+
+def _leaves_track(steps: NDArray[np.float64], b: int, first: int, last: int) -> bool:
+    """Whether marker `b` steps off its track relative to its neighbours where a range of
+    frames first..last begins or ends (the frame entering it, or the frame after it)."""
+    col = steps[:, b]
+    vals = col[np.isfinite(col)]
+    if vals.size < 3:
+        return True  # too little track to read: a fault, as before this test
+    med = float(np.median(vals))
+    limit = med + STEP_MADS * 1.4826 * float(np.median(np.abs(vals - med)))
+    edges = [k for k in (first, last + 1) if 0 <= k < col.shape[0] and np.isfinite(col[k])]
+    return any(col[k] > limit for k in edges)
+
+
 def diagnose(
     residuals: ArrayLike,
     missing: ArrayLike,
@@ -239,6 +315,7 @@ def diagnose(
                     taken |= {(a, s1, e1), (b, s2, e2)}
                     swapped += [(a, first, last), (b, first, last)]
     singles = []
+    steps = None if x is None else _relative_steps(x)
     for b, rs in (runs if residual_runs is None else residual_runs).items():
         for s, e in rs:
             if (b, s, e) in taken or any(k == b and s <= e1 and s1 <= e for k, s1, e1 in swapped):
@@ -247,9 +324,41 @@ def diagnose(
             if not backed and (x is None or not _is_spike(x[:, b], s, e)):
                 continue  # two unrelated steps of real motion, not a marker off its track
             kind = "spike" if e - s + 1 <= SPIKE_FRAMES else "off"
+            if steps is not None and not _leaves_track(steps, b, s, e):
+                kind = "gap"  # the marker moves with its neighbours: the dataset's, not its
             singles.append(Finding(kind, (names[b],), s, e, _worst(r[s : e + 1, b])))
     singles.sort(key=lambda f: -f.worst)
+    if x is not None:
+        singles = _without_echoes(findings + singles, x, names)[len(findings) :]
     return findings + singles + face_jumps
+
+
+def _without_echoes(
+    found: list[Finding], x: NDArray[np.float64], names: Sequence[str]
+) -> list[Finding]:
+    """`found` less the gaps that are a fault's echo: a noise-aware solve spreads a faulty
+    marker's correction to its neighbours, whose residuals then rise over the fault's frames
+    without any track of theirs moving. A gap of one of a fault's `2 * NEIGHBOURS` nearest
+    markers (in the take's median pose) overlapping the fault's frames is dropped."""
+    faults = [f for f in found if f.fault]
+    if not faults:
+        return found
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # a marker never seen: NaN
+        pose = np.nanmedian(x, axis=0)
+    index = {n: k for k, n in enumerate(names)}
+    dist = np.linalg.norm(pose[:, None] - pose[None], axis=2)
+    dist[~np.isfinite(dist)] = np.inf
+    near = np.argsort(dist, axis=1)[:, 1 : 2 * NEIGHBOURS + 1]
+
+    def echo(g: Finding) -> bool:
+        k = index[g.markers[0]]
+        return any(
+            g.first <= f.last and f.first <= g.last and any(k in near[index[n]] for n in f.markers)
+            for f in faults
+        )
+
+    return [g for g in found if g.kind != "gap" or not echo(g)]
 
 
 def _worst(r: NDArray[np.float64]) -> float:
@@ -302,8 +411,8 @@ def summary(
         f"{np.nanpercentile(r, 95):.3g}{u}, largest {r[f, b]:.3g}{u} ({names[b]} at time code "
         f"{start + f})"
     ]
-    if not findings:
-        lines.append("no marker flagged (outliers, spikes, label swaps)")
+    if not any(f.fault for f in findings):
+        lines.append("no marker fault (outliers off their track, spikes, label swaps)")
     for item in findings[:shown]:
         lines.append(item.describe(start, units))
     if len(findings) > shown:
