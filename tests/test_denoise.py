@@ -134,7 +134,8 @@ def test_lgi_solve_denoise_says_what_it_kept_and_measures_residuals_on_the_given
     model.save(model_path)
     markers = np.asarray(sample.performance, dtype=np.float64).copy()
     # A marker spiking 1.5 along x for 3 frames: the denoising takes most of it out of what
-    # is solved, but the report reads the given markers, so it is still named.
+    # is solved, but the report reads the given markers, so it is still named (kept as given,
+    # `--no-repair`).
     spiking = 7 if np.isfinite(markers[40:43, 7]).all() else 8
     markers[40:43, spiking, 0] += 1.5
     take = tmp_path / "take.npz"
@@ -142,7 +143,7 @@ def test_lgi_solve_denoise_says_what_it_kept_and_measures_residuals_on_the_given
     out = tmp_path / "out.npz"
     noise = f"{sigma:.6g}"
     argv = ["solve", str(model_path), str(take), "-o", str(out), "--marker-noise", noise]
-    assert main([*argv, "--denoise"]) == 0
+    assert main([*argv, "--denoise", "--no-repair"]) == 0
     said = capsys.readouterr().err
     assert "denoised the take:" in said and f"marker noise {float(noise):.4g} ->" in said, said
     spike = f"spike: {model.marker_names[spiking]}, time codes 40-42"
@@ -163,6 +164,11 @@ def test_lgi_solve_denoise_says_what_it_kept_and_measures_residuals_on_the_given
     on_surface = model.bundle_positions(np.asarray(r.vertices, dtype=np.float64))
     expected = np.nan_to_num(np.linalg.norm(markers - on_surface, axis=2))  # 0: missing
     np.testing.assert_allclose(r.bundle_residuals, expected, atol=1e-5)  # float32 meshes
+    # Repaired (the default), the spike is solved as missing and said so, denoised or not.
+    assert main([*argv, "--denoise", "--force"]) == 0
+    said = capsys.readouterr().err
+    name = model.marker_names[spiking]
+    assert f"repaired: {name} solved as missing (a spike), time codes 40-42" in said, said
     # Without a noise there is nothing to remove: an error in our words, exit 2.
     out2 = tmp_path / "out2.npz"
     bad = ["solve", str(model_path), str(take), "-o", str(out2), "--denoise"]

@@ -195,3 +195,48 @@ def test_clicking_a_heatmap_cell_in_the_report_opens_the_viewer_at_that_frame(pa
         time.sleep(0.05)
     assert abs(got - 160) <= 1, got
     assert _errors(driver) == []
+
+
+def test_a_solve_that_repaired_markers_lists_them_and_seeks_to_them(
+    sample, sample_model, tmp_path
+) -> None:  # type: ignore[no-untyped-def]
+    """The settings' repairs are listed under the heatmap; a click opens the frame."""
+    from dataclasses import replace
+
+    from lgi.io.result import read_result_npz, write_result_npz
+    from lgi.io.settings import SolveSettings
+    from lgi.review import view
+
+    plain = read_result_npz(write_solve(tmp_path / "a.npz", sample_model, sample.performance, 0.02))
+    settings = replace(
+        SolveSettings.of(has_jaw_rig=False, jaw=None, marker_noise=0.02, detail_weight=None),
+        repairs=(("spike", ("m010",), 40, 42),),
+    )
+    path = write_result_npz(
+        tmp_path / "repaired.npz",
+        plain.topology,
+        plain.vertices,
+        plain.bundle_residuals,
+        plain.missing,
+        plain.marker_names,
+        fps=plain.fps,
+        start=plain.start,
+        units=plain.units,
+        markers=plain.markers,
+        settings=settings,
+    )
+    driver = _browser()
+    server, url = view.serve(view.load(path))
+    try:
+        _open(driver, url)
+        items = driver.execute_script(
+            "return [...document.querySelectorAll('#repaired button')].map(b => b.textContent)"
+        )
+        assert items == ["m010 solved as missing (a spike), time codes 140-142"]
+        driver.execute_script("document.querySelector('#repaired button').click()")
+        _wait(driver, "return document.body.dataset.frame", "140")
+        assert _errors(driver) == []
+    finally:
+        driver.quit()
+        server.shutdown()
+        server.server_close()

@@ -49,6 +49,14 @@ def add_solve_options(parser: argparse.ArgumentParser) -> None:
     _add_denoise_argument(parser)
     _add_recommended_argument(parser)
     parser.add_argument(
+        "--no-repair",
+        dest="repair",
+        action="store_false",
+        help="keep the markers as given: by default a named label swap is undone and a spike "
+        "or a marker off its track is solved as missing over its frames, and the take solved "
+        "again (the take file is never touched; what was repaired is said and recorded)",
+    )
+    parser.add_argument(
         "--jaw",
         choices=list(pipeline.JAW_POSES),
         default="auto",

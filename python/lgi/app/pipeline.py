@@ -7,6 +7,7 @@ with; the residuals written and the findings are always the given markers'. `sol
 
 from __future__ import annotations
 
+import dataclasses
 import os
 from dataclasses import dataclass
 from pathlib import Path
@@ -35,6 +36,7 @@ from lgi.io.topology import topology
 from lgi.plan.choices import SolvePlan, plan_solve
 from lgi.plan.denoise import DenoisedTake
 from lgi.review.diagnose import Finding, diagnose, face_size, summary
+from lgi.review.repair import repaired
 from lgi.solve.model import PROGRESS_DELAY, Model
 from lgi.solve.options import JAW_MODES, SolveOptions
 from lgi.solve.placement import ScaleFit, check_scale
@@ -142,6 +144,46 @@ def plan_take(
     return PlannedTake(frames, plan, plan.settings(has_jaw_rig=m.jaw_rig is not None))
 
 
+def solve_take(
+    planned: PlannedTake,
+    m: Model,
+    options: SolveOptions,
+    *,
+    repair: bool = True,
+    start: int = 0,
+    quiet: bool = True,
+    say: Say = _silent,
+) -> tuple[PlannedTake, SolveResult]:
+    """The planned take solved; with `repair`, the marker faults that solve shows (label
+    swaps, spikes, markers off their track: `lgi.review.diagnose`, told from model gaps) are
+    repaired (`lgi.review.repair`), said in one line each, and the repaired take planned and
+    solved again, its settings recording the repairs. Returns what was solved and its
+    result (the take given is never touched)."""
+    res = m.solve(planned.plan.frames, quiet=quiet, options=planned.plan.options)
+    if not repair:
+        return planned, res
+    names = m.marker_names
+    found = diagnose(
+        planned.residuals(res),
+        res.missing,
+        names,
+        size=face_size(res.vertices[0]),
+        markers=planned.given,
+        noise=planned.plan.given_noise,
+    )
+    faults = [f for f in found if f.fault]
+    if not faults:
+        return planned, res
+    x, _, done = repaired(planned.given, faults, names)
+    again = plan_take(x, m, options)
+    settings = dataclasses.replace(again.settings, repairs=done)
+    for line in settings.repair_lines(start):
+        say(f"repaired: {line}")
+    again = PlannedTake(again.given, again.plan, settings)
+    say("solved again with the repaired markers (--no-repair keeps them as given)")
+    return again, m.solve(again.plan.frames, quiet=quiet, options=again.plan.options)
+
+
 def solve_file(
     model: str | os.PathLike[str],
     take: str | os.PathLike[str],
@@ -161,6 +203,7 @@ def solve_file(
     up: str = "y",
     quiet: bool = False,
     say: Say = _silent,
+    repair: bool = True,
 ) -> tuple[Path, int]:
     """`lgi solve`: the take file solved with the model file with `options` (built once from
     the command line, `SolveOptions.from_cli`; default: the paper's exact interpolation),
@@ -171,7 +214,10 @@ def solve_file(
     (`--chunk N`) solves and writes N frames at a time into one reused buffer, so the solve's
     memory stays that of N frames (each chunk continues from the last frame of the one before:
     the same frames as one solve, except with `--jaw track`, tracked chunk by chunk). Returns
-    the path written (the `NAME.NNNN.obj` pattern for OBJ sequences) and the frame count."""
+    the path written (the `NAME.NNNN.obj` pattern for OBJ sequences) and the frame count.
+    `repair` (default; `--no-repair` off): marker faults the solve shows are repaired and the
+    take solved again (`solve_take`); with `chunk` they are named, not repaired (repairing
+    needs the whole take's residuals)."""
     options = SolveOptions() if options is None else options
     if chunk is not None and (isinstance(chunk, bool) or int(chunk) < 1):
         raise InputError(f"--chunk {chunk}: must be a whole number of frames >= 1")
@@ -225,7 +271,10 @@ def solve_file(
     topo = topology(m.dataset)
     start = t.first_frame + rng.start
     if chunk is None:
-        res = m.solve(x, quiet=quiet, options=plan.options)
+        planned, res = solve_take(
+            planned, m, options, repair=repair, start=start, quiet=quiet, say=say
+        )
+        given, settings, given_sigma = planned.given, planned.settings, planned.plan.given_noise
         if curves_out is not None:
             _write_curves(
                 curves_out, res.fit_weights, res.jaw_theta, m, fps=rate, start=start, frame=frame
@@ -333,7 +382,7 @@ def solve_file(
         sink.abort()
         raise
     assert first_frame is not None  # a take has at least one frame (takes.read)
-    _say_findings(
+    found = _say_findings(
         say,
         np.concatenate(residuals),
         np.concatenate(absent),
@@ -343,4 +392,6 @@ def solve_file(
         start,
         given_sigma,
     )
+    if repair and any(f.fault for f in found):
+        say("not repaired with --chunk (repairing needs the whole take's residuals)")
     return written, n

@@ -40,7 +40,10 @@ class SolveSettings:
     (`lgi.estimate_take_prior`; older files read as False); `denoised_from`: the markers'
     noise before the take was denoised (`lgi.denoise_take`; `marker_noise` is then the noise
     it left) and `denoised_rank` the directions of motion it kept (None: not denoised, as
-    older files read)."""
+    older files read); `repairs`: the marker faults repaired before the solve (`lgi.review.
+    repair`), each `{"kind", "markers", "first", "last"}` with frames 0-based in the solve
+    (a swap undone; a spike or a marker off its track solved as missing; none in older
+    files)."""
 
     marker_noise: float | None
     jaw: str | None
@@ -51,6 +54,7 @@ class SolveSettings:
     take_prior: bool = False
     denoised_from: float | None = None
     denoised_rank: int | None = None
+    repairs: tuple[tuple[str, tuple[str, ...], int, int], ...] = ()
 
     @staticmethod
     def of(
@@ -106,6 +110,10 @@ class SolveSettings:
                 "take_prior": self.take_prior,
                 "denoised_from": self.denoised_from,
                 "denoised_rank": self.denoised_rank,
+                "repairs": [
+                    {"kind": k, "markers": list(m), "first": a, "last": b}
+                    for k, m, a, b in self.repairs
+                ],
             },
             sort_keys=True,
         )
@@ -119,12 +127,19 @@ class SolveSettings:
         except ValueError:
             raise InputError(f"{where}: not the JSON text lgi writes: {text[:60]!r}") from None
         keys = {"marker_noise", "jaw", "detail_weight", "version"}
-        optional = {"local_fits", "unbounded_fit", "take_prior", "denoised_from", "denoised_rank"}
+        optional = {
+            "local_fits",
+            "unbounded_fit",
+            "take_prior",
+            "denoised_from",
+            "denoised_rank",
+            "repairs",
+        }
         if not isinstance(d, dict) or not keys <= set(d) <= keys | optional:
             raise InputError(
                 f"{where}: expected the keys marker_noise, jaw, detail_weight, version and "
-                "(optionally) local_fits, unbounded_fit, take_prior, denoised_from and "
-                "denoised_rank"
+                "(optionally) local_fits, unbounded_fit, take_prior, denoised_from, "
+                "denoised_rank and repairs"
             )
         local = d.get("local_fits", False)
         if not isinstance(local, bool) and local != "unbounded":
@@ -151,6 +166,27 @@ class SolveSettings:
             raise InputError(
                 f"{where}: denoised_rank must be a whole number >= 0 or null, got {rank!r}"
             )
+        repairs = []
+        items: list[Any] = d.get("repairs", [])
+        for item in items if isinstance(items, list) else [items]:
+            ok = (
+                isinstance(item, dict)
+                and set(item) == {"kind", "markers", "first", "last"}
+                and item["kind"] in ("swap", "spike", "off")
+                and isinstance(item["markers"], list)
+                and all(isinstance(n, str) for n in item["markers"])
+                and all(
+                    isinstance(item[k], int) and not isinstance(item[k], bool) and item[k] >= 0
+                    for k in ("first", "last")
+                )
+            )
+            if not ok:
+                raise InputError(
+                    f"{where}: repairs must be a list of {{kind, markers, first, last}}, got "
+                    f"{item!r}"
+                )
+            assert isinstance(item, dict)
+            repairs.append((item["kind"], tuple(item["markers"]), item["first"], item["last"]))
         for key in ("jaw", "version"):
             if d[key] is not None and not isinstance(d[key], str):
                 raise InputError(f"{where}: {key} must be text or null, got {d[key]!r}")
@@ -164,6 +200,7 @@ class SolveSettings:
             take_prior=prior,
             denoised_from=number("denoised_from") if "denoised_from" in d else None,
             denoised_rank=rank,
+            repairs=tuple(repairs),
         )
 
     def describe(self, units: str | None) -> str:
@@ -186,7 +223,25 @@ class SolveSettings:
             if self.detail_weight is None
             else f"detail weight {self.detail_weight:.3f}"
         )
-        return f"{noise}, {jaw}, {detail}{self.pieces()} (lgi {self.version or 'version unknown'})"
+        line = f"{noise}, {jaw}, {detail}{self.pieces()} (lgi {self.version or 'version unknown'})"
+        return line + "".join(f"; repaired: {r}" for r in self.repair_lines())
+
+    def repair_lines(self, start: int = 0) -> list[str]:
+        """Each repair in a few words, frames as time codes from `start`: 'm063 <-> m153
+        swapped, time codes 301-360', 'm029 solved as missing (a spike), time code 206'."""
+        out = []
+        for kind, markers, first, last in self.repairs:
+            span = (
+                f"time code {start + first}"
+                if first == last
+                else f"time codes {start + first}-{start + last}"
+            )
+            if kind == "swap":
+                out.append(f"{markers[0]} <-> {markers[1]} swapped, {span}")
+            else:
+                what = "a spike" if kind == "spike" else "off its track"
+                out.append(f"{markers[0]} solved as missing ({what}), {span}")
+        return out
 
     def pieces(self) -> str:
         """How the pieces and the global fit read at the end of a line that describes the solve:

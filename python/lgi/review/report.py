@@ -427,6 +427,14 @@ def render_report(
         "</table>",
         "<h2>Findings</h2>",
     ]
+    fixed = [] if solved.settings is None else solved.settings.repair_lines(solved.start)
+    if fixed:
+        body += [
+            "<p>Repaired before the solve (the take file is untouched):</p>",
+            "<ul class=repaired>",
+            *(f"<li>{esc(line)}</li>" for line in fixed),
+            "</ul>",
+        ]
     if findings:
         body += ["<ul>", *(f"<li>{esc(f)}</li>" for f in findings), "</ul>"]
     else:

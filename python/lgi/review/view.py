@@ -83,6 +83,14 @@ class ViewData:
                 {"frame": w.frame, "residual": w.residual, "marker": s.marker_names[w.marker]}
                 for w in worst_frames(s, WORST_SHOWN)
             ],
+            "repairs": []
+            if s.settings is None
+            else [
+                {"markers": list(markers), "first": first, "last": last, "line": line}
+                for (_, markers, first, last), line in zip(
+                    s.settings.repairs, s.settings.repair_lines(s.start), strict=True
+                )
+            ],
         }
 
     def triangles(self) -> bytes:

@@ -178,7 +178,8 @@ async function show(frame) {
       dummy.scale.setScalar(present ? 1 : 0);
       dummy.updateMatrix();
       markerMesh.setMatrixAt(b, dummy.matrix);
-      const c = ramp(MAGMA, Number.isFinite(r) ? 0.15 + 0.85 * r / resTop : 0);
+      const c = repairedAt[frame * B + b] ? REPAIRED
+        : ramp(MAGMA, Number.isFinite(r) ? 0.15 + 0.85 * r / resTop : 0);
       markerMesh.setColorAt(b, tint.setRGB(c[0], c[1], c[2]));
     }
     markerMesh.instanceMatrix.needsUpdate = true;
@@ -237,6 +238,31 @@ function drawHeatmap() {
   });
 }
 
+// Samples repaired before the solve (a swap undone, a spike solved as missing): drawn cyan.
+const REPAIRED = [0.0, 0.8, 1.0];
+const repairedAt = new Uint8Array(F * B);
+for (const r of meta.repairs) {
+  for (const name of r.markers) {
+    const b = meta.markers.indexOf(name);
+    for (let f = r.first; f <= r.last && b >= 0; f++) repairedAt[f * B + b] = 1;
+  }
+}
+
+function listRepaired() {
+  if (!meta.repairs.length) return;
+  $("repaired-box").hidden = false;
+  for (const r of meta.repairs) {
+    const li = document.createElement("li");
+    const btn = document.createElement("button");
+    btn.type = "button";
+    btn.dataset.frame = String(meta.start + r.first);
+    btn.textContent = r.line;
+    btn.addEventListener("click", () => seek(r.first));
+    li.append(btn);
+    $("repaired").append(li);
+  }
+}
+
 function listWorst() {
   for (const w of meta.worst_frames) {
     const li = document.createElement("li");
@@ -281,6 +307,7 @@ window.addEventListener("hashchange", fromHash);
 resize();
 drawHeatmap();
 listWorst();
+listRepaired();
 await setMode("none");
 if (!meta.fps_known) status("the take has no frame rate: playing at 24 fps");
 fromHash();
