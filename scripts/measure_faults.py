@@ -1,0 +1,212 @@
+"""Marker faults, model gaps, repair and pops on the capture protocol's takes (ICT-FaceKit with a
+quarter of its shapes held out, driven by the shared Live Link recordings; docs/reliability.md).
+
+    python scripts/measure_faults.py findings [--sigma 0 0.02 0.05] [--seeds 0]
+        clean takes (markers_120 and 160 random markers, both recordings whole): findings by
+        kind; then a swap of two markers 1-2 cm apart (60 frames) and spikes of 1 cm and 0.5 cm
+        (3 frames) planted in each: which are named as faults.
+    python scripts/measure_faults.py repair [--seeds 0 1] [--call auto|recommended]
+        a 1,200-frame 60 Hz take (160 random markers, 0.2 mm noise, 2 % dropouts) with a swap
+        (60 frames) and a 1 cm spike (3 frames): the face-skin error on those frames, repaired
+        and kept as given, against the clean take's solve; and the clean take's error over all
+        frames with and without repair.
+    python scripts/measure_faults.py pops [--seeds 0]
+        the same clean take: frames whose face-skin error jumps by more than 2 and 5 mm
+        (`lgi.lab.scoring.pops`), the fast call, --recommended and the rig-solve peer.
+
+Needs ../shared/data beside the checkout (or $LGI_SHARED_DATA)."""
+
+from __future__ import annotations
+
+import argparse
+import collections
+import os
+import time
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+import lgi
+from lgi.app.pipeline import plan_take, solve_take
+from lgi.io.livelink import read_livelinkface
+from lgi.lab import ict
+from lgi.lab.baselines import FitJaw
+from lgi.lab.capture import make_capture, random_layout
+from lgi.lab.scoring import POP_CM, pops
+from lgi.review.diagnose import diagnose
+
+ROOT = Path(__file__).resolve().parents[1]
+RECORDINGS = ("alex_rom_4", "jmtechart_myslate_3")
+
+
+def data() -> tuple[lgi.Dataset, np.ndarray, np.ndarray, Path]:
+    folder = ict.find(os.environ.get(ict.ENV), start=ROOT)
+    if folder is None:
+        raise SystemExit("ICT-FaceKit not found: put ../shared/data beside the checkout")
+    d = ict.load_dataset(folder)
+    return (
+        d,
+        ict.load_layout(folder).positions,
+        random_layout(d, 160, 1, np.arange(ict.NARROW_FACE)),
+        folder,
+    )
+
+
+def curves(d: lgi.Dataset, folder: Path, name: str) -> np.ndarray:
+    return read_livelinkface(folder.parent / "livelinkface" / f"{name}.csv").for_dataset(d.names)
+
+
+def _found(m: lgi.Model, x: np.ndarray, sig: float) -> list:  # type: ignore[type-arg]
+    """The findings of `x` solved noise-aware, as `lgi solve` reads them."""
+    r = m.solve(x, marker_noise=sig, quiet=True)
+    names = list(m.marker_names)
+    return diagnose(r.bundle_residuals, r.missing, names, size=m.diagonal, markers=x, noise=sig)
+
+
+def findings(sigmas: list[float], seeds: list[int]) -> None:
+    d, markers_120, random_160, folder = data()
+    clean: collections.Counter[str] = collections.Counter()
+    named: collections.Counter[str] = collections.Counter()
+    takes = frames = 0
+    for layout, pos in (("markers_120", markers_120), ("random 160", random_160)):
+        for rec in RECORDINGS:
+            w = curves(d, folder, rec)
+            for sigma in sigmas:
+                for seed in seeds:
+                    t = make_capture(
+                        d, w, pos, sigma=sigma, dropout=0.02, holdout=0.25, seed=seed, jaw=None
+                    )
+                    m = lgi.Model.build(t.dataset, pos)
+                    names, n = list(m.marker_names), t.frames.shape[0]
+                    with warnings.catch_warnings():
+                        warnings.simplefilter("ignore", lgi.LgiWarning)
+                        sig = lgi.estimate_marker_noise(t.frames, m)
+
+                    for g in _found(m, t.frames, sig):
+                        clean[g.kind] += 1
+                    x = t.frames.copy()
+                    pose = np.nanmedian(x, axis=0)
+                    dist = np.linalg.norm(pose[:, None] - pose[None], axis=2)
+                    rng = np.random.default_rng(seed + 10)
+                    a = int(rng.integers(len(names)))
+                    b = int(np.flatnonzero((dist[a] > 1.0) & (dist[a] < 2.0))[0])
+                    s0, s1, s2 = n // 4, n // 2, (3 * n) // 4
+                    x[s0 : s0 + 60, [a, b]] = x[s0 : s0 + 60, [b, a]]
+                    c, e = (int(k) for k in rng.choice(len(names), 2, replace=False))
+                    x[s1 : s1 + 3, c] += [0.0, 0.0, 1.0]
+                    x[s2 : s2 + 3, e] += [0.0, 0.5, 0.0]
+                    got = _found(m, x, sig)
+                    named["swap"] += any(
+                        g.kind == "swap" and set(g.markers) == {names[a], names[b]} for g in got
+                    )
+                    for key, k, s in (("spike 1 cm", c, s1), ("spike 0.5 cm", e, s2)):
+                        named[key] += any(
+                            g.fault and names[k] in g.markers and g.first <= s + 2 and g.last >= s
+                            for g in got
+                        )
+                    takes, frames = takes + 1, frames + n
+                    print(layout, rec, sigma, seed, n, flush=True)
+    print(f"clean takes: {takes}, {frames} frames; findings by kind: {dict(clean)}")
+    print(f"planted faults named (of {takes}): {dict(named)}")
+
+
+def take(d: lgi.Dataset, pos: np.ndarray, folder: Path, seed: int):  # type: ignore[no-untyped-def]
+    w = curves(d, folder, RECORDINGS[0])[:1200]
+    return make_capture(d, w, pos, sigma=0.02, dropout=0.02, holdout=0.25, seed=seed, jaw=None)
+
+
+def _error(
+    m: lgi.Model, opts: lgi.SolveOptions, frames: np.ndarray, fix: bool, truth: np.ndarray,
+    rows: slice = slice(None),
+) -> tuple[float, float]:  # fmt: skip
+    """Mean and max face-skin error (cm) of `frames` solved as `lgi solve` solves them."""
+    skin = ict.skin()
+    _, r = solve_take(plan_take(frames, m, opts), m, opts, repair=fix)
+    e = np.linalg.norm(np.asarray(r.vertices)[rows][:, skin] - truth[rows][:, skin], axis=2)
+    return float(e.mean()), float(e.max())
+
+
+def repair(seeds: list[int], call: str) -> None:
+    d, _, pos, folder = data()
+    opts = lgi.SolveOptions(marker_noise="auto", recommended=call == "recommended")
+    for seed in seeds:
+        t = take(d, pos, folder, seed)
+        m = lgi.Model.build(t.dataset, pos)
+        pose = np.nanmedian(t.frames, axis=0)
+        dist = np.linalg.norm(pose[:, None] - pose[None], axis=2)
+        rng = np.random.default_rng(seed)
+        a = int(rng.integers(160))
+        b = int(np.argmin(np.abs(dist[a] - 1.5)))
+        c = int(rng.integers(160))
+        x = t.frames.copy()
+        x[300:360, [a, b]] = x[300:360, [b, a]]
+        x[700:703, c] += [0.0, 0.0, 1.0]
+        truth = np.asarray(t.truth)
+
+        print(f"seed {seed}, {call}: the clean take's error, all frames (mean / max cm):")
+        fixed, kept = (
+            _error(m, opts, t.frames, True, truth),
+            _error(m, opts, t.frames, False, truth),
+        )
+        print(f"  repaired {fixed}, kept as given {kept}")
+        for name, rows in (("swap", slice(300, 360)), ("spike", slice(700, 703))):
+            (cm, cx), (km, kx), (fm, fx) = (
+                _error(m, opts, t.frames, True, truth, rows),
+                _error(m, opts, x, False, truth, rows),
+                _error(m, opts, x, True, truth, rows),
+            )  # fmt: skip
+            print(
+                f"  {name} frames: clean {cm:.4f} / {cx:.3f}; kept as given {km:.4f} / {kx:.3f} "
+                f"({km / cm:.2f} x mean); repaired {fm:.4f} / {fx:.3f} ({fm / cm:.2f} x mean, "
+                f"{fx / cx:.2f} x max)",
+                flush=True,
+            )
+
+
+def _pops(label: str, vertices: np.ndarray, truth: np.ndarray, seconds: float) -> None:
+    skin = ict.skin()
+    err = np.linalg.norm(np.asarray(vertices)[:, skin] - truth[:, skin], axis=2)
+    print(
+        f"{label}: mean {err.mean():.4f} cm; pops > 2 mm {pops(err, POP_CM[0])}, > 5 mm "
+        f"{pops(err, POP_CM[1])} of {err.shape[0]} frames ({seconds:.1f} s)",
+        flush=True,
+    )
+
+
+def pop_counts(seeds: list[int]) -> None:
+    d, _, pos, folder = data()
+    for seed in seeds:
+        t = take(d, pos, folder, seed)
+        m = lgi.Model.build(t.dataset, pos)
+        truth = np.asarray(t.truth)
+        sig = lgi.estimate_marker_noise(t.frames, m)
+        t0 = time.perf_counter()
+        fast = m.solve(t.frames, marker_noise=sig, quiet=True)
+        _pops(f"seed {seed}, --marker-noise auto", fast.vertices, truth, time.perf_counter() - t0)
+        t0 = time.perf_counter()
+        peer = FitJaw(m).solve(t.frames, quiet=True)
+        _pops(f"seed {seed}, rig solve (fit + jaw)", peer.vertices, truth, time.perf_counter() - t0)
+        t0 = time.perf_counter()
+        plan = lgi.plan_solve(t.frames, m, recommended=True)
+        solved = m.solve(plan.frames, options=plan.options, quiet=True)
+        _pops(f"seed {seed}, --recommended", solved.vertices, truth, time.perf_counter() - t0)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
+    ap.add_argument("what", choices=["findings", "repair", "pops"])
+    ap.add_argument("--sigma", type=float, nargs="+", default=[0.0, 0.02, 0.05])
+    ap.add_argument("--seeds", type=int, nargs="+", default=[0])
+    ap.add_argument("--call", choices=["auto", "recommended"], default="auto")
+    args = ap.parse_args()
+    if args.what == "findings":
+        findings(args.sigma, args.seeds)
+    elif args.what == "repair":
+        repair(args.seeds, args.call)
+    else:
+        pop_counts(args.seeds)
+
+
+if __name__ == "__main__":
+    main()
