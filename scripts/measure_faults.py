@@ -122,7 +122,7 @@ def _error(
 ) -> tuple[float, float]:  # fmt: skip
     """Mean and max face-skin error (cm) of `frames` solved as `lgi solve` solves them."""
     skin = ict.skin()
-    _, r = solve_take(plan_take(frames, m, opts), m, opts, repair=fix)
+    _, r, _ = solve_take(plan_take(frames, m, opts), m, opts, repair=fix)
     e = np.linalg.norm(np.asarray(r.vertices)[rows][:, skin] - truth[rows][:, skin], axis=2)
     return float(e.mean()), float(e.max())
 

@@ -268,7 +268,7 @@ def solve_shot(
         planned = plan_take(x, m, options)
         if kind == "usd" and rate is None:
             raise InputError("the take has no frame rate; a USD point cache needs fps=")
-        planned, res = solve_take(planned, m, options, repair=repair, start=start)
+        planned, res, _ = solve_take(planned, m, options, repair=repair, start=start)
         written = write_solved(
             kind,
             Path(dest),

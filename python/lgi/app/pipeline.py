@@ -65,25 +65,17 @@ def solved_residuals(res: SolveResult, given: np.ndarray, den: DenoisedTake | No
     return np.where(np.isnan(d), 0.0, d)
 
 
-def _say_findings(
+def _say_summary(
     say: Say,
     residuals: np.ndarray,
     missing: np.ndarray,
-    markers: np.ndarray,
-    first_frame: np.ndarray,
+    found: list[Finding],
     m: Model,
     start: int,
-    noise: float | None,
-) -> list[Finding]:
-    """The solve's summary (`lgi.review.diagnose`): residuals, then flagged markers and frames;
-    returns the findings (measured as `lgi info` measures them on the file)."""
-    names = m.marker_names
-    found = diagnose(
-        residuals, missing, names, size=face_size(first_frame), markers=markers, noise=noise
-    )
-    for line in summary(residuals, missing, names, found, start=start, units=m.units):
+) -> None:
+    """The solve's summary (`lgi.review.diagnose.summary`): residuals, then the findings."""
+    for line in summary(residuals, missing, m.marker_names, found, start=start, units=m.units):
         say(line)
-    return found
 
 
 def check_take_scale(
@@ -132,6 +124,21 @@ class PlannedTake:
         """The given markers' residuals of `res`, the solve of `rows` of the plan's frames."""
         return solved_residuals(res, self.given[rows], self.plan.denoised)
 
+    def findings(
+        self, residuals: np.ndarray, missing: np.ndarray, first_frame: np.ndarray, m: Model
+    ) -> list[Finding]:
+        """What a solve of this take shows (`lgi.review.diagnose`), read from its `residuals`
+        (`PlannedTake.residuals`), `missing` samples and first solved frame as `lgi info` reads
+        the file: against the given markers, with their noise."""
+        return diagnose(
+            residuals,
+            missing,
+            m.marker_names,
+            size=face_size(first_frame),
+            markers=self.given,
+            noise=self.plan.given_noise,
+        )
+
 
 def plan_take(
     frames: np.ndarray, m: Model, options: SolveOptions, *, say: Say = _silent
@@ -153,35 +160,28 @@ def solve_take(
     start: int = 0,
     quiet: bool = True,
     say: Say = _silent,
-) -> tuple[PlannedTake, SolveResult]:
+) -> tuple[PlannedTake, SolveResult, list[Finding] | None]:
     """The planned take solved; with `repair`, the marker faults that solve shows (label
-    swaps, spikes, markers off their track: `lgi.review.diagnose`, told from model gaps) are
+    swaps, spikes, markers off their track: `PlannedTake.findings`, told from model gaps) are
     repaired (`lgi.review.repair`), said in one line each, and the repaired take planned and
-    solved again, its settings recording the repairs. Returns what was solved and its
-    result (the take given is never touched)."""
+    solved again, its settings recording the repairs. Returns what was solved, its result
+    and, where they were read (a solve with `repair` that found no fault), that result's
+    findings; None otherwise (the take given is never touched)."""
     res = m.solve(planned.plan.frames, quiet=quiet, options=planned.plan.options)
     if not repair:
-        return planned, res
-    names = m.marker_names
-    found = diagnose(
-        planned.residuals(res),
-        res.missing,
-        names,
-        size=face_size(res.vertices[0]),
-        markers=planned.given,
-        noise=planned.plan.given_noise,
-    )
+        return planned, res, None
+    found = planned.findings(planned.residuals(res), res.missing, res.vertices[0], m)
     faults = [f for f in found if f.fault]
     if not faults:
-        return planned, res
-    x, _, done = repaired(planned.given, faults, names)
+        return planned, res, found
+    x, _, done = repaired(planned.given, faults, m.marker_names)
     again = plan_take(x, m, options)
     settings = dataclasses.replace(again.settings, repairs=done)
     for line in settings.repair_lines(start):
         say(f"repaired: {line}")
     again = PlannedTake(again.given, again.plan, settings)
     say("solved again with the repaired markers (--no-repair keeps them as given)")
-    return again, m.solve(again.plan.frames, quiet=quiet, options=again.plan.options)
+    return again, m.solve(again.plan.frames, quiet=quiet, options=again.plan.options), None
 
 
 def solve_file(
@@ -258,7 +258,7 @@ def solve_file(
     plan, settings = planned.plan, planned.settings
     # What is solved: the given markers, or the take denoised with the noise it leaves. The
     # residuals written and the findings are always the given markers' (`given`).
-    given, given_sigma = x, plan.given_noise
+    given = x
     x, sigma, weight = plan.frames, plan.marker_noise, plan.detail_weight
     missing = np.isnan(x).any(axis=2)
     say(
@@ -271,10 +271,10 @@ def solve_file(
     topo = topology(m.dataset)
     start = t.first_frame + rng.start
     if chunk is None:
-        planned, res = solve_take(
+        planned, res, found = solve_take(
             planned, m, options, repair=repair, start=start, quiet=quiet, say=say
         )
-        given, settings, given_sigma = planned.given, planned.settings, planned.plan.given_noise
+        given, settings = planned.given, planned.settings
         if curves_out is not None:
             _write_curves(
                 curves_out, res.fit_weights, res.jaw_theta, m, fps=rate, start=start, frame=frame
@@ -296,16 +296,9 @@ def solve_file(
             settings=settings,
             residuals=given_residuals,
         )
-        found = _say_findings(
-            say,
-            given_residuals,
-            res.missing,
-            given,
-            res.vertices[0],
-            m,
-            start,
-            given_sigma,
-        )
+        if found is None:
+            found = planned.findings(given_residuals, res.missing, res.vertices[0], m)
+        _say_summary(say, given_residuals, res.missing, found, m, start)
         if page is not None:
             _write_solve_report(
                 page,
@@ -382,16 +375,9 @@ def solve_file(
         sink.abort()
         raise
     assert first_frame is not None  # a take has at least one frame (takes.read)
-    found = _say_findings(
-        say,
-        np.concatenate(residuals),
-        np.concatenate(absent),
-        given,
-        first_frame,
-        m,
-        start,
-        given_sigma,
-    )
+    all_residuals, all_absent = np.concatenate(residuals), np.concatenate(absent)
+    found = planned.findings(all_residuals, all_absent, first_frame, m)
+    _say_summary(say, all_residuals, all_absent, found, m, start)
     if repair and any(f.fault for f in found):
         say("not repaired with --chunk (repairing needs the whole take's residuals)")
     return written, n
