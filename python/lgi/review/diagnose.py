@@ -208,24 +208,34 @@ def _track_ranges(x: NDArray[np.float64], size: float) -> dict[int, list[tuple[i
     return out
 
 
-def _relative_steps(x: NDArray[np.float64]) -> NDArray[np.float64]:
-    """(F, B) each marker's step between the frames it is seen in, less the median step of its
-    `NEIGHBOURS` nearest markers (nearest in the take's median pose) seen in both, per frame
-    elapsed; NaN where none of them is. Skin carries a marker with its neighbours; a fault
-    moves it alone. (A neighbour's dropout changes which neighbours are averaged, not the
-    step: each neighbour's own step is taken between the same two frames.)"""
-    f, b = x.shape[:2]
-    steps = np.full((f, b), np.nan)
+def _nearest(x: NDArray[np.float64]) -> NDArray[np.int64]:
+    """(B, B - 1) each marker's other markers, nearest first in the take's median pose; a
+    marker never seen is nobody's near neighbour (it sorts last) and has no order of its own
+    (all -1)."""
+    b = x.shape[1]
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)  # a marker never seen: NaN, left out
-        pose = np.nanmedian(x, axis=0) if f else np.full((b, 3), np.nan)
-    ok = np.isfinite(pose).all(axis=1)
-    if ok.sum() <= NEIGHBOURS:
+        pose = np.nanmedian(x, axis=0) if x.shape[0] else np.full((b, 3), np.nan)
+    d = np.linalg.norm(pose[:, None] - pose[None], axis=2)
+    d[~np.isfinite(d)] = np.inf
+    np.fill_diagonal(d, -1.0)  # itself first, then dropped
+    order = np.argsort(d, axis=1, kind="stable")[:, 1:]
+    order[~np.isfinite(pose).all(axis=1)] = -1
+    return order
+
+
+def _relative_steps(x: NDArray[np.float64], nearest: NDArray[np.int64]) -> NDArray[np.float64]:
+    """(F, B) each marker's step between the frames it is seen in, less the median step of its
+    `NEIGHBOURS` nearest markers (`_nearest`) seen in both, per frame elapsed; NaN where none
+    of them is. Skin carries a marker with its neighbours; a fault moves it alone. (A
+    neighbour's dropout changes which neighbours are averaged, not the step: each neighbour's
+    own step is taken between the same two frames.)"""
+    f, b = x.shape[:2]
+    steps = np.full((f, b), np.nan)
+    idx = np.flatnonzero(nearest[:, 0] >= 0) if b > 1 else np.zeros(0, np.int64)
+    if idx.size <= NEIGHBOURS:
         return steps
-    idx = np.flatnonzero(ok)
-    d = np.linalg.norm(pose[idx, None] - pose[None, idx], axis=2)
-    np.fill_diagonal(d, np.inf)
-    near = idx[np.argsort(d, axis=1)[:, :NEIGHBOURS]]
+    near = nearest[idx, :NEIGHBOURS]
     present: NDArray[np.bool_] = np.asarray(np.isfinite(x).all(axis=2))
     for i, k in enumerate(idx):
         seen = np.flatnonzero(present[:, k])
@@ -315,7 +325,8 @@ def diagnose(
                     taken |= {(a, s1, e1), (b, s2, e2)}
                     swapped += [(a, first, last), (b, first, last)]
     singles = []
-    steps = None if x is None else _relative_steps(x)
+    nearest = None if x is None else _nearest(x)
+    steps: NDArray[np.float64] | None = None  # read on first need: most takes need none
     for b, rs in (runs if residual_runs is None else residual_runs).items():
         for s, e in rs:
             if (b, s, e) in taken or any(k == b and s <= e1 and s1 <= e for k, s1, e1 in swapped):
@@ -324,32 +335,31 @@ def diagnose(
             if not backed and (x is None or not _is_spike(x[:, b], s, e)):
                 continue  # two unrelated steps of real motion, not a marker off its track
             kind = "spike" if e - s + 1 <= SPIKE_FRAMES else "off"
-            if steps is not None and not _leaves_track(steps, b, s, e):
-                kind = "gap"  # the marker moves with its neighbours: the dataset's, not its
+            if x is not None and nearest is not None:
+                if steps is None:
+                    steps = _relative_steps(x, nearest)
+                if not _leaves_track(steps, b, s, e):
+                    kind = "gap"  # the marker moves with its neighbours: the dataset's, not its
             singles.append(Finding(kind, (names[b],), s, e, _worst(r[s : e + 1, b])))
     singles.sort(key=lambda f: -f.worst)
     if x is not None:
-        singles = _without_echoes(findings + singles, x, names)[len(findings) :]
+        assert nearest is not None
+        singles = _without_echoes(findings + singles, nearest, names)[len(findings) :]
     return findings + singles + face_jumps
 
 
 def _without_echoes(
-    found: list[Finding], x: NDArray[np.float64], names: Sequence[str]
+    found: list[Finding], nearest: NDArray[np.int64], names: Sequence[str]
 ) -> list[Finding]:
     """`found` less the gaps that are a fault's echo: a noise-aware solve spreads a faulty
     marker's correction to its neighbours, whose residuals then rise over the fault's frames
     without any track of theirs moving. A gap of one of a fault's `2 * NEIGHBOURS` nearest
-    markers (in the take's median pose) overlapping the fault's frames is dropped."""
+    markers (`_nearest`) overlapping the fault's frames is dropped."""
     faults = [f for f in found if f.fault]
     if not faults:
         return found
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", RuntimeWarning)  # a marker never seen: NaN
-        pose = np.nanmedian(x, axis=0)
     index = {n: k for k, n in enumerate(names)}
-    dist = np.linalg.norm(pose[:, None] - pose[None], axis=2)
-    dist[~np.isfinite(dist)] = np.inf
-    near = np.argsort(dist, axis=1)[:, 1 : 2 * NEIGHBOURS + 1]
+    near = nearest[:, : 2 * NEIGHBOURS]
 
     def echo(g: Finding) -> bool:
         k = index[g.markers[0]]
