@@ -125,3 +125,12 @@ def test_lgi_solve_recommended_writes_model_solve_of_its_plan_and_records_it(
     assert r.settings.marker_noise == pytest.approx(plan.marker_noise)
     assert r.settings.local_fits == plan.local_fits
     assert r.settings.unbounded_fit == plan.unbounded_fit
+
+
+def test_plan_solve_names_an_option_it_does_not_know_in_our_words(noise_aware_sample) -> None:  # type: ignore[no-untyped-def]
+    model, _ = noise_aware_sample
+    x = np.zeros((2, model.num_bundles, 3))
+    with pytest.raises(lgi.InputError, match=r"plan_solve: unknown solve options \['noise'\]"):
+        plan_solve(x, model, noise=0.1)
+    with pytest.raises(lgi.InputError, match="as options= or as keywords"):
+        plan_solve(x, model, lgi.SolveOptions(), marker_noise=0.1)

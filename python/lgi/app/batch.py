@@ -7,7 +7,6 @@ address or a `Client` runs the same code on a real cluster (docs/scale.md)."""
 
 from __future__ import annotations
 
-import dataclasses
 import hashlib
 import json
 import os
@@ -113,26 +112,6 @@ def _sha256_array(a: np.ndarray) -> str:
     h = hashlib.sha256(f"{a.dtype.str}{a.shape}".encode())
     h.update(np.ascontiguousarray(a).tobytes())
     return h.hexdigest()
-
-
-def _options(options: SolveOptions | None, given: dict[str, Any]) -> SolveOptions:
-    """The batch's solve options, built once (`SolveOptions`) from `options` or the keywords
-    `given`; unknown names are an InputError naming the known ones."""
-    if options is not None:
-        if given:
-            raise InputError("solve_shots: give the solve options as options= or as keywords")
-        if not isinstance(options, SolveOptions):
-            raise InputError(
-                f"solve_shots: options must be an lgi.SolveOptions, got {type(options).__name__}"
-            )
-        return options
-    known = {f.name for f in dataclasses.fields(SolveOptions)} - {"cli"}
-    unknown = sorted(set(given) - known)
-    if unknown:
-        raise InputError(
-            f"solve_shots: unknown solve options {unknown} (it takes {', '.join(sorted(known))})"
-        )
-    return SolveOptions(**given)
 
 
 def _recorded(options: SolveOptions) -> str:
@@ -408,7 +387,7 @@ def solve_shots(
     if not isinstance(repair, bool):
         raise InputError(f"repair must be True or False, got {repair!r}")
     _check_client(client, workers)
-    options = _options(options, solve_options)
+    options = SolveOptions.given(options, solve_options, "solve_shots")
     options_json = _recorded(options)
     if isinstance(model, Model):
         the_model: Model = model

@@ -361,10 +361,7 @@ def plan_solve(
     fits are used (local fits chosen say the dataset suits the take around each marker; the
     detail weight is for a dataset that does not: docs/concepts.md). Options given keep their
     values ('none' included); local fits are not read for a model with jaw bins."""
-    if options is None:
-        options = SolveOptions(**given)
-    elif given:
-        raise InputError("plan_solve: give the options either as options= or as keywords")
+    options = SolveOptions.given(options, given, "plan_solve")
     options.check_model(model.jaw_bins is not None)
     o = options
     noise, denoise, local_fits, take_prior, detail = (
@@ -392,10 +389,7 @@ def plan_solve(
         say("local fits not read: no marker noise (every marker interpolated as given)")
         local_fits = False
     if local_fits and sigma is None:
-        raise InputError(
-            "--local-fits needs --marker-noise (SIGMA or auto; 0 for clean markers): the local "
-            "fits fit the noise-aware targets"
-        )
+        raise o.local_fits_without_noise()
     chosen, free = fits_choice(local_fits, unbounded_fit, x, model, sigma, o.jaw, say, take_prior)
     prior = take_prior_choice(take_prior, x, model, sigma, o.jaw, say, free or chosen == UNBOUNDED)
     fit = UNBOUNDED if free else None

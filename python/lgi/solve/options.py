@@ -123,6 +123,28 @@ class SolveOptions:
             cli=True,
         )
 
+    @classmethod
+    def given(
+        cls, options: SolveOptions | None, keywords: dict[str, Any], where: str
+    ) -> SolveOptions:
+        """The options a call was given, as `options` or as keywords (not both), built once;
+        an unknown keyword is an InputError naming `where` and the options there are."""
+        if options is not None:
+            if keywords:
+                raise InputError(f"{where}: give the solve options as options= or as keywords")
+            if not isinstance(options, SolveOptions):
+                raise InputError(
+                    f"{where}: options must be an lgi.SolveOptions, got {type(options).__name__}"
+                )
+            return options
+        known = {f.name for f in dataclasses.fields(cls)} - {"cli"}
+        unknown = sorted(set(keywords) - known)
+        if unknown:
+            raise InputError(
+                f"{where}: unknown solve options {unknown} (it takes {', '.join(sorted(known))})"
+            )
+        return cls(**keywords)
+
     def replace(self, **changes: Any) -> SolveOptions:
         """These options with `changes` (checked again)."""
         return dataclasses.replace(self, **changes)
@@ -148,6 +170,19 @@ class SolveOptions:
             "Model.solve applies options as they are: 'auto', recommended, denoise and "
             "take_prior=True are read from a take by lgi.plan_solve (solve its plan: "
             "model.solve(plan.frames, options=plan.options))"
+        )
+
+    def local_fits_without_noise(self) -> InputError:
+        """The error of local fits asked without a marker noise (given, or with `recommended`
+        none read): they fit the noise-aware targets."""
+        if self.cli:
+            return InputError(
+                "--local-fits needs --marker-noise (SIGMA or auto; 0 for clean markers): the "
+                "local fits fit the noise-aware targets"
+            )
+        return InputError(
+            "local_fits needs marker_noise (the noise-aware solve's targets and global fits; "
+            "marker_noise=0 for clean markers)"
         )
 
     def check_model(self, jaw_bins: bool) -> None:
@@ -277,15 +312,7 @@ class SolveOptions:
         """What no take can change: options that cannot be given together."""
         local = self.local_fits
         if local and self.marker_noise is None and not self.recommended:
-            if self.cli:
-                raise InputError(
-                    "--local-fits needs --marker-noise (SIGMA or auto; 0 for clean markers): the "
-                    "local fits fit the noise-aware targets"
-                )
-            raise InputError(
-                "local_fits needs marker_noise (the noise-aware solve's targets and global fits; "
-                "marker_noise=0 for clean markers)"
-            )
+            raise self.local_fits_without_noise()
         if local and self.fit is False:
             raise InputError("local_fits needs the global fit: do not pass fit=False")
         noise = self.marker_noise
