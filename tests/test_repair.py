@@ -87,6 +87,11 @@ def test_lgi_solve_repairs_a_swap_and_a_spike_and_the_face_is_the_clean_takes_ag
     }
     assert kept.settings.repairs == ()
     assert "repaired: " in fixed.settings.describe("cm")
+    # `lgi info` names them at the take's time codes (from 1), as the solve said them.
+    capsys.readouterr()
+    assert cli.main(["info", str(tmp_path / "fixed.npz")]) == 0
+    info = capsys.readouterr().out
+    assert f"repaired: {names[10]} solved as missing (a spike), time codes 41-43" in info, info
 
     def off(r, rows: slice) -> float:  # type: ignore[no-untyped-def]
         return float(np.linalg.norm(r.vertices[rows] - clean.vertices[rows], axis=2).mean())

@@ -79,7 +79,11 @@ def describe(
                 f"  markers: {len(r.marker_names)}",
                 f"  units: {r.units or 'not given'}",
                 "  solved with: "
-                + (r.settings.describe(r.units) if r.settings is not None else "not recorded"),
+                + (
+                    r.settings.describe(r.units, r.start)
+                    if r.settings is not None
+                    else "not recorded"
+                ),
                 *(
                     f"  {line}"
                     for line in summary(
@@ -135,7 +139,8 @@ def describe(
 
                 s = solve_settings(prim, str(path))
                 if s is not None:
-                    lines.append(f"    solved with: {s.describe(stage_units(stage))}")
+                    start = round(stage.GetStartTimeCode())
+                    lines.append(f"    solved with: {s.describe(stage_units(stage), start)}")
         return lines
     raise InputError(
         f"{path}: unknown file kind {suffix or '(no suffix)'!r}; lgi info reads .lgi models, "

@@ -203,9 +203,9 @@ class SolveSettings:
             repairs=tuple(repairs),
         )
 
-    def describe(self, units: str | None) -> str:
+    def describe(self, units: str | None, start: int = 0) -> str:
         """One line, e.g. 'marker noise 0.05 cm, jaw pose from the fit, detail weight 0.470
-        (lgi 0.1.0)'."""
+        (lgi 0.1.0)'; repairs at time codes from `start`, the solve's first."""
         unit = f" {units}" if units else ""
         noise = (
             "no marker noise (every marker interpolated as given)"
@@ -224,7 +224,7 @@ class SolveSettings:
             else f"detail weight {self.detail_weight:.3f}"
         )
         line = f"{noise}, {jaw}, {detail}{self.pieces()} (lgi {self.version or 'version unknown'})"
-        return line + "".join(f"; repaired: {r}" for r in self.repair_lines())
+        return line + "".join(f"; repaired: {r}" for r in self.repair_lines(start))
 
     def repair_lines(self, start: int = 0) -> list[str]:
         """Each repair in a few words, frames as time codes from `start`: 'm063 <-> m153

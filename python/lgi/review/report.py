@@ -397,7 +397,7 @@ def render_report(
         f"<tr><th>units</th><td>{esc(u or 'not given')}</td></tr>",
         "<tr><th>solved with</th><td>"
         + esc(
-            solved.settings.describe(u)
+            solved.settings.describe(u, solved.start)
             if solved.settings is not None
             else "not recorded (a file written before lgi kept it, or not by lgi solve)"
         )
