@@ -10,9 +10,19 @@ quarter of its shapes held out, driven by the shared Live Link recordings; docs/
         (60 frames) and a 1 cm spike (3 frames): the face-skin error on those frames, repaired
         and kept as given, against the clean take's solve; and the clean take's error over all
         frames with and without repair.
-    python scripts/measure_faults.py pops [--seeds 0]
+    python scripts/measure_faults.py study [--seeds 0 1 2] [--dataset ict|scans]
+        the detection study: on 1,200-frame takes (markers_120 and 160 random markers, 0.2 mm
+        noise, 2 % dropouts) swaps of two markers 0.5-3 cm apart lasting 1-120 frames and
+        spikes of 0.3-2 cm lasting 1-5 frames, six planted per take in their own 200 frames;
+        per cell, how many were named as faults (and swaps as the swap of that pair), and the
+        marker faults named on the clean takes.
+    python scripts/measure_faults.py pops [--seeds 0] [--dataset ict|scans]
         the same clean take: frames whose face-skin error jumps by more than 2 and 5 mm
-        (`lgi.lab.scoring.pops`), the fast call, --recommended and the rig-solve peer.
+        (`lgi.lab.scoring.pops`), the fast call, --recommended and the rig-solve peer, each
+        solved as a performance (`steady`, the default) and frame by frame alone
+        (`steady=False`). With `--dataset scans` the model's dataset is 120 whole-face scans
+        picked from the other recording's curves (`lgi.lab.scans`), all of ICT's shapes
+        kept in the truth.
 
 Needs ../shared/data beside the checkout (or $LGI_SHARED_DATA)."""
 
@@ -174,38 +184,160 @@ def _pops(label: str, vertices: np.ndarray, truth: np.ndarray, seconds: float) -
     )
 
 
-def pop_counts(seeds: list[int]) -> None:
+def _scans_take(d: lgi.Dataset, pos: np.ndarray, folder: Path, seed: int):  # type: ignore[no-untyped-def]
+    """The 1,200-frame take of the first recording, and a dataset of 120 scans picked from
+    the second recording's curves (no held-out shapes: the scans are the dataset)."""
+    from lgi.lab.scans import scan_session
+
+    session = scan_session(d, curves(d, folder, RECORDINGS[1]), 120, None, None)
+    w = curves(d, folder, RECORDINGS[0])[:1200]
+    t = make_capture(d, w, pos, sigma=0.02, dropout=0.02, holdout=0.0, seed=seed, jaw=None)
+    return t, session.dataset
+
+
+def pop_counts(seeds: list[int], dataset: str) -> None:
     d, _, pos, folder = data()
     for seed in seeds:
-        t = take(d, pos, folder, seed)
-        m = lgi.Model.build(t.dataset, pos)
+        if dataset == "scans":
+            t, given = _scans_take(d, pos, folder, seed)
+        else:
+            t = take(d, pos, folder, seed)
+            given = t.dataset
+        m = lgi.Model.build(given, pos)
         truth = np.asarray(t.truth)
         sig = lgi.estimate_marker_noise(t.frames, m)
         t0 = time.perf_counter()
-        fast = m.solve(t.frames, marker_noise=sig, quiet=True)
-        _pops(f"seed {seed}, --marker-noise auto", fast.vertices, truth, time.perf_counter() - t0)
-        t0 = time.perf_counter()
         peer = FitJaw(m).solve(t.frames, quiet=True)
         _pops(f"seed {seed}, rig solve (fit + jaw)", peer.vertices, truth, time.perf_counter() - t0)
-        t0 = time.perf_counter()
         plan = lgi.plan_solve(t.frames, m, recommended=True)
-        solved = m.solve(plan.frames, options=plan.options, quiet=True)
-        _pops(f"seed {seed}, --recommended", solved.vertices, truth, time.perf_counter() - t0)
+        for steady in (False, True):
+            how = "steady" if steady else "each frame alone"
+            t0 = time.perf_counter()
+            fast = m.solve(t.frames, marker_noise=sig, steady=steady, quiet=True)
+            _pops(
+                f"seed {seed}, --marker-noise auto, {how}",
+                fast.vertices,
+                truth,
+                time.perf_counter() - t0,
+            )
+            t0 = time.perf_counter()
+            solved = m.solve(plan.frames, options=plan.options, steady=steady, quiet=True)
+            _pops(
+                f"seed {seed}, --recommended, {how}",
+                solved.vertices,
+                truth,
+                time.perf_counter() - t0,
+            )
+
+
+SWAP_CM = (0.5, 1.0, 2.0, 3.0)
+SWAP_FRAMES = (1, 5, 30, 120)
+SPIKE_CM = (0.3, 0.5, 1.0, 2.0)
+SPIKE_FRAMES = (1, 3, 5)
+
+
+def _planted(x: np.ndarray, cells: list, rng: np.random.Generator):  # type: ignore[type-arg]
+    """`x` with each cell planted in its own 200-frame window on markers of its own: a swap
+    ("swap", cm, frames) of two markers about cm apart, a spike ("spike", cm, frames) of one
+    marker moved cm in a random direction; with where each went."""
+    x = x.copy()
+    pose = np.nanmedian(x, axis=0)
+    dist = np.linalg.norm(pose[:, None] - pose[None], axis=2)
+    used: set[int] = set()
+    placed = []
+    for k, (kind, cm, n) in enumerate(cells):
+        start = 200 * k + 40
+        free = [i for i in rng.permutation(x.shape[1]) if i not in used]
+        if kind == "swap":
+            for a in free:
+                near = [
+                    j for j in np.flatnonzero(np.abs(dist[a] - cm) < 0.25 * cm) if j not in used
+                ]
+                if near:
+                    b = int(rng.choice(near))
+                    break
+            else:
+                continue
+            x[start : start + n, [a, b]] = x[start : start + n, [b, a]]
+            used |= {int(a), b}
+            placed.append((kind, cm, n, (int(a), b), start))
+        else:
+            a = int(free[0])
+            d = rng.normal(size=3)
+            x[start : start + n, a] += cm * d / np.linalg.norm(d)
+            used.add(a)
+            placed.append((kind, cm, n, (a,), start))
+    return x, placed
+
+
+def study(seeds: list[int], dataset: str) -> None:
+    d, markers_120, random_160, folder = data()
+    cells = [("swap", c, n) for c in SWAP_CM for n in SWAP_FRAMES]
+    cells += [("spike", c, n) for c in SPIKE_CM for n in SPIKE_FRAMES]
+    named: collections.Counter[tuple] = collections.Counter()  # type: ignore[type-arg]
+    as_swap: collections.Counter[tuple] = collections.Counter()  # type: ignore[type-arg]
+    tried: collections.Counter[tuple] = collections.Counter()  # type: ignore[type-arg]
+    false_faults = clean_frames = 0
+    for layout, pos in (("markers_120", markers_120), ("random 160", random_160)):
+        for seed in seeds:
+            if dataset == "scans":
+                t, given = _scans_take(d, pos, folder, seed)
+            else:
+                t = take(d, pos, folder, seed)
+                given = t.dataset
+            m = lgi.Model.build(given, pos)
+            names = list(m.marker_names)
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", lgi.LgiWarning)
+                sig = lgi.estimate_marker_noise(t.frames, m)
+            clean = [g for g in _found(m, t.frames, sig) if g.fault]
+            false_faults += len(clean)
+            clean_frames += t.frames.shape[0]
+            rng = np.random.default_rng(1000 + seed)
+            order = [cells[i] for i in rng.permutation(len(cells))]
+            for group in range(0, len(order), 6):
+                x, placed = _planted(t.frames, order[group : group + 6], rng)
+                got = [g for g in _found(m, x, sig) if g.fault]
+                for kind, cm, n, who, start in placed:
+                    key = (kind, cm, n)
+                    tried[key] += 1
+                    hit = [
+                        g
+                        for g in got
+                        if {names[k] for k in who} & set(g.markers)
+                        and g.first <= start + n - 1
+                        and g.last >= start
+                    ]
+                    named[key] += bool(hit)
+                    as_swap[key] += any(
+                        g.kind == "swap" and set(g.markers) == {names[k] for k in who} for g in hit
+                    )
+            print(layout, seed, "clean faults", len(clean), flush=True)
+    print(f"\n{dataset}: clean takes {clean_frames} frames, marker faults named {false_faults}")
+    print("| fault | size | frames | named as a fault | named as that swap |")
+    print("|---|---|---|---|---|")
+    for key in cells:
+        kind, cm, n = key
+        swap = f"{as_swap[key]}/{tried[key]}" if kind == "swap" else "-"
+        print(f"| {kind} | {cm} cm | {n} | {named[key]}/{tried[key]} | {swap} |")
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
-    ap.add_argument("what", choices=["findings", "repair", "pops"])
+    ap.add_argument("what", choices=["findings", "repair", "pops", "study"])
     ap.add_argument("--sigma", type=float, nargs="+", default=[0.0, 0.02, 0.05])
     ap.add_argument("--seeds", type=int, nargs="+", default=[0])
     ap.add_argument("--call", choices=["auto", "recommended"], default="auto")
+    ap.add_argument("--dataset", choices=["ict", "scans"], default="ict")
     args = ap.parse_args()
     if args.what == "findings":
         findings(args.sigma, args.seeds)
     elif args.what == "repair":
         repair(args.seeds, args.call)
+    elif args.what == "study":
+        study(args.seeds, args.dataset)
     else:
-        pop_counts(args.seeds)
+        pop_counts(args.seeds, args.dataset)
 
 
 if __name__ == "__main__":

@@ -4,6 +4,7 @@ against closed forms, and the page against what a solve with a planted spike mus
 from __future__ import annotations
 
 import base64
+import dataclasses
 import re
 from pathlib import Path
 
@@ -13,7 +14,7 @@ import pytest
 from lgi.errors import InputError
 from lgi.io.result import Result, read_result_npz, write_result_npz
 from lgi.io.topology import Topology
-from lgi.review.report import compare, marker_stats, render_report
+from lgi.review.report import compare, marker_stats, render_report, surface_jumps
 from pipeline_files import lgi_cli, spiked_sample_take, write_solve
 
 
@@ -30,6 +31,28 @@ def _result(vertices, residuals, missing, names, units="cm", start=0):  # type: 
         units=units,
         topology=topo,
     )
+
+
+def test_surface_jumps_rank_a_planted_one_frame_excursion_first_with_its_size_and_markers() -> None:
+    rng = np.random.default_rng(3)
+    t = np.arange(300, dtype=float)[:, None, None]
+    v = np.broadcast_to(rng.normal(size=(1, 40, 3)), (300, 40, 3)) + 0.01 * t  # steady motion
+    v = v.copy()
+    v[261, 17] += [0.0, 0.0, 0.4]  # one vertex, one frame (across the 256-frame block edge)
+    v[120, 5] += [0.1, 0.0, 0.0]
+    markers = np.stack([v[:, 17] + [0.05, 0, 0], v[:, 5], v[:, 30] + [0.2, 0, 0]], axis=1)
+    markers[261, 1] = np.nan  # a missing marker is nobody's nearest
+    solved = _result(v, np.zeros((300, 3)), np.zeros((300, 3), bool), ["a", "b", "c"], start=10)
+    solved = dataclasses.replace(solved, markers=markers.astype(np.float32))
+    jumps = surface_jumps(solved, 4)
+    assert [j.frame for j in jumps[:2]] == [261, 260] or [j.frame for j in jumps[:2]] == [261, 262]
+    # The second difference of a one-frame excursion of 0.4 is 0.8 at its frame, 0.4 beside it.
+    assert jumps[0].vertex == 17 and jumps[0].size == pytest.approx(0.8, abs=1e-5)
+    assert jumps[0].markers == ["a", "c"]
+    assert {j.frame for j in jumps} == {260, 261, 262, 120}
+    page = render_report(solved, source="take.npz")
+    table = page.split("<h2>Where the surface jumps</h2>")[1].split("</table>")[0]
+    assert re.findall(r"<tr id='jump-(\d+)'>", table)[0] == "271"  # time code 10 + 261
 
 
 def test_marker_stats_equal_a_plain_loop_over_present_samples() -> None:

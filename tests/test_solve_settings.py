@@ -32,8 +32,14 @@ def test_settings_round_trip_as_json_and_describe_themselves() -> None:
     s = SolveSettings(marker_noise=0.05, jaw="fit", detail_weight=0.47, version="9.9")
     assert SolveSettings.from_json(s.to_json(), "x") == s
     assert s.describe("cm") == (
-        "marker noise 0.05 cm per coordinate, jaw pose 'fit', detail weight 0.470 (lgi 9.9)"
+        "marker noise 0.05 cm per coordinate, jaw pose 'fit', detail weight 0.470, each frame "
+        "alone (lgi 9.9)"
     )
+    steady = SolveSettings(
+        marker_noise=None, jaw=None, detail_weight=None, version="1", steady=True
+    )
+    assert SolveSettings.from_json(steady.to_json(), "x") == steady
+    assert ", dropouts filled and detail steady over frames (lgi 1)" in steady.describe(None)
     # A model with a jaw rig solved with jaw=None is at the rest pose; a pose array is 'given'.
     of = SolveSettings.of
     assert of(has_jaw_rig=True, jaw=None, marker_noise=None, detail_weight=None).jaw == "rest"
@@ -82,6 +88,11 @@ def test_settings_round_trip_as_json_and_describe_themselves() -> None:
             "jaw must be text or null, got 3",
         ),
         (
+            '{"marker_noise": null, "jaw": null, "detail_weight": null, "version": "1", '
+            '"steady": "yes"}',
+            "steady must be true or false, got 'yes'",
+        ),
+        (
             '{"marker_noise": null, "jaw": null, "detail_weight": NaN, "version": "1"}',
             "detail_weight must be a finite number or null",
         ),
@@ -119,6 +130,7 @@ def test_lgi_solve_records_its_settings_in_the_npz_and_info_and_report_show_them
         jaw="auto" if has_jaw else None,
         detail_weight=0.4,
         version=lgi.__version__,
+        steady=True,
     )
     capsys.readouterr()
     assert cli.main(["info", str(out)]) == 0
@@ -131,6 +143,11 @@ def test_lgi_solve_records_its_settings_in_the_npz_and_info_and_report_show_them
     assert cli.main(["solve", str(model), str(take), "-o", str(plain), "-q"]) == 0
     s = read_result_npz(plain).settings
     assert s is not None and s.marker_noise is None and s.detail_weight is None
+    # --no-steady: each frame from its own markers alone, recorded and said.
+    alone = tmp_path / "a.npz"
+    assert cli.main(["solve", str(model), str(take), "-o", str(alone), "-q", "--no-steady"]) == 0
+    s = read_result_npz(alone).settings
+    assert s is not None and not s.steady and "each frame alone" in s.describe("cm")
 
 
 def test_the_usd_cache_keeps_the_settings_and_export_carries_them_on(

@@ -21,8 +21,8 @@ def test_unbounded_fit_weights_equal_numpys_ridge_of_the_unskinned_markers_at_th
     outside_the_box,  # type: ignore[no-untyped-def]
 ) -> None:
     model, frames, _ = outside_the_box
-    boxed = model.solve(frames, jaw="fit", fit=True, quiet=True)
-    free = model.solve(frames, jaw="fit", fit="unbounded", quiet=True)
+    boxed = model.solve(frames, jaw="fit", fit=True, steady=False, quiet=True)
+    free = model.solve(frames, jaw="fit", fit="unbounded", steady=False, quiet=True)
     # The pose is the boxed fit's, bit for bit.
     np.testing.assert_array_equal(free.jaw_theta, boxed.jaw_theta)
     # Reference: the markers unskinned by that pose with each bundle's jaw weight, fitted by
@@ -48,15 +48,16 @@ def test_the_recommended_solve_with_the_unbounded_fit_gives_back_a_face_outside_
     model, frames, truth = outside_the_box
 
     def error(**kw: object) -> float:
-        res = model.solve(frames, marker_noise=0.0, quiet=True, **kw)  # type: ignore[arg-type]
+        res = model.solve(frames, marker_noise=0.0, steady=False, quiet=True, **kw)  # type: ignore[arg-type]
         return float(np.linalg.norm(res.vertices - truth, axis=2).mean())
 
     boxed, free = error(fit=True), error(fit="unbounded")
     # Measured 0.0083 against 0.00032 (the sample's face is about 23 units across).
     assert free < 0.1 * boxed, (free, boxed)
     # Unbounded local fits start from it (measured 0.0012 at sigma 0.01).
-    res = model.solve(frames, marker_noise=0.01, local_fits="unbounded", quiet=True)
-    alone = model.solve(frames, marker_noise=0.01, fit="unbounded", quiet=True)
+    # (The frames are independent faces, not a take: each solved alone.)
+    res = model.solve(frames, marker_noise=0.01, local_fits="unbounded", steady=False, quiet=True)
+    alone = model.solve(frames, marker_noise=0.01, fit="unbounded", steady=False, quiet=True)
     np.testing.assert_array_equal(res.fit_weights, alone.fit_weights)
     assert np.linalg.norm(res.vertices - truth, axis=2).mean() < 0.5 * boxed
 
@@ -82,7 +83,7 @@ def test_solve_settings_record_the_unbounded_fit_and_older_files_read_as_boxed()
     )
     back = SolveSettings.from_json(s.to_json(), "x.npz")
     assert back == s and back.unbounded_fit
-    assert back.describe("cm").endswith(", unbounded fit (lgi " + s.version + ")")
+    assert back.describe("cm").endswith(", unbounded fit, each frame alone (lgi " + s.version + ")")
     # Unbounded local fits imply it, and say so once.
     u = SolveSettings.of(
         has_jaw_rig=True, jaw="auto", marker_noise=0.05, detail_weight=None, local_fits="unbounded"

@@ -43,7 +43,8 @@ class SolveSettings:
     older files read); `repairs`: the marker faults repaired before the solve (`lgi.review.
     repair`), each `{"kind", "markers", "first", "last"}` with frames 0-based in the solve
     (a swap undone; a spike or a marker off its track solved as missing; none in older
-    files)."""
+    files); `steady`: dropouts filled from the take and the detail averaged over neighbouring
+    frames (`lgi.solve.steady`; files written before it read as False, as they were solved)."""
 
     marker_noise: float | None
     jaw: str | None
@@ -55,6 +56,7 @@ class SolveSettings:
     denoised_from: float | None = None
     denoised_rank: int | None = None
     repairs: tuple[tuple[str, tuple[str, ...], int, int], ...] = ()
+    steady: bool = False
 
     @staticmethod
     def of(
@@ -67,6 +69,7 @@ class SolveSettings:
         unbounded_fit: bool = False,
         take_prior: bool = False,
         denoised: DenoisedTake | None = None,
+        steady: bool = False,
     ) -> SolveSettings:
         """The settings of a `Model.solve` call: `jaw` as passed (None, the rest pose, is
         recorded as 'rest' and a pose array as 'given'; None for a model without a jaw rig),
@@ -90,6 +93,7 @@ class SolveSettings:
             take_prior=bool(take_prior),
             denoised_from=None if denoised is None else float(denoised.input_noise),
             denoised_rank=None if denoised is None else int(denoised.rank),
+            steady=bool(steady),
         )
 
     @property
@@ -110,6 +114,7 @@ class SolveSettings:
                 "take_prior": self.take_prior,
                 "denoised_from": self.denoised_from,
                 "denoised_rank": self.denoised_rank,
+                "steady": self.steady,
                 "repairs": [
                     {"kind": k, "markers": list(m), "first": a, "last": b}
                     for k, m, a, b in self.repairs
@@ -134,12 +139,13 @@ class SolveSettings:
             "denoised_from",
             "denoised_rank",
             "repairs",
+            "steady",
         }
         if not isinstance(d, dict) or not keys <= set(d) <= keys | optional:
             raise InputError(
                 f"{where}: expected the keys marker_noise, jaw, detail_weight, version and "
                 "(optionally) local_fits, unbounded_fit, take_prior, denoised_from, "
-                "denoised_rank and repairs"
+                "denoised_rank, repairs and steady"
             )
         local = d.get("local_fits", False)
         if not isinstance(local, bool) and local != "unbounded":
@@ -149,6 +155,9 @@ class SolveSettings:
         unbounded = d.get("unbounded_fit", False)
         if not isinstance(unbounded, bool):
             raise InputError(f"{where}: unbounded_fit must be true or false, got {unbounded!r}")
+        steady = d.get("steady", False)
+        if not isinstance(steady, bool):
+            raise InputError(f"{where}: steady must be true or false, got {steady!r}")
         prior = d.get("take_prior", False)
         if not isinstance(prior, bool):
             raise InputError(f"{where}: take_prior must be true or false, got {prior!r}")
@@ -201,6 +210,7 @@ class SolveSettings:
             denoised_from=number("denoised_from") if "denoised_from" in d else None,
             denoised_rank=rank,
             repairs=tuple(repairs),
+            steady=steady,
         )
 
     def describe(self, units: str | None, start: int = 0) -> str:
@@ -223,7 +233,13 @@ class SolveSettings:
             if self.detail_weight is None
             else f"detail weight {self.detail_weight:.3f}"
         )
-        line = f"{noise}, {jaw}, {detail}{self.pieces()} (lgi {self.version or 'version unknown'})"
+        frames = (
+            ", dropouts filled and detail steady over frames"
+            if self.steady
+            else ", each frame alone"
+        )
+        version = self.version or "version unknown"
+        line = f"{noise}, {jaw}, {detail}{self.pieces()}{frames} (lgi {version})"
         return line + "".join(f"; repaired: {r}" for r in self.repair_lines(start))
 
     def repair_lines(self, start: int = 0) -> list[str]:

@@ -437,10 +437,10 @@ class LgiRbf:
         return self._s.num_bundles
 
     def solve(
-        self, frames: ArrayLike, *, temporal: bool = True, quiet: bool = False
+        self, frames: ArrayLike, *, temporal: bool = True, steady: bool = True, quiet: bool = False
     ) -> SolveResult:
         fr = _frames(frames, self._s)
-        lgi_res = self.model.solve(fr, temporal=temporal, quiet=quiet)
+        lgi_res = self.model.solve(fr, temporal=temporal, steady=steady, quiet=quiet)
         ch = lgi_res.choices
         nf, b = fr.shape[:2]
         s = self._shapes.shape[0]

@@ -221,7 +221,7 @@ class Rest:
     def __init__(self, dataset: Dataset) -> None:
         self.neutral = np.asarray(dataset.neutral, dtype=np.float64)
 
-    def solve(self, frames: ArrayLike, *, temporal: bool = True, quiet: bool = True) -> Any:
+    def solve(self, frames: ArrayLike, *, quiet: bool = True, **_: Any) -> Any:
         n = np.asarray(frames).shape[0]
         return _Vertices(np.broadcast_to(self.neutral, (n, *self.neutral.shape)))
 
@@ -268,7 +268,8 @@ def lomo(
         fr = take.frames[::step, keep]
         for name, m in methods.items():
             t0 = time.perf_counter()
-            res = m.solve(fr, temporal=True, quiet=True)
+            # Every `step`-th frame: no performance to fill gaps or steady detail over.
+            res = m.solve(fr, temporal=True, steady=False, quiet=True)
             seconds[name] = seconds.get(name, 0.0) + time.perf_counter() - t0
             v = np.asarray(res.vertices)
             at = np.einsum("fkd,k->fd", v[:, take.corners[j]], take.barycentrics[j])

@@ -67,7 +67,9 @@ class Recommended:
         self.denoise = denoise
         self.last_detail_weight: float | None = None
 
-    def solve(self, frames: ArrayLike, *, temporal: bool = True, quiet: bool = True) -> SolveResult:
+    def solve(
+        self, frames: ArrayLike, *, temporal: bool = True, steady: bool = True, quiet: bool = True
+    ) -> SolveResult:
         # The plan `lgi solve` makes with these options given (one definition of the steps).
         plan = plan_solve(
             np.asarray(frames, dtype=np.float64),
@@ -81,7 +83,12 @@ class Recommended:
         )
         if self.detail == "auto":
             self.last_detail_weight = plan.detail_weight
-        return self.model.solve(plan.frames, temporal=temporal, quiet=quiet, options=plan.options)
+        return self.model.solve(
+            plan.frames,
+            temporal=temporal,
+            quiet=quiet,
+            options=plan.options.replace(steady=steady),
+        )
 
 
 #: The name of LGI with local fits (`Model.solve(local_fits=True)`) among compared methods.
@@ -135,9 +142,11 @@ class OnDenoised:
     def __init__(self, method: Solver, sigma: float) -> None:
         self.method, self.sigma = method, sigma
 
-    def solve(self, frames: ArrayLike, *, temporal: bool = True, quiet: bool = True) -> Any:
+    def solve(
+        self, frames: ArrayLike, *, temporal: bool = True, steady: bool = True, quiet: bool = True
+    ) -> Any:
         den = denoise_take(frames, self.sigma)
-        return self.method.solve(den.frames, temporal=temporal, quiet=quiet)
+        return self.method.solve(den.frames, temporal=temporal, steady=steady, quiet=quiet)
 
 
 def add_denoised(methods: dict[str, Solver], unbounded: bool) -> None:
@@ -174,7 +183,9 @@ class AsRecommended:
         self.take = None if take is None else np.asarray(take, dtype=np.float64)
         self.last_plan: SolvePlan | None = None
 
-    def solve(self, frames: ArrayLike, *, temporal: bool = True, quiet: bool = True) -> Any:
+    def solve(
+        self, frames: ArrayLike, *, temporal: bool = True, steady: bool = True, quiet: bool = True
+    ) -> Any:
         x = np.asarray(frames, dtype=np.float64)
         whole = x if self.take is None else self.take
         with warnings.catch_warnings():
@@ -189,7 +200,9 @@ class AsRecommended:
                 f"the take's {whole.shape[0]}"
             )
         self.last_plan = plan
-        return self.model.solve(solved, temporal=temporal, quiet=quiet, options=plan.options)
+        return self.model.solve(
+            solved, temporal=temporal, quiet=quiet, options=plan.options.replace(steady=steady)
+        )
 
 
 def add_as_recommended(methods: dict[str, Solver]) -> None:

@@ -56,7 +56,9 @@ def pops(err: F64, limit: float) -> int:
 
 
 class Solver(Protocol):
-    def solve(self, frames: ArrayLike, *, temporal: bool = ..., quiet: bool = ...) -> Any: ...
+    def solve(
+        self, frames: ArrayLike, *, temporal: bool = ..., steady: bool = ..., quiet: bool = ...
+    ) -> Any: ...
 
 
 def score(

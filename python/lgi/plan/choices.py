@@ -339,6 +339,7 @@ class SolvePlan:
             unbounded_fit=self.unbounded_fit,
             take_prior=self.take_prior is not None,
             denoised=self.denoised,
+            steady=self.options.steady,
         )
 
 
@@ -415,5 +416,6 @@ def plan_solve(
             take_prior=False if prior is None else prior,
             detail_weight=weight,
             jaw=o.jaw,
+            steady=o.steady,
         ),
     )

@@ -28,11 +28,13 @@ F64 = NDArray[np.float64]
 
 __all__ = [
     "Comparison",
+    "Jump",
     "MarkerStats",
     "WorstFrame",
     "compare",
     "marker_stats",
     "render_report",
+    "surface_jumps",
     "worst_frames",
     "worst_markers",
     "write_report",
@@ -134,6 +136,51 @@ def worst_frames(solved: Result, count: int) -> list[WorstFrame]:
         )
         for f in _largest_first(frame_max, count)
     ]
+
+
+@dataclass(frozen=True)
+class Jump:
+    """A frame where the solved surface jumps: some vertex's second difference in time
+    |v(t+1) - 2 v(t) + v(t-1)| (a one-frame excursion; a steady motion is none)."""
+
+    frame: int
+    """Index into the solve (its time code is `start + frame`)."""
+    size: float
+    """The largest vertex's jump (model units)."""
+    vertex: int
+    markers: list[str]
+    """The given markers nearest that vertex at that frame, nearest first (none without the
+    given markers)."""
+
+
+_JUMP_BLOCK = 256
+"""Frames read at once for the jumps (memory flat on a long take)."""
+
+_JUMP_MARKERS = 3
+"""Markers named beside each jump."""
+
+
+def surface_jumps(solved: Result, count: int) -> list[Jump]:
+    """The `count` frames where the solved surface jumps most, largest first."""
+    v = solved.vertices
+    nf = v.shape[0]
+    size = np.zeros(nf)
+    where = np.zeros(nf, dtype=np.int64)
+    for a in range(1, nf - 1, _JUMP_BLOCK):
+        b = min(nf - 1, a + _JUMP_BLOCK)
+        block = np.asarray(v[a - 1 : b + 1], dtype=np.float64)
+        jump = np.linalg.norm(block[2:] - 2.0 * block[1:-1] + block[:-2], axis=2)  # (n, V)
+        where[a:b] = jump.argmax(axis=1)
+        size[a:b] = jump.max(axis=1)
+    out = []
+    for f in _largest_first(np.where(size > 0, size, np.nan), count):
+        near: list[str] = []
+        if solved.markers is not None:
+            d = np.linalg.norm(np.asarray(solved.markers[f], np.float64) - v[f, where[f]], axis=1)
+            order = np.argsort(np.where(np.isfinite(d), d, np.inf))[:_JUMP_MARKERS]
+            near = [solved.marker_names[k] for k in order if np.isfinite(d[k])]
+        out.append(Jump(f, float(size[f]), int(where[f]), near))
+    return out
 
 
 @dataclass(frozen=True)
@@ -477,6 +524,22 @@ def render_report(
             f"<tr id='frame-{code}'><td>{_seek_link(viewer_url, code)}</td>"
             f"<td>{_fmt(w.residual, None)}</td><td>{esc(stats.names[w.marker])}</td>"
             f"<td>{int(solved.missing[w.frame].sum())}</td></tr>"
+        )
+    body.append("</table>")
+    body += [
+        "<h2>Where the surface jumps</h2>",
+        "<p class=note>The frames where some vertex leaves the path of the frames either side "
+        "most (its second difference in time): where to watch the take for a pop. Fast motion "
+        "jumps too.</p>",
+        f"<table><tr><th>time code</th><th>jump{_unit(u)}</th><th>vertex</th>"
+        "<th>markers near it</th></tr>",
+    ]
+    for j in surface_jumps(solved, WORST_SHOWN):
+        code = solved.start + j.frame
+        body.append(
+            f"<tr id='jump-{code}'><td>{_seek_link(viewer_url, code)}</td>"
+            f"<td>{_fmt(j.size, None)}</td><td>{j.vertex}</td>"
+            f"<td>{esc(', '.join(j.markers)) or '-'}</td></tr>"
         )
     body.append("</table>")
     jaw = _jaw(solved, frames)

@@ -33,7 +33,7 @@ if TYPE_CHECKING:
 
 F64 = NDArray[np.float64]
 
-__all__ = ["blend_detail", "bundle_interpolator", "rest_positions"]
+__all__ = ["blend_detail", "bundle_interpolator", "rest_positions", "surface_interpolator"]
 
 
 # Per model (made on first use, dropped with the model): the two interpolators below.
@@ -41,7 +41,7 @@ _SURFACE: weakref.WeakKeyDictionary[Model, _lgi.RbfInterpolator] = weakref.WeakK
 _BUNDLES: weakref.WeakKeyDictionary[Model, _lgi.RbfInterpolator] = weakref.WeakKeyDictionary()
 
 
-def _surface_interpolator(model: Model) -> _lgi.RbfInterpolator:
+def surface_interpolator(model: Model) -> _lgi.RbfInterpolator:
     """The biharmonic interpolation of values at the bundles over the mesh's vertices, each
     bundle's constraint sampled like the mesh samples it (so it passes through the bundles)."""
     made = _SURFACE.get(model)
@@ -81,7 +81,7 @@ def blend_detail(
         return vertices
     rest = rest_positions(model)
     values = np.where(missing[..., None], np.nan, positions - rest[None])
-    smooth = _surface_interpolator(model).interpolate(values)
+    smooth = surface_interpolator(model).interpolate(values)
     smooth += np.asarray(model.dataset.neutral, dtype=np.float64)[None]
     vertices *= weight
     vertices += (1.0 - weight) * smooth

@@ -18,10 +18,12 @@ import lgi._lgi as _lgi
 from lgi._lgi import BuildConfig, SolveResult
 from lgi.data.dataset import Dataset
 from lgi.errors import InputError
-from lgi.solve.detail import blend_detail
+from lgi.solve.detail import blend_detail, rest_positions
+from lgi.solve.gaps import CONTEXT, filled
 from lgi.solve.jaw import JawRig, auto_rig
 from lgi.solve.local import local_pieces
 from lgi.solve.options import UNBOUNDED, SolveOptions, local_bounds
+from lgi.solve.steady import RADIUS, steadied
 from lgi.solve.take_prior import TakePrior
 
 
@@ -257,6 +259,7 @@ class Model:
         frames: ArrayLike,
         *,
         temporal: bool = True,
+        steady: bool | None = None,
         jaw: str | ArrayLike | None = "auto",
         smooth_window: int = 0,
         quiet: bool = False,
@@ -272,6 +275,14 @@ class Model:
         NaN rows are missing markers. With `temporal` (a performance), frames are solved in
         order and each prefers the previous frame's choices; `temporal=False` treats frames as
         independent (e.g. one frame per dataset shape) and solves them in parallel.
+
+        `steady` (default True; with `temporal`, the frames a take's consecutive frames): a missing
+        marker sample is filled from its own track and its neighbours before the frame is
+        solved (`lgi.solve.gaps`; it stays missing in the result), and the dataset's detail
+        between the markers is averaged over neighbouring frames (`lgi.solve.steady`; every
+        marker stays where the solve put it), so a dropout or a flip between two pieces of
+        local geometry does not pop. `steady=False` for frames that are not consecutive (a
+        take subsampled in time).
 
         `jaw` (models built with a jaw rig): `"auto"` (default) and `"fit"` start each frame's
         jaw pose from its global blendshape fit (the shapes' poses weighted by their fitted
@@ -336,12 +347,17 @@ class Model:
             detail_weight=detail_weight,
             local_fits=local_fits,
             take_prior=take_prior,
+            steady=steady,
         )
         offer, unbounded, prior, sigma = _core_fit(opts)
         arr = np.asarray(frames)
         if arr.ndim == 2:
             arr = arr[None]
         total = int(arr.shape[0]) if arr.ndim == 3 else 0
+        given = arr
+        steady = temporal and opts.steady
+        if steady:
+            arr = self._gaps_filled(arr)
         with _progress_bar(total, "lgi solve", quiet) as bar:
             res = self._core.solve(
                 arr,
@@ -355,7 +371,10 @@ class Model:
                 unbounded_fit=unbounded,
                 take_prior=prior,
             )
-        return self._finish(res, arr, opts)
+        res = self._finish(res, arr, opts)
+        if not steady:
+            return res
+        return self._as_given(res, steadied(self, np.asarray(res.vertices)), given)
 
     def _options(
         self, options: SolveOptions | None, jaw: Any, **given: Any
@@ -363,6 +382,8 @@ class Model:
         """The solve's options, built and checked once (`SolveOptions`, from `options` or the
         keywords `given`, not both), and the core's `jaw`: the options' mode, or the poses
         given as an array."""
+        if given.get("steady") is None:
+            given.pop("steady", None)  # the options' own (True unless given)
         if options is None:
             mode = jaw if jaw is None or isinstance(jaw, str) else "auto"
             opts = SolveOptions(jaw=mode, **given)
@@ -370,7 +391,10 @@ class Model:
             raise InputError(f"options: expected an lgi.SolveOptions, got {type(options).__name__}")
         else:
             # Every keyword left at its default (None or False) when options= is given.
-            if jaw != "auto" or any(v is not None and v is not False for v in given.values()):
+            named = "steady" in given or any(
+                v is not None and v is not False for v in given.values()
+            )
+            if jaw != "auto" or named:
                 raise InputError(
                     "give a solve's options either as options= or as keywords, not both"
                 )
@@ -378,6 +402,44 @@ class Model:
         opts.check_resolved()
         opts.check_model(self.jaw_bins is not None)
         return opts, jaw
+
+    def _gaps_filled(self, frames: NDArray[Any]) -> NDArray[Any]:
+        """A take's frames with the missing samples it can fill filled (`lgi.solve.gaps`); frames
+        the core will refuse (shape, dtype, a value neither finite nor a missing row) go to it
+        as given, so its error names the problem."""
+        if (
+            frames.ndim != 3
+            or frames.dtype.kind != "f"
+            or frames.shape[1:] != (self.num_bundles, 3)
+            or frames.shape[0] < 2
+        ):
+            return frames
+        nan = np.isnan(frames)
+        if not np.isfinite(frames[~nan]).all() or (nan.any(axis=2) != nan.all(axis=2)).any():
+            return frames
+        if not nan.any():
+            return frames
+        return filled(frames, rest_positions(self))[0]
+
+    def _as_given(
+        self, res: SolveResult, vertices: NDArray[np.float64], given: NDArray[Any]
+    ) -> SolveResult:
+        """`res` of a take's gap-filled frames with its steadied `vertices`, reported against the
+        frames `given`: a filled sample is missing (residual 0), as the take had it."""
+        missing = np.asarray(res.missing) | np.isnan(given).any(axis=2)
+        moved = res.marker_corrections
+        return SolveResult(
+            vertices=vertices,
+            bundle_residuals=np.where(missing, 0.0, np.asarray(res.bundle_residuals)),
+            bundle_positions=res.bundle_positions,
+            missing=missing,
+            choices=res.choices,
+            jaw_theta=res.jaw_theta,
+            jaw_bin=res.jaw_bin,
+            marker_corrections=None if moved is None else np.where(missing, 0.0, moved),
+            fit_weights=res.fit_weights,
+            state=res.state,
+        )
 
     def _finish(self, res: SolveResult, frames: NDArray[Any], opts: SolveOptions) -> SolveResult:
         """`res` with its local fits' surface and then the weight of its detail (`opts`)."""
@@ -431,6 +493,7 @@ class Model:
         *,
         chunk: int = 256,
         temporal: bool = True,
+        steady: bool | None = None,
         jaw: str | None = "auto",
         quiet: bool = False,
         out: NDArray[np.float64] | None = None,
@@ -450,7 +513,9 @@ class Model:
         are then overwritten by the next chunk: copy what you keep). Smoothing is not offered
         (it needs frames beyond the chunk); give poses as arrays by solving chunks with
         `solve`. Other options as in `solve` (`detail_weight` applied chunk by chunk: each
-        frame's blend is its own, and `local_fits` too; `take_prior` is the whole take's)."""
+        frame's blend is its own, and `local_fits` too; `take_prior` is the whole take's; `steady`
+        fills and steadies each chunk with the frames around it, so the chunks still equal one
+        solve)."""
         if jaw is not None and not isinstance(jaw, str):
             raise InputError("solve_iter: jaw must be 'auto', 'fit', 'track' or None")
         opts, jaw = self._options(
@@ -461,6 +526,7 @@ class Model:
             detail_weight=detail_weight,
             local_fits=local_fits,
             take_prior=take_prior,
+            steady=steady,
         )
         offer, unbounded, prior, sigma = _core_fit(opts)
         n = _lgi.check_count(chunk, "chunk")
@@ -469,25 +535,54 @@ class Model:
         arr = frames if isinstance(frames, np.ndarray) else np.asarray(frames)
         if arr.ndim != 3:
             raise InputError(f"frames must have shape (F, B, 3), got {arr.shape}")
+        total = int(arr.shape[0])
+        steady = temporal and opts.steady
         state: _lgi.SolveState | None = None
-        with _progress_bar(int(arr.shape[0]), "lgi solve", quiet) as bar:
-            for a in range(0, int(arr.shape[0]), n):
-                part = np.asarray(arr[a : a + n])
-                buf = None if out is None else out[: part.shape[0]]
-                res = self._core.solve(
-                    part,
-                    progress=lambda _f: bar.update(1),
-                    temporal=temporal,
-                    jaw=jaw,
-                    out=buf,
-                    fit=offer,
-                    marker_noise=sigma,
-                    previous=state,
-                    unbounded_fit=unbounded,
-                    take_prior=prior,
-                )
-                state = res.state if temporal else None
-                yield self._finish(res, part, opts)
+        before: NDArray[np.float64] | None = None
+
+        def solved(part: NDArray[Any], buf: Any, previous: Any, tick: Any) -> SolveResult:
+            res = self._core.solve(
+                part,
+                progress=tick,
+                temporal=temporal,
+                jaw=jaw,
+                out=buf,
+                fit=offer,
+                marker_noise=sigma,
+                previous=previous,
+                unbounded_fit=unbounded,
+                take_prior=prior,
+            )
+            return self._finish(res, part, opts)
+
+        with _progress_bar(total, "lgi solve", quiet) as bar:
+            for a in range(0, total, n):
+                b = min(total, a + n)
+                if not steady:
+                    part = np.asarray(arr[a:b])
+                    buf = None if out is None else out[: b - a]
+                    res = solved(part, buf, state, lambda _f: bar.update(1))
+                    state = res.state if temporal else None
+                    yield res
+                    continue
+                # A chunk's gaps are filled, and its detail steadied, from the frames around it
+                # (`lgi.solve.gaps`, `lgi.solve.steady`), so the chunks equal one solve.
+                lo, hi = max(0, a - CONTEXT), min(total, b + RADIUS + CONTEXT)
+                given = np.asarray(arr[lo:hi])
+                window = self._gaps_filled(given)
+                part = window[a - lo : b - lo]
+                buf = None if out is None else out[: b - a]
+                res = solved(part, buf, state, lambda _f: bar.update(1))
+                state = res.state
+                v = np.asarray(res.vertices)
+                after = None
+                if b < total:
+                    ahead = window[b - lo : min(total, b + RADIUS) - lo]
+                    after = np.asarray(solved(ahead, None, state, None).vertices)
+                tail = v[-RADIUS:].copy()
+                steadied(self, v, before=before, after=after)
+                before = tail if before is None else np.concatenate([before, tail])[-RADIUS:]
+                yield self._as_given(res, v, given[a - lo : b - lo])
 
     def bundle_positions(self, meshes: ArrayLike) -> NDArray[np.float64]:
         """Marker surface positions (F, B, 3) on meshes (F, V, 3) or (V, 3) -> (B, 3)."""

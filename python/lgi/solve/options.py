@@ -47,6 +47,7 @@ _FLAGS = {
     "detail_weight": "--detail-weight",
     "jaw": "--jaw",
     "recommended": "--recommended",
+    "steady": "--no-steady",
 }
 
 
@@ -73,7 +74,10 @@ class SolveOptions:
       take says so) or False;
     - `detail_weight`: a weight in [0, 1], 'auto' or None (all of the dataset's detail);
     - `jaw`: one of `JAW_MODES`, or None for the rest pose;
-    - `recommended`: read every option left at its default from the take.
+    - `recommended`: read every option left at its default from the take;
+    - `steady`: in a temporal solve, dropouts filled from the take and the detail averaged over
+      neighbouring frames (`lgi.solve.gaps`, `lgi.solve.steady`); False solves each frame from
+      its own markers alone (frames that are not a take's consecutive frames).
 
     Built from the command line with `from_cli` (strings as typed); `cli` only changes how
     errors name the options."""
@@ -86,11 +90,13 @@ class SolveOptions:
     detail_weight: float | str | None = None
     jaw: str | None = "auto"
     recommended: bool = False
+    steady: bool = True
     cli: bool = field(default=False, compare=False, repr=False)
 
     def __post_init__(self) -> None:
         put = object.__setattr__
         put(self, "recommended", self._flag("recommended", self.recommended))
+        put(self, "steady", self._flag("steady", self.steady))
         put(self, "marker_noise", self._noise(self.marker_noise))
         put(self, "detail_weight", self._weight(self.detail_weight))
         put(self, "denoise", self._flag_or_auto("denoise", self.denoise))
@@ -120,6 +126,7 @@ class SolveOptions:
             detail_weight=args.detail_weight,
             jaw=None if args.jaw == "rest" else args.jaw,
             recommended=args.recommended,
+            steady=args.steady,
             cli=True,
         )
 

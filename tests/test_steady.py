@@ -1,0 +1,146 @@
+"""A take's frames read together: dropouts filled from the marker's track and its neighbours
+(`lgi.solve.gaps`) and the dataset's detail kept steady across frames (`lgi.solve.steady`)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+import lgi
+from lgi.solve import gaps, steady
+from lgi.solve.detail import rest_positions
+
+
+def _rigid_take(
+    frames: int = 60, markers: int = 12, seed: int = 0
+) -> tuple[np.ndarray, np.ndarray]:
+    """Markers carried by one nonlinear translation, marker 0 also drifting linearly in time:
+    every fill the module makes is exact on it (closed form)."""
+    rng = np.random.default_rng(seed)
+    rest = rng.normal(size=(markers, 3))
+    t = np.arange(frames, dtype=float)
+    carry = np.stack([np.sin(t / 5.0), np.cos(t / 7.0) ** 2, 0.1 * t], axis=1)  # (F, 3)
+    x = rest[None] + carry[:, None]
+    x[:, 0] += np.outer(t, [0.01, -0.02, 0.005])
+    return x, rest
+
+
+def test_a_dropout_is_filled_exactly_where_the_marker_moves_with_its_neighbours() -> None:
+    x, rest = _rigid_take()
+    given_ = x.copy()
+    given_[20:26, 0] = np.nan  # a 6-frame dropout of the drifting marker
+    given_[40, 3] = np.nan
+    out, done = gaps.filled(given_, rest)
+    np.testing.assert_allclose(out, x, atol=1e-12)
+    assert done.sum() == 7 and done[20:26, 0].all() and done[40, 3]
+    assert np.isnan(given_[20, 0, 0])  # the caller's frames are not touched
+
+
+def test_a_long_gap_a_marker_never_seen_and_a_frame_without_neighbours_stay_missing() -> None:
+    x, rest = _rigid_take(frames=100)
+    x[10 : 10 + gaps.MAX_GAP + 1, 0] = np.nan
+    x[:, 5] = np.nan
+    near = gaps.nearest(rest)[1]
+    x[70, 1] = np.nan
+    x[70, near] = np.nan
+    out, done = gaps.filled(x, rest)
+    assert not done[:, 0].any() and not done[:, 5].any() and not done[70, 1]
+    assert np.isnan(out[10, 0]).all() and np.isnan(out[70, 1]).all()
+
+
+@settings(max_examples=40, deadline=None)
+@given(
+    seed=st.integers(0, 10_000),
+    start=st.integers(1, 150),
+    size=st.integers(1, 60),
+)
+def test_a_chunk_filled_with_its_context_equals_the_take_filled_whole(
+    seed: int, start: int, size: int
+) -> None:
+    rng = np.random.default_rng(seed)
+    x = rng.normal(size=(200, 8, 3)).cumsum(axis=0)
+    lost = rng.random((200, 8)) < 0.15
+    x[lost] = np.nan
+    rest = rng.normal(size=(8, 3))
+    whole, done = gaps.filled(x, rest)
+    stop = min(200, start + size)
+    lo, hi = max(0, start - gaps.CONTEXT), min(200, stop + gaps.CONTEXT)
+    part, part_done = gaps.filled(x[lo:hi], rest)
+    np.testing.assert_array_equal(part[start - lo : stop - lo], whole[start:stop])
+    np.testing.assert_array_equal(part_done[start - lo : stop - lo], done[start:stop])
+    seen = ~lost
+    np.testing.assert_array_equal(whole[seen], x[seen])  # what was seen is kept
+
+
+def test_steadying_keeps_every_marker_where_the_solve_put_it_and_spreads_a_one_frame_flip(
+    sample, sample_model
+) -> None:  # type: ignore[no-untyped-def]
+    res = sample_model.solve(sample.performance[:30], temporal=False, quiet=True)
+    v = np.array(res.vertices)
+    p = sample_model.bundle_positions(v)
+    flip = v.copy()
+    bump = np.zeros(v.shape[1:])
+    bump[:, 2] = 0.3 * np.sin(3.0 * v[15, :, 0])  # not a motion the markers' interpolation makes
+    flip[15] += bump  # a flip at one frame
+    flip[15] -= steady.surface_interpolator(sample_model).interpolate(
+        sample_model.bundle_positions(flip[15:16]) - p[15:16]
+    )[0]  # ... that leaves the markers where they were
+    np.testing.assert_allclose(sample_model.bundle_positions(flip), p, atol=1e-9)
+    out = steady.steadied(sample_model, flip.copy())
+    np.testing.assert_allclose(sample_model.bundle_positions(out), p, atol=1e-9)
+    jump = np.abs(flip[15] - v[15]).max()
+    left = np.abs(out[15] - steady.steadied(sample_model, v.copy())[15]).max()
+    # A Gaussian of one frame keeps 0.399 of a one-frame excursion at its frame.
+    assert jump > 0.1 and left == pytest.approx(0.3989 * jump, rel=0.02)
+
+
+@pytest.mark.parametrize("block", [1, 5, 64])
+def test_a_take_steadied_in_blocks_or_chunks_equals_it_steadied_whole(
+    sample, sample_model, block, monkeypatch
+) -> None:  # type: ignore[no-untyped-def]
+    v = np.array(sample_model.solve(sample.performance[:40], temporal=False, quiet=True).vertices)
+    whole = steady.steadied(sample_model, v.copy())
+    monkeypatch.setattr(steady, "_BLOCK", block)
+    np.testing.assert_allclose(steady.steadied(sample_model, v.copy()), whole, atol=1e-12)
+    r = steady.RADIUS
+    mid = steady.steadied(
+        sample_model, v[10:25].copy(), before=v[10 - r : 10], after=v[25 : 25 + r]
+    )
+    np.testing.assert_allclose(mid, whole[10:25], atol=1e-12)
+
+
+def test_a_take_with_dropouts_solves_the_same_in_chunks_reports_its_gaps_missing_and_pops_less(
+    sample, sample_model
+) -> None:  # type: ignore[no-untyped-def]
+    frames = np.array(sample.performance[:60])
+    frames[18:22, 3] = frames[29, 7] = frames[30:33, 0] = np.nan  # across chunk edges of 10
+    lost = np.isnan(frames).any(axis=2)
+    whole = sample_model.solve(frames, quiet=True)
+    parts = list(sample_model.solve_iter(frames, chunk=10, quiet=True))
+    np.testing.assert_array_equal(np.concatenate([p.vertices for p in parts]), whole.vertices)
+    np.testing.assert_array_equal(whole.missing, lost)
+    assert not whole.bundle_residuals[lost].any()
+    # Every present marker is still interpolated exactly (the paper's mode).
+    pos = sample_model.bundle_positions(whole.vertices)
+    np.testing.assert_allclose(pos[~lost], frames[~lost], atol=1e-6)
+    # Against each frame solved alone: closer to the truth on the frames with a dropout.
+    truth = np.asarray(sample.truth[:60])
+    alone = sample_model.solve(frames, temporal=False, quiet=True)
+    rows = lost.any(axis=1)
+
+    def err(r: lgi.SolveResult) -> float:
+        return float(np.linalg.norm(r.vertices[rows] - truth[rows], axis=2).mean())
+
+    assert err(whole) < 0.95 * err(alone)
+
+
+def test_rest_positions_give_each_marker_its_nearest_neighbours(sample_model) -> None:  # type: ignore[no-untyped-def]
+    rest = rest_positions(sample_model)
+    near = gaps.nearest(rest)
+    d = np.linalg.norm(rest[:, None] - rest[None], axis=2)
+    np.fill_diagonal(d, np.inf)
+    brute = np.sort(d, axis=1)[:, : near.shape[1]]
+    np.testing.assert_allclose(np.take_along_axis(d, near, axis=1), brute)
+    assert isinstance(sample_model, lgi.Model)
