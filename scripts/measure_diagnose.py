@@ -1,5 +1,5 @@
 """Usage: python scripts/measure_diagnose.py (from the checkout, ../shared beside it).
-False findings of lgi.review.diagnose on clean ICT captures of both Live Link recordings, whole
+False findings of lgi.solve.diagnose on clean ICT captures of both Live Link recordings, whole
 length, 0.5 mm noise, 2 % dropouts, noise-aware solves, read without and with the solve's
 sigma (`noise=`, what `lgi solve` / `info` / `report` pass); then a swapped pair (50 frames)
 and a 1 cm spike (3 frames) planted in 300-frame captures (two recordings x three seeds),
@@ -9,7 +9,7 @@ import lgi
 from lgi.io.livelink import read_livelinkface
 from lgi.lab import ict
 from lgi.lab.capture import make_capture
-from lgi.review.diagnose import diagnose
+from lgi.solve.diagnose import diagnose
 
 SIGMA = 0.05
 D = "../shared/data/ict-facekit"

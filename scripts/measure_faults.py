@@ -18,9 +18,9 @@ quarter of its shapes held out, driven by the shared Live Link recordings; docs/
         marker faults named on the clean takes.
     python scripts/measure_faults.py pops [--seeds 0] [--dataset ict|scans]
         the same clean take: frames whose face-skin error jumps by more than 2 and 5 mm
-        (`lgi.lab.scoring.pops`), the fast call, --recommended and the rig-solve peer, each
-        solved as a performance (`steady`, the default) and frame by frame alone
-        (`steady=False`). With `--dataset scans` the model's dataset is 120 whole-face scans
+        (`lgi.lab.scoring.pops`), the fast call, --recommended and the rig-solve peer; lgi's
+        calls each frame alone (`steady=False`), steady with the markers as given
+        (`repair=False`) and steady with the faults its solve shows repaired (the default). With `--dataset scans` the model's dataset is 120 whole-face scans
         picked from the other recording's curves (`lgi.lab.scans`), all of ICT's shapes
         kept in the truth.
 
@@ -44,7 +44,7 @@ from lgi.lab import ict
 from lgi.lab.baselines import FitJaw
 from lgi.lab.capture import make_capture, random_layout
 from lgi.lab.scoring import POP_CM, pops
-from lgi.review.diagnose import diagnose
+from lgi.solve.diagnose import diagnose
 
 ROOT = Path(__file__).resolve().parents[1]
 RECORDINGS = ("alex_rom_4", "jmtechart_myslate_3")
@@ -69,7 +69,7 @@ def curves(d: lgi.Dataset, folder: Path, name: str) -> np.ndarray:
 
 def _found(m: lgi.Model, x: np.ndarray, sig: float) -> list:  # type: ignore[type-arg]
     """The findings of `x` solved noise-aware, as `lgi solve` reads them."""
-    r = m.solve(x, marker_noise=sig, quiet=True)
+    r = m.solve(x, marker_noise=sig, repair=False, quiet=True)
     names = list(m.marker_names)
     return diagnose(r.bundle_residuals, r.missing, names, size=m.diagonal, markers=x, noise=sig)
 
@@ -206,28 +206,26 @@ def pop_counts(seeds: list[int], dataset: str) -> None:
         m = lgi.Model.build(given, pos)
         truth = np.asarray(t.truth)
         sig = lgi.estimate_marker_noise(t.frames, m)
-        t0 = time.perf_counter()
-        peer = FitJaw(m).solve(t.frames, quiet=True)
-        _pops(f"seed {seed}, rig solve (fit + jaw)", peer.vertices, truth, time.perf_counter() - t0)
+        if m.jaw_rig is not None:  # the peer skins the fit's jaw pose (a scans model has none)
+            t0 = time.perf_counter()
+            peer = FitJaw(m).solve(t.frames, quiet=True)
+            took = time.perf_counter() - t0
+            _pops(f"seed {seed}, rig solve (fit + jaw)", peer.vertices, truth, took)
         plan = lgi.plan_solve(t.frames, m, recommended=True)
-        for steady in (False, True):
-            how = "steady" if steady else "each frame alone"
+        for steady, fix, how in (
+            (False, False, "each frame alone"),
+            (True, False, "steady"),
+            (True, True, "steady + repair (the default)"),
+        ):
             t0 = time.perf_counter()
-            fast = m.solve(t.frames, marker_noise=sig, steady=steady, quiet=True)
-            _pops(
-                f"seed {seed}, --marker-noise auto, {how}",
-                fast.vertices,
-                truth,
-                time.perf_counter() - t0,
-            )
+            fast = m.solve(t.frames, marker_noise=sig, steady=steady, repair=fix, quiet=True)
+            took = time.perf_counter() - t0
+            _pops(f"seed {seed}, --marker-noise auto, {how}", fast.vertices, truth, took)
             t0 = time.perf_counter()
-            solved = m.solve(plan.frames, options=plan.options, steady=steady, quiet=True)
-            _pops(
-                f"seed {seed}, --recommended, {how}",
-                solved.vertices,
-                truth,
-                time.perf_counter() - t0,
-            )
+            opts = plan.options.replace(steady=steady, repair=fix)
+            solved = m.solve(plan.frames, options=opts, quiet=True)
+            took = time.perf_counter() - t0
+            _pops(f"seed {seed}, --recommended, {how}", solved.vertices, truth, took)
 
 
 SWAP_CM = (0.5, 1.0, 2.0, 3.0)

@@ -147,11 +147,12 @@ def write_solve(  # type: ignore[no-untyped-def]
     path: Path, model, frames, noise: float | None, fps: float = 30.0, start: int = 100
 ) -> Path:
     """`frames` solved with `model` (noise-aware with `noise`) as a solved-take npz at `fps`
-    from time code `start`, the take's markers kept."""
+    from time code `start`, the take's markers kept, and kept as given (no repair: what a
+    finding reads is in the residuals)."""
     from lgi.io.result import write_result_npz
     from lgi.io.topology import topology
 
-    res = model.solve(frames, marker_noise=noise, quiet=True)
+    res = model.solve(frames, marker_noise=noise, repair=False, quiet=True)
     return write_result_npz(
         path,
         topology(model.dataset),

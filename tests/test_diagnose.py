@@ -1,5 +1,5 @@
 """Bad markers named: a swapped label pair and a spiking marker planted in a capture of ICT
-driven by a real Live Link recording are named with their frames, by `lgi.review.diagnose` and by
+driven by a real Live Link recording are named with their frames, by `lgi.solve.diagnose` and by
 `lgi solve` / `lgi info` on the command line; a clean take of the same capture is not
 flagged."""
 
@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from lgi.app import cli
-from lgi.review.diagnose import Finding, diagnose, summary
+from lgi.solve.diagnose import Finding, diagnose, summary
 from pipeline_files import write_solve
 
 
@@ -159,7 +159,7 @@ def test_held_out_shapes_are_gaps_and_planted_faults_are_still_named(
     sigma = lgi.estimate_marker_noise(take.frames, model)
 
     def found(x: np.ndarray) -> list[Finding]:
-        res = model.solve(x, marker_noise=sigma, quiet=True)
+        res = model.solve(x, marker_noise=sigma, repair=False, quiet=True)
         return diagnose(
             res.bundle_residuals, res.missing, names, size=model.diagonal, markers=x, noise=sigma
         )

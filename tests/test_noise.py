@@ -101,7 +101,7 @@ def test_a_sparse_noisy_take_flags_only_the_planted_spike(rom_scans) -> None:  #
     # Found trying `lgi solve --marker-noise auto` on this setting: 30-39 "spikes" were listed
     # on a take with no bad marker (ordinary noise corrections, and the tracks' away-and-back
     # between frames a second apart).
-    from lgi.review.diagnose import diagnose
+    from lgi.solve.diagnose import diagnose
 
     _, _, rom, _, model = rom_scans
     take = _take(rom_scans, rom[:: rom.shape[0] // 40][:40])

@@ -11,10 +11,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+import lgi
 from lgi.app import cli
 from lgi.io.result import read_result_npz
-from lgi.review.diagnose import Finding
-from lgi.review.repair import repaired
+from lgi.solve.diagnose import Finding
+from lgi.solve.repair import repaired
 from pipeline_files import build_actor, write_c3d
 
 
@@ -125,3 +126,36 @@ def test_repairs_round_trip_through_the_settings_and_a_malformed_record_is_refus
     bad = old[:-1] + ', "repairs": [{"kind": "gap", "markers": ["m1"], "first": 0, "last": 1}]}'
     with pytest.raises(InputError, match=r"x\.npz: repairs must be a list"):
         SolveSettings.from_json(bad, "x.npz")
+
+
+def test_model_solve_repairs_a_swap_and_a_spike_and_says_what_it_repaired(
+    sample, sample_model
+) -> None:  # type: ignore[no-untyped-def]
+    x = np.array(sample.performance)
+    x[50:70, [3, 40]] = x[50:70, [40, 3]]  # a label swap, 20 frames
+    x[100:102, 7] += [0.0, 0.0, 1.0]  # a 1 cm spike, 2 frames
+    clean = sample_model.solve(sample.performance, marker_noise=0.02, quiet=True)
+    kept = sample_model.solve(x, marker_noise=0.02, repair=False, quiet=True)
+    fixed = sample_model.solve(x, marker_noise=0.02, quiet=True)
+    assert clean.repairs == () and kept.repairs is None and kept.repaired is None
+    names = sample_model.marker_names
+    got = {(f.kind, frozenset(f.markers), f.first, f.last) for f in fixed.repairs}
+    assert got == {
+        ("swap", frozenset({names[3], names[40]}), 50, 69),
+        ("spike", frozenset({names[7]}), 100, 101),
+    }
+    want = np.zeros(x.shape[:2], dtype=bool)
+    want[50:70, [3, 40]] = want[100:102, 7] = True
+    np.testing.assert_array_equal(fixed.repaired, want)
+
+    def err(r, rows):  # type: ignore[no-untyped-def]
+        return float(np.linalg.norm(r.vertices[rows] - sample.truth[rows], axis=2).mean())
+
+    for rows in (slice(50, 70), slice(100, 102)):
+        assert err(kept, rows) > 1.3 * err(clean, rows)  # the faults dent the face as given
+        assert err(fixed, rows) <= 1.05 * err(clean, rows)  # and repaired, it is the clean one's
+    # Frames solved each alone, or in chunks, are not read for faults (None: not looked for).
+    assert sample_model.solve(x, marker_noise=0.02, steady=False, quiet=True).repairs is None
+    assert next(sample_model.solve_iter(x, chunk=50, marker_noise=0.02, quiet=True)).repairs is None
+    with pytest.raises(lgi.InputError, match="repair must be True or False"):
+        sample_model.solve(x, repair="yes", quiet=True)  # type: ignore[arg-type]

@@ -121,6 +121,8 @@ def test_a_take_with_dropouts_solves_the_same_in_chunks_reports_its_gaps_missing
     parts = list(sample_model.solve_iter(frames, chunk=10, quiet=True))
     np.testing.assert_array_equal(np.concatenate([p.vertices for p in parts]), whole.vertices)
     np.testing.assert_array_equal(whole.missing, lost)
+    want = gaps.filled(frames, rest_positions(sample_model))[1]
+    assert want.any() and np.array_equal(whole.filled, want)
     assert not whole.bundle_residuals[lost].any()
     # Every present marker is still interpolated exactly (the paper's mode).
     pos = sample_model.bundle_positions(whole.vertices)

@@ -306,6 +306,9 @@ class SolveResult:
         marker_corrections: NDArray[np.float64] | None = None,
         fit_weights: NDArray[np.float64] | None = None,
         state: SolveState | None = None,
+        filled: NDArray[np.bool_] | None = None,
+        repaired: NDArray[np.bool_] | None = None,
+        repairs: tuple[Any, ...] | None = None,
     ) -> SolveResult: ...
     @property
     def vertices(self) -> NDArray[np.float64]:
@@ -340,6 +343,17 @@ class SolveResult:
     def state(self) -> SolveState | None:
         """What the chunk after a temporal solve needs to continue it (`solve_iter` passes it
         on); None for no frames, and after unpickling (a pickled result keeps its arrays)."""
+    @property
+    def filled(self) -> NDArray[np.bool_] | None:
+        """(F, B) missing samples the solve filled from the take (`lgi.solve.gaps`; still
+        `missing`); None when the frames were solved each alone."""
+    @property
+    def repaired(self) -> NDArray[np.bool_] | None:
+        """(F, B) samples a repair changed (`lgi.solve.repair`); None when no repair was made."""
+    @property
+    def repairs(self) -> tuple[Any, ...] | None:
+        """The marker faults repaired before the solve (`lgi.solve.diagnose.Finding`s); None
+        when the solve did not look for them (`repair=False`, frames solved each alone)."""
     def __reduce__(self) -> tuple[type[SolveResult], tuple[object, ...]]: ...
 
 @final

@@ -45,13 +45,24 @@ pub struct SolveResult {
     /// None for no frames, and after unpickling (a pickled result keeps its arrays only).
     #[pyo3(get)]
     state: Option<Py<SolveState>>,
+    /// (F, B) missing samples the solve filled from the take (`lgi.solve.gaps`; still
+    /// `missing`); None when the frames were solved each alone.
+    #[pyo3(get)]
+    filled: Option<Py<PyAny>>,
+    /// (F, B) samples a repair changed (`lgi.solve.repair`); None when no repair was made.
+    #[pyo3(get)]
+    repaired: Option<Py<PyAny>>,
+    /// The marker faults repaired before the solve (`lgi.solve.diagnose.Finding`s), a tuple;
+    /// None when the solve did not look for them (`repair=False`, frames solved each alone).
+    #[pyo3(get)]
+    repairs: Option<Py<PyAny>>,
 }
 
 #[pymethods]
 impl SolveResult {
     /// A result from its arrays (what the baselines return; `Model.solve` makes its own).
     #[new]
-    #[pyo3(signature = (vertices, bundle_residuals, bundle_positions, missing, choices, jaw_theta=None, jaw_bin=None, marker_corrections=None, fit_weights=None, state=None))]
+    #[pyo3(signature = (vertices, bundle_residuals, bundle_positions, missing, choices, jaw_theta=None, jaw_bin=None, marker_corrections=None, fit_weights=None, state=None, filled=None, repaired=None, repairs=None))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         vertices: Py<PyAny>,
@@ -64,6 +75,9 @@ impl SolveResult {
         marker_corrections: Option<Py<PyAny>>,
         fit_weights: Option<Py<PyAny>>,
         state: Option<Py<SolveState>>,
+        filled: Option<Py<PyAny>>,
+        repaired: Option<Py<PyAny>>,
+        repairs: Option<Py<PyAny>>,
     ) -> Self {
         SolveResult {
             vertices,
@@ -76,6 +90,9 @@ impl SolveResult {
             marker_corrections,
             fit_weights,
             state,
+            filled,
+            repaired,
+            repairs,
         }
     }
 
@@ -85,19 +102,26 @@ impl SolveResult {
     ) -> PyResult<(Bound<'py, PyAny>, Bound<'py, PyTuple>)> {
         let py = slf.py();
         let r = slf.get();
-        let opt = |x: &Option<Py<PyAny>>| x.as_ref().map(|a| a.clone_ref(py));
-        let args = (
-            r.vertices.clone_ref(py),
-            r.bundle_residuals.clone_ref(py),
-            r.bundle_positions.clone_ref(py),
-            r.missing.clone_ref(py),
-            r.choices.clone_ref(py),
-            opt(&r.jaw_theta),
-            opt(&r.jaw_bin),
-            opt(&r.marker_corrections),
-            opt(&r.fit_weights),
-        )
-            .into_pyobject(py)?;
+        // Absent optionals (and the state, which stays behind) are Python's None.
+        let opt = |x: &Option<Py<PyAny>>| x.as_ref().map_or_else(|| py.None(), |a| a.clone_ref(py));
+        let args = PyTuple::new(
+            py,
+            [
+                r.vertices.clone_ref(py),
+                r.bundle_residuals.clone_ref(py),
+                r.bundle_positions.clone_ref(py),
+                r.missing.clone_ref(py),
+                r.choices.clone_ref(py),
+                opt(&r.jaw_theta),
+                opt(&r.jaw_bin),
+                opt(&r.marker_corrections),
+                opt(&r.fit_weights),
+                py.None(),
+                opt(&r.filled),
+                opt(&r.repaired),
+                opt(&r.repairs),
+            ],
+        )?;
         Ok((slf.get_type().into_any(), args))
     }
 
@@ -288,5 +312,8 @@ pub fn pack(
             .last()
             .map(|fr| Py::new(py, SolveState { inner: fr.state() }))
             .transpose()?,
+        filled: None,
+        repaired: None,
+        repairs: None,
     })
 }

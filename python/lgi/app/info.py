@@ -15,7 +15,7 @@ from lgi.errors import InputError
 from lgi.io import takes
 from lgi.io.result import Result, read_result_npz
 from lgi.plan.noise import estimate_marker_noise
-from lgi.review.diagnose import diagnose_result, summary
+from lgi.solve.diagnose import diagnose_result, summary
 from lgi.solve.model import Model
 from lgi.solve.placement import describe_scale
 

@@ -35,11 +35,11 @@ from lgi.io.sink import FrameSink
 from lgi.io.topology import topology
 from lgi.plan.choices import SolvePlan, plan_solve
 from lgi.plan.denoise import DenoisedTake
-from lgi.review.diagnose import Finding, diagnose, face_size, summary
-from lgi.review.repair import repaired
+from lgi.solve.diagnose import Finding, diagnose, face_size, summary
 from lgi.solve.model import PROGRESS_DELAY, Model
 from lgi.solve.options import JAW_MODES, SolveOptions
 from lgi.solve.placement import ScaleFit, check_scale
+from lgi.solve.repair import repaired
 
 __all__ = [
     "JAW_POSES",
@@ -73,7 +73,7 @@ def _say_summary(
     m: Model,
     start: int,
 ) -> None:
-    """The solve's summary (`lgi.review.diagnose.summary`): residuals, then the findings."""
+    """The solve's summary (`lgi.solve.diagnose.summary`): residuals, then the findings."""
     for line in summary(residuals, missing, m.marker_names, found, start=start, units=m.units):
         say(line)
 
@@ -127,7 +127,7 @@ class PlannedTake:
     def findings(
         self, residuals: np.ndarray, missing: np.ndarray, first_frame: np.ndarray, m: Model
     ) -> list[Finding]:
-        """What a solve of this take shows (`lgi.review.diagnose`), read from its `residuals`
+        """What a solve of this take shows (`lgi.solve.diagnose`), read from its `residuals`
         (`PlannedTake.residuals`), `missing` samples and first solved frame as `lgi info` reads
         the file: against the given markers, with their noise."""
         return diagnose(
@@ -163,11 +163,14 @@ def solve_take(
 ) -> tuple[PlannedTake, SolveResult, list[Finding] | None]:
     """The planned take solved; with `repair`, the marker faults that solve shows (label
     swaps, spikes, markers off their track: `PlannedTake.findings`, told from model gaps) are
-    repaired (`lgi.review.repair`), said in one line each, and the repaired take planned and
+    repaired (`lgi.solve.repair`), said in one line each, and the repaired take planned and
     solved again, its settings recording the repairs. Returns what was solved, its result
     and, where they were read (a solve with `repair` that found no fault), that result's
     findings; None otherwise (the take given is never touched)."""
-    res = m.solve(planned.plan.frames, quiet=quiet, options=planned.plan.options)
+    # The pipeline repairs itself (against the given markers, the take planned again).
+    res = m.solve(
+        planned.plan.frames, quiet=quiet, options=planned.plan.options.replace(repair=False)
+    )
     if not repair:
         return planned, res, None
     found = planned.findings(planned.residuals(res), res.missing, res.vertices[0], m)
@@ -181,7 +184,8 @@ def solve_take(
         say(f"repaired: {line}")
     again = PlannedTake(again.given, again.plan, settings)
     say("solved again with the repaired markers (--no-repair keeps them as given)")
-    return again, m.solve(again.plan.frames, quiet=quiet, options=again.plan.options), None
+    kept = again.plan.options.replace(repair=False)
+    return again, m.solve(again.plan.frames, quiet=quiet, options=kept), None
 
 
 def solve_file(

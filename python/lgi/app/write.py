@@ -15,7 +15,7 @@ from lgi.io.result import Result
 from lgi.io.settings import SolveSettings
 from lgi.io.sink import FrameSink
 from lgi.io.topology import Topology
-from lgi.review.diagnose import Finding
+from lgi.solve.diagnose import Finding
 from lgi.solve.model import Model
 
 CHUNK_FRAMES = 100

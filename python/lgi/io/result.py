@@ -127,9 +127,11 @@ def write_result_npz(
         arrays["markers"] = mk
     if settings is not None:
         arrays["solve_settings"] = np.str_(settings.to_json())
-    # A file object: numpy would append '.npz' to another suffix.
+    # A file object: numpy would append '.npz' to another suffix. Stored, not deflated:
+    # deflate saves about a tenth of a solve's size at several times the write's time
+    # (docs/performance.md), and stored members still read in order (`stream_result_npz`).
     with atomic_path(p) as tmp, open(tmp, "wb") as fh:
-        np.savez_compressed(fh, **arrays)
+        np.savez(fh, **arrays)
     return p
 
 
@@ -143,7 +145,7 @@ def read_result_npz(path: str | os.PathLike[str]) -> Result:
 
 def stream_result_npz(path: str | os.PathLike[str]) -> tuple[Result, Callable[[int], None]]:
     """A solved take whose `vertices` are still being read: the small arrays are read at once,
-    the frames are decompressed in order by a background thread into the returned array, and
+    the frames are read in order by a background thread into the returned array, and
     `wait(stop)` returns once frames `0..stop-1` are in (raising `InputError` if the file
     turns out damaged). `lgi view` shows the first frame of a 1,500-frame take this way
     without waiting for all of it."""

@@ -239,7 +239,8 @@ class FitJaw:
 
     def solve(self, frames: ArrayLike, *, quiet: bool = False, **_: Any) -> SolveResult:
         fr = _frames(frames, self._s)
-        solved = self._model.solve(fr, jaw="fit", fit=True, quiet=True)
+        # The peer as a rig solve reads a take: each frame from its own markers.
+        solved = self._model.solve(fr, jaw="fit", fit=True, steady=False, quiet=True)
         w, theta = solved.fit_weights, solved.jaw_theta
         if w is None or theta is None:
             raise InputError("FitJaw: the solve made no fit or no jaw pose")
@@ -277,7 +278,7 @@ class FitJawUnbounded(FitJaw):
 
     def solve(self, frames: ArrayLike, *, quiet: bool = False, **_: Any) -> SolveResult:
         fr = _frames(frames, self._s)
-        theta = self._model.solve(fr, jaw="fit", fit=True, quiet=True).jaw_theta
+        theta = self._model.solve(fr, jaw="fit", fit=True, steady=False, quiet=True).jaw_theta
         if theta is None:
             raise InputError("FitJawUnbounded: the solve made no jaw pose")
         unskinned = self._rig.unskin(np.nan_to_num(fr), theta, weights=self._bundle_jaw)

@@ -417,5 +417,6 @@ def plan_solve(
             detail_weight=weight,
             jaw=o.jaw,
             steady=o.steady,
+            repair=o.repair,
         ),
     )

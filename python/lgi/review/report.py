@@ -594,7 +594,7 @@ def write_report(
         reference_job = None if reference_path is None else pool.submit(read_solved, reference_path)
         solved = solved_job.result()
         reference = None if reference_job is None else reference_job.result()
-    from lgi.review.diagnose import finding_lines
+    from lgi.solve.diagnose import finding_lines
 
     found = finding_lines(solved)
     text = render_report(

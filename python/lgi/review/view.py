@@ -215,8 +215,8 @@ def serve(data: ViewData, *, port: int = 0) -> tuple[ThreadingHTTPServer, str]:
     """Starts the viewer's server on 127.0.0.1 (`port` 0: any free port) in a daemon thread;
     returns it and its address. `/report.html` is `lgi report`'s page of the take, its worst
     frames linking back to the viewer."""
-    from lgi.review.diagnose import finding_lines
     from lgi.review.report import render_report
+    from lgi.solve.diagnose import finding_lines
 
     def report() -> str:
         data.wait(data.num_frames)

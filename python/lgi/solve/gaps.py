@@ -60,16 +60,18 @@ def filled(frames: F64, rest: F64) -> tuple[F64, NDArray[np.bool_]]:
     x = np.array(frames, dtype=np.float64)
     f, b = x.shape[:2]
     done = np.zeros((f, b), dtype=bool)
-    seen = np.isfinite(x).all(axis=2)
+    seen: NDArray[np.bool_] = np.asarray(np.isfinite(x).all(axis=2))
     if f < 2 or b < 2 or seen.all():
         return x, done
     near = nearest(np.asarray(rest, dtype=np.float64))
-    frame_kept = seen.mean(axis=1) >= MIN_SEEN  # frames that are there, a few markers lost
+    frame_kept: NDArray[np.bool_] = np.asarray(
+        seen.mean(axis=1) >= MIN_SEEN
+    )  # frames that are there, a few markers lost
     moved = x - rest[None]  # each marker's displacement from rest; NaN where missing
     frames_at = np.arange(f)
     for k in np.flatnonzero(~seen.all(axis=0)):
         around = moved[:, near[k]]  # (F, k, 3)
-        with_neighbour = seen[:, near[k]].any(axis=1)
+        with_neighbour: NDArray[np.bool_] = np.asarray(seen[:, near[k]].any(axis=1))
         carried = np.zeros((f, 3))
         carried[with_neighbour] = np.nanmedian(around[with_neighbour], axis=1)
         usable = seen[:, k] & with_neighbour  # frames that say where the marker sits

@@ -19,10 +19,12 @@ from lgi._lgi import BuildConfig, SolveResult
 from lgi.data.dataset import Dataset
 from lgi.errors import InputError
 from lgi.solve.detail import blend_detail, rest_positions
+from lgi.solve.diagnose import diagnose, face_size
 from lgi.solve.gaps import CONTEXT, filled
 from lgi.solve.jaw import JawRig, auto_rig
 from lgi.solve.local import local_pieces
 from lgi.solve.options import UNBOUNDED, SolveOptions, local_bounds
+from lgi.solve.repair import repaired
 from lgi.solve.steady import RADIUS, steadied
 from lgi.solve.take_prior import TakePrior
 
@@ -269,6 +271,7 @@ class Model:
         detail_weight: float | None = None,
         local_fits: bool | str = False,
         take_prior: TakePrior | None = None,
+        repair: bool | None = None,
         options: SolveOptions | None = None,
     ) -> SolveResult:
         """Solves frames (F, B, 3) of marker positions (a single (B, 3) frame gives F = 1).
@@ -338,7 +341,14 @@ class Model:
 
         `take_prior` (`lgi.estimate_take_prior`, with an unbounded global fit): the take's own
         prior on the fit's weights in place of its ridge, so a noisy frame keeps to the
-        directions the take moves in (docs/concepts.md)."""
+        directions the take moves in (docs/concepts.md).
+
+        `repair` (default True; with `steady`, a take's consecutive frames): the marker faults
+        the solve shows (`lgi.solve.diagnose`: a label swap, a spike, a marker off its track;
+        never a model gap) are repaired on a copy of the frames (`lgi.solve.repair`: the swap
+        undone, the others solved as missing and filled) and the frames solved again;
+        `result.repairs` lists the faults repaired (empty: none found) and `result.repaired`
+        marks the samples changed. `repair=False` keeps the markers as given."""
         opts, jaw = self._options(
             options,
             jaw,
@@ -348,11 +358,56 @@ class Model:
             local_fits=local_fits,
             take_prior=take_prior,
             steady=steady,
+            repair=repair,
         )
-        offer, unbounded, prior, sigma = _core_fit(opts)
         arr = np.asarray(frames)
         if arr.ndim == 2:
             arr = arr[None]
+
+        def once(x: NDArray[Any]) -> SolveResult:
+            return self._solved(
+                x,
+                opts,
+                temporal=temporal,
+                jaw=jaw,
+                smooth_window=smooth_window,
+                quiet=quiet,
+                out=out,
+            )
+
+        res = once(arr)
+        if not (temporal and opts.steady and opts.repair and arr.shape[0] >= 2):
+            return res
+        names = self.marker_names
+        sigma = None if opts.marker_noise is None else float(opts.marker_noise)
+        found = diagnose(
+            res.bundle_residuals,
+            res.missing,
+            names,
+            size=face_size(np.asarray(res.vertices)[0]),
+            markers=arr,
+            noise=sigma,
+        )
+        faults = tuple(f for f in found if f.fault)
+        if not faults:
+            return _with(res, repairs=())
+        fixed, changed, _ = repaired(np.asarray(arr, dtype=np.float64), faults, names)
+        again = once(fixed)
+        return _with(again, repaired=changed, repairs=faults)
+
+    def _solved(
+        self,
+        arr: NDArray[Any],
+        opts: SolveOptions,
+        *,
+        temporal: bool,
+        jaw: Any,
+        smooth_window: int,
+        quiet: bool,
+        out: NDArray[np.float64] | None,
+    ) -> SolveResult:
+        """One solve of `arr` (`solve` without the repair)."""
+        offer, unbounded, prior, sigma = _core_fit(opts)
         total = int(arr.shape[0]) if arr.ndim == 3 else 0
         given = arr
         steady = temporal and opts.steady
@@ -382,8 +437,9 @@ class Model:
         """The solve's options, built and checked once (`SolveOptions`, from `options` or the
         keywords `given`, not both), and the core's `jaw`: the options' mode, or the poses
         given as an array."""
-        if given.get("steady") is None:
-            given.pop("steady", None)  # the options' own (True unless given)
+        for flag in ("steady", "repair"):  # None: the options' own (True unless given)
+            if given.get(flag) is None:
+                given.pop(flag, None)
         if options is None:
             mode = jaw if jaw is None or isinstance(jaw, str) else "auto"
             opts = SolveOptions(jaw=mode, **given)
@@ -391,8 +447,10 @@ class Model:
             raise InputError(f"options: expected an lgi.SolveOptions, got {type(options).__name__}")
         else:
             # Every keyword left at its default (None or False) when options= is given.
-            named = "steady" in given or any(
-                v is not None and v is not False for v in given.values()
+            named = (
+                "steady" in given
+                or "repair" in given
+                or any(v is not None and v is not False for v in given.values())
             )
             if jaw != "auto" or named:
                 raise InputError(
@@ -428,6 +486,7 @@ class Model:
         frames `given`: a filled sample is missing (residual 0), as the take had it."""
         missing = np.asarray(res.missing) | np.isnan(given).any(axis=2)
         moved = res.marker_corrections
+        filled = missing & ~np.asarray(res.missing)  # missing as given, solved as filled
         return SolveResult(
             vertices=vertices,
             bundle_residuals=np.where(missing, 0.0, np.asarray(res.bundle_residuals)),
@@ -439,6 +498,7 @@ class Model:
             marker_corrections=None if moved is None else np.where(missing, 0.0, moved),
             fit_weights=res.fit_weights,
             state=res.state,
+            filled=filled,
         )
 
     def _finish(self, res: SolveResult, frames: NDArray[Any], opts: SolveOptions) -> SolveResult:
@@ -515,7 +575,8 @@ class Model:
         `solve`. Other options as in `solve` (`detail_weight` applied chunk by chunk: each
         frame's blend is its own, and `local_fits` too; `take_prior` is the whole take's; `steady`
         fills and steadies each chunk with the frames around it, so the chunks still equal one
-        solve)."""
+        solve; `repair` is not applied, since it reads the whole take's residuals: solve the
+        take with `solve`, and a chunk's `repairs` is None)."""
         if jaw is not None and not isinstance(jaw, str):
             raise InputError("solve_iter: jaw must be 'auto', 'fit', 'track' or None")
         opts, jaw = self._options(
@@ -593,6 +654,26 @@ class Model:
 
     def __repr__(self) -> str:
         return f"Model(num_bundles={self.num_bundles}, num_vertices={self.num_vertices})"
+
+
+def _with(res: SolveResult, **fields: Any) -> SolveResult:
+    """`res` with `fields` (its `filled`, `repaired`, `repairs`) set."""
+    keep = {
+        "vertices": res.vertices,
+        "bundle_residuals": res.bundle_residuals,
+        "bundle_positions": res.bundle_positions,
+        "missing": res.missing,
+        "choices": res.choices,
+        "jaw_theta": res.jaw_theta,
+        "jaw_bin": res.jaw_bin,
+        "marker_corrections": res.marker_corrections,
+        "fit_weights": res.fit_weights,
+        "state": res.state,
+        "filled": res.filled,
+        "repaired": res.repaired,
+        "repairs": res.repairs,
+    }
+    return SolveResult(**{**keep, **fields})
 
 
 def _core_fit(

@@ -48,6 +48,7 @@ _FLAGS = {
     "jaw": "--jaw",
     "recommended": "--recommended",
     "steady": "--no-steady",
+    "repair": "--no-repair",
 }
 
 
@@ -77,7 +78,9 @@ class SolveOptions:
     - `recommended`: read every option left at its default from the take;
     - `steady`: in a temporal solve, dropouts filled from the take and the detail averaged over
       neighbouring frames (`lgi.solve.gaps`, `lgi.solve.steady`); False solves each frame from
-      its own markers alone (frames that are not a take's consecutive frames).
+      its own markers alone (frames that are not a take's consecutive frames);
+    - `repair`: in a steady solve, the marker faults it shows repaired and the take solved
+      again (`lgi.solve.repair`); False keeps the markers as given.
 
     Built from the command line with `from_cli` (strings as typed); `cli` only changes how
     errors name the options."""
@@ -91,12 +94,14 @@ class SolveOptions:
     jaw: str | None = "auto"
     recommended: bool = False
     steady: bool = True
+    repair: bool = True
     cli: bool = field(default=False, compare=False, repr=False)
 
     def __post_init__(self) -> None:
         put = object.__setattr__
         put(self, "recommended", self._flag("recommended", self.recommended))
         put(self, "steady", self._flag("steady", self.steady))
+        put(self, "repair", self._flag("repair", self.repair))
         put(self, "marker_noise", self._noise(self.marker_noise))
         put(self, "detail_weight", self._weight(self.detail_weight))
         put(self, "denoise", self._flag_or_auto("denoise", self.denoise))
@@ -127,6 +132,7 @@ class SolveOptions:
             jaw=None if args.jaw == "rest" else args.jaw,
             recommended=args.recommended,
             steady=args.steady,
+            repair=args.repair,
             cli=True,
         )
 

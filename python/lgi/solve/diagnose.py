@@ -255,16 +255,27 @@ def _relative_steps(x: NDArray[np.float64], nearest: NDArray[np.int64]) -> NDArr
 
 
 def _leaves_track(steps: NDArray[np.float64], b: int, first: int, last: int) -> bool:
-    """Whether marker `b` steps off its track relative to its neighbours where a range of
-    frames first..last begins or ends (the frame entering it, or the frame after it)."""
+    """Whether marker `b` steps off its track relative to its neighbours both where a range of
+    frames first..last begins and where it ends (the frame entering it, the frame after it;
+    each within a frame, so a range read a frame long or short still meets its steps). A fault
+    leaves the track and comes back to it; skin that moves fast and eases back (a blink on an
+    eyelid marker) steps only once. An edge at the take's first or last frame, or without a
+    step to read, is not asked."""
     col = steps[:, b]
     vals = col[np.isfinite(col)]
     if vals.size < 3:
         return True  # too little track to read: a fault, as before this test
     med = float(np.median(vals))
     limit = med + STEP_MADS * 1.4826 * float(np.median(np.abs(vals - med)))
-    edges = [k for k in (first, last + 1) if 0 <= k < col.shape[0] and np.isfinite(col[k])]
-    return any(col[k] > limit for k in edges)
+    stepped = []
+    for edge in (first, last + 1):
+        if not 0 < edge < col.shape[0]:
+            continue
+        near = col[max(edge - 1, 0) : edge + 2]
+        near = near[np.isfinite(near)]
+        if near.size:
+            stepped.append(bool(near.max() > limit))
+    return all(stepped)
 
 
 def diagnose(

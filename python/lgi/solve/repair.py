@@ -12,7 +12,7 @@ from collections.abc import Sequence
 import numpy as np
 from numpy.typing import NDArray
 
-from lgi.review.diagnose import Finding
+from lgi.solve.diagnose import Finding
 
 __all__ = ["repaired"]
 
