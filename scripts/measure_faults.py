@@ -20,7 +20,8 @@ quarter of its shapes held out, driven by the shared Live Link recordings; docs/
         the same clean take: frames whose face-skin error jumps by more than 2 and 5 mm
         (`lgi.lab.scoring.pops`), the fast call, --recommended and the rig-solve peer; lgi's
         calls each frame alone (`steady=False`), steady with the markers as given
-        (`repair=False`) and steady with the faults its solve shows repaired (the default). With `--dataset scans` the model's dataset is 120 whole-face scans
+        (`repair=False`) and steady with the faults its solve shows repaired (the
+        default). With `--dataset scans` the model's dataset is 120 whole-face scans
         picked from the other recording's curves (`lgi.lab.scans`), all of ICT's shapes
         kept in the truth.
 
