@@ -78,7 +78,7 @@ def test_an_npz_whose_bytes_stop_half_way_is_not_left_at_the_final_path(
         fh.write(b"PK\x03\x04" + b"\0" * 1000)  # the start of a zip, then Ctrl-C
         raise KeyboardInterrupt
 
-    monkeypatch.setattr(result_module.np, "savez_compressed", half_then_interrupt)
+    monkeypatch.setattr(result_module.np, "savez", half_then_interrupt)
     out = tmp_path / "take.npz"
     assert _solve(files, out) == 130
     assert not out.exists() and _leftovers(tmp_path) == []
@@ -243,3 +243,26 @@ def test_ctrl_c_at_any_moment_of_the_command_start_is_one_line_and_exit_130(
     # action ends the process, silently, as any program's: a shell reports 128 + 2 = 130 too.
     assert (proc.returncode, err) in ((130, "lgi: interrupted\n"), (-signal.SIGINT, "")), err
     assert not out.exists() and _leftovers(tmp_path) == []
+
+
+def test_a_solved_npz_is_stored_not_deflated_and_streams_back_frame_by_frame(
+    tmp_path: Path,
+) -> None:
+    import zipfile
+
+    from lgi.io.result import read_result_npz, stream_result_npz, write_result_npz
+    from lgi.io.topology import Topology
+
+    rng = np.random.default_rng(0)
+    v = rng.normal(size=(40, 5, 3))
+    topo = Topology(5, np.array([3, 3]), np.array([0, 1, 2, 2, 3, 4]), None, None)
+    out = write_result_npz(
+        tmp_path / "s.npz", topo, v, np.zeros((40, 2)), np.zeros((40, 2), bool), ["a", "b"],
+        fps=60.0,
+    )  # fmt: skip
+    with zipfile.ZipFile(out) as z:
+        assert {i.compress_type for i in z.infolist()} == {zipfile.ZIP_STORED}
+    np.testing.assert_array_equal(read_result_npz(out).vertices, v.astype(np.float32))
+    streamed, wait = stream_result_npz(out)
+    wait(40)
+    np.testing.assert_array_equal(streamed.vertices, v.astype(np.float32))
