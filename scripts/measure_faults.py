@@ -16,7 +16,7 @@ quarter of its shapes held out, driven by the shared Live Link recordings; docs/
         spikes of 0.3-2 cm lasting 1-5 frames, six planted per take in their own 200 frames;
         per cell, how many were named as faults (and swaps as the swap of that pair), and the
         marker faults named on the clean takes.
-    python scripts/measure_faults.py pops [--seeds 0] [--dataset ict|scans]
+    python scripts/measure_faults.py pops [--seeds 0] [--dataset ict|scans] [--list]
         the same clean take: frames whose face-skin error jumps by more than 2 and 5 mm
         (`lgi.lab.scoring.pops`), the fast call, --recommended and the rig-solve peer; lgi's
         calls each frame alone (`steady=False`), steady with the markers as given
@@ -180,6 +180,23 @@ def _accel(x: np.ndarray) -> np.ndarray:
     return np.linalg.norm(x[2:] - 2.0 * x[1:-1] + x[:-2], axis=2)
 
 
+def _pop_list(vertices: np.ndarray, truth: np.ndarray, rest: np.ndarray) -> None:
+    """Each frame the error pops above 2 mm: the vertex (its rest position), its error's jump,
+    and the second differences there of the true face and of the solved surface."""
+    skin = ict.skin()
+    v, tr = np.asarray(vertices)[:, skin], truth[:, skin]
+    err = np.linalg.norm(v - tr, axis=2)
+    jump = np.abs(err[2:] - 2.0 * err[1:-1] + err[:-2])
+    face, solved = _accel(tr), _accel(v)
+    for f in np.flatnonzero(jump.max(axis=1) > POP_CM[0]):
+        k = int(jump[f].argmax())
+        print(
+            f"  frame {f + 1}: error jump {10 * jump[f, k]:.1f} mm at {np.round(rest[skin][k], 1)} "
+            f"cm; the face's second difference {10 * face[f, k]:.1f} mm, the solve's "
+            f"{10 * solved[f, k]:.1f} mm"
+        )
+
+
 def _pops(label: str, vertices: np.ndarray, truth: np.ndarray, seconds: float) -> None:
     """The error's pops (`lgi.lab.scoring.pops`), and the frames where the solved surface
     itself jumps by more than the true face does (beyond 2 mm at some vertex): an error pop
@@ -208,14 +225,19 @@ def _scans_take(d: lgi.Dataset, pos: np.ndarray, folder: Path, seed: int):  # ty
     return t, session.dataset
 
 
-def pop_counts(seeds: list[int], dataset: str) -> None:
+def _take_of(d: lgi.Dataset, pos: np.ndarray, folder: Path, seed: int, dataset: str):  # type: ignore[no-untyped-def]
+    """The 1,200-frame take and the dataset its model is built from (`dataset` "ict": ICT with
+    a quarter of its shapes held out; "scans": `_scans_take`)."""
+    if dataset == "scans":
+        return _scans_take(d, pos, folder, seed)
+    t = take(d, pos, folder, seed)
+    return t, t.dataset
+
+
+def pop_counts(seeds: list[int], dataset: str, listed: bool) -> None:
     d, _, pos, folder = data()
     for seed in seeds:
-        if dataset == "scans":
-            t, given = _scans_take(d, pos, folder, seed)
-        else:
-            t = take(d, pos, folder, seed)
-            given = t.dataset
+        t, given = _take_of(d, pos, folder, seed, dataset)
         m = lgi.Model.build(given, pos)
         truth = np.asarray(t.truth)
         sig = lgi.estimate_marker_noise(t.frames, m)
@@ -234,6 +256,8 @@ def pop_counts(seeds: list[int], dataset: str) -> None:
             fast = m.solve(t.frames, marker_noise=sig, steady=steady, repair=fix, quiet=True)
             took = time.perf_counter() - t0
             _pops(f"seed {seed}, --marker-noise auto, {how}", fast.vertices, truth, took)
+            if listed and steady and not fix:
+                _pop_list(fast.vertices, truth, np.asarray(given.neutral))
             t0 = time.perf_counter()
             opts = plan.options.replace(steady=steady, repair=fix)
             solved = m.solve(plan.frames, options=opts, quiet=True)
@@ -291,11 +315,7 @@ def study(seeds: list[int], dataset: str) -> None:
     false_faults = clean_frames = 0
     for layout, pos in (("markers_120", markers_120), ("random 160", random_160)):
         for seed in seeds:
-            if dataset == "scans":
-                t, given = _scans_take(d, pos, folder, seed)
-            else:
-                t = take(d, pos, folder, seed)
-                given = t.dataset
+            t, given = _take_of(d, pos, folder, seed, dataset)
             m = lgi.Model.build(given, pos)
             names = list(m.marker_names)
             with warnings.catch_warnings():
@@ -340,6 +360,9 @@ def main() -> None:
     ap.add_argument("--seeds", type=int, nargs="+", default=[0])
     ap.add_argument("--call", choices=["auto", "recommended"], default="auto")
     ap.add_argument("--dataset", choices=["ict", "scans"], default="ict")
+    ap.add_argument(
+        "--list", action="store_true", help="pops: each pop of the steady fast call, where and why"
+    )
     args = ap.parse_args()
     if args.what == "findings":
         findings(args.sigma, args.seeds)
@@ -348,7 +371,7 @@ def main() -> None:
     elif args.what == "study":
         study(args.seeds, args.dataset)
     else:
-        pop_counts(args.seeds, args.dataset)
+        pop_counts(args.seeds, args.dataset, args.list)
 
 
 if __name__ == "__main__":
