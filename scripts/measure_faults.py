@@ -272,22 +272,26 @@ SPIKE_FRAMES = (1, 3, 5)
 
 
 def _planted(x: np.ndarray, cells: list, rng: np.random.Generator):  # type: ignore[type-arg]
-    """`x` with each cell planted in its own 200-frame window on markers of its own: a swap
-    ("swap", cm, frames) of two markers about cm apart, a spike ("spike", cm, frames) of one
-    marker moved cm in a random direction; with where each went."""
+    """`x` with each cell planted in its own 200-frame window on markers of its own, seen on
+    every planted frame (a fault on a dropout is no fault): a swap ("swap", cm, frames) of two
+    markers about cm apart, a spike ("spike", cm, frames) of one marker moved cm in a random
+    direction; with where each went."""
     x = x.copy()
     pose = np.nanmedian(x, axis=0)
     dist = np.linalg.norm(pose[:, None] - pose[None], axis=2)
     used: set[int] = set()
     placed = []
+    seen = np.isfinite(x).all(axis=2)
     for k, (kind, cm, n) in enumerate(cells):
         start = 200 * k + 40
-        free = [i for i in rng.permutation(x.shape[1]) if i not in used]
+        free = [
+            i
+            for i in rng.permutation(x.shape[1])
+            if i not in used and seen[start : start + n, i].all()
+        ]
         if kind == "swap":
             for a in free:
-                near = [
-                    j for j in np.flatnonzero(np.abs(dist[a] - cm) < 0.25 * cm) if j not in used
-                ]
+                near = [j for j in np.flatnonzero(np.abs(dist[a] - cm) < 0.25 * cm) if j in free]
                 if near:
                     b = int(rng.choice(near))
                     break
