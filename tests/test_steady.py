@@ -88,27 +88,32 @@ def test_steadying_keeps_every_marker_where_the_solve_put_it_and_spreads_a_one_f
         sample_model.bundle_positions(flip[15:16]) - p[15:16]
     )[0]  # ... that leaves the markers where they were
     np.testing.assert_allclose(sample_model.bundle_positions(flip), p, atol=1e-9)
-    out = steady.steadied(sample_model, flip.copy())
+    out = steady.steadied(sample_model, flip.copy(), p)
     np.testing.assert_allclose(sample_model.bundle_positions(out), p, atol=1e-9)
     jump = np.abs(flip[15] - v[15]).max()
-    left = np.abs(out[15] - steady.steadied(sample_model, v.copy())[15]).max()
+    left = np.abs(out[15] - steady.steadied(sample_model, v.copy(), p)[15]).max()
     # A Gaussian of one frame keeps 0.399 of a one-frame excursion at its frame.
     assert jump > 0.1 and left == pytest.approx(0.3989 * jump, rel=0.02)
 
 
 @pytest.mark.parametrize("block", [1, 5, 64])
-def test_a_take_steadied_in_blocks_or_chunks_equals_it_steadied_whole(
+def test_a_take_steadied_in_chunks_equals_it_steadied_whole_bit_for_bit(
     sample, sample_model, block, monkeypatch
 ) -> None:  # type: ignore[no-untyped-def]
-    v = np.array(sample_model.solve(sample.performance[:40], temporal=False, quiet=True).vertices)
-    whole = steady.steadied(sample_model, v.copy())
+    res = sample_model.solve(sample.performance[:40], temporal=False, quiet=True)
+    v, p = np.array(res.vertices), np.array(res.bundle_positions)
     monkeypatch.setattr(steady, "_BLOCK", block)
-    np.testing.assert_allclose(steady.steadied(sample_model, v.copy()), whole, atol=1e-12)
+    whole = steady.steadied(sample_model, v.copy(), p)
     r = steady.RADIUS
-    mid = steady.steadied(
-        sample_model, v[10:25].copy(), before=v[10 - r : 10], after=v[25 : 25 + r]
-    )
-    np.testing.assert_allclose(mid, whole[10:25], atol=1e-12)
+    for a, b in ((10, 25), (0, 7), (33, 40), (12, 13)):
+        before = (v[max(a - r, 0) : a], p[max(a - r, 0) : a]) if a else None
+        after = (v[b : b + r], p[b : b + r]) if b < 40 else None
+        part = steady.steadied(
+            sample_model, v[a:b].copy(), p[a:b], first=a, before=before, after=after
+        )
+        np.testing.assert_array_equal(part, whole[a:b])  # blocks by frame number: bit for bit
+    # The markers stay where the solve put them.
+    np.testing.assert_allclose(sample_model.bundle_positions(whole), p, atol=1e-9)
 
 
 def test_a_take_with_dropouts_solves_the_same_in_chunks_reports_its_gaps_missing_and_pops_less(

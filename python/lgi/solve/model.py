@@ -429,7 +429,8 @@ class Model:
         res = self._finish(res, arr, opts)
         if not steady:
             return res
-        return self._as_given(res, steadied(self, np.asarray(res.vertices)), given)
+        v, p = np.asarray(res.vertices), np.asarray(res.bundle_positions)
+        return self._as_given(res, steadied(self, v, p), given)
 
     def _options(
         self, options: SolveOptions | None, jaw: Any, **given: Any
@@ -599,7 +600,7 @@ class Model:
         total = int(arr.shape[0])
         steady = temporal and opts.steady
         state: _lgi.SolveState | None = None
-        before: NDArray[np.float64] | None = None
+        before: tuple[NDArray[np.float64], NDArray[np.float64]] | None = None
 
         def solved(part: NDArray[Any], buf: Any, previous: Any, tick: Any) -> SolveResult:
             res = self._core.solve(
@@ -639,10 +640,19 @@ class Model:
                 after = None
                 if b < total:
                     ahead = window[b - lo : min(total, b + RADIUS) - lo]
-                    after = np.asarray(solved(ahead, None, state, None).vertices)
-                tail = v[-RADIUS:].copy()
-                steadied(self, v, before=before, after=after)
-                before = tail if before is None else np.concatenate([before, tail])[-RADIUS:]
+                    nxt = solved(ahead, None, state, None)
+                    after = (np.asarray(nxt.vertices), np.asarray(nxt.bundle_positions))
+                p = np.asarray(res.bundle_positions)
+                tail = (v[-RADIUS:].copy(), p[-RADIUS:].copy())
+                steadied(self, v, p, first=a, before=before, after=after)
+                before = (
+                    tail
+                    if before is None
+                    else (
+                        np.concatenate([before[0], tail[0]])[-RADIUS:],
+                        np.concatenate([before[1], tail[1]])[-RADIUS:],
+                    )
+                )
                 yield self._as_given(res, v, given[a - lo : b - lo])
 
     def bundle_positions(self, meshes: ArrayLike) -> NDArray[np.float64]:

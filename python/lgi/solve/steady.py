@@ -37,7 +37,12 @@ RADIUS = int(_TRUNCATE * SIGMA_FRAMES + 0.5)
 """Frames either side that a frame's steady detail reads."""
 
 _BLOCK = 64
-"""Frames steadied at once (memory: two blocks of vertices beside the take's)."""
+"""Frames steadied at once, in blocks aligned to the take's frame numbers: the markers' share is
+one (V, B) x (B, 3 x 64) product per block, the same arithmetic for a frame whichever chunk it
+came in (memory: a block of vertices beside the take's)."""
+
+Frames = tuple[F64, F64]
+"""Solved frames and their markers' positions on them: (n, V, 3), (n, B, 3)."""
 
 
 def _filtered(x: F64) -> F64:
@@ -49,31 +54,49 @@ def _filtered(x: F64) -> F64:
 def steadied(
     model: Model,
     vertices: F64,
+    positions: F64,
     *,
-    before: F64 | None = None,
-    after: F64 | None = None,
+    first: int = 0,
+    before: Frames | None = None,
+    after: Frames | None = None,
 ) -> F64:
-    """`vertices` (F, V, 3), a take's solved frames in order, with their detail steadied in
-    place (returned). `before` and `after`: up to `RADIUS` solved frames just before and after
-    them (unsteadied; a chunk's neighbours), none at the take's ends."""
+    """`vertices` (F, V, 3), a take's solved frames in order from its frame `first`, with their
+    detail steadied in place (returned); `positions` (F, B, 3): the markers' positions on them
+    (`SolveResult.bundle_positions`). `before` and `after`: up to `RADIUS` solved frames just
+    before and after them with their positions (unsteadied; a chunk's neighbours), none at the
+    take's ends."""
     f = vertices.shape[0]
-    if f + (0 if before is None else len(before)) + (0 if after is None else len(after)) < 2:
+    if f + (0 if before is None else len(before[0])) + (0 if after is None else len(after[0])) < 2:
         return vertices
     interp = np.asarray(surface_interpolator(model).matrix)  # (V, B)
-    tail = np.zeros((0, *vertices.shape[1:])) if before is None else before[-RADIUS:].copy()
-    ahead_all = np.zeros((0, *vertices.shape[1:])) if after is None else after[:RADIUS]
-    for s in range(0, f, _BLOCK):
-        e = min(f, s + _BLOCK)
-        ahead = vertices[e : e + RADIUS]
-        if ahead.shape[0] < RADIUS:
-            ahead = np.concatenate([ahead, ahead_all[: RADIUS - ahead.shape[0]]])
-        window = np.concatenate([tail, vertices[s:e], ahead])
-        mid = slice(tail.shape[0], tail.shape[0] + (e - s))
-        next_tail = np.concatenate([tail, vertices[s:e]])[-RADIUS:].copy()
-        p = model.bundle_positions(window)
-        rough = p[mid] - _filtered(p)[mid]  # (n, B, 3): what the filter takes off the markers
-        vertices[s:e] = _filtered(window)[mid]
-        for i in range(e - s):  # frame by frame: the same arithmetic whatever the blocks
-            vertices[s + i] += interp @ rough[i]
-        tail = next_tail
+    nb = positions.shape[1]
+
+    def ends(got: Frames | None, head: bool) -> Frames:
+        if got is None:
+            return np.zeros((0, *vertices.shape[1:])), np.zeros((0, nb, 3))
+        pick = slice(-RADIUS, None) if head else slice(0, RADIUS)
+        return got[0][pick].copy(), got[1][pick].copy()
+
+    tail_v, tail_p = ends(before, True)
+    more_v, more_p = ends(after, False)
+    s = 0
+    while s < f:
+        e = min(f, s + _BLOCK - (first + s) % _BLOCK)
+        ahead_v, ahead_p = vertices[e : e + RADIUS], positions[e : e + RADIUS]
+        short = RADIUS - ahead_v.shape[0]
+        if short > 0:
+            ahead_v = np.concatenate([ahead_v, more_v[:short]])
+            ahead_p = np.concatenate([ahead_p, more_p[:short]])
+        window_v = np.concatenate([tail_v, vertices[s:e], ahead_v])
+        window_p = np.concatenate([tail_p, positions[s:e], ahead_p])
+        mid = slice(tail_v.shape[0], tail_v.shape[0] + (e - s))
+        next_v = np.concatenate([tail_v, vertices[s:e]])[-RADIUS:].copy()
+        next_p = np.concatenate([tail_p, positions[s:e]])[-RADIUS:].copy()
+        rough = np.zeros((_BLOCK, nb, 3))  # what the filter takes off the markers
+        at = (first + s) % _BLOCK + np.arange(e - s)
+        rough[at] = window_p[mid] - _filtered(window_p)[mid]
+        back = (interp @ rough.transpose(1, 0, 2).reshape(nb, -1)).reshape(-1, _BLOCK, 3)
+        vertices[s:e] = _filtered(window_v)[mid] + back[:, at].transpose(1, 0, 2)
+        tail_v, tail_p = next_v, next_p
+        s = e
     return vertices
