@@ -16,6 +16,8 @@ quarter of its shapes held out, driven by the shared Live Link recordings; docs/
         spikes of 0.3-2 cm lasting 1-5 frames, six planted per take in their own 200 frames;
         per cell, how many were named as faults (and swaps as the swap of that pair), and the
         marker faults named on the clean takes.
+    python scripts/measure_faults.py cost
+        the steady solve's cost: the same take solved each frame alone and steady, in-process.
     python scripts/measure_faults.py pops [--seeds 0] [--dataset ict|scans] [--list]
         the same clean take: frames whose face-skin error jumps by more than 2 and 5 mm
         (`lgi.lab.scoring.pops`), the fast call, --recommended and the rig-solve peer; lgi's
@@ -357,9 +359,33 @@ def study(seeds: list[int], dataset: str) -> None:
         print(f"| {kind} | {cm} cm | {n} | {named[key]}/{tried[key]} | {swap} |")
 
 
+def steady_cost(seeds: list[int]) -> None:
+    """`Model.solve` of the 1,200-frame take with `--marker-noise auto`'s sigma, each frame alone
+    and steady (no repair), three runs alternating, in-process."""
+    import statistics
+
+    d, _, pos, folder = data()
+    t = take(d, pos, folder, seeds[0])
+    m = lgi.Model.build(t.dataset, pos)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", lgi.LgiWarning)
+        sig = lgi.estimate_marker_noise(t.frames, m)
+    m.solve(t.frames[:50], marker_noise=sig, quiet=True)  # the first solve's one-time work
+    got: dict[bool, list[float]] = {False: [], True: []}
+    for _ in range(3):
+        for steady in (False, True):
+            t0 = time.perf_counter()
+            m.solve(t.frames, marker_noise=sig, steady=steady, repair=False, quiet=True)
+            got[steady].append(time.perf_counter() - t0)
+    for steady, times in got.items():
+        runs = ", ".join(f"{x:.2f}" for x in times)
+        how = "steady" if steady else "each frame alone"
+        print(f"{how}: {runs} s, median {statistics.median(times):.2f} s")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
-    ap.add_argument("what", choices=["findings", "repair", "pops", "study"])
+    ap.add_argument("what", choices=["findings", "repair", "pops", "study", "cost"])
     ap.add_argument("--sigma", type=float, nargs="+", default=[0.0, 0.02, 0.05])
     ap.add_argument("--seeds", type=int, nargs="+", default=[0])
     ap.add_argument("--call", choices=["auto", "recommended"], default="auto")
@@ -374,6 +400,8 @@ def main() -> None:
         repair(args.seeds, args.call)
     elif args.what == "study":
         study(args.seeds, args.dataset)
+    elif args.what == "cost":
+        steady_cost(args.seeds)
     else:
         pop_counts(args.seeds, args.dataset, args.list)
 
