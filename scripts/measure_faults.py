@@ -135,7 +135,8 @@ def _error(
 ) -> tuple[float, float]:  # fmt: skip
     """Mean and max face-skin error (cm) of `frames` solved as `lgi solve` solves them."""
     skin = ict.skin()
-    _, r, _ = solve_take(plan_take(frames, m, opts), m, opts, repair=fix)
+    fixed = opts.replace(repair=fix)
+    _, r, _ = solve_take(plan_take(frames, m, fixed), m, fixed)
     e = np.linalg.norm(np.asarray(r.vertices)[rows][:, skin] - truth[rows][:, skin], axis=2)
     return float(e.mean()), float(e.max())
 

@@ -221,10 +221,9 @@ def solve_shot(
     take_units: str | None = None,
     fps: float | None = None,
     threads: int | None = None,
-    repair: bool = True,
 ) -> dict[str, Any]:
-    """One task: read the take, solve it (its marker faults repaired with `repair`, as `lgi
-    solve` repairs them), write it to `dest`; on a worker. Returns
+    """One task: read the take, solve it (its marker faults repaired with `options.repair`, as
+    `lgi solve` repairs them), write it to `dest`; on a worker. Returns
     `{"status", "frames", "seconds", "output", "error"}`; it never raises for a bad shot (the
     error is the record's), so one shot's failure stops no other."""
     t0 = time.perf_counter()
@@ -247,7 +246,7 @@ def solve_shot(
         planned = plan_take(x, m, options)
         if kind == "usd" and rate is None:
             raise InputError("the take has no frame rate; a USD point cache needs fps=")
-        planned, res, _ = solve_take(planned, m, options, repair=repair, start=start)
+        planned, res, _ = solve_take(planned, m, options, start=start)
         written = write_solved(
             kind,
             Path(dest),
@@ -343,7 +342,6 @@ def solve_shots(
     take_units: str | None = None,
     quiet: bool = False,
     options: SolveOptions | None = None,
-    repair: bool = True,
     **solve_options: Any,
 ) -> BatchResult:
     """Solves every take of `takes` (shot name -> a take file `lgi.io.takes.read` reads, or an
@@ -361,8 +359,8 @@ def solve_shots(
 
     `options` (a `SolveOptions`, or its fields as keywords `solve_options`) are planned per
     take as `lgi solve` plans them (`lgi.plan_solve`: 'auto' values read from each take,
-    `recommended` every default); `repair` (default) repairs each shot's marker faults as
-    `lgi solve` does (`lgi.app.pipeline.solve_take`); `fps` is the
+    `recommended` every default; `repair`, the default, repairs each shot's marker faults as
+    `lgi solve` does: `lgi.app.pipeline.solve_take`); `fps` is the
     output's frame rate when the take has none (arrays); `allow_missing` and `take_units` are
     `lgi.io.takes.read`'s.
 
@@ -384,8 +382,6 @@ def solve_shots(
         raise InputError(f"threads must be a whole number >= 1, got {threads!r}")
     if fps is not None and not (isinstance(fps, (int, float)) and np.isfinite(fps) and fps > 0):
         raise InputError(f"fps must be a positive number, got {fps!r}")
-    if not isinstance(repair, bool):
-        raise InputError(f"repair must be True or False, got {repair!r}")
     _check_client(client, workers)
     options = SolveOptions.given(options, solve_options, "solve_shots")
     options_json = _recorded(options)
@@ -419,11 +415,11 @@ def solve_shots(
     writable_folder(out, "out_dir", MANIFEST)  # before any shot is solved, not after
     import lgi
 
-    # A batch without repair is another setting (a rerun with it solves the shots again).
+    # A batch without repair is another setting: `repair` is among the options recorded.
     settings_hash = hashlib.sha256(
         (
             f"{model_hash}\n{options_json}\n{output}\n{fps}\n{allow_missing}\n{take_units}\n"
-            f"{lgi.__version__}" + ("" if repair else "\nno repair")
+            f"{lgi.__version__}"
         ).encode()
     ).hexdigest()
     manifest = out / MANIFEST
@@ -485,7 +481,6 @@ def solve_shots(
                 take_units=take_units,
                 fps=fps,
                 threads=per_task,
-                repair=repair,
                 pure=False,
                 key=f"lgi-shot-{name}-{os.urandom(4).hex()}",
             )

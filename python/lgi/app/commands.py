@@ -46,7 +46,6 @@ def _cmd_solve(args: argparse.Namespace) -> int:
         args.take,
         args.out,
         SolveOptions.from_cli(args),
-        repair=args.repair,
         frames=args.frames,
         fps=args.fps,
         allow_missing=args.allow_missing,
@@ -172,7 +171,6 @@ def _cmd_batch(args: argparse.Namespace) -> int:
         take_units=args.take_units,
         quiet=args.quiet,
         options=options,
-        repair=args.repair,
     )
     failed = result.failed
     print(

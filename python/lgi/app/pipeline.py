@@ -156,22 +156,21 @@ def solve_take(
     m: Model,
     options: SolveOptions,
     *,
-    repair: bool = True,
     start: int = 0,
     quiet: bool = True,
     say: Say = _silent,
 ) -> tuple[PlannedTake, SolveResult, list[Finding] | None]:
-    """The planned take solved; with `repair`, the marker faults that solve shows (label
+    """The planned take solved; with `options.repair`, the marker faults that solve shows (label
     swaps, spikes, markers off their track: `PlannedTake.findings`, told from model gaps) are
     repaired (`lgi.solve.repair`), said in one line each, and the repaired take planned and
     solved again, its settings recording the repairs. Returns what was solved, its result
-    and, where they were read (a solve with `repair` that found no fault), that result's
+    and, where they were read (a solve with repair that found no fault), that result's
     findings; None otherwise (the take given is never touched)."""
     # The pipeline repairs itself (against the given markers, the take planned again).
     res = m.solve(
         planned.plan.frames, quiet=quiet, options=planned.plan.options.replace(repair=False)
     )
-    if not repair:
+    if not options.repair:
         return planned, res, None
     found = planned.findings(planned.residuals(res), res.missing, res.vertices[0], m)
     faults = [f for f in found if f.fault]
@@ -207,7 +206,6 @@ def solve_file(
     up: str = "y",
     quiet: bool = False,
     say: Say = _silent,
-    repair: bool = True,
 ) -> tuple[Path, int]:
     """`lgi solve`: the take file solved with the model file with `options` (built once from
     the command line, `SolveOptions.from_cli`; default: the paper's exact interpolation),
@@ -219,9 +217,9 @@ def solve_file(
     memory stays that of N frames (each chunk continues from the last frame of the one before:
     the same frames as one solve, except with `--jaw track`, tracked chunk by chunk). Returns
     the path written (the `NAME.NNNN.obj` pattern for OBJ sequences) and the frame count.
-    `repair` (default; `--no-repair` off): marker faults the solve shows are repaired and the
-    take solved again (`solve_take`); with `chunk` they are named, not repaired (repairing
-    needs the whole take's residuals)."""
+    `options.repair` (default; `--no-repair` off): marker faults the solve shows are repaired
+    and the take solved again (`solve_take`); with `chunk` they are named, not repaired
+    (repairing needs the whole take's residuals)."""
     options = SolveOptions() if options is None else options
     if chunk is not None and (isinstance(chunk, bool) or int(chunk) < 1):
         raise InputError(f"--chunk {chunk}: must be a whole number of frames >= 1")
@@ -275,9 +273,7 @@ def solve_file(
     topo = topology(m.dataset)
     start = t.first_frame + rng.start
     if chunk is None:
-        planned, res, found = solve_take(
-            planned, m, options, repair=repair, start=start, quiet=quiet, say=say
-        )
+        planned, res, found = solve_take(planned, m, options, start=start, quiet=quiet, say=say)
         given, settings = planned.given, planned.settings
         if curves_out is not None:
             _write_curves(
@@ -382,6 +378,6 @@ def solve_file(
     all_residuals, all_absent = np.concatenate(residuals), np.concatenate(absent)
     found = planned.findings(all_residuals, all_absent, first_frame, m)
     _say_summary(say, all_residuals, all_absent, found, m, start)
-    if repair and any(f.fault for f in found):
+    if options.repair and any(f.fault for f in found):
         say("not repaired with --chunk (repairing needs the whole take's residuals)")
     return written, n

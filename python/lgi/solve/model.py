@@ -487,19 +487,13 @@ class Model:
         frames `given`: a filled sample is missing (residual 0), as the take had it."""
         missing = np.asarray(res.missing) | np.isnan(given).any(axis=2)
         moved = res.marker_corrections
-        filled = missing & ~np.asarray(res.missing)  # missing as given, solved as filled
-        return SolveResult(
+        return _with(
+            res,
             vertices=vertices,
             bundle_residuals=np.where(missing, 0.0, np.asarray(res.bundle_residuals)),
-            bundle_positions=res.bundle_positions,
             missing=missing,
-            choices=res.choices,
-            jaw_theta=res.jaw_theta,
-            jaw_bin=res.jaw_bin,
             marker_corrections=None if moved is None else np.where(missing, 0.0, moved),
-            fit_weights=res.fit_weights,
-            state=res.state,
-            filled=filled,
+            filled=missing & ~np.asarray(res.missing),  # missing as given, solved as filled
         )
 
     def _finish(self, res: SolveResult, frames: NDArray[Any], opts: SolveOptions) -> SolveResult:
@@ -527,18 +521,7 @@ class Model:
         pos = self.bundle_positions(v)
         given = np.asarray(frames, dtype=np.float64)
         residuals = np.where(missing, 0.0, np.linalg.norm(np.nan_to_num(given - pos), axis=2))
-        return SolveResult(
-            vertices=v,
-            bundle_residuals=residuals,
-            bundle_positions=pos,
-            missing=missing,
-            choices=res.choices,
-            jaw_theta=res.jaw_theta,
-            jaw_bin=res.jaw_bin,
-            marker_corrections=res.marker_corrections,
-            fit_weights=res.fit_weights,
-            state=res.state,
-        )
+        return _with(res, vertices=v, bundle_residuals=residuals, bundle_positions=pos)
 
     def _with_detail(self, res: SolveResult, frames: NDArray[Any], weight: float) -> SolveResult:
         """`res` with `weight` of its detail kept (`lgi.solve.detail.blend_detail`, in place in its
@@ -667,7 +650,7 @@ class Model:
 
 
 def _with(res: SolveResult, **fields: Any) -> SolveResult:
-    """`res` with `fields` (its `filled`, `repaired`, `repairs`) set."""
+    """`res` with `fields` replaced (the binding's result is immutable)."""
     keep = {
         "vertices": res.vertices,
         "bundle_residuals": res.bundle_residuals,
