@@ -463,9 +463,9 @@ class Model:
         return opts, jaw
 
     def _gaps_filled(self, frames: NDArray[Any]) -> NDArray[Any]:
-        """A take's frames with the missing samples it can fill filled (`lgi.solve.gaps`); frames
-        the core will refuse (shape, dtype, a value neither finite nor a missing row) go to it
-        as given, so its error names the problem."""
+        """A take's frames with the missing samples it can fill filled (`lgi.solve.gaps`; a row
+        with any NaN is missing, as the core reads it); frames the core will refuse (shape,
+        dtype, an infinite value) go to it as given, so its error names the problem."""
         if (
             frames.ndim != 3
             or frames.dtype.kind != "f"
@@ -474,9 +474,7 @@ class Model:
         ):
             return frames
         nan = np.isnan(frames)
-        if not np.isfinite(frames[~nan]).all() or (nan.any(axis=2) != nan.all(axis=2)).any():
-            return frames
-        if not nan.any():
+        if not nan.any() or not np.isfinite(frames[~nan]).all():
             return frames
         return filled(frames, rest_positions(self))[0]
 
