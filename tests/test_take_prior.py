@@ -361,3 +361,42 @@ def test_take_prior_auto_says_why_it_was_not_read(two_directions: Any) -> None:
     # A take_prior that is none of these is refused where the options are built, once.
     with pytest.raises(lgi.InputError, match=r"take_prior must be True, False or .auto."):
         lgi.SolveOptions(take_prior="Auto")
+
+
+@settings(max_examples=25, deadline=None)
+@given(seed=st.integers(0, 2**31 - 1), most_missing=st.integers(1, 9))
+def test_the_batched_refills_equal_each_frames_fit_on_its_present_rows(
+    seed: int, most_missing: int
+) -> None:
+    """The held-out priors fill every frame in batched products (Woodbury's identity on each
+    frame's missing rows); each frame must equal its own fit made directly on its present
+    rows: the ridge fit first (`_frames_in_directions`), then the MAP under a prior
+    (`_refilled`), solved by numpy in the q-dimensional weights."""
+    from lgi.plan.take_prior import _frames_in_directions, _refilled
+
+    rng = np.random.default_rng(seed)
+    rows, q, k, frames = 24, 7, 3, 12
+    u, s, _ = np.linalg.svd(rng.normal(size=(rows, q)), full_matrices=False)
+    s = s * rng.uniform(0.5, 2.0, q)
+    offsets = rng.normal(size=(frames, rows))
+    for f in range(frames):
+        gone = rng.choice(rows, size=rng.integers(0, most_missing + 1), replace=False)
+        offsets[f, gone] = np.nan
+    sigma, ridge = 0.3, 0.2
+    zeta, miss = _frames_in_directions(u, s, offsets, sigma, ridge)
+    d_inv = np.diag(1.0 / (1.0 + ridge / s**2))
+    mean, phi = rng.normal(size=q), rng.normal(size=(q, k))
+    again = _refilled(u, miss, zeta, mean, phi)
+    for f in range(frames):
+        p = np.isfinite(offsets[f])
+        up, um = u[p], u[~p]
+        c = up.T @ offsets[f, p] / sigma
+        # Ridge fit: (D - U_Mᵀ U_M) z = c, i.e. (I + ridge S⁻² - U_Mᵀ U_M) z = c.
+        fitted = np.linalg.solve(np.linalg.inv(d_inv) - um.T @ um, c)
+        want = c + um.T @ (um @ fitted)
+        np.testing.assert_allclose(zeta[f], want, rtol=1e-9, atol=1e-9)
+        # MAP under the prior: mean + Φ (Φᵀ U_PᵀU_P Φ + I)⁻¹ Φᵀ (c_f - U_PᵀU_P mean).
+        cf = up.T @ (up @ zeta[f])
+        gram = phi.T @ up.T @ up @ phi + np.eye(k)
+        fit_map = mean + phi @ np.linalg.solve(gram, phi.T @ (cf - up.T @ (up @ mean)))
+        np.testing.assert_allclose(again[f], cf + um.T @ (um @ fit_map), rtol=1e-9, atol=1e-9)

@@ -103,39 +103,87 @@ def _shrunk(zeta: F64) -> tuple[F64, F64]:
     return mean, wt[used].T * np.sqrt(f[used] / (1.0 - f[used]))
 
 
+class _Missing:
+    """The frames of a take short of a row, and each one's missing rows as indices (n, m) into
+    the fit's rows, padded to the most any frame lacks (`mask` False on the padding, where
+    every gathered value is 0): every frame is filled in
+    a few batched products instead of a Python loop (the held-out priors fill every frame of
+    a take once per marker)."""
+
+    def __init__(self, present: NDArray[np.bool_]) -> None:
+        self.frames = np.flatnonzero(~present.all(axis=1))
+        lacking = ~present[self.frames]
+        most = int(lacking.sum(axis=1).max()) if self.frames.size else 0
+        # Each frame's missing rows first, in order (a stable sort of missing before present).
+        self.index = np.argsort(~lacking, axis=1, kind="stable")[:, :most]
+        self.mask = np.take_along_axis(lacking, self.index, axis=1)
+
+    def gather(self, full: F64) -> F64:
+        """Each frame's missing entries of `full` (n, R): (n, m), 0 on the padding."""
+        return np.where(self.mask, np.take_along_axis(full, self.index, axis=1), 0.0)
+
+    def scatter(self, values: F64, rows: int) -> F64:
+        """`values` (n, m) at each frame's missing rows of `rows` rows, 0 elsewhere (n, R)."""
+        full = np.zeros((self.index.shape[0], rows))
+        np.put_along_axis(full, self.index, np.where(self.mask, values, 0.0), axis=1)
+        return full
+
+    def inverse_of_rest(self, m: F64, rhs: F64) -> F64:
+        """Each frame's `(I - M[miss, miss])⁻¹ rhs` for `m` (R, R) and `rhs` (n, m) (0 on the
+        padding), solved in groups of frames missing as many rows (no padded solves)."""
+        out = np.zeros_like(rhs)
+        counts = self.mask.sum(axis=1)
+        for count in np.unique(counts):
+            which = np.flatnonzero(counts == count)
+            at = self.index[which, :count]
+            sub = m[at[:, :, None], at[:, None, :]]
+            lhs = np.eye(count) - sub
+            out[which, :count] = np.linalg.solve(lhs, rhs[which, :count, None])[..., 0]
+        return out
+
+
 def _frames_in_directions(
     u: F64, s: F64, offsets: F64, sigma: float, ridge: float
-) -> tuple[F64, NDArray[np.bool_]]:
+) -> tuple[F64, _Missing]:
     """Each frame in the fit matrix's own coordinates, `ζ = Uᵀ d / sigma` (F, q), its missing
     rows filled by the frame's ridge fit (`J c` with `J = (D - U_Mᵀ U_M)⁻¹`, `D = I +
     ridge S⁻²`, `c = U_Pᵀ d_P / sigma`: Woodbury's identity, an m x m solve for m missing
-    rows), and which rows are present (F, R)."""
+    rows, `I - U_M D⁻¹ U_Mᵀ`, read from one R x R product), and the frames' missing rows."""
     present = np.isfinite(offsets)
     c = (np.where(present, offsets, 0.0) @ u) / sigma
     a0 = 1.0 / (1.0 + ridge / s**2)
     zeta = c.copy()
-    for f in np.flatnonzero(~present.all(axis=1)):
-        um = u[~present[f]]
-        qm = (um * a0).T  # D⁻¹ U_Mᵀ (q, m)
-        fitted = c[f] * a0 + qm @ np.linalg.solve(np.eye(len(um)) - um @ qm, qm.T @ c[f])
-        zeta[f] = c[f] + um.T @ (um @ fitted)
-    return zeta, present
+    miss = _Missing(present)
+    if miss.frames.size:
+        cs = c[miss.frames]
+        ua = u * a0
+        seen = miss.gather(cs @ ua.T)  # U_M D⁻¹ c
+        inner = ua @ u.T
+        solved = miss.inverse_of_rest(inner, seen)
+        # U_M fitted, with fitted = D⁻¹ c + D⁻¹ U_Mᵀ solved: U_M D⁻¹ c + U_M D⁻¹ U_Mᵀ solved
+        # = solved.
+        zeta[miss.frames] = cs + miss.scatter(solved, u.shape[0]) @ u
+    return zeta, miss
 
 
-def _refilled(u: F64, zeta: F64, present: NDArray[np.bool_], mean: F64, phi: F64) -> F64:
+def _refilled(u: F64, miss: _Missing, zeta: F64, mean: F64, phi: F64) -> F64:
     """`zeta` with each frame's missing rows filled again, by its fit under the prior `mean`,
     `phi` (its MAP over its present rows: `mean + Φ (ΦᵀU_PᵀU_PΦ + I)⁻¹ Φᵀ (c - U_PᵀU_P mean)`,
-    with `U_PᵀU_P = I - U_MᵀU_M`)."""
+    with `U_PᵀU_P = I - U_MᵀU_M`). Only `U_M` of the fit is needed, which Woodbury's identity
+    gives from an m x m solve: `U_M fitted = U_M mean + (I - U_M P U_Mᵀ)⁻¹ U_M P r`, with
+    `P = Φ (ΦᵀΦ + I)⁻¹ Φᵀ` (once per call) and `r` the frame's offset from the mean off its
+    missing rows; the frame is then `ζ - U_Mᵀ (U_M (ζ - mean) - t)`."""
     out = zeta.copy()
+    if not miss.frames.size:
+        return out
     k = phi.shape[1]
-    for f in np.flatnonzero(~present.all(axis=1)):
-        um = u[~present[f]]
-        c = zeta[f] - um.T @ (um @ zeta[f])  # the present rows' share, U_Pᵀ d_P / sigma
-        seen = mean - um.T @ (um @ mean)
-        uphi = um @ phi
-        gram = phi.T @ phi - uphi.T @ uphi + np.eye(k)
-        fitted = mean + phi @ np.linalg.solve(gram, phi.T @ (c - seen))
-        out[f] = c + um.T @ (um @ fitted)
+    up = u @ (phi @ np.linalg.solve(phi.T @ phi + np.eye(k), phi.T))
+    rows = u.shape[0]
+    d = zeta[miss.frames] - mean
+    g = miss.gather(d @ u.T)
+    r = d - miss.scatter(g, rows) @ u
+    t = miss.inverse_of_rest(up @ u.T, miss.gather(r @ up.T))
+    out[miss.frames] = zeta[miss.frames] - miss.scatter(g - t, rows) @ u
     return out
 
 
@@ -183,13 +231,13 @@ class TakeRows:
         if without is not None:
             offsets = offsets.copy()
             offsets[:, 3 * without : 3 * without + 3] = np.nan
-        zeta, present = _frames_in_directions(u, s, offsets, sigma, ridge)
+        zeta, miss = _frames_in_directions(u, s, offsets, sigma, ridge)
         mean, phi = _shrunk(zeta)
-        if not present.all():
+        if miss.frames.size:
             # A frame short of a marker is filled by its fit under the prior read so far, and
             # the prior read again (a few rounds: the kept directions settle in two or three).
             for _ in range(REFILL_ROUNDS):
-                zeta = _refilled(u, zeta, present, mean, phi)
+                zeta = _refilled(u, miss, zeta, mean, phi)
                 mean, phi = _shrunk(zeta)
         # ζ = S z / sigma and w = V z: w = V S⁻¹ sigma ζ. Mean and factor are the frames' ridge
         # fits' (each direction's share by s² / (s² + ridge)): in a weakly seen direction they
