@@ -573,3 +573,41 @@ def test_a_dropped_marker_does_not_throw_unbounded_local_fits_off_the_face(rom_s
         res = model.solve(frames, marker_noise=0.0, quiet=True, temporal=False, **kw)
         worst[name] = np.linalg.norm(res.vertices[:, skin] - take.truth[:, skin], axis=2).max()
     assert worst["local"] < 1.5 * worst["global"], worst
+
+
+def test_the_cores_local_surface_is_the_blend_posed_and_corrected_step_by_step(solved) -> None:  # type: ignore[no-untyped-def]
+    """`_lgi.LocalSurface` makes each frame's blend, jaw pose, corrective and marker positions in
+    one call; the same steps made one after another with the binding's separate functions
+    (`blend_local`, `JawRig.skin`, `RbfInterpolator.interpolate`, `Model.bundle_positions`)
+    must give the same bits, dropouts included."""
+    from lgi.solve.local import _blend
+
+    _, model, frames, sigma = solved
+    given = frames.copy()
+    given[2, 3] = np.nan
+    given[5, [0, 7]] = np.nan
+    res = model.solve(given, marker_noise=sigma, quiet=True)
+    pieces = local_pieces(model)
+    assert pieces.rig is not None  # the jaw's step is in the comparison
+    for bounded in (True, False):
+        targets, weights, theta = pieces._fits(res, bounded)
+        blend = _blend(pieces.neutral, pieces.shapes, pieces._sew_rows, weights)
+        posed = pieces.rig.skin(blend, theta)
+        want = posed + pieces.corrective.interpolate(targets - model.bundle_positions(posed))
+        got, at = pieces.surface_and_markers(res, bounded=bounded)
+        np.testing.assert_array_equal(got, want)
+        np.testing.assert_array_equal(at, model.bundle_positions(want))
+
+
+def test_the_local_surface_refuses_an_output_it_cannot_write_in_our_words(solved) -> None:  # type: ignore[no-untyped-def]
+    _, model, frames, sigma = solved
+    res = model.solve(frames[:3], marker_noise=sigma, quiet=True)
+    pieces = local_pieces(model)
+    targets, weights, theta = pieces._fits(res, True)
+    v = pieces.neutral.shape[0]
+    with pytest.raises(InputError, match=r"out: expected shape"):
+        pieces._surface.surface(weights, targets, np.empty((3, v + 1, 3)), theta)
+    frozen = np.empty((3, v, 3))
+    frozen.flags.writeable = False
+    with pytest.raises(InputError, match=r"not writeable"):
+        pieces._surface.surface(weights, targets, frozen, theta)

@@ -21,6 +21,7 @@ __all__ = [
     "Dataset",
     "JawRig",
     "LocalFits",
+    "LocalSurface",
     "Model",
     "RbfInterpolator",
     "SolveResult",
@@ -532,6 +533,32 @@ class LocalFits:
     def solve(self, targets: ArrayLike, starts: ArrayLike) -> tuple[NDArray[np.float64], int]:
         """(F, B, 3) displacements (NaN rows missing) and (F, S) starts -> weights (F, B, S) and
         how many fits kept their start."""
+
+@final
+class LocalSurface:
+    """The local fits' surface of a chunk of frames in one call (`lgi.solve.local`): blend,
+    jaw pose, biharmonic corrective and the markers' positions, frames in parallel."""
+
+    def __new__(
+        cls,
+        neutral: ArrayLike,
+        shapes: NDArray[np.float32],
+        indptr: NDArray[np.int64],
+        indices: NDArray[np.int64],
+        data: NDArray[np.float64],
+        rig: JawRig | None,
+        corrective: RbfInterpolator,
+        model: Model,
+    ) -> LocalSurface: ...
+    def surface(
+        self,
+        weights: ArrayLike,
+        targets: ArrayLike,
+        out: NDArray[np.float64],
+        theta: ArrayLike | None = None,
+    ) -> NDArray[np.float64]:
+        """Weights (F, B, q), targets (F, B, 3), `out` (F, V, 3) receiving the surface, jaw
+        poses (F, 3) -> the markers' positions on it (F, B, 3)."""
 
 @final
 class BlendshapeSolver:

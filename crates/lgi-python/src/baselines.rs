@@ -17,7 +17,7 @@ type WeightsAndIterations<'py> = (Bound<'py, PyArrayDyn<f64>>, Bound<'py, PyArra
 /// Biharmonic RBF interpolation of marker values over mesh vertices (exact at the markers).
 #[pyclass(frozen, module = "lgi._lgi")]
 pub struct RbfInterpolator {
-    inner: CoreRbf,
+    pub(crate) inner: CoreRbf,
 }
 
 /// Active-set solver of the box-penalised blendshape least squares.

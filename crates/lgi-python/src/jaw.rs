@@ -36,7 +36,7 @@ fn matrix_to_array<'py>(py: Python<'py>, m: DMat3) -> PyResult<Bound<'py, PyArra
 
 /// One pose per set: `theta` (3,) for every set or (F, 3), one per set; errors name the
 /// argument (`name`).
-fn poses(
+pub(crate) fn poses(
     theta: &Bound<'_, PyAny>,
     name: &str,
     sets: usize,

@@ -37,6 +37,7 @@ fn _lgi(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<baselines::RbfInterpolator>()?;
     m.add_class::<baselines::BlendshapeSolver>()?;
     m.add_class::<local_fit::LocalFits>()?;
+    m.add_class::<local_fit::LocalSurface>()?;
     m.add_function(wrap_pyfunction!(baselines::check_marker_frames, m)?)?;
     m.add_function(wrap_pyfunction!(convert::check_count, m)?)?;
     m.add_function(wrap_pyfunction!(local_fit::shape_basis, m)?)?;

@@ -4,11 +4,14 @@
 use crate::convert::{flat_to_array, float_array, points as read_points};
 use crate::error::PyLgiError;
 use crate::threads;
+use glam::DVec3;
 use lgi_core::LocalFits as CoreLocal;
+use numpy::PyArrayMethods;
 use numpy::{
     PyArrayDyn, PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArray3, PyUntypedArrayMethods,
 };
 use pyo3::prelude::*;
+use rayon::prelude::*;
 
 /// Local fits of one marker layout (immutable; the fits run in parallel).
 #[pyclass(frozen, module = "lgi._lgi")]
@@ -180,4 +183,176 @@ pub fn blend_local<'py>(
     })
     .map_err(PyLgiError)?;
     flat_to_array(py, out, &[f, v, 3])
+}
+
+/// The local fits' surface of a chunk of frames in one call (python/lgi/solve/local.py): each
+/// frame's blend of its bundles' weights over the mesh (`lgi_core::blend_local`), skinned by its
+/// jaw pose, plus the biharmonic corrective of what the blend misses at the targets, written
+/// into the caller's array, and the markers' positions measured on it. Frames run in parallel,
+/// each with its own buffers, so no frame-sized array goes back to Python between the steps
+/// and the result is the same, bit for bit, as those steps one after another.
+#[pyclass(frozen, module = "lgi._lgi")]
+pub struct LocalSurface {
+    neutral: Vec<DVec3>,
+    /// V × 3 × q float32, vertex-major (as `blend_local` reads it).
+    shapes: Vec<f32>,
+    q: usize,
+    indptr: Vec<usize>,
+    indices: Vec<usize>,
+    data: Vec<f64>,
+    rig: Option<Py<crate::jaw::JawRig>>,
+    corrective: Py<crate::baselines::RbfInterpolator>,
+    model: Py<crate::model::Model>,
+}
+
+#[pymethods]
+impl LocalSurface {
+    /// `neutral` (V, 3); `shapes` (V, 3, q) float32 C-contiguous; the sewing weights as CSR
+    /// rows (`indptr` (V+1,), `indices`, `data`); `rig`: the jaw rig that poses the blend
+    /// (None: none); `corrective`: the RBF interpolator over the mesh; `model`: whose bundles
+    /// are measured.
+    #[new]
+    #[allow(clippy::too_many_arguments)]
+    fn new<'py>(
+        neutral: &Bound<'py, PyAny>,
+        shapes: PyReadonlyArray3<'py, f32>,
+        indptr: PyReadonlyArray1<'py, i64>,
+        indices: PyReadonlyArray1<'py, i64>,
+        data: PyReadonlyArray1<'py, f64>,
+        rig: Option<Py<crate::jaw::JawRig>>,
+        corrective: Py<crate::baselines::RbfInterpolator>,
+        model: Py<crate::model::Model>,
+    ) -> PyResult<Self> {
+        let neutral = read_points(neutral, "neutral", None, false)?;
+        let v = neutral.len();
+        let q = shapes.shape()[2];
+        if shapes.shape()[..2] != [v, 3] || !shapes.is_c_contiguous() || q == 0 {
+            return Err(crate::error::input_error(format!(
+                "LocalSurface: shapes must be C-contiguous ({v}, 3, q) float32, got {:?}",
+                shapes.shape()
+            )));
+        }
+        let to_usize = |a: &PyReadonlyArray1<'py, i64>, name: &str| -> PyResult<Vec<usize>> {
+            a.as_array()
+                .iter()
+                .map(|&i| usize::try_from(i))
+                .collect::<Result<_, _>>()
+                .map_err(|_| crate::error::input_error(format!("LocalSurface: negative {name}")))
+        };
+        let surface = LocalSurface {
+            shapes: shapes.as_array().iter().copied().collect(),
+            q,
+            indptr: to_usize(&indptr, "indptr")?,
+            indices: to_usize(&indices, "indices")?,
+            data: data.as_array().iter().copied().collect(),
+            rig,
+            corrective,
+            model,
+            neutral,
+        };
+        let nv = surface.model.get().inner.dataset().num_vertices();
+        let rbf = &surface.corrective.get().inner;
+        if nv != v || rbf.num_points() != v {
+            return Err(crate::error::input_error(format!(
+                "LocalSurface: the model's mesh has {nv} vertices and the corrective {}, the \
+                 neutral {v}",
+                rbf.num_points()
+            )));
+        }
+        Ok(surface)
+    }
+
+    /// `weights` (F, B, q), `targets` (F, B, 3) (NaN rows: missing markers), `out` (F, V, 3)
+    /// float64 C-contiguous (receives the surface), `theta` (F, 3) jaw poses (None: unposed)
+    /// -> the markers' positions on the surface (F, B, 3).
+    #[pyo3(signature = (weights, targets, out, theta=None))]
+    fn surface<'py>(
+        &self,
+        py: Python<'py>,
+        weights: &Bound<'py, PyAny>,
+        targets: &Bound<'py, PyAny>,
+        out: &Bound<'py, PyAny>,
+        theta: Option<&Bound<'py, PyAny>>,
+    ) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
+        let model = &self.model.get().inner;
+        let (v, b, q) = (self.neutral.len(), model.num_bundles(), self.q);
+        let w = float_array(weights, "weights", &[None, Some(b), Some(q)])?;
+        let f = w.shape()[0];
+        let w: Vec<f64> = w.iter().copied().collect();
+        let t = float_array(targets, "targets", &[Some(f), Some(b), Some(3)])?;
+        let t: Vec<DVec3> = t
+            .as_slice()
+            .map(|s| s.to_vec())
+            .unwrap_or_else(|| t.iter().copied().collect())
+            .chunks_exact(3)
+            .map(|c| DVec3::new(c[0], c[1], c[2]))
+            .collect();
+        let poses = match (theta, &self.rig) {
+            (Some(th), Some(_)) => Some(crate::jaw::poses(th, "theta", f, true)?),
+            _ => None,
+        };
+        let arr = crate::solve_args::output_array(out, [f, v, 3])?;
+        let mut rw = arr.try_readwrite().map_err(|e| {
+            crate::error::input_error(format!(
+                "out: the array is not writeable (read-only, or borrowed elsewhere): {e}"
+            ))
+        })?;
+        let flat = rw.as_slice_mut().map_err(|e| {
+            crate::error::input_error(format!("out: the array must be C-contiguous: {e}"))
+        })?;
+        let out: &mut [DVec3] = bytemuck::try_cast_slice_mut(flat).map_err(|e| {
+            crate::error::input_error(format!(
+                "out: the array's memory must be aligned to 8 bytes (a fresh np.empty is): {e}"
+            ))
+        })?;
+        let rig = self.rig.as_ref().map(|r| &r.get().inner);
+        let rbf = &self.corrective.get().inner;
+        let sewing = lgi_core::SewingRows {
+            indptr: &self.indptr,
+            indices: &self.indices,
+            data: &self.data,
+        };
+        let frame = |k: usize, o: &mut [DVec3]| -> lgi_core::Result<Vec<DVec3>> {
+            let mut blend = vec![DVec3::ZERO; v];
+            lgi_core::blend_local(
+                &self.neutral,
+                &self.shapes,
+                sewing,
+                &w[k * b * q..(k + 1) * b * q],
+                &mut blend,
+            )?;
+            let posed = match (rig, &poses) {
+                (Some(rig), Some(poses)) => {
+                    let mut posed = vec![DVec3::ZERO; v];
+                    rig.skin(&blend, poses[k], &mut posed)?;
+                    posed
+                }
+                _ => blend,
+            };
+            let on = model.bundle_positions(&posed)?;
+            let misses: Vec<DVec3> = t[k * b..(k + 1) * b]
+                .iter()
+                .zip(&on)
+                .map(|(target, at)| *target - *at)
+                .collect();
+            let corrective = rbf.interpolate(&misses)?;
+            for ((o, p), c) in o.iter_mut().zip(&posed).zip(&corrective) {
+                *o = *p + *c;
+            }
+            model.bundle_positions(o)
+        };
+        let positions = threads::detach(py, || {
+            out.par_chunks_mut(v)
+                .enumerate()
+                .map(|(k, o)| frame(k, o))
+                .collect::<lgi_core::Result<Vec<Vec<DVec3>>>>()
+        })
+        .map_err(PyLgiError)?;
+        let flat: Vec<f64> = positions
+            .iter()
+            .flatten()
+            .flat_map(|p| [p.x, p.y, p.z])
+            .collect();
+        flat_to_array(py, flat, &[f, b, 3])
+    }
 }

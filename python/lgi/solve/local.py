@@ -106,6 +106,10 @@ class LocalPieces:
         sewing = sp.csr_matrix((sw["data"], sw["indices"], sw["indptr"]), shape=(v, b))
         self._sew_rows = _csr_rows(sewing)
         self.corrective = _lgi.RbfInterpolator(self.neutral, tris, bary)
+        # Blend, skinning, corrective and the markers measured, frame by frame in the core.
+        self._surface = _lgi.LocalSurface(
+            self.neutral, self.shapes, *self._sew_rows, self.rig, self.corrective, model.core
+        )
         # The same surface at the bundles only (`at_bundles`): the vertices of their triangles,
         # their sewing rows and shapes, and the corrective over them (its centres and samples
         # are these vertices', so it is the same interpolant evaluated at fewer points).
@@ -194,17 +198,34 @@ class LocalPieces:
         """The local fits' surface (F, V, 3) of a noise-aware solve `res` (its targets, jaw
         poses and global fits), into `out` when given; `bounded` and `lengths`: as
         `fits_for`."""
-        if np.asarray(res.missing).shape[0] == 0:
-            return np.asarray(res.vertices, dtype=np.float64) if out is None else out
-        targets, weights, theta = self._fits(res, bounded, lengths)
-        blend = _blend(self.neutral, self.shapes, self._sew_rows, weights)
-        posed = self._posed(blend, theta, None)
-        misses = targets - self._bundle_positions(posed)
-        result = posed + self.corrective.interpolate(misses)
+        return self.surface_and_markers(res, out, bounded=bounded, lengths=lengths)[0]
+
+    def surface_and_markers(
+        self,
+        res: SolveResult,
+        out: F64 | None = None,
+        *,
+        bounded: bool = True,
+        lengths: float = _lgi.LOCAL_LENGTH,
+    ) -> tuple[F64, F64]:
+        """`surface` and the markers' positions on it (F, B, 3), measured as
+        `Model.bundle_positions` measures them. Each chunk of frames is one call to the core
+        (`_lgi.LocalSurface`: blend, jaw pose, corrective and positions, with no frame-sized
+        array in between; Ctrl-C is seen between calls)."""
+        f = np.asarray(res.missing).shape[0]
+        v, b = self.neutral.shape[0], self.rest.shape[0]
         if out is None:
-            return np.asarray(result, dtype=np.float64)
-        out[...] = result
-        return out
+            out = np.empty((f, v, 3))
+        if f == 0:
+            return out, np.empty((0, b, 3))
+        targets, weights, theta = self._fits(res, bounded, lengths)
+        positions = np.empty((f, b, 3))
+        for a in range(0, f, FITS_CHUNK):
+            part = slice(a, a + FITS_CHUNK)
+            positions[part] = self._surface.surface(
+                weights[part], targets[part], out[part], None if theta is None else theta[part]
+            )
+        return out, positions
 
     def at_bundles(self, res: SolveResult, *, bounded: bool = True) -> F64:
         """Every bundle's position (F, B, 3) on the local fits' surface of `res`: the same

@@ -508,15 +508,20 @@ class Model:
         """`res` with the local fits' surface (`lgi.plan.local`) in place in its vertices (an `out`
         buffer receives it), its marker positions and residuals measured again."""
         v = np.asarray(res.vertices)
-        local_pieces(self).surface(res, out=v, bounded=bounded)
-        return self._remeasured(res, v, frames)
+        _, pos = local_pieces(self).surface_and_markers(res, out=v, bounded=bounded)
+        return self._remeasured(res, v, frames, pos)
 
     def _remeasured(
-        self, res: SolveResult, v: NDArray[np.float64], frames: NDArray[Any]
+        self,
+        res: SolveResult,
+        v: NDArray[np.float64],
+        frames: NDArray[Any],
+        pos: NDArray[np.float64] | None = None,
     ) -> SolveResult:
-        """`res` with vertices `v`, its marker positions and residuals measured on them."""
+        """`res` with vertices `v`, its marker positions (`pos`, where already measured) and
+        residuals measured on them."""
         missing = np.asarray(res.missing)
-        pos = self.bundle_positions(v)
+        pos = self.bundle_positions(v) if pos is None else pos
         given = np.asarray(frames, dtype=np.float64)
         residuals = np.where(missing, 0.0, np.linalg.norm(np.nan_to_num(given - pos), axis=2))
         return _with(res, vertices=v, bundle_residuals=residuals, bundle_positions=pos)
