@@ -53,7 +53,7 @@ def test_recommended_reads_the_detail_weight_only_where_no_local_fits_are_used(
     x = np.asarray(sample.performance, dtype=np.float64)[:20]
     read: list[Any] = []
 
-    def fits(spec, unbounded, frames, m, s, jaw, say, prior=False):  # type: ignore[no-untyped-def]
+    def fits(spec, unbounded, frames, m, s, jaw, say, prior=False, readings=None):  # type: ignore[no-untyped-def]
         assert (spec, unbounded, prior) == ("auto", "auto", "auto")
         return local, local == "unbounded"
 

@@ -383,7 +383,10 @@ def test_the_batched_refills_equal_each_frames_fit_on_its_present_rows(
         gone = rng.choice(rows, size=rng.integers(0, most_missing + 1), replace=False)
         offsets[f, gone] = np.nan
     sigma, ridge = 0.3, 0.2
-    zeta, miss = _frames_in_directions(u, s, offsets, sigma, ridge)
+    present = np.isfinite(offsets)
+    c_all = (np.where(present, offsets, 0.0) @ u) / sigma
+    ua = u / (1.0 + ridge / s**2)
+    zeta, miss = _frames_in_directions(u, ua, ua @ u.T, c_all, present)
     d_inv = np.diag(1.0 / (1.0 + ridge / s**2))
     mean, phi = rng.normal(size=q), rng.normal(size=(q, k))
     again = _refilled(u, miss, zeta, mean, phi)

@@ -239,12 +239,12 @@ def test_both_auto_read_the_local_fits_first_and_the_fit_only_without_them(
 
     calls: list[str] = []
 
-    def local_choice(spec, frames, model, sigma, jaw, say, fit=None):  # type: ignore[no-untyped-def]
+    def local_choice(spec, frames, model, sigma, jaw, say, fit=None, readings=None):  # type: ignore[no-untyped-def]
         calls.append("local")
         assert spec == "auto" and fit is None  # read on the boxed solve
         return local_read
 
-    def fit_choice(spec, frames, model, sigma, jaw, say, prior=False):  # type: ignore[no-untyped-def]
+    def fit_choice(spec, frames, model, sigma, jaw, say, prior=False, readings=None):  # type: ignore[no-untyped-def]
         calls.append("fit")
         assert spec == "auto" and prior is False  # no --take-prior here
         return fit_read

@@ -19,6 +19,7 @@ from lgi.plan.denoise import DenoisedTake, denoise_take
 from lgi.plan.detail import estimate_detail_weight
 from lgi.plan.local import estimate_local_fits
 from lgi.plan.noise import estimate_marker_noise
+from lgi.plan.readings import TakeReadings
 from lgi.plan.take_prior import estimate_take_prior, estimate_take_prior_use
 from lgi.plan.unbounded import estimate_unbounded_fit
 from lgi.solve.model import Model
@@ -55,6 +56,7 @@ def fits_choice(
     jaw: str | None,
     say: Say,
     prior: TakePrior | bool | str = False,
+    readings: TakeReadings | None = None,
 ) -> tuple[bool | str, bool]:
     """`--local-fits` and `--unbounded-fit` as given or read from the take (`local_fits_choice`,
     `unbounded_fit_choice`): `local_fits` and whether the global fit is unbounded. When both
@@ -63,14 +65,17 @@ def fits_choice(
     bounded ones keep the box, and with neither the unbounded fit is read on its own
     (docs/concepts.md). Otherwise the fit is decided first and the local fits read on it.
     With `prior` (`--take-prior`, given or 'auto') the unbounded fit is read as it would be
-    solved, with the take's prior."""
+    solved, with the take's prior. `readings`: the take's left-out readings, shared by every
+    reading (`lgi.plan.readings`)."""
     if local == "auto" and unbounded == "auto":
-        chosen = local_fits_choice(local, frames, model, sigma, jaw, say)
+        chosen = local_fits_choice(local, frames, model, sigma, jaw, say, readings=readings)
         if chosen:
             return chosen, chosen == UNBOUNDED
-        return False, unbounded_fit_choice(unbounded, frames, model, sigma, jaw, say, prior)
-    free = unbounded_fit_choice(unbounded, frames, model, sigma, jaw, say, prior)
-    chosen = local_fits_choice(local, frames, model, sigma, jaw, say, UNBOUNDED if free else None)
+        free = unbounded_fit_choice(unbounded, frames, model, sigma, jaw, say, prior, readings)
+        return False, free
+    free = unbounded_fit_choice(unbounded, frames, model, sigma, jaw, say, prior, readings)
+    fit = UNBOUNDED if free else None
+    chosen = local_fits_choice(local, frames, model, sigma, jaw, say, fit, readings)
     # Unbounded local fits start from the unbounded fit whatever was asked of the fit.
     return chosen, free or chosen == UNBOUNDED
 
@@ -83,6 +88,7 @@ def unbounded_fit_choice(
     jaw: str | None,
     say: Say,
     prior: TakePrior | bool | str = False,
+    readings: TakeReadings | None = None,
 ) -> bool:
     """`--unbounded-fit`: True, False or 'auto' (read from the take's own markers left out,
     `lgi.estimate_unbounded_fit`, and said with its numbers; with `prior`, the unbounded fit
@@ -90,7 +96,9 @@ def unbounded_fit_choice(
     if spec is True or spec is False:
         return spec
     with_prior = bool(prior) and sigma is not None and sigma > 0.0
-    est = estimate_unbounded_fit(frames, model, marker_noise=sigma, jaw=jaw, take_prior=with_prior)
+    est = estimate_unbounded_fit(
+        frames, model, marker_noise=sigma, jaw=jaw, take_prior=with_prior, readings=readings
+    )
     which = " (with the take prior)" if with_prior else ""
     say(
         _reading(
@@ -127,6 +135,7 @@ def take_prior_choice(
     jaw: str | None,
     say: Say,
     unbounded: bool,
+    readings: TakeReadings | None = None,
 ) -> TakePrior | None:
     """`--take-prior`: a `TakePrior` (used as it is), True, False or 'auto' (read from the take's
     own markers left out, `lgi.estimate_take_prior_use`, and said with its numbers), on the
@@ -162,7 +171,7 @@ def take_prior_choice(
         say(f"take prior not read: {why}")
         return None
     assert sigma is not None
-    est = estimate_take_prior_use(frames, model, marker_noise=sigma, jaw=jaw)
+    est = estimate_take_prior_use(frames, model, marker_noise=sigma, jaw=jaw, readings=readings)
     if est.left_out == 0:
         say("take prior not used: the take is too short to read it on frames of its own")
         return None
@@ -189,6 +198,7 @@ def local_fits_choice(
     jaw: str | None,
     say: Say,
     fit: str | None = None,
+    readings: TakeReadings | None = None,
 ) -> bool | str:
     """`--local-fits`: True, False, 'unbounded' or 'auto' (read from the take's own markers
     left out, `lgi.estimate_local_fits` with `fit`, and said with its numbers). Needs the
@@ -196,7 +206,9 @@ def local_fits_choice(
     if spec is True or spec is False or spec == UNBOUNDED:
         return spec
     assert sigma is not None
-    est = estimate_local_fits(frames, model, marker_noise=sigma, jaw=jaw, fit=fit)
+    est = estimate_local_fits(
+        frames, model, marker_noise=sigma, jaw=jaw, fit=fit, readings=readings
+    )
     chosen = {False: "not used", True: "used", UNBOUNDED: "used, unbounded"}[est.local_fits]
     read = [
         f"{x:.4g}{kind}"
@@ -391,8 +403,16 @@ def plan_solve(
         local_fits = False
     if local_fits and sigma is None:
         raise o.local_fits_without_noise()
-    chosen, free = fits_choice(local_fits, unbounded_fit, x, model, sigma, o.jaw, say, take_prior)
-    prior = take_prior_choice(take_prior, x, model, sigma, o.jaw, say, free or chosen == UNBOUNDED)
+    # One stage of left-out readings for every choice read from the take (each row and solve
+    # made once, lgi.plan.readings).
+    readings = None
+    if AUTO in (local_fits, unbounded_fit, take_prior) and sigma is not None:
+        readings = TakeReadings(x, model, marker_noise=sigma, jaw=o.jaw)
+    chosen, free = fits_choice(
+        local_fits, unbounded_fit, x, model, sigma, o.jaw, say, take_prior, readings
+    )
+    unbounded = free or chosen == UNBOUNDED
+    prior = take_prior_choice(take_prior, x, model, sigma, o.jaw, say, unbounded, readings)
     fit = UNBOUNDED if free else None
     if o.recommended and detail is None:
         if chosen:

@@ -12,15 +12,8 @@ from numpy.typing import ArrayLike, NDArray
 
 from lgi.errors import InputError
 from lgi.plan.detail import DETAIL_FRAMES
-from lgi.plan.leave_out import (
-    LEFT_OUT_PER_FRAME,
-    LOOK_SIGNIFICANCE,
-    LOOKS,
-    Looks,
-    leave_markers_out,
-    solved_in_chunks,
-    take_frames,
-)
+from lgi.plan.leave_out import LEFT_OUT_PER_FRAME, LOOK_SIGNIFICANCE, LOOKS, Looks
+from lgi.plan.readings import TakeReadings
 from lgi.solve.local import UNBOUNDED, local_pieces
 
 if TYPE_CHECKING:
@@ -70,6 +63,7 @@ def estimate_local_fits(
     jaw: str | None = "auto",
     frames_used: int = DETAIL_FRAMES,
     fit: bool | str | None = None,
+    readings: TakeReadings | None = None,
 ) -> LocalFitsEstimate:
     """Whether local fits suit a take (F, B, 3; NaN rows missing) and `model`, and which kind,
     read from the take's own markers: on `frames_used` frames spread over the take, up to
@@ -87,8 +81,8 @@ def estimate_local_fits(
     local fits (not their meshes); reading unbounded ones solves those rows once more.
     `fit=UNBOUNDED` (the take is solved with the unbounded global fit, `Model.solve(fit=...)`):
     the solve without local fits is that one, and only unbounded local fits are read (one test
-    at the same boundary)."""
-    arr = take_frames(frames, model)
+    at the same boundary). `readings`: the take's readings to share rows and solves with (made
+    for this call where not given)."""
     if marker_noise is None:
         raise InputError("estimate_local_fits needs marker_noise (0 for clean markers)")
     if frames_used < 1:
@@ -96,7 +90,9 @@ def estimate_local_fits(
     only_unbounded = fit == UNBOUNDED
     if not (only_unbounded or fit is None or fit is True):
         raise InputError(f"fit: expected None, True or {UNBOUNDED!r}, got {fit!r}")
-    out = leave_markers_out(arr, LOOKS * frames_used, LEFT_OUT_PER_FRAME, what="local fits")
+    r = TakeReadings.given(readings, frames, model, marker_noise=marker_noise, jaw=jaw)
+    key = (LOOKS * frames_used, LEFT_OUT_PER_FRAME)
+    out = r.left_out(*key, what="local fits")
     looks = Looks(out)
     pieces = local_pieces(model)
     err_without = np.full(out.marker.size, np.nan)
@@ -108,15 +104,11 @@ def estimate_local_fits(
         """The left-out distances of `rows` with local fits of `kind` (column of `err_with`:
         0 bounded, 1 unbounded, on the solve with the unbounded global fit); with `base`, the
         solve's own (without them) too."""
-        part = out.subset(rows)
-        solve_fit = UNBOUNDED if kind else None
-        for at, solved in solved_in_chunks(
-            model, part, jaw=jaw, marker_noise=marker_noise, fit=solve_fit
-        ):
-            if base:
-                err_without[rows[at]] = looks.distances(rows[at], solved.bundle_positions)
-            on = pieces.at_bundles(solved, bounded=kind == 0)
-            err_with[rows[at], kind] = looks.distances(rows[at], on)
+        solved = r.solved(*key, rows, fit=UNBOUNDED if kind else None)
+        if base:
+            err_without[rows] = looks.distances(rows, solved.bundle_positions)
+        on = pieces.at_bundles(solved, bounded=kind == 0)
+        err_with[rows, kind] = looks.distances(rows, on)
 
     first = 1 if only_unbounded else 0
     look = looks.first_clearing(

@@ -47,7 +47,6 @@ from lgi.plan.leave_out import (
     LOOKS,
     LeftOut,
     Looks,
-    leave_markers_out,
     solved_in_chunks,
     take_frames,
 )
@@ -56,6 +55,7 @@ from lgi.solve.take_prior import TakePrior
 
 if TYPE_CHECKING:
     from lgi._lgi import SolveResult
+    from lgi.plan.readings import TakeReadings
     from lgi.solve.model import Model
 
 __all__ = [
@@ -143,22 +143,18 @@ class _Missing:
 
 
 def _frames_in_directions(
-    u: F64, s: F64, offsets: F64, sigma: float, ridge: float
+    u: F64, ua: F64, inner: F64, c: F64, present: NDArray[np.bool_]
 ) -> tuple[F64, _Missing]:
-    """Each frame in the fit matrix's own coordinates, `ζ = Uᵀ d / sigma` (F, q), its missing
-    rows filled by the frame's ridge fit (`J c` with `J = (D - U_Mᵀ U_M)⁻¹`, `D = I +
-    ridge S⁻²`, `c = U_Pᵀ d_P / sigma`: Woodbury's identity, an m x m solve for m missing
-    rows, `I - U_M D⁻¹ U_Mᵀ`, read from one R x R product), and the frames' missing rows."""
-    present = np.isfinite(offsets)
-    c = (np.where(present, offsets, 0.0) @ u) / sigma
-    a0 = 1.0 / (1.0 + ridge / s**2)
+    """Each frame in the fit matrix's own coordinates, `ζ = Uᵀ d / sigma` (F, q), from its
+    present rows' share `c = U_Pᵀ d_P / sigma` (F, q) and which rows are `present` (F, R): its
+    missing rows filled by the frame's ridge fit (`J c` with `J = (D - U_Mᵀ U_M)⁻¹`, `D = I +
+    ridge S⁻²`: Woodbury's identity, an m x m solve for m missing rows, `I - U_M D⁻¹ U_Mᵀ`,
+    read from `inner = U D⁻¹ Uᵀ` (R, R), with `ua = U D⁻¹`); and the frames' missing rows."""
     zeta = c.copy()
     miss = _Missing(present)
     if miss.frames.size:
         cs = c[miss.frames]
-        ua = u * a0
         seen = miss.gather(cs @ ua.T)  # U_M D⁻¹ c
-        inner = ua @ u.T
         solved = miss.inverse_of_rest(inner, seen)
         # U_M fitted, with fitted = D⁻¹ c + D⁻¹ U_Mᵀ solved: U_M D⁻¹ c + U_M D⁻¹ U_Mᵀ solved
         # = solved.
@@ -216,22 +212,32 @@ class TakeRows:
             )
         self.sigma = sigma
         self.ridge = _lgi.FIT_L2 * float(np.mean(np.sum(a**2, axis=0)))
+        self._present = np.isfinite(self.offsets)
         u, s, vt = np.linalg.svd(a, full_matrices=False)
         # Every direction the markers see at all (the fit's ridge still weighs the weak ones).
         keep = s > s[0] * DIRECTION_TOLERANCE if s.size else s > 0
         if not keep.any():
             raise InputError("take prior: the dataset's shapes do not move the markers")
         self.u, self.s, self.vt = u[:, keep], s[keep], vt[keep]
+        # Every frame's present rows in the fit's coordinates (c = U_Pᵀ d_P / sigma), once: a
+        # prior without a marker takes its rows' share off.
+        self._dropped = np.where(self._present, self.offsets, 0.0)
+        self._c = (self._dropped @ self.u) / sigma
+        # The ridge fit's U D⁻¹ and U D⁻¹ Uᵀ (D = I + ridge S⁻²), the same for every prior.
+        self._ua = self.u / (1.0 + self.ridge / self.s**2)
+        self._inner = self._ua @ self.u.T
 
     def prior(self, without: int | None = None) -> TakePrior:
         """The take's prior; `without`: marker `without`'s rows left out of every frame, as if
         the take had never had it (the left-out readings' prior for a row leaving it out)."""
         u, s, sigma, ridge = self.u, self.s, self.sigma, self.ridge
-        offsets = self.offsets
+        c, present = self._c, self._present
         if without is not None:
-            offsets = offsets.copy()
-            offsets[:, 3 * without : 3 * without + 3] = np.nan
-        zeta, miss = _frames_in_directions(u, s, offsets, sigma, ridge)
+            rows = slice(3 * without, 3 * without + 3)
+            c = c - (self._dropped[:, rows] @ u[rows]) / sigma
+            present = present.copy()
+            present[:, rows] = False
+        zeta, miss = _frames_in_directions(u, self._ua, self._inner, c, present)
         mean, phi = _shrunk(zeta)
         if miss.frames.size:
             # A frame short of a marker is filled by its fit under the prior read so far, and
@@ -248,7 +254,7 @@ class TakeRows:
             factor=np.ascontiguousarray(with_ridge(to_w @ phi, ridge / sigma**2)),
             noise=sigma,
             directions=len(s),
-            frames=offsets.shape[0],
+            frames=self.offsets.shape[0],
         )
 
 
@@ -351,6 +357,7 @@ def estimate_take_prior_use(
     marker_noise: float,
     jaw: str | None = "auto",
     frames_used: int = DETAIL_FRAMES,
+    readings: TakeReadings | None = None,
 ) -> TakePriorEstimate:
     """Whether a take (F, B, 3; NaN rows missing) is better solved by `model` with the take's
     prior on its unbounded fit, read from its own markers: on `frames_used` frames spread over
@@ -360,26 +367,26 @@ def estimate_take_prior_use(
     (none of the frames left out from, and without the row's left-out marker in any frame,
     `HeldOutPriors`, so no left-out marker informs its prior; a take with fewer than 2 such
     frames is not read). Used as the looks' rule says (`Looks.first_clearing`); then the prior
-    is read from the whole take."""
-    arr = take_frames(frames, model)
+    is read from the whole take. `readings`: the take's readings to share rows and solves with
+    (made for this call where not given)."""
+    from lgi.plan.readings import TakeReadings  # it reads the held-out priors defined here
+
     nan = float("nan")
     if not (np.isfinite(marker_noise) and marker_noise > 0.0):
         return TakePriorEstimate(False, nan, nan, 0, 0, None)
-    out = leave_markers_out(arr, LOOKS * frames_used, LEFT_OUT_PER_FRAME, what="take prior")
-    held = HeldOutPriors.of(model, arr, out, marker_noise, jaw)
-    if held is None:
+    r = TakeReadings.given(readings, frames, model, marker_noise=marker_noise, jaw=jaw)
+    key = (LOOKS * frames_used, LEFT_OUT_PER_FRAME)
+    out = r.left_out(*key, what="take prior")
+    if r.held_out_priors(*key) is None:
         return TakePriorEstimate(False, nan, nan, 0, 0, None)
     looks = Looks(out)
 
     def read(rows: NDArray[np.int64], err: NDArray[np.float64]) -> None:
         """The left-out distances of `rows`: without the prior (column 0) and with it (1)."""
-        part = out.subset(rows)
-        for at, solved in solved_in_chunks(
-            model, part, jaw=jaw, marker_noise=marker_noise, fit=UNBOUNDED
-        ):
-            err[rows[at], 0] = looks.distances(rows[at], solved.bundle_positions)
-        for mine, solved in held.solved(model, out, rows, jaw=jaw, marker_noise=marker_noise):
-            err[mine, 1] = looks.distances(mine, solved.bundle_positions)
+        without = r.solved(*key, rows, fit=UNBOUNDED)
+        err[rows, 0] = looks.distances(rows, without.bundle_positions)
+        with_it = r.solved(*key, rows, fit=UNBOUNDED, held_out_prior=True)
+        err[rows, 1] = looks.distances(rows, with_it.bundle_positions)
 
     read_out = looks.compare(read)
     return TakePriorEstimate(
@@ -388,5 +395,5 @@ def estimate_take_prior_use(
         error_with=read_out.option,
         left_out=read_out.left_out,
         frames=read_out.frames,
-        prior=estimate_take_prior(model, arr, marker_noise, jaw=jaw) if read_out.use else None,
+        prior=estimate_take_prior(model, r.frames, marker_noise, jaw=jaw) if read_out.use else None,
     )

@@ -12,7 +12,6 @@ takes."""
 
 from __future__ import annotations
 
-from collections.abc import Iterator
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
@@ -20,18 +19,11 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from lgi.plan.detail import DETAIL_FRAMES
-from lgi.plan.leave_out import (
-    LEFT_OUT_PER_FRAME,
-    LOOKS,
-    Looks,
-    leave_markers_out,
-    solved_in_chunks,
-    take_frames,
-)
+from lgi.plan.leave_out import LEFT_OUT_PER_FRAME, LOOKS, Looks
+from lgi.plan.readings import TakeReadings
 from lgi.solve.local import UNBOUNDED
 
 if TYPE_CHECKING:
-    from lgi._lgi import SolveResult
     from lgi.solve.model import Model
 
 __all__ = ["UnboundedFitEstimate", "estimate_unbounded_fit"]
@@ -69,6 +61,7 @@ def estimate_unbounded_fit(
     jaw: str | None = "auto",
     frames_used: int = DETAIL_FRAMES,
     take_prior: bool = False,
+    readings: TakeReadings | None = None,
 ) -> UnboundedFitEstimate:
     """Whether a take (F, B, 3; NaN rows missing) is better solved by `model` with the unbounded
     global fit, read from its own markers: on `frames_used` frames spread over the take, up to
@@ -80,33 +73,20 @@ def estimate_unbounded_fit(
     looks. Each look solves about `frames_used` x 30 frames twice. With `take_prior` (and a
     `marker_noise` > 0) the unbounded fit is read as it would be solved with the take's prior
     (`lgi.plan.take_prior`), each row's prior read without its left-out marker from the take's
-    frames none of the markers is left out of (`lgi.plan.take_prior.HeldOutPriors`)."""
-    from lgi.plan.take_prior import HeldOutPriors
-
-    arr = take_frames(frames, model)
-    out = leave_markers_out(arr, LOOKS * frames_used, LEFT_OUT_PER_FRAME, what="unbounded fit")
-    held = None
-    if take_prior and marker_noise:
-        held = HeldOutPriors.of(model, arr, out, marker_noise, jaw)
+    frames none of the markers is left out of (`lgi.plan.take_prior.HeldOutPriors`).
+    `readings`: the take's readings to share rows and solves with (made for this call where
+    not given)."""
+    r = TakeReadings.given(readings, frames, model, marker_noise=marker_noise, jaw=jaw)
+    key = (LOOKS * frames_used, LEFT_OUT_PER_FRAME)
+    out = r.left_out(*key, what="unbounded fit")
+    held = take_prior and bool(marker_noise) and r.held_out_priors(*key) is not None
     looks = Looks(out)
 
     def read(rows: NDArray[np.int64], err: NDArray[np.float64]) -> None:
         """The left-out distances of `rows`, solved boxed (column 0) and unbounded (1)."""
-        part = out.subset(rows)
-        for at, solved in solved_in_chunks(model, part, jaw=jaw, marker_noise=marker_noise):
-            err[rows[at], 0] = looks.distances(rows[at], solved.bundle_positions)
-        unbounded: Iterator[tuple[NDArray[np.int64], SolveResult]]
-        if held is None:
-            unbounded = (
-                (rows[at], res)
-                for at, res in solved_in_chunks(
-                    model, part, jaw=jaw, marker_noise=marker_noise, fit=UNBOUNDED
-                )
-            )
-        else:
-            unbounded = held.solved(model, out, rows, jaw=jaw, marker_noise=marker_noise)
-        for mine, res in unbounded:
-            err[mine, 1] = looks.distances(mine, res.bundle_positions)
+        err[rows, 0] = looks.distances(rows, r.solved(*key, rows).bundle_positions)
+        unbounded = r.solved(*key, rows, fit=UNBOUNDED, held_out_prior=held)
+        err[rows, 1] = looks.distances(rows, unbounded.bundle_positions)
 
     read_out = looks.compare(read)
     return UnboundedFitEstimate(

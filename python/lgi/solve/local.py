@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import warnings
 import weakref
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
 import scipy.sparse as sp
@@ -37,7 +37,22 @@ if TYPE_CHECKING:
 
 F64 = NDArray[np.float64]
 
-__all__ = ["FITS_CHUNK", "UNBOUNDED", "LocalPieces", "local_pieces"]
+__all__ = ["FITS_CHUNK", "UNBOUNDED", "LocalPieces", "Solution", "local_pieces"]
+
+
+class Solution(Protocol):
+    """What local fits read of a noise-aware solve: a `SolveResult`, or the left-out readings'
+    rows of one (`lgi.plan.readings.Solved`)."""
+
+    @property
+    def bundle_positions(self) -> NDArray[np.float64]: ...
+    @property
+    def missing(self) -> NDArray[np.bool_]: ...
+    @property
+    def fit_weights(self) -> NDArray[np.float64] | None: ...
+    @property
+    def jaw_theta(self) -> NDArray[np.float64] | None: ...
+
 
 FITS_CHUNK = 16
 """Frames whose local fits (and then whose blend) one call to the core makes (a few hundred
@@ -136,7 +151,7 @@ class LocalPieces:
         return made
 
     def _fits(
-        self, res: SolveResult, bounded: bool, lengths: float = _lgi.LOCAL_LENGTH
+        self, res: Solution, bounded: bool, lengths: float = _lgi.LOCAL_LENGTH
     ) -> tuple[F64, F64, F64 | None]:
         """The solve's targets (F, B, 3; NaN: missing), each frame's local weights per bundle
         (F, B, q: over the shape basis where there is one; `bounded`: held to [0, 1]) and the
@@ -227,7 +242,7 @@ class LocalPieces:
             )
         return out, positions
 
-    def at_bundles(self, res: SolveResult, *, bounded: bool = True) -> F64:
+    def at_bundles(self, res: Solution, *, bounded: bool = True) -> F64:
         """Every bundle's position (F, B, 3) on the local fits' surface of `res`: the same
         values as `surface` sampled at the bundles (to round-off), made on the bundles'
         triangles' vertices only (what `estimate_local_fits` compares)."""
