@@ -403,3 +403,28 @@ def test_the_batched_refills_equal_each_frames_fit_on_its_present_rows(
         gram = phi.T @ up.T @ up @ phi + np.eye(k)
         fit_map = mean + phi @ np.linalg.solve(gram, phi.T @ (cf - up.T @ (up @ mean)))
         np.testing.assert_allclose(again[f], cf + um.T @ (um @ fit_map), rtol=1e-9, atol=1e-9)
+
+
+def test_held_out_priors_read_on_threads_equal_each_read_alone(two_directions: Any) -> None:
+    """`HeldOutPriors.read` reads the priors on lgi's threads (one BLAS thread each); each must
+    be the prior `TakeRows.prior(without=...)` reads alone."""
+    from lgi.plan.take_prior import HeldOutPriors, TakeRows
+
+    model, frames, _, _ = two_directions
+    rows = TakeRows(model, frames, SIGMA)
+    held = HeldOutPriors(rows)
+    markers = np.array([0, 3, 3, 7, 11])
+    before = lgi.get_num_threads()
+    lgi.set_num_threads(2)
+    try:
+        held.read(markers)
+    finally:
+        lgi.set_num_threads(before)
+    assert sorted(held._priors) == [0, 3, 7, 11]
+    for k in (0, 3, 7, 11):
+        alone = rows.prior(without=k)
+        got = held.without(k)
+        np.testing.assert_allclose(got.mean, alone.mean, rtol=0, atol=1e-12)
+        np.testing.assert_allclose(
+            got.factor @ got.factor.T, alone.factor @ alone.factor.T, atol=1e-12
+        )
