@@ -18,6 +18,7 @@ from hypothesis import strategies as st
 
 import lgi
 from interrupts import python_sigint_handler, sigint_at
+from lgi import _lgi
 from pipeline_files import write_actor
 
 
@@ -226,7 +227,7 @@ def test_on_lgi_own_pool_ctrl_c_and_a_failing_callback_still_stop_a_solve_early(
     assert sample_model.solve(frames[:3], quiet=True).vertices.shape[0] == 3
 
 
-@pytest.mark.parametrize("bad", [0, -1, 1.5, True, "2", lgi._lgi.MAX_THREADS + 1])
+@pytest.mark.parametrize("bad", [0, -1, 1.5, True, "2", _lgi.MAX_THREADS + 1])
 def test_set_num_threads_refuses_what_is_not_a_thread_count(bad, default_threads):  # type: ignore[no-untyped-def]
     lgi.set_num_threads(2)
     with pytest.raises(lgi.InputError, match="set_num_threads"):

@@ -280,6 +280,27 @@ impl ShapeBasis {
         })
     }
 
+    /// A basis as saved ([`ShapeBasis::shapes`] and [`ShapeBasis::coefficients`]) for a dataset
+    /// of `num_shapes` shapes; `None` unless the basis shapes are distinct and in range, fewer
+    /// than all, and the coefficients `S × q` finite.
+    pub fn from_saved(
+        shapes: Vec<usize>,
+        coefficients: Vec<f64>,
+        num_shapes: usize,
+    ) -> Option<ShapeBasis> {
+        let q = shapes.len();
+        let mut seen = vec![false; num_shapes];
+        let distinct = shapes
+            .iter()
+            .all(|&k| k < num_shapes && !std::mem::replace(&mut seen[k], true));
+        let fits =
+            coefficients.len() == num_shapes * q && coefficients.iter().all(|c| c.is_finite());
+        (q > 0 && q < num_shapes && distinct && fits).then_some(ShapeBasis {
+            shapes,
+            coefficients,
+        })
+    }
+
     /// Every shape's coefficients over the basis shapes (S × q, row-major, shape k's row:
     /// `Σ_j c[k q + j] · shapes[j]` is shape k).
     pub fn coefficients(&self) -> &[f64] {

@@ -161,17 +161,35 @@ impl FitPrior {
     /// scans is solved with, whose weights are no activations.
     pub fn fit_unbounded(&self, targets: &[DVec3]) -> Result<FrameFit> {
         let solver = self
-            .unbounded
-            .get_or_init(|| {
-                let b = self.rest.len();
-                let s = self.displacements.len() / b.max(1);
-                let a = fit_matrix(&self.displacements, b);
-                let scale = fit_scale(&a, s);
-                RidgeFit::new(a, 3 * b, s, FIT_L2 * scale).map_err(|e| e.to_string())
-            })
+            .unbounded_solver()
             .as_ref()
             .map_err(|e| LgiError::Input(e.clone()))?;
         Ok(self.placed(&solver.solve(&self.offsets(targets))?))
+    }
+
+    /// The unbounded fit's solver (made on first use, or by [`FitPrior::derive`]).
+    fn unbounded_solver(&self) -> &std::result::Result<RidgeFit, String> {
+        self.unbounded.get_or_init(|| {
+            let b = self.rest.len();
+            let s = self.displacements.len() / b.max(1);
+            let a = fit_matrix(&self.displacements, b);
+            let scale = fit_scale(&a, s);
+            RidgeFit::new(a, 3 * b, s, FIT_L2 * scale).map_err(|e| e.to_string())
+        })
+    }
+
+    /// What the fit's first uses would make (the boxed solver's whitened form, the unbounded
+    /// solver), made now: a model's build or load does it, not a take's first solve. A
+    /// failure is left to the solve that meets it, whose error names the frame.
+    pub fn derive(&self) {
+        rayon::join(
+            || {
+                let _ = self.solver.derive();
+            },
+            || {
+                let _ = self.unbounded_solver();
+            },
+        );
     }
 
     /// A take's prior ([`TakePrior`]) made ready for this fit's matrix.

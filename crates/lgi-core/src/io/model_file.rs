@@ -12,6 +12,7 @@
 //! neutral, shape names, displacements, then the source polygons) in the same framing under
 //! its own magic.
 
+use crate::basis::ShapeBasis;
 use crate::cloud::BundleCloud;
 use crate::dataset::Dataset;
 use crate::error::{LgiError, Result};
@@ -32,7 +33,7 @@ const DATASET_MAGIC: &[u8; 8] = b"LGIDATAS";
 /// What errors name as the file when the bytes came from memory, not from a file.
 const IN_MEMORY: &str = "<in-memory bytes>";
 /// Format version written by this build; readers accept exactly the versions they know.
-pub const FORMAT_VERSION: u32 = 4;
+pub const FORMAT_VERSION: u32 = 5;
 /// The oldest version read (no jaw bins: an unbinned model).
 const PREVIOUS_VERSION: u32 = 2;
 /// The first version with jaw bins (and the word-wise checksum).
@@ -435,6 +436,27 @@ fn encode(parts: &ModelPartsRef<'_>, marker_names: &[String], units: &str) -> Ve
     }
     w.str(units);
     write_polygons(&mut w, parts.dataset);
+    // Version 5: what the build derived from the model alone, per bin: the global fit's shape
+    // basis (0 = not derived; 1 = none, the fit has full rank; 2 = the basis shapes, then every
+    // shape's coefficients over them).
+    for bin in &parts.bins {
+        match bin.fit_basis {
+            None => w.u64(0),
+            Some(None) => w.u64(1),
+            Some(Some(basis)) => {
+                w.u64(2);
+                w.u32s(
+                    basis
+                        .shapes
+                        .iter()
+                        .map(|&k| k as u32)
+                        .collect::<Vec<_>>()
+                        .into_iter(),
+                );
+                w.f64s(basis.coefficients().to_vec().into_iter());
+            }
+        }
+    }
     framed(MAGIC, &w.0)
 }
 
@@ -620,6 +642,26 @@ fn decode(bytes: &[u8], source: &Path) -> Result<Model> {
     } else {
         None
     };
+    if version >= 5 {
+        for (bin, part) in built.iter_mut().enumerate() {
+            part.fit_basis = match r.u64()? {
+                0 => None,
+                1 => Some(None),
+                2 => {
+                    let shapes: Vec<usize> = r.u32s()?.into_iter().map(|k| k as usize).collect();
+                    let coefficients = r.f64s()?;
+                    let basis = ShapeBasis::from_saved(shapes, coefficients, dataset.num_shapes());
+                    // Bin b's shapes are a subset of the dataset's: the parts check the range.
+                    Some(Some(basis.ok_or_else(|| {
+                        bad(&format!(
+                            "bin {bin}: the fit's shape basis is not a valid one"
+                        ))
+                    })?))
+                }
+                _ => return Err(r.err("unknown fit basis section")),
+            };
+        }
+    }
     if r.at != payload.len() {
         return Err(bad("trailing bytes after the last section"));
     }
@@ -649,6 +691,8 @@ fn decode(bytes: &[u8], source: &Path) -> Result<Model> {
         PartsError::Inconsistent(m) => bad(&m),
         PartsError::Build(e) => bad(&format!("not a valid model: {e}")),
     })?;
+    // What the file does not save is derived now, not at a take's first solve.
+    model.derive_for_solves();
     match labels {
         None => Ok(model),
         Some((names, units)) => model
@@ -702,7 +746,11 @@ fn read_clouds(r: &mut Reader<'_>, num_bundles: usize) -> Result<BinParts> {
         clouds.push(BundleCloud { points, aliases });
         tets.push(t);
     }
-    Ok(BinParts { clouds, tets })
+    Ok(BinParts {
+        clouds,
+        tets,
+        fit_basis: None,
+    })
 }
 
 #[cfg(test)]

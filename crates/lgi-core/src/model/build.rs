@@ -72,9 +72,39 @@ impl Model {
                 shape_positions,
                 clouds,
                 tets,
+                fit_basis: None,
             });
         }
-        Model::assemble(dataset, jaw, markers_rest, config, bundles, parts)
+        let model = Model::assemble(dataset, jaw, markers_rest, config, bundles, parts)?;
+        model.derive_for_solves();
+        Ok(model)
+    }
+
+    /// Work that depends only on the model, done when it is built (the fit's shape basis,
+    /// seconds at 2,000 scans, is saved with it) or loaded, never at a take's first solve: per
+    /// bin the fit's shape basis, where each shape moves per blend block and the fit's solvers'
+    /// factors, and with a jaw rig the dataset's fit at rest that a pose from the fit starts
+    /// from.
+    pub(crate) fn derive_for_solves(&self) {
+        let ((), rest) = rayon::join(
+            || {
+                self.lookups.par_iter().for_each(|lk| {
+                    rayon::join(
+                        || rayon::join(|| lk.fit_basis(), || lk.shape_spans()),
+                        || lk.prior.as_ref().map(|p| p.derive()),
+                    );
+                })
+            },
+            || match (&self.jaw, self.rest_fit.get()) {
+                (Some(_), None) => super::pose::RestFit::new(self).ok(),
+                _ => None,
+            },
+        );
+        // A rest fit that cannot be made is left to the solve that needs it, whose error
+        // names the frame.
+        if let Some(made) = rest {
+            let _ = self.rest_fit.set(made);
+        }
     }
 
     /// The cheap part of a build, shared with loading a saved model: everything derived from

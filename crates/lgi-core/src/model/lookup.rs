@@ -215,6 +215,8 @@ pub(super) struct LookupParts {
     pub(super) shape_positions: Vec<DVec3>,
     pub(super) clouds: Vec<BundleCloud>,
     pub(super) tets: Vec<Vec<Tet>>,
+    /// The fit's shape basis where already derived ([`super::BinParts::fit_basis`]).
+    pub(super) fit_basis: Option<Option<ShapeBasis>>,
 }
 
 impl Lookup {
@@ -248,7 +250,10 @@ impl Lookup {
         let prior = FitPrior::new(&part.shape_positions, b)?;
         Ok(Lookup {
             prior,
-            basis: OnceLock::new(),
+            basis: match part.fit_basis {
+                Some(derived) => OnceLock::from(derived),
+                None => OnceLock::new(),
+            },
             spans: OnceLock::new(),
             reference: src.reference,
             members: src.members,

@@ -6,6 +6,7 @@
 use super::build::{locate_bundles, lookup_bundle_positions};
 use super::lookup::{lookup_sources, LookupParts};
 use super::{BuildConfig, JawInput, Model};
+use crate::basis::ShapeBasis;
 use crate::cloud::BundleCloud;
 use crate::dataset::Dataset;
 use crate::error::LgiError;
@@ -35,6 +36,9 @@ pub struct BinParts {
     pub clouds: Vec<BundleCloud>,
     /// Every bundle's tets, indexing its cloud's points (B).
     pub tets: Vec<Vec<Tet>>,
+    /// The global fit's shape basis as derived at build (`Some(None)`: none, the fit has full
+    /// rank); `None`: not derived (a file older than version 5), found on first use.
+    pub fit_basis: Option<Option<ShapeBasis>>,
 }
 
 /// The parts of a model, borrowed from it ([`Model::parts`]): what a saved model stores.
@@ -59,6 +63,8 @@ pub struct BinPartsRef<'a> {
     pub clouds: &'a [BundleCloud],
     /// Every bundle's tets (B).
     pub tets: Vec<&'a [Tet]>,
+    /// The global fit's shape basis where derived ([`BinParts::fit_basis`]).
+    pub fit_basis: Option<&'a Option<ShapeBasis>>,
 }
 
 /// Why parts did not make a model.
@@ -85,6 +91,7 @@ impl Model {
                 .map(|lk| BinPartsRef {
                     clouds: &lk.clouds,
                     tets: lk.indices.iter().map(|i| i.tets()).collect(),
+                    fit_basis: lk.basis.get(),
                 })
                 .collect(),
         }
@@ -113,9 +120,20 @@ impl Model {
         let bundles =
             locate_bundles(dataset.neutral(), &markers_rest, &config).map_err(PartsError::Build)?;
         let mut lookups = Vec::with_capacity(sources.len());
-        for (bin, (source, BinParts { clouds, tets })) in sources.into_iter().zip(bins).enumerate()
-        {
+        for (bin, (source, parts)) in sources.into_iter().zip(bins).enumerate() {
+            let BinParts {
+                clouds,
+                tets,
+                fit_basis,
+            } = parts;
             let ns = source.num_shapes() as u32;
+            if let Some(Some(basis)) = &fit_basis {
+                if basis.shapes.iter().any(|&k| k >= source.num_shapes()) {
+                    return Err(PartsError::Inconsistent(format!(
+                        "bin {bin}: the fit's shape basis names a shape out of range"
+                    )));
+                }
+            }
             if let Some(i) = clouds
                 .iter()
                 .position(|c| c.aliases.iter().flatten().any(|&s| s > ns))
@@ -132,6 +150,7 @@ impl Model {
                 shape_positions,
                 clouds,
                 tets,
+                fit_basis,
             });
         }
         Model::assemble(dataset, jaw, &markers_rest, &config, bundles, lookups)

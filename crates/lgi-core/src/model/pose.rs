@@ -74,7 +74,7 @@ impl RestFit {
     /// and penalty are [`FIT_L2`] and [`FIT_PENALTY`] times the columns' mean squared norm.
     /// Each sum is taken in the order numpy takes it, so poses match the numpy fit this
     /// replaces bit for bit.
-    fn new(model: &Model) -> Result<RestFit> {
+    pub(super) fn new(model: &Model) -> Result<RestFit> {
         let data = &model.dataset;
         let (tris, x0) = (&data.neutral().triangles, &data.neutral().positions);
         let (b, s) = (model.bundles.len(), data.num_shapes());

@@ -20,6 +20,7 @@ impl ModelParts {
                 .map(|b| super::BinPartsRef {
                     clouds: &b.clouds,
                     tets: b.tets.iter().map(|t| t.as_slice()).collect(),
+                    fit_basis: b.fit_basis.as_ref(),
                 })
                 .collect(),
         }
@@ -41,6 +42,7 @@ impl Model {
                 .map(|b| super::BinParts {
                     clouds: b.clouds.to_vec(),
                     tets: b.tets.iter().map(|t| t.to_vec()).collect(),
+                    fit_basis: b.fit_basis.cloned(),
                 })
                 .collect(),
         }

@@ -692,6 +692,7 @@ fn owned_parts(model: &Model) -> ModelParts {
             .map(|b| BinParts {
                 clouds: b.clouds.to_vec(),
                 tets: b.tets.iter().map(|t| t.to_vec()).collect(),
+                fit_basis: b.fit_basis.cloned(),
             })
             .collect(),
     }
@@ -840,11 +841,20 @@ fn a_version_2_file_still_loads_as_an_unbinned_model() {
     let model = jaw_model(&data, &markers, rig, &thetas, None).unwrap();
     let path = std::env::temp_dir().join(format!("lgi-v2-{}.lgi", std::process::id()));
     crate::io::model_file::save(&model, &path).unwrap();
-    // Version 2 is version 4 without its labels section (names, unit, a u64 0 for no
-    // polygons) and the bins section before it (a u64 0 when unbinned).
+    // Version 2 is version 5 without its derived section (the fit's basis per bin: a u64 tag,
+    // 1 for none), its labels section (names, unit, a u64 0 for no polygons) and the bins
+    // section before it (a u64 0 when unbinned).
     let bytes = std::fs::read(&path).unwrap();
+    assert!(matches!(
+        model.parts().bins[..],
+        [BinPartsRef {
+            fit_basis: Some(None),
+            ..
+        }]
+    ));
+    let derived = 8;
     let names: usize = model.marker_names().iter().map(|n| 8 + n.len()).sum();
-    let end = bytes.len() - (8 + names + 8 + model.units().len() + 8);
+    let end = bytes.len() - (8 + names + 8 + model.units().len() + 8) - derived;
     let payload = &bytes[28..end - 8];
     assert_eq!(&bytes[end - 8..end], &[0u8; 8]);
     let mut v2 = bytes[..8].to_vec();

@@ -103,6 +103,15 @@ impl BlendshapeSolver {
         self.rows
     }
 
+    /// What every fit of complete frames would make on first use, made now (the low-rank
+    /// form's whitened rows): a model's build or load does it, not a take's first solve.
+    pub fn derive(&self) -> Result<()> {
+        match &self.low_rank {
+            Some(lr) => lr.whiten(1.0 / (self.l2 + self.penalty)),
+            None => Ok(()),
+        }
+    }
+
     /// The rank of the normal equations' low-rank form, when the solver uses it (a matrix of
     /// rank at most half its shapes, e.g. an augmented dataset's).
     pub fn low_rank(&self) -> Option<usize> {

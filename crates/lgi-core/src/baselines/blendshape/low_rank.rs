@@ -66,6 +66,16 @@ pub(super) struct LowRank {
 }
 
 impl LowRank {
+    /// The complete frames' [`Whitened`] form for a fit with `held` = 1 / (l2 + penalty), made
+    /// now (a model's build or load) rather than by its first complete frame.
+    pub(super) fn whiten(&self, held: f64) -> crate::error::Result<()> {
+        if self.whitened.get().is_none() {
+            let made = Whitened::new(&self.w, &self.wtw, self.rank, self.shapes, held)?;
+            let _ = self.whitened.set(made);
+        }
+        Ok(())
+    }
+
     /// The factors of `A` (R × S row-major) when its numerical rank is low enough to pay,
     /// else `None`. The Gram matrix AᵀA (without the ridge) is given by its diagonal (S) and
     /// `column(p)` (its column p, S): only the pivots' columns are asked for (r of S; the

@@ -84,11 +84,12 @@ fn a_version_3_file_loads_with_default_names_no_unit_and_no_polygons() {
     let path = dir.join("m.lgi");
     save(&model, &path).unwrap();
     let bytes = std::fs::read(&path).unwrap();
-    // A version 3 file is a version 4 payload without its last section (the labels).
+    // A version 3 file is a version 5 payload without its last two sections (the labels and
+    // polygons, then what the build derived).
     let p = model.dataset().polygons().unwrap();
     let names: usize = model.marker_names().iter().map(|n| 8 + n.len()).sum();
     let labels = 8 + names + 8 + 2 + 8 + 3 * 8 + 4 * (p.counts.len() + 2 * p.vertices.len());
-    let payload = &bytes[HEADER..bytes.len() - labels];
+    let payload = &bytes[HEADER..bytes.len() - labels - derived_len(&model)];
     let mut v3 = Vec::new();
     v3.extend_from_slice(MAGIC);
     v3.extend_from_slice(&BINS_VERSION.to_le_bytes());
@@ -104,6 +105,130 @@ fn a_version_3_file_loads_with_default_names_no_unit_and_no_polygons() {
     assert_eq!(back.units(), "");
     assert!(back.dataset().polygons().is_none());
     std::fs::remove_dir_all(&dir).ok();
+}
+
+/// The bytes of version 5's last section (what the build derived, per bin).
+fn derived_len(model: &Model) -> usize {
+    model
+        .parts()
+        .bins
+        .iter()
+        .map(|b| match b.fit_basis {
+            Some(Some(basis)) => {
+                8 + 8 + 4 * basis.shapes.len() + 8 + 8 * basis.coefficients().len()
+            }
+            _ => 8,
+        })
+        .sum()
+}
+
+/// A model whose global fit has low rank and a shape basis: more shapes than the markers' rows
+/// (the fit's low-rank form), the last the sum of the first two.
+fn basis_model() -> Model {
+    let d = crate::model::tests::patch_with(9, 20);
+    let (v, s) = (d.num_vertices(), d.num_shapes());
+    let mut displacements = d.displacements().to_vec();
+    let sum: Vec<f32> = (0..3 * v)
+        .map(|i| displacements[i] + displacements[3 * v + i])
+        .collect();
+    displacements.extend(sum);
+    let mut names = d.names().to_vec();
+    names.push("sum".into());
+    let data = Dataset::new(d.neutral().clone(), displacements, names).unwrap();
+    assert_eq!(data.num_shapes(), s + 1);
+    let markers: Vec<DVec3> = [(0.2, 0.2), (0.8, 0.2), (0.5, 0.5), (0.2, 0.8), (0.8, 0.8)]
+        .iter()
+        .map(|&(u, v)| DVec3::new(u, v, 0.1 * (3.0f64 * u).sin() * (2.0f64 * v).cos()))
+        .collect();
+    Model::build(&data, &markers, &BuildConfig::default()).unwrap()
+}
+
+/// Frames on blends of the dataset's shapes 0 and 1, as `model`'s markers.
+fn blend_frames(model: &Model) -> Vec<Vec<DVec3>> {
+    let d = model.dataset();
+    [0.0, 0.3, 0.7, 1.0]
+        .iter()
+        .map(|&t| {
+            let mesh: Vec<DVec3> = (0..d.num_vertices())
+                .map(|v| {
+                    d.neutral().positions[v]
+                        + d.displacement(0, v) * t
+                        + d.displacement(1, v) * (1.0 - t)
+                })
+                .collect();
+            model.bundle_positions(&mesh).unwrap()
+        })
+        .collect()
+}
+
+/// Every vertex's bits of a noise-aware solve (the global fit sewn over its shape basis).
+fn noise_aware_bits(model: &Model, frames: &[Vec<DVec3>]) -> Vec<u64> {
+    let options = crate::model::SolveOptions::new(false, 0, Some(true), Some(0.01));
+    crate::model::tests::solve_with(model, frames, &options, None)
+        .unwrap()
+        .iter()
+        .flat_map(|f| {
+            f.vertices
+                .iter()
+                .flat_map(|p| [p.x.to_bits(), p.y.to_bits(), p.z.to_bits()])
+        })
+        .collect()
+}
+
+#[test]
+fn the_fit_basis_is_derived_at_build_saved_and_loaded_bit_for_bit() {
+    let model = basis_model();
+    let derived = model.parts().bins[0].fit_basis.cloned();
+    let Some(Some(basis)) = derived else {
+        panic!("the build derived no shape basis: {derived:?}");
+    };
+    assert!(basis.shapes.len() < model.dataset().num_shapes());
+    let back = from_bytes(&to_bytes(&model)).unwrap();
+    let loaded = back.parts().bins[0].fit_basis.cloned().flatten().unwrap();
+    assert_eq!(loaded.shapes, basis.shapes);
+    assert_eq!(loaded.coefficients(), basis.coefficients());
+    let frames = blend_frames(&model);
+    assert_eq!(
+        noise_aware_bits(&back, &frames),
+        noise_aware_bits(&model, &frames)
+    );
+}
+
+#[test]
+fn a_version_4_file_loads_and_derives_the_fit_basis_at_load_to_the_same_bits() {
+    let model = basis_model();
+    let bytes = to_bytes(&model);
+    let payload = &bytes[HEADER..bytes.len() - derived_len(&model)];
+    let mut v4 = Vec::new();
+    v4.extend_from_slice(MAGIC);
+    v4.extend_from_slice(&4u32.to_le_bytes());
+    v4.extend_from_slice(&(payload.len() as u64).to_le_bytes());
+    v4.extend_from_slice(&checksum(payload).to_le_bytes());
+    v4.extend_from_slice(payload);
+    // A version 4 file saves no basis: the load derives it (not a take's first solve), and
+    // saves it from then on.
+    let back = from_bytes(&v4).unwrap();
+    assert!(matches!(back.parts().bins[0].fit_basis, Some(Some(_))));
+    let frames = blend_frames(&model);
+    assert_eq!(
+        noise_aware_bits(&back, &frames),
+        noise_aware_bits(&model, &frames)
+    );
+    assert_eq!(to_bytes(&back), bytes);
+}
+
+#[test]
+fn a_saved_fit_basis_that_is_not_one_is_a_format_error() {
+    let model = basis_model();
+    let mut bytes = to_bytes(&model);
+    // The first basis shape index (after the bin's tag and the indices' length) out of range.
+    let at = bytes.len() - derived_len(&model) + 16;
+    bytes[at..at + 4].copy_from_slice(&u32::MAX.to_le_bytes());
+    let n = bytes.len();
+    let sum = checksum(&bytes[HEADER..n]);
+    bytes[20..28].copy_from_slice(&sum.to_le_bytes());
+    let err = from_bytes(&bytes).unwrap_err().to_string();
+    assert!(err.contains("fit's shape basis"), "{err}");
 }
 
 #[test]

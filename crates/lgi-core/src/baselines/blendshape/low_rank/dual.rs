@@ -17,6 +17,18 @@ pub(super) struct Whitened {
     z: Vec<f64>,
 }
 
+impl Whitened {
+    /// The form of `w` (S × r row-major, S = `shapes`) with `wtw` = WᵀW.
+    pub(super) fn new(w: &[f64], wtw: &[f64], r: usize, shapes: usize, held: f64) -> Result<Self> {
+        let l = held_factor(wtw, r, held)?;
+        let mut z = vec![0.0; w.len()];
+        for i in 0..shapes {
+            z[i * r..(i + 1) * r].copy_from_slice(&lower_solve(r, &l, &w[i * r..(i + 1) * r]));
+        }
+        Ok(Whitened { l, z })
+    }
+}
+
 /// The Cholesky factor of `I + held WᵀW`.
 fn held_factor(wtw: &[f64], r: usize, held: f64) -> Result<Vec<f64>> {
     let mut b: Vec<f64> = wtw.iter().map(|x| x * held).collect();
@@ -232,12 +244,7 @@ impl Frame<'_> {
         let whole = match self.whitened {
             Some(cell) => {
                 if cell.get().is_none() {
-                    let l = held_factor(&self.wtw, r, held)?;
-                    let mut z = vec![0.0; self.w.len()];
-                    for i in 0..self.shapes {
-                        z[i * r..(i + 1) * r].copy_from_slice(&lower_solve(r, &l, row(i)));
-                    }
-                    let _ = cell.set(Whitened { l, z });
+                    let _ = cell.set(Whitened::new(&self.w, &self.wtw, r, self.shapes, held)?);
                 }
                 cell.get()
             }
