@@ -11,7 +11,13 @@ timed). The calls (`--calls`): exact (no option), `--marker-noise auto` (sigma),
 (`--formats usd pc2 npz`).
 
     python scripts/bench_calls.py [--dataset ict|scans] [--calls exact sigma recommended denoise]
-                                  [--formats pc2] [--reps 3] [--frames 1200]
+                                  [--formats pc2] [--reps 3] [--frames 1200] [--stages]
+
+`--stages`: each call once more in a process of its own, its stages timed (wall seconds, from
+wrappers around the pipeline's functions) with the process's peak RSS as each stage ends: the
+take read, the plan's readings (noise, denoising, the fits' choice, the take prior, the detail
+weight), the solve (gaps filled, the core's solve, the local fits' surface or detail blend, the
+steady pass), the faults looked for and repaired, and the output written.
 
 Needs ../shared/data beside the checkout (or $LGI_SHARED_DATA). Prints a markdown table."""
 
@@ -73,13 +79,107 @@ def run(argv: list[str]) -> tuple[float, float]:
     return seconds, usage.ru_maxrss / 2**20  # KiB on Linux
 
 
+STAGES = [
+    ("read the take", "lgi.app.pipeline", "read_take"),
+    ("plan: noise", "lgi.plan.choices", "marker_noise"),
+    ("plan: denoise", "lgi.plan.choices", "take_denoised"),
+    ("plan: fits' choice (local fits, box)", "lgi.plan.choices", "fits_choice"),
+    ("plan: take prior", "lgi.plan.choices", "take_prior_choice"),
+    ("plan: detail weight", "lgi.plan.choices", "detail_weight"),
+    ("solve: gaps filled", "lgi.solve.model", "Model._gaps_filled"),
+    ("solve: local fits / detail", "lgi.solve.model", "Model._finish"),
+    ("solve: steady", "lgi.solve.model", "steadied"),
+    ("solve and repair (all; core = the rest)", "lgi.app.pipeline", "solve_take"),
+    ("write", "lgi.app.pipeline", "write_solved"),
+]
+"""(stage, module, function): the `solve:` stages count only within `solve_take` (the readings
+solve their left-out rows with the same functions)."""
+
+
+def staged(argv: list[str]) -> None:
+    """Runs `lgi` with `argv` in this process, each of `STAGES` timed, and prints one JSON
+    line: stage -> [seconds, calls, peak RSS GiB when it last ended]."""
+    import importlib
+    import json
+    import resource
+
+    spent: dict[str, list[float]] = {}
+    final = [False]  # within solve_take
+
+    def wrapped(name: str, fn):  # type: ignore[no-untyped-def]
+        outer = fn.__name__ == "solve_take"
+
+        def timed(*args, **kw):  # type: ignore[no-untyped-def]
+            if name.startswith("solve:") and not final[0]:
+                return fn(*args, **kw)
+            final[0] = final[0] or outer
+            t0 = time.perf_counter()
+            try:
+                return fn(*args, **kw)
+            finally:
+                final[0] = final[0] and not outer
+                got = spent.setdefault(name, [0.0, 0, 0.0])
+                got[0] += time.perf_counter() - t0
+                got[1] += 1
+                got[2] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2**20
+
+        return timed
+
+    for name, module, attr in STAGES:
+        owner = importlib.import_module(module)
+        *path, leaf = attr.split(".")
+        for part in path:
+            owner = getattr(owner, part)
+        setattr(owner, leaf, wrapped(name, getattr(owner, leaf)))
+    from lgi.app.main import entry
+
+    sys.argv = ["lgi", *argv]
+    t0 = time.perf_counter()
+    try:
+        entry()
+    except SystemExit as e:
+        if e.code not in (0, None):
+            raise
+    spent["whole process (after imports)"] = [time.perf_counter() - t0, 1, 0.0]
+    print(json.dumps(spent))
+
+
+def stage_table(lgi_cmd: list[str], argv_of: dict[str, list[str]]) -> None:
+    """Each call's stages (`staged`, a process each), as a markdown table."""
+    import json
+
+    rows: dict[str, dict[str, list[float]]] = {}
+    for call, argv in argv_of.items():
+        out = subprocess.run(
+            [*lgi_cmd[:1], __file__, "--run-staged", *argv], capture_output=True, text=True
+        )
+        if out.returncode != 0:
+            raise SystemExit(f"stages of {call} failed:\n{out.stderr}")
+        rows[call] = json.loads(out.stdout.strip().splitlines()[-1])
+    calls = list(rows)
+    print("\n| stage | " + " | ".join(calls) + " |")
+    print("|---|" + "---|" * len(calls))
+    names = [n for n, _, _ in STAGES] + ["whole process (after imports)"]
+    for n in names:
+        cells = []
+        for c in calls:
+            got = rows[c].get(n)
+            cells.append("-" if got is None else f"{got[0]:.2f} s" + (
+                f" ({got[2]:.2f} GiB)" if got[2] else ""))
+        print(f"| {n} | " + " | ".join(cells) + " |")
+
+
 def main() -> None:
+    if len(sys.argv) > 1 and sys.argv[1] == "--run-staged":
+        staged(sys.argv[2:])
+        return
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
     ap.add_argument("--dataset", choices=["ict", "scans"], default="ict")
     ap.add_argument("--calls", nargs="+", choices=list(CALLS), default=list(CALLS))
     ap.add_argument("--formats", nargs="+", choices=list(SUFFIX), default=["pc2"])
     ap.add_argument("--reps", type=int, default=3)
     ap.add_argument("--frames", type=int, default=1200)
+    ap.add_argument("--stages", action="store_true")
     args = ap.parse_args()
     lgi_cmd = [sys.executable, "-m", "lgi.app.main"]
     with tempfile.TemporaryDirectory() as tmp:
@@ -105,6 +205,13 @@ def main() -> None:
             f"| {call} | {fmt} | {med:.1f} s ({min(wall):.1f}-{max(wall):.1f}) | "
             f"{1000 * med / frames:.1f} ms | {statistics.median(rss):.2f} GiB |"
         )
+    if args.stages:
+        with tempfile.TemporaryDirectory() as tmp:
+            folder = Path(tmp)
+            model, take = prepare(folder, args.dataset, args.frames)
+            out = folder / "out.pc2"
+            base = ["solve", str(model), str(take), "-o", str(out), "-q", "--force"]
+            stage_table(lgi_cmd, {c: [*base, *CALLS[c]] for c in args.calls})
 
 
 if __name__ == "__main__":

@@ -41,7 +41,8 @@ if TYPE_CHECKING:
     from lgi.plan.detail import estimate_detail_weight
     from lgi.plan.local import LocalFitsEstimate, estimate_local_fits
     from lgi.plan.noise import estimate_marker_noise
-    from lgi.plan.take_prior import TakePriorEstimate, estimate_take_prior, estimate_take_prior_use
+    from lgi.plan.take_prior import estimate_take_prior
+    from lgi.plan.take_prior_use import TakePriorEstimate, estimate_take_prior_use
     from lgi.plan.unbounded import UnboundedFitEstimate, estimate_unbounded_fit
     from lgi.solve import jaw, rig
     from lgi.solve.model import BuildConfig, Model
@@ -98,7 +99,7 @@ _FACES = {
     "SolvePlan": "lgi.plan.choices",
     "SolveResult": "lgi._lgi",
     "TakePrior": "lgi.solve.take_prior",
-    "TakePriorEstimate": "lgi.plan.take_prior",
+    "TakePriorEstimate": "lgi.plan.take_prior_use",
     "UnboundedFitEstimate": "lgi.plan.unbounded",
     "__version__": "lgi._lgi",
     "denoise_take": "lgi.plan.denoise",
@@ -106,7 +107,7 @@ _FACES = {
     "estimate_local_fits": "lgi.plan.local",
     "estimate_marker_noise": "lgi.plan.noise",
     "estimate_take_prior": "lgi.plan.take_prior",
-    "estimate_take_prior_use": "lgi.plan.take_prior",
+    "estimate_take_prior_use": "lgi.plan.take_prior_use",
     "estimate_unbounded_fit": "lgi.plan.unbounded",
     "get_num_threads": "lgi._lgi",
     "plan_solve": "lgi.plan.choices",

@@ -165,7 +165,8 @@ def solve_take(
     repaired (`lgi.solve.repair`), said in one line each, and the repaired take planned and
     solved again, its settings recording the repairs. Returns what was solved, its result
     and, where they were read (a solve with repair that found no fault), that result's
-    findings; None otherwise (the take given is never touched)."""
+    findings; None otherwise (the take given is never touched). The repaired take is solved
+    with the first plan's choices (`SolvePlan.chosen`), denoised again where it was."""
     # The pipeline repairs itself (against the given markers, the take planned again).
     res = m.solve(
         planned.plan.frames, quiet=quiet, options=planned.plan.options.replace(repair=False)
@@ -177,7 +178,8 @@ def solve_take(
     if not faults:
         return planned, res, found
     x, _, done = repaired(planned.given, faults, m.marker_names)
-    again = plan_take(x, m, options)
+    # The repaired take keeps the plan's choices: its readings are not made a second time.
+    again = plan_take(x, m, planned.plan.chosen(options))
     settings = dataclasses.replace(again.settings, repairs=done)
     for line in settings.repair_lines(start):
         say(f"repaired: {line}")

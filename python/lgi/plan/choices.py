@@ -20,7 +20,8 @@ from lgi.plan.detail import estimate_detail_weight
 from lgi.plan.local import estimate_local_fits
 from lgi.plan.noise import estimate_marker_noise
 from lgi.plan.readings import TakeReadings
-from lgi.plan.take_prior import estimate_take_prior, estimate_take_prior_use
+from lgi.plan.take_prior import estimate_take_prior
+from lgi.plan.take_prior_use import estimate_take_prior_use
 from lgi.plan.unbounded import estimate_unbounded_fit
 from lgi.solve.model import Model
 from lgi.solve.options import AUTO, NONE, UNBOUNDED, SolveOptions
@@ -338,6 +339,22 @@ class SolvePlan:
             f"noise {noise}; fit {'unbounded' if self.unbounded_fit else 'boxed'}; local fits "
             f"{local}; take prior {'yes' if self.take_prior is not None else 'no'}; detail "
             f"weight {'-' if self.detail_weight is None else f'{self.detail_weight:.3f}'}"
+        )
+
+    def chosen(self, options: SolveOptions) -> SolveOptions:
+        """`options` with every reading's answer of this plan given: what solves another
+        version of the same take (its marker faults repaired) as this plan chose, without
+        reading the take's left-out markers again. What is read from the markers themselves is
+        made again from the new ones: the take denoised, and the take prior where one is used.
+        The noise is the one read (a repaired sample changes it by a fraction of itself)."""
+        return options.replace(
+            recommended=False,
+            marker_noise=self.given_noise,
+            denoise=self.denoised is not None,
+            fit=self.options.fit,
+            local_fits=self.local_fits,
+            take_prior=self.take_prior is not None,
+            detail_weight=self.detail_weight,
         )
 
     def settings(self, *, has_jaw_rig: bool) -> SolveSettings:
