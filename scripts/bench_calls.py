@@ -164,8 +164,11 @@ def stage_table(lgi_cmd: list[str], argv_of: dict[str, list[str]]) -> None:
         cells = []
         for c in calls:
             got = rows[c].get(n)
-            cells.append("-" if got is None else f"{got[0]:.2f} s" + (
-                f" ({got[2]:.2f} GiB)" if got[2] else ""))
+            cells.append(
+                "-"
+                if got is None
+                else f"{got[0]:.2f} s" + (f" ({got[2]:.2f} GiB)" if got[2] else "")
+            )
         print(f"| {n} | " + " | ".join(cells) + " |")
 
 
