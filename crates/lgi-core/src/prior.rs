@@ -178,16 +178,24 @@ impl FitPrior {
         })
     }
 
+    /// Whether [`FitPrior::derive`] has made what it makes (the tests' check).
+    #[cfg(test)]
+    pub(crate) fn is_derived(&self) -> bool {
+        self.gram.get().is_some() && self.unbounded.get().is_some()
+    }
+
     /// What the fit's first uses would make (the boxed solver's whitened form, the unbounded
-    /// solver), made now: a model's build or load does it, not a take's first solve. A
-    /// failure is left to the solve that meets it, whose error names the frame.
+    /// solver, the displacements' Gram matrix of complete frames' residuals), made now: a
+    /// model's build or load does it, not a take's first solve. A failure is left to the
+    /// solve that meets it, whose error names the frame.
     pub fn derive(&self) {
         rayon::join(
             || {
                 let _ = self.solver.derive();
+                let _ = self.unbounded_solver();
             },
             || {
-                let _ = self.unbounded_solver();
+                self.gram.get_or_init(|| self.whole_gram());
             },
         );
     }

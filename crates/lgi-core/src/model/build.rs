@@ -96,7 +96,7 @@ impl Model {
                 })
             },
             || match (&self.jaw, self.rest_fit.get()) {
-                (Some(_), None) => super::pose::RestFit::new(self).ok(),
+                (Some(_), None) => super::pose::RestFit::derived(self).ok(),
                 _ => None,
             },
         );

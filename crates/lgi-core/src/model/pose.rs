@@ -69,6 +69,14 @@ pub(super) struct RestFit {
 }
 
 impl RestFit {
+    /// The fit made with its solver's factors ([`BlendshapeSolver::derive`]): what a model's
+    /// build or load keeps, so that a take's first pose costs what its next does.
+    pub(super) fn derived(model: &Model) -> Result<RestFit> {
+        let fit = RestFit::new(model)?;
+        fit.solver.derive()?;
+        Ok(fit)
+    }
+
     /// The matrix's column k is shape k's displacement of the bundles (`x0 + s_k` evaluated
     /// at the bundles, minus the neutral's), row `3i + c` coordinate c of bundle i; the ridge
     /// and penalty are [`FIT_L2`] and [`FIT_PENALTY`] times the columns' mean squared norm.

@@ -1150,3 +1150,31 @@ fn on_the_ict_face_plans_from_kept_rows_match_plans_derived_from_the_full_plan()
         model.sewing.space().sewn().count()
     );
 }
+
+#[test]
+fn a_built_or_loaded_model_has_derived_what_a_first_solve_would() {
+    let (data, rig, thetas, markers) = jaw_patch();
+    let model = jaw_model(&data, &markers, rig, &thetas, None).unwrap();
+    let loaded =
+        crate::io::model_file::from_bytes(&crate::io::model_file::to_bytes(&model)).unwrap();
+    for m in [&model, &loaded] {
+        assert!(
+            m.rest_fit.get().is_some(),
+            "the rest fit a pose from the fit starts from"
+        );
+        for lk in &m.lookups {
+            assert!(
+                lk.basis.get().is_some(),
+                "the fit's shape basis (or that there is none)"
+            );
+            assert!(
+                lk.spans.get().is_some(),
+                "the shapes' spans per blend block"
+            );
+            assert!(
+                lk.prior.as_ref().is_some_and(|p| p.is_derived()),
+                "the fit's factors"
+            );
+        }
+    }
+}
