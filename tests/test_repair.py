@@ -159,36 +159,3 @@ def test_model_solve_repairs_a_swap_and_a_spike_and_says_what_it_repaired(
     assert next(sample_model.solve_iter(x, chunk=50, marker_noise=0.02, quiet=True)).repairs is None
     with pytest.raises(lgi.InputError, match="repair must be True or False"):
         sample_model.solve(x, repair="yes", quiet=True)  # type: ignore[arg-type]
-
-
-def test_a_repaired_recommended_take_is_planned_once_and_keeps_the_plans_choices(
-    takes, tmp_path: Path, capsys, monkeypatch: pytest.MonkeyPatch
-) -> None:  # type: ignore[no-untyped-def]
-    """`--recommended` on a faulty take: every reading is made once (on the take as given),
-    the repaired take is solved with the same choices (its settings say so) and denoised
-    again from its repaired markers."""
-    from lgi.plan import choices
-
-    model, paths, _, _ = takes
-    reads: list[str] = []
-    for name in ("fits_choice", "take_prior_choice", "marker_noise", "take_denoised"):
-        real = getattr(choices, name)
-
-        def counted(*args, _real=real, _name=name, **kw):  # type: ignore[no-untyped-def]
-            reads.append(f"{_name}:{args[0]!r}")
-            return _real(*args, **kw)
-
-        monkeypatch.setattr(choices, name, counted)
-    out = tmp_path / "fixed.npz"
-    argv = ["solve", str(model), str(paths["faulty"]), "-o", str(out), "--recommended"]
-    assert cli.main(argv) == 0
-    said = capsys.readouterr().err
-    assert "repaired: " in said and "solved again" in said, said
-    auto = [r for r in reads if r.endswith("'auto'")]
-    # Each reading once, on the take as given; the repaired take's plan reads nothing.
-    assert sorted(auto) == sorted(set(auto)), reads
-    assert reads.count("take_denoised:'auto'") == 1
-    assert any(r.startswith("take_denoised:True") for r in reads), reads  # denoised again
-    fixed = read_result_npz(out)
-    assert fixed.settings is not None and fixed.settings.repairs
-    assert fixed.settings.denoised_from is not None  # denoised, as the plan chose

@@ -341,22 +341,6 @@ class SolvePlan:
             f"weight {'-' if self.detail_weight is None else f'{self.detail_weight:.3f}'}"
         )
 
-    def chosen(self, options: SolveOptions) -> SolveOptions:
-        """`options` with every reading's answer of this plan given: what solves another
-        version of the same take (its marker faults repaired) as this plan chose, without
-        reading the take's left-out markers again. What is read from the markers themselves is
-        made again from the new ones: the take denoised, and the take prior where one is used.
-        The noise is the one read (a repaired sample changes it by a fraction of itself)."""
-        return options.replace(
-            recommended=False,
-            marker_noise=self.given_noise,
-            denoise=self.denoised is not None,
-            fit=self.options.fit,
-            local_fits=self.local_fits,
-            take_prior=self.take_prior is not None,
-            detail_weight=self.detail_weight,
-        )
-
     def settings(self, *, has_jaw_rig: bool) -> SolveSettings:
         """The settings a solve of this plan records in its output."""
         return SolveSettings.of(
