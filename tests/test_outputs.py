@@ -72,13 +72,12 @@ def test_a_write_interrupted_mid_way_leaves_nothing_at_the_final_path(
 def test_an_npz_whose_bytes_stop_half_way_is_not_left_at_the_final_path(
     files, tmp_path: Path, monkeypatch, capsys
 ) -> None:  # type: ignore[no-untyped-def]
-    import lgi.io.result as result_module
-
-    def half_then_interrupt(fh, **arrays):  # type: ignore[no-untyped-def]
-        fh.write(b"PK\x03\x04" + b"\0" * 1000)  # the start of a zip, then Ctrl-C
+    def half_then_interrupt(fh, array, **kw):  # type: ignore[no-untyped-def]
+        # The vertices are in the zip, the first small array half written: then Ctrl-C.
+        fh.write(b"\x93NUMPY" + b"\0" * 100)
         raise KeyboardInterrupt
 
-    monkeypatch.setattr(result_module.np, "savez", half_then_interrupt)
+    monkeypatch.setattr(np.lib.format, "write_array", half_then_interrupt)
     out = tmp_path / "take.npz"
     assert _solve(files, out) == 130
     assert not out.exists() and _leftovers(tmp_path) == []
@@ -266,3 +265,26 @@ def test_a_solved_npz_is_stored_not_deflated_and_streams_back_frame_by_frame(
     streamed, wait = stream_result_npz(out)
     wait(40)
     np.testing.assert_array_equal(streamed.vertices, v.astype(np.float32))
+
+
+def test_a_solved_npz_written_from_chunks_is_the_one_written_whole_and_numpy_reads_it(
+    tmp_path: Path,
+) -> None:
+    """`lgi solve` hands the npz writer its float32 chunks (no whole-take copy): the file must
+    hold the same arrays as one written from the whole take, and numpy's own `np.load` must
+    read it."""
+    from lgi.io.result import read_result_npz, write_result_npz
+    from lgi.io.topology import Topology
+
+    rng = np.random.default_rng(1)
+    v = rng.normal(size=(23, 5, 3)).astype(np.float32)
+    topo = Topology(5, np.array([3, 3]), np.array([0, 1, 2, 2, 3, 4]), None, None)
+    rest = (np.zeros((23, 2)), np.zeros((23, 2), bool), ["a", "b"])
+    whole = write_result_npz(tmp_path / "whole.npz", topo, v, *rest, fps=30.0)
+    parts = write_result_npz(tmp_path / "parts.npz", topo, [v[:7], v[7:8], v[8:]], *rest, fps=30.0)
+    a, b = np.load(whole), np.load(parts)
+    assert a.files == b.files and a.files[0] == "vertices"
+    for name in a.files:
+        np.testing.assert_array_equal(a[name], b[name])
+    assert b["vertices"].dtype == np.float32 and b["vertices"].shape == (23, 5, 3)
+    np.testing.assert_array_equal(read_result_npz(parts).vertices, v)

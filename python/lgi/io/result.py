@@ -99,11 +99,14 @@ def write_result_npz(
     markers: Any | None = None,
     settings: SolveSettings | None = None,
 ) -> Path:
-    """Writes a solved take (`RESULT_NPZ_KEYS`) that `read_result_npz` and `lgi export` read."""
+    """Writes a solved take (`RESULT_NPZ_KEYS`) that `read_result_npz` and `lgi export` read.
+    `vertices`: (F, V, 3), or a list of such chunks in order (`lgi solve`'s, written one after
+    another into the file: no whole-take copy is made)."""
     p = output_file(path, "npz output")
-    v = vertex_frames(vertices, topo.num_vertices, "write_result_npz")
+    chunks = list(vertices) if isinstance(vertices, list) else [vertices]
+    frames = [vertex_frames(c, topo.num_vertices, "write_result_npz") for c in chunks]
+    count = sum(int(c.shape[0]) for c in frames)
     arrays: dict[str, Any] = {
-        "vertices": v.astype(np.float32),
         "bundle_residuals": np.asarray(bundle_residuals, dtype=np.float64),
         "missing": np.asarray(missing, dtype=bool),
         "marker_names": np.array(marker_names, dtype=str),
@@ -119,19 +122,31 @@ def write_result_npz(
         arrays["jaw_theta"] = np.asarray(jaw_theta, dtype=np.float64)
     if markers is not None:
         mk = np.asarray(markers, dtype=np.float32)
-        if mk.shape != (v.shape[0], len(marker_names), 3):
+        if mk.shape != (count, len(marker_names), 3):
             raise InputError(
-                f"write_result_npz: markers must be (F, B, 3) = ({v.shape[0]}, "
+                f"write_result_npz: markers must be (F, B, 3) = ({count}, "
                 f"{len(marker_names)}, 3), got {mk.shape}"
             )
         arrays["markers"] = mk
     if settings is not None:
         arrays["solve_settings"] = np.str_(settings.to_json())
-    # A file object: numpy would append '.npz' to another suffix. Stored, not deflated:
+    # The layout np.savez writes (a zip of .npy members, vertices first), stored, not deflated:
     # deflate saves about a tenth of a solve's size at several times the write's time
     # (docs/performance.md), and stored members still read in order (`stream_result_npz`).
-    with atomic_path(p) as tmp, open(tmp, "wb") as fh:
-        np.savez(fh, **arrays)
+    # The vertices go in chunk by chunk as float32, each chunk converted on its own.
+    header = {
+        "descr": np.lib.format.dtype_to_descr(np.dtype("<f4")),
+        "fortran_order": False,
+        "shape": (count, topo.num_vertices, 3),
+    }
+    with atomic_path(p) as tmp, zipfile.ZipFile(tmp, "w", zipfile.ZIP_STORED) as zf:
+        with zf.open("vertices.npy", "w", force_zip64=True) as fh:
+            np.lib.format.write_array_header_1_0(fh, header)
+            for c in frames:
+                fh.write(np.ascontiguousarray(c, dtype="<f4").data)
+        for name, value in arrays.items():
+            with zf.open(f"{name}.npy", "w", force_zip64=True) as fh:
+                np.lib.format.write_array(fh, np.asanyarray(value), allow_pickle=False)
     return p
 
 

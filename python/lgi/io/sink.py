@@ -129,7 +129,7 @@ class FrameSink:
         return write_result_npz(
             self.out,
             self.topo,
-            np.concatenate([p[0] for p in self.parts]),
+            [p[0] for p in self.parts],
             np.concatenate([p[1] for p in self.parts]),
             np.concatenate([p[2] for p in self.parts]),
             self.names,
