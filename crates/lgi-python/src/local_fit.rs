@@ -6,7 +6,6 @@ use crate::error::PyLgiError;
 use crate::threads;
 use glam::DVec3;
 use lgi_core::LocalFits as CoreLocal;
-use numpy::PyArrayMethods;
 use numpy::{
     PyArrayDyn, PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArray3, PyUntypedArrayMethods,
 };
@@ -92,6 +91,15 @@ impl LocalFits {
     }
 }
 
+/// An int64 index array as `usize`s; `what` names it in the error for a negative one.
+fn indices_of(a: &PyReadonlyArray1<'_, i64>, what: &str) -> PyResult<Vec<usize>> {
+    a.as_array()
+        .iter()
+        .map(|&i| usize::try_from(i))
+        .collect::<Result<_, _>>()
+        .map_err(|_| crate::error::input_error(format!("{what}: a negative index")))
+}
+
 /// A shape basis: the basis shapes' indices (q,) and every shape's coefficients (S, q).
 type Basis<'py> = (Bound<'py, PyArrayDyn<i64>>, Bound<'py, PyArrayDyn<f64>>);
 
@@ -148,15 +156,8 @@ pub fn blend_local<'py>(
     let flat = shapes
         .as_slice()
         .map_err(|_| crate::error::input_error("blend_local: shapes must be C-contiguous"))?;
-    let to_usize = |a: &PyReadonlyArray1<'py, i64>, name: &str| -> PyResult<Vec<usize>> {
-        a.as_array()
-            .iter()
-            .map(|&i| usize::try_from(i))
-            .collect::<Result<_, _>>()
-            .map_err(|_| crate::error::input_error(format!("blend_local: negative {name}")))
-    };
-    let indptr = to_usize(&indptr, "indptr")?;
-    let indices = to_usize(&indices, "indices")?;
+    let indptr = indices_of(&indptr, "blend_local: indptr")?;
+    let indices = indices_of(&indices, "blend_local: indices")?;
     let data: Vec<f64> = data.as_array().iter().copied().collect();
     let w = float_array(weights, "weights", &[None, None, Some(q)])?;
     let (f, b) = (w.shape()[0], w.shape()[1]);
@@ -232,18 +233,11 @@ impl LocalSurface {
                 shapes.shape()
             )));
         }
-        let to_usize = |a: &PyReadonlyArray1<'py, i64>, name: &str| -> PyResult<Vec<usize>> {
-            a.as_array()
-                .iter()
-                .map(|&i| usize::try_from(i))
-                .collect::<Result<_, _>>()
-                .map_err(|_| crate::error::input_error(format!("LocalSurface: negative {name}")))
-        };
         let surface = LocalSurface {
             shapes: shapes.as_array().iter().copied().collect(),
             q,
-            indptr: to_usize(&indptr, "indptr")?,
-            indices: to_usize(&indices, "indices")?,
+            indptr: indices_of(&indptr, "LocalSurface: indptr")?,
+            indices: indices_of(&indices, "LocalSurface: indices")?,
             data: data.as_array().iter().copied().collect(),
             rig,
             corrective,
@@ -292,19 +286,6 @@ impl LocalSurface {
             _ => None,
         };
         let arr = crate::solve_args::output_array(out, [f, v, 3])?;
-        let mut rw = arr.try_readwrite().map_err(|e| {
-            crate::error::input_error(format!(
-                "out: the array is not writeable (read-only, or borrowed elsewhere): {e}"
-            ))
-        })?;
-        let flat = rw.as_slice_mut().map_err(|e| {
-            crate::error::input_error(format!("out: the array must be C-contiguous: {e}"))
-        })?;
-        let out: &mut [DVec3] = bytemuck::try_cast_slice_mut(flat).map_err(|e| {
-            crate::error::input_error(format!(
-                "out: the array's memory must be aligned to 8 bytes (a fresh np.empty is): {e}"
-            ))
-        })?;
         let rig = self.rig.as_ref().map(|r| &r.get().inner);
         let rbf = &self.corrective.get().inner;
         let sewing = lgi_core::SewingRows {
@@ -341,13 +322,15 @@ impl LocalSurface {
             }
             model.bundle_positions(o)
         };
-        let positions = threads::detach(py, || {
-            out.par_chunks_mut(v)
-                .enumerate()
-                .map(|(k, o)| frame(k, o))
-                .collect::<lgi_core::Result<Vec<Vec<DVec3>>>>()
-        })
-        .map_err(PyLgiError)?;
+        let positions = crate::solve_args::with_points_mut(&arr, |out| {
+            threads::detach(py, || {
+                out.par_chunks_mut(v)
+                    .enumerate()
+                    .map(|(k, o)| frame(k, o))
+                    .collect::<lgi_core::Result<Vec<Vec<DVec3>>>>()
+            })
+            .map_err(|e| PyLgiError(e).into())
+        })?;
         let flat: Vec<f64> = positions
             .iter()
             .flatten()

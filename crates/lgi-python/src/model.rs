@@ -12,7 +12,7 @@ use crate::solve_args;
 use crate::threads;
 use glam::{DMat3, DVec3};
 use lgi_core::{JawBins, JawInput, JawParams, JawRig as CoreRig, Model as CoreModel, SolveOptions};
-use numpy::{PyArray3, PyArrayDyn, PyArrayMethods};
+use numpy::{PyArray3, PyArrayDyn};
 use pyo3::prelude::*;
 use pyo3::types::{PyBytes, PyDict};
 use std::sync::Arc;
@@ -239,25 +239,12 @@ impl Model {
             None => PyArray3::<f64>::zeros(py, [nf, nv, 3], false),
             Some(o) => solve_args::output_array(o, [nf, nv, 3])?,
         };
-        let solved = {
-            let mut rw = vertices.try_readwrite().map_err(|e| {
-                input_error(format!(
-                    "out: the array is not writeable (read-only, or borrowed elsewhere): {e}"
-                ))
-            })?;
-            let flat = rw
-                .as_slice_mut()
-                .map_err(|e| input_error(format!("out: the array must be C-contiguous: {e}")))?;
-            let out: &mut [DVec3] = bytemuck::try_cast_slice_mut(flat).map_err(|e| {
-                input_error(format!(
-                    "out: the array's memory must be aligned to 8 bytes (a fresh np.empty is): {e}"
-                ))
-            })?;
+        let solved = solve_args::with_points_mut(&vertices, |out| {
             let model = self.inner.clone();
             solve_watching(py, progress.as_ref(), |on_frame| {
                 model.solve(&frames, &options, previous.as_ref(), out, on_frame)
-            })?
-        };
+            })
+        })?;
         let ns = self.inner.dataset().num_shapes();
         result::pack(py, &solved, vertices, b, ns)
     }

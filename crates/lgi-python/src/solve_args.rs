@@ -121,6 +121,29 @@ pub fn output_array<'py>(
     Ok(arr.clone())
 }
 
+/// Runs `work` on `arr`'s memory (an `output_array`) as points: borrowed writeable for the
+/// call, errors in our words for a read-only, non-contiguous or misaligned array.
+pub fn with_points_mut<T>(
+    arr: &Bound<'_, PyArray3<f64>>,
+    work: impl FnOnce(&mut [glam::DVec3]) -> PyResult<T>,
+) -> PyResult<T> {
+    use numpy::PyArrayMethods;
+    let mut rw = arr.try_readwrite().map_err(|e| {
+        input_error(format!(
+            "out: the array is not writeable (read-only, or borrowed elsewhere): {e}"
+        ))
+    })?;
+    let flat = rw
+        .as_slice_mut()
+        .map_err(|e| input_error(format!("out: the array must be C-contiguous: {e}")))?;
+    let points: &mut [glam::DVec3] = bytemuck::try_cast_slice_mut(flat).map_err(|e| {
+        input_error(format!(
+            "out: the array's memory must be aligned to 8 bytes (a fresh np.empty is): {e}"
+        ))
+    })?;
+    work(points)
+}
+
 /// `take_prior`: None, or `(mean (S,), factor (S, q), noise_variance)` (`lgi.TakePrior`'s
 /// arrays), checked by the core.
 pub fn take_prior(obj: &Bound<'_, PyAny>) -> PyResult<Option<Arc<TakePrior>>> {

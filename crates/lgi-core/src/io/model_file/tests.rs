@@ -246,20 +246,7 @@ fn to_bytes_are_the_file_and_from_bytes_solves_bit_identically() {
     assert_eq!(back.units(), model.units());
     assert_eq!(to_bytes(&back), bytes);
     // Frames between the dataset's shapes: the markers on blends of shapes 1 and 2.
-    let d = model.dataset();
-    let frames: Vec<Vec<DVec3>> = [0.0, 0.3, 0.7, 1.0]
-        .iter()
-        .map(|&t| {
-            let mesh: Vec<DVec3> = (0..d.num_vertices())
-                .map(|v| {
-                    d.neutral().positions[v]
-                        + d.displacement(0, v) * t
-                        + d.displacement(1, v) * (1.0 - t)
-                })
-                .collect();
-            model.bundle_positions(&mesh).unwrap()
-        })
-        .collect();
+    let frames = blend_frames(&model);
     let exact = crate::model::SolveOptions::default();
     let a = crate::model::tests::solve_with(&model, &frames, &exact, None).unwrap();
     let b = crate::model::tests::solve_with(&back, &frames, &exact, None).unwrap();
