@@ -91,6 +91,26 @@ impl LocalFits {
     }
 }
 
+/// `shapes` (V, 3, q) float32 read in place, vertex-major as `lgi_core::blend_local` reads it;
+/// an error naming `what` for another shape or a non-contiguous array.
+fn vertex_shapes<'a>(
+    shapes: &'a PyReadonlyArray3<'_, f32>,
+    v: usize,
+    what: &str,
+) -> PyResult<&'a [f32]> {
+    let bad = || {
+        crate::error::input_error(format!(
+            "{what}: shapes must be C-contiguous ({v}, 3, q) float32, got {:?}",
+            shapes.shape()
+        ))
+    };
+    // `as_slice` takes Fortran order too, whose slice is not vertex-major.
+    if shapes.shape()[..2] != [v, 3] || !shapes.is_c_contiguous() {
+        return Err(bad());
+    }
+    shapes.as_slice().map_err(|_| bad())
+}
+
 /// An int64 index array as `usize`s; `what` names it in the error for a negative one.
 fn indices_of(a: &PyReadonlyArray1<'_, i64>, what: &str) -> PyResult<Vec<usize>> {
     a.as_array()
@@ -147,15 +167,7 @@ pub fn blend_local<'py>(
     let x0 = read_points(neutral, "neutral", None, false)?;
     let v = x0.len();
     let q = shapes.shape()[2];
-    if shapes.shape()[..2] != [v, 3] || !shapes.is_c_contiguous() {
-        return Err(crate::error::input_error(format!(
-            "blend_local: shapes must be C-contiguous ({v}, 3, q) float32, got {:?}",
-            shapes.shape()
-        )));
-    }
-    let flat = shapes
-        .as_slice()
-        .map_err(|_| crate::error::input_error("blend_local: shapes must be C-contiguous"))?;
+    let flat = vertex_shapes(&shapes, v, "blend_local")?;
     let indptr = indices_of(&indptr, "blend_local: indptr")?;
     let indices = indices_of(&indices, "blend_local: indices")?;
     let data: Vec<f64> = data.as_array().iter().copied().collect();
@@ -227,14 +239,15 @@ impl LocalSurface {
         let neutral = read_points(neutral, "neutral", None, false)?;
         let v = neutral.len();
         let q = shapes.shape()[2];
-        if shapes.shape()[..2] != [v, 3] || !shapes.is_c_contiguous() || q == 0 {
+        let flat = vertex_shapes(&shapes, v, "LocalSurface")?;
+        if q == 0 {
             return Err(crate::error::input_error(format!(
                 "LocalSurface: shapes must be C-contiguous ({v}, 3, q) float32, got {:?}",
                 shapes.shape()
             )));
         }
         let surface = LocalSurface {
-            shapes: shapes.as_array().iter().copied().collect(),
+            shapes: flat.to_vec(),
             q,
             indptr: indices_of(&indptr, "LocalSurface: indptr")?,
             indices: indices_of(&indices, "LocalSurface: indices")?,

@@ -105,26 +105,29 @@ def _shrunk(zeta: F64) -> tuple[F64, F64]:
 
 class _Missing:
     """The frames of a take short of a row, and each one's missing rows as indices (n, m) into
-    the fit's rows, padded to the most any frame lacks (`mask` False on the padding, where
-    every gathered value is 0): every frame is filled in
-    a few batched products instead of a Python loop (the held-out priors fill every frame of
-    a take once per marker)."""
+    the fit's R rows, padded to the most any frame lacks (`mask` False on the padding, where
+    every gathered value is 0): every frame is filled in a few batched products instead of a
+    Python loop (the held-out priors fill every frame of a take once per marker)."""
 
     def __init__(self, present: NDArray[np.bool_]) -> None:
+        self.rows = present.shape[1]
         self.frames = np.flatnonzero(~present.all(axis=1))
         lacking = ~present[self.frames]
-        most = int(lacking.sum(axis=1).max()) if self.frames.size else 0
+        counts = lacking.sum(axis=1)
+        most = int(counts.max()) if self.frames.size else 0
         # Each frame's missing rows first, in order (a stable sort of missing before present).
         self.index = np.argsort(~lacking, axis=1, kind="stable")[:, :most]
         self.mask = np.take_along_axis(lacking, self.index, axis=1)
+        # The frames missing as many rows, together (each group's solves are m x m, unpadded).
+        self.groups = [(int(m), np.flatnonzero(counts == m)) for m in np.unique(counts)]
 
     def gather(self, full: F64) -> F64:
         """Each frame's missing entries of `full` (n, R): (n, m), 0 on the padding."""
         return np.where(self.mask, np.take_along_axis(full, self.index, axis=1), 0.0)
 
-    def scatter(self, values: F64, rows: int) -> F64:
-        """`values` (n, m) at each frame's missing rows of `rows` rows, 0 elsewhere (n, R)."""
-        full = np.zeros((self.index.shape[0], rows))
+    def scatter(self, values: F64) -> F64:
+        """`values` (n, m) at each frame's missing rows, 0 elsewhere (n, R)."""
+        full = np.zeros((self.index.shape[0], self.rows))
         np.put_along_axis(full, self.index, np.where(self.mask, values, 0.0), axis=1)
         return full
 
@@ -132,12 +135,9 @@ class _Missing:
         """Each frame's `(I - M[miss, miss])⁻¹ rhs` for `m` (R, R) and `rhs` (n, m) (0 on the
         padding), solved in groups of frames missing as many rows (no padded solves)."""
         out = np.zeros_like(rhs)
-        counts = self.mask.sum(axis=1)
-        for count in np.unique(counts):
-            which = np.flatnonzero(counts == count)
+        for count, which in self.groups:
             at = self.index[which, :count]
-            sub = m[at[:, :, None], at[:, None, :]]
-            lhs = np.eye(count) - sub
+            lhs = np.eye(count) - m[at[:, :, None], at[:, None, :]]
             out[which, :count] = np.linalg.solve(lhs, rhs[which, :count, None])[..., 0]
         return out
 
@@ -158,7 +158,7 @@ def _frames_in_directions(
         solved = miss.inverse_of_rest(inner, seen)
         # U_M fitted, with fitted = D⁻¹ c + D⁻¹ U_Mᵀ solved: U_M D⁻¹ c + U_M D⁻¹ U_Mᵀ solved
         # = solved.
-        zeta[miss.frames] = cs + miss.scatter(solved, u.shape[0]) @ u
+        zeta[miss.frames] = cs + miss.scatter(solved) @ u
     return zeta, miss
 
 
@@ -174,12 +174,11 @@ def _refilled(u: F64, miss: _Missing, zeta: F64, mean: F64, phi: F64) -> F64:
         return out
     k = phi.shape[1]
     up = u @ (phi @ np.linalg.solve(phi.T @ phi + np.eye(k), phi.T))
-    rows = u.shape[0]
     d = zeta[miss.frames] - mean
     g = miss.gather(d @ u.T)
-    r = d - miss.scatter(g, rows) @ u
+    r = d - miss.scatter(g) @ u
     t = miss.inverse_of_rest(up @ u.T, miss.gather(r @ up.T))
-    out[miss.frames] = zeta[miss.frames] - miss.scatter(g - t, rows) @ u
+    out[miss.frames] = zeta[miss.frames] - miss.scatter(g - t) @ u
     return out
 
 

@@ -106,10 +106,8 @@ class LocalPieces:
         surf = model.core.bundle_surface_points()
         tris = np.asarray(data.triangles, dtype=np.int64)[np.asarray(surf["triangles"])]
         bary = np.asarray(surf["barycentrics"], dtype=np.float64)
-        # The bundles' positions on meshes (F, V, 3): the core's one definition, which the
-        # result's marker positions are measured with too.
-        self._bundle_positions = model.core.bundle_positions
-        self.rest = self._bundle_positions(self.neutral[None])[0]
+        # The bundles' rest positions, by the core's one definition of a bundle on a mesh.
+        self.rest = model.core.bundle_positions(self.neutral[None])[0]
         at = np.einsum("sbjd,bj->bds", unskinned[:, tris], bary, dtype=np.float64)
         a = at.reshape(3 * model.num_bundles, s_count)
         del unskinned

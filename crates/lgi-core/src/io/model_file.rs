@@ -445,15 +445,8 @@ fn encode(parts: &ModelPartsRef<'_>, marker_names: &[String], units: &str) -> Ve
             Some(None) => w.u64(1),
             Some(Some(basis)) => {
                 w.u64(2);
-                w.u32s(
-                    basis
-                        .shapes
-                        .iter()
-                        .map(|&k| k as u32)
-                        .collect::<Vec<_>>()
-                        .into_iter(),
-                );
-                w.f64s(basis.coefficients().to_vec().into_iter());
+                w.u32s(basis.shapes.iter().map(|&k| k as u32));
+                w.f64s(basis.coefficients().iter().copied());
             }
         }
     }
