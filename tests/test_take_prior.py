@@ -365,14 +365,14 @@ def test_take_prior_auto_says_why_it_was_not_read(two_directions: Any) -> None:
 
 @settings(max_examples=25, deadline=None)
 @given(seed=st.integers(0, 2**31 - 1), most_missing=st.integers(1, 9))
-def test_the_batched_refills_equal_each_frames_fit_on_its_present_rows(
+def test_the_core_fills_equal_each_frames_fit_on_its_present_rows(
     seed: int, most_missing: int
 ) -> None:
-    """The held-out priors fill every frame in batched products (Woodbury's identity on each
-    frame's missing rows); each frame must equal its own fit made directly on its present
-    rows: the ridge fit first (`_frames_in_directions`), then the MAP under a prior
-    (`_refilled`), solved by numpy in the q-dimensional weights."""
-    from lgi.plan.take_prior import _frames_in_directions, _refilled
+    """The take prior's reading fills every frame short of a row in the core (Woodbury's
+    identity on each frame's missing rows, `_filled`); each frame must equal its own fit made
+    directly on its present rows: the ridge fit first, then the MAP under a prior, solved by
+    numpy in the q-dimensional weights."""
+    from lgi.plan.take_prior import _filled
 
     rng = np.random.default_rng(seed)
     rows, q, k, frames = 24, 7, 3, 12
@@ -386,10 +386,11 @@ def test_the_batched_refills_equal_each_frames_fit_on_its_present_rows(
     present = np.isfinite(offsets)
     c_all = (np.where(present, offsets, 0.0) @ u) / sigma
     ua = u / (1.0 + ridge / s**2)
-    zeta, miss = _frames_in_directions(u, ua, ua @ u.T, c_all, present)
+    zeta = _filled(u, ua, ua @ u.T, present, c_all, None)
     d_inv = np.diag(1.0 / (1.0 + ridge / s**2))
     mean, phi = rng.normal(size=q), rng.normal(size=(q, k))
-    again = _refilled(u, miss, zeta, mean, phi)
+    up_fit = u @ (phi @ np.linalg.solve(phi.T @ phi + np.eye(k), phi.T))
+    again = _filled(u, up_fit, up_fit @ u.T, present, zeta, mean)
     for f in range(frames):
         p = np.isfinite(offsets[f])
         up, um = u[p], u[~p]

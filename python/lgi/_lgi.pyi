@@ -31,6 +31,7 @@ __all__ = [
     "check_count",
     "check_marker_frames",
     "closest_surface_points",
+    "fill_missing_rows",
     "get_num_threads",
     "set_num_threads",
     "shape_basis",
@@ -83,6 +84,19 @@ def closest_surface_points(
 ) -> tuple[NDArray[np.int64], NDArray[np.float64]]:
     """Each of ``points`` (P, 3)'s closest point on the mesh: the row of ``triangles`` it lies
     on (P,) (the lowest on a tie) and its barycentric coordinates (P, 3)."""
+
+def fill_missing_rows(
+    u: NDArray[np.float64],
+    l: NDArray[np.float64],
+    k: NDArray[np.float64],
+    present: NDArray[np.bool_],
+    zeta: NDArray[np.float64],
+    mean: NDArray[np.float64] | None = None,
+) -> NDArray[np.float64]:
+    """``zeta`` (F, q) with every frame short of a row (``present`` (F, R) bool) filled by its
+    fit in the fit matrix's coordinates: ``u`` and the fit's left factor ``l`` (R, q), ``k = l
+    @ u.T`` (R, R); with ``mean`` (q,), under the prior of that mean. All C-contiguous
+    float64 (``lgi.plan.take_prior``)."""
 
 _Path = str | os.PathLike[str]
 

@@ -30,6 +30,7 @@ mod linalg;
 mod local_fit;
 mod magnitude;
 mod mesh;
+mod missing_rows;
 mod model;
 mod polygons;
 mod prefetch;
@@ -58,6 +59,7 @@ pub use magnitude::{
     check_dataset, Extent, Naming, MAGNITUDE_LIMIT, MAX_COORDINATE, MIN_PRESENT_MARKERS,
 };
 pub use mesh::{Mesh, SurfacePoint};
+pub use missing_rows::{FillFit, MissingRows};
 pub use model::{
     default_marker_names, BinParts, BinPartsRef, BuildConfig, BundleStats, FitResiduals, FrameInfo,
     FrameState, JawInput, JawPose, JawSetup, LocalShapeId, Lookup, Model, ModelParts,

@@ -9,6 +9,7 @@ mod dataset;
 mod error;
 mod jaw;
 mod local_fit;
+mod missing_rows;
 mod model;
 mod result;
 mod solve_args;
@@ -42,6 +43,7 @@ fn _lgi(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(convert::check_count, m)?)?;
     m.add_function(wrap_pyfunction!(local_fit::shape_basis, m)?)?;
     m.add_function(wrap_pyfunction!(local_fit::blend_local, m)?)?;
+    m.add_function(wrap_pyfunction!(missing_rows::fill_missing_rows, m)?)?;
     m.add_function(wrap_pyfunction!(surface::closest_surface_points, m)?)?;
     m.add_function(wrap_pyfunction!(threads::set_num_threads, m)?)?;
     m.add_function(wrap_pyfunction!(threads::get_num_threads, m)?)?;

@@ -103,83 +103,27 @@ def _shrunk(zeta: F64) -> tuple[F64, F64]:
     return mean, v[:, order[used]] * np.sqrt(f[used] / (1.0 - f[used]))
 
 
-class _Missing:
-    """The frames of a take short of a row, and each one's missing rows as indices (n, m) into
-    the fit's R rows, padded to the most any frame lacks (`mask` False on the padding, where
-    every gathered value is 0): every frame is filled in a few batched products instead of a
-    Python loop (the held-out priors fill every frame of a take once per marker)."""
+def _filled(
+    u: F64, left: F64, k: F64, present: NDArray[np.bool_], zeta: F64, mean: F64 | None
+) -> F64:
+    """`zeta` (F, q) with each frame short of a row (`present` (F, R)) filled by its fit in the
+    core (`_lgi.fill_missing_rows`: products with the frame's m missing rows of `u` and an m x m
+    solve, Woodbury's identity), the fit's `left` factor (R, q) and `k = left @ u.T`:
 
-    def __init__(self, present: NDArray[np.bool_]) -> None:
-        self.rows = present.shape[1]
-        self.frames = np.flatnonzero(~present.all(axis=1))
-        lacking = ~present[self.frames]
-        counts = lacking.sum(axis=1)
-        most = int(counts.max()) if self.frames.size else 0
-        # Each frame's missing rows first, in order (a stable sort of missing before present).
-        self.index = np.argsort(~lacking, axis=1, kind="stable")[:, :most]
-        self.mask = np.take_along_axis(lacking, self.index, axis=1)
-        # The frames missing as many rows, together (each group's solves are m x m, unpadded).
-        self.groups = [(int(m), np.flatnonzero(counts == m)) for m in np.unique(counts)]
-
-    def gather(self, full: F64) -> F64:
-        """Each frame's missing entries of `full` (n, R): (n, m), 0 on the padding."""
-        return np.where(self.mask, np.take_along_axis(full, self.index, axis=1), 0.0)
-
-    def scatter(self, values: F64) -> F64:
-        """`values` (n, m) at each frame's missing rows, 0 elsewhere (n, R)."""
-        full = np.zeros((self.index.shape[0], self.rows))
-        np.put_along_axis(full, self.index, np.where(self.mask, values, 0.0), axis=1)
-        return full
-
-    def inverse_of_rest(self, m: F64, rhs: F64) -> F64:
-        """Each frame's `(I - M[miss, miss])⁻¹ rhs` for `m` (R, R) and `rhs` (n, m) (0 on the
-        padding), solved in groups of frames missing as many rows (no padded solves)."""
-        out = np.zeros_like(rhs)
-        for count, which in self.groups:
-            at = self.index[which, :count]
-            lhs = np.eye(count) - m[at[:, :, None], at[:, None, :]]
-            out[which, :count] = np.linalg.solve(lhs, rhs[which, :count, None])[..., 0]
-        return out
-
-
-def _frames_in_directions(
-    u: F64, ua: F64, inner: F64, c: F64, present: NDArray[np.bool_]
-) -> tuple[F64, _Missing]:
-    """Each frame in the fit matrix's own coordinates, `ζ = Uᵀ d / sigma` (F, q), from its
-    present rows' share `c = U_Pᵀ d_P / sigma` (F, q) and which rows are `present` (F, R): its
-    missing rows filled by the frame's ridge fit (`J c` with `J = (D - U_Mᵀ U_M)⁻¹`, `D = I +
-    ridge S⁻²`: Woodbury's identity, an m x m solve for m missing rows, `I - U_M D⁻¹ U_Mᵀ`,
-    read from `inner = U D⁻¹ Uᵀ` (R, R), with `ua = U D⁻¹`); and the frames' missing rows."""
-    zeta = c.copy()
-    miss = _Missing(present)
-    if miss.frames.size:
-        cs = c[miss.frames]
-        seen = miss.gather(cs @ ua.T)  # U_M D⁻¹ c
-        solved = miss.inverse_of_rest(inner, seen)
-        # U_M fitted, with fitted = D⁻¹ c + D⁻¹ U_Mᵀ solved: U_M D⁻¹ c + U_M D⁻¹ U_Mᵀ solved
-        # = solved.
-        zeta[miss.frames] = cs + miss.scatter(solved) @ u
-    return zeta, miss
-
-
-def _refilled(u: F64, miss: _Missing, zeta: F64, mean: F64, phi: F64) -> F64:
-    """`zeta` with each frame's missing rows filled again, by its fit under the prior `mean`,
-    `phi` (its MAP over its present rows: `mean + Φ (ΦᵀU_PᵀU_PΦ + I)⁻¹ Φᵀ (c - U_PᵀU_P mean)`,
-    with `U_PᵀU_P = I - U_MᵀU_M`). Only `U_M` of the fit is needed, which Woodbury's identity
-    gives from an m x m solve: `U_M fitted = U_M mean + (I - U_M P U_Mᵀ)⁻¹ U_M P r`, with
-    `P = Φ (ΦᵀΦ + I)⁻¹ Φᵀ` (once per call) and `r` the frame's offset from the mean off its
-    missing rows; the frame is then `ζ - U_Mᵀ (U_M (ζ - mean) - t)`."""
-    out = zeta.copy()
-    if not miss.frames.size:
-        return out
-    k = phi.shape[1]
-    up = u @ (phi @ np.linalg.solve(phi.T @ phi + np.eye(k), phi.T))
-    d = zeta[miss.frames] - mean
-    g = miss.gather(d @ u.T)
-    r = d - miss.scatter(g) @ u
-    t = miss.inverse_of_rest(up @ u.T, miss.gather(r @ up.T))
-    out[miss.frames] = zeta[miss.frames] - miss.scatter(g - t) @ u
-    return out
+    - the frame's ridge fit (`mean` None; `left = U D⁻¹`, `D = I + ridge S⁻²`): `zeta`'s frames
+      are their present rows' share `c = U_Pᵀ d_P / sigma` and become `c + U_Mᵀ x`, `x = (I -
+      U_M D⁻¹ U_Mᵀ)⁻¹ U_M D⁻¹ c`: the fit `(D - U_MᵀU_M)⁻¹ c` at the missing rows;
+    - the frame's fit under the prior `mean`, `Φ` (its MAP over its present rows, `left = U P`,
+      `P = Φ (ΦᵀΦ + I)⁻¹ Φᵀ`): the frame's offset from the mean less its missing rows' share,
+      `r`, becomes `mean + r + U_Mᵀ (I - U_M P U_Mᵀ)⁻¹ U_M P r`."""
+    if present.all():
+        return zeta
+    c64 = np.ascontiguousarray
+    return np.asarray(
+        _lgi.fill_missing_rows(
+            c64(u), c64(left), c64(k), c64(present), c64(zeta), None if mean is None else c64(mean)
+        )
+    )
 
 
 class TakeRows:
@@ -236,13 +180,15 @@ class TakeRows:
             c = c - (self._dropped[:, rows] @ u[rows]) / sigma
             present = present.copy()
             present[:, rows] = False
-        zeta, miss = _frames_in_directions(u, self._ua, self._inner, c, present)
+        zeta = _filled(u, self._ua, self._inner, present, c, None)
         mean, phi = _shrunk(zeta)
-        if miss.frames.size:
+        if not present.all():
             # A frame short of a marker is filled by its fit under the prior read so far, and
             # the prior read again (a few rounds: the kept directions settle in two or three).
             for _ in range(REFILL_ROUNDS):
-                zeta = _refilled(u, miss, zeta, mean, phi)
+                k = phi.shape[1]
+                up = u @ (phi @ np.linalg.solve(phi.T @ phi + np.eye(k), phi.T))
+                zeta = _filled(u, up, up @ u.T, present, zeta, mean)
                 mean, phi = _shrunk(zeta)
         # ζ = S z / sigma and w = V z: w = V S⁻¹ sigma ζ. Mean and factor are the frames' ridge
         # fits' (each direction's share by s² / (s² + ridge)): in a weakly seen direction they
