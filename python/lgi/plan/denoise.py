@@ -6,7 +6,7 @@ take of F frames of B markers is, but for the noise, close to a matrix of low ra
 Marker noise of a known level sigma per coordinate is white in that matrix. The take's centred
 matrix is shrunk by the optimal singular-value shrinker for white noise of known level (Gavish
 & Donoho 2017, Frobenius loss; the same shrinker the take's prior uses,
-`lgi.plan.take_prior.shrinkage_factors`): directions inside the noise's bulk edge `1 + √β` carry no
+`lgi.solve.spectrum.shrinkage_factors`): directions inside the noise's bulk edge `1 + √β` carry no
 motion that can be told from noise and are dropped, the others are shrunk to what the noise
 leaves of them. Nothing is read from the dataset or a solve: the take alone, and sigma.
 
@@ -30,7 +30,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from lgi.errors import InputError
-from lgi.plan.take_prior import shrinkage_factors
+from lgi.solve.spectrum import shrinkage_factors, thin_svd
 
 __all__ = ["DenoisedTake", "bulk_noise", "denoise_take"]
 
@@ -72,21 +72,6 @@ def _signal(y: F64, beta: float) -> F64:
     return np.sqrt(0.5 * (t + np.sqrt(np.maximum(t**2 - 4.0 * beta, 0.0))))
 
 
-def _svd(a: F64) -> tuple[F64, F64, F64]:
-    """The thin SVD of `a` (F, p) through the Gram matrix of its smaller side: several times
-    faster than the full SVD, and exact enough above the noise's bulk edge (all that is kept)."""
-    f, p = a.shape
-    if f < p:
-        v, sv, ut = _svd(a.T)
-        return ut.T, sv, v.T
-    evals, v = np.linalg.eigh(a.T @ a)
-    order = np.argsort(evals)[::-1]
-    sv = np.sqrt(np.maximum(evals[order], 0.0))
-    v = v[:, order]
-    u = (a @ v) / np.where(sv > 0.0, sv, 1.0)
-    return u, sv, v.T
-
-
 def _shrink(centred: F64, sigma: float) -> tuple[F64, int, float]:
     """`centred` (F, p) with white noise `sigma` shrunk optimally: the estimate, how many
     directions were kept, and its expected squared error per entry."""
@@ -95,15 +80,21 @@ def _shrink(centred: F64, sigma: float) -> tuple[F64, int, float]:
     if small < 1:
         return np.zeros_like(centred), 0, 0.0
     scale = np.sqrt(big) * sigma
-    u, sv, vt = _svd(centred)
+
+    def kept_count(sv: F64) -> int:
+        # The shrinker keeps the singular values above the bulk edge: the leading ones.
+        return int(np.count_nonzero(shrinkage_factors(sv / scale, small / big) > 0.0))
+
+    u, sv, vt = thin_svd(centred, kept_count)
     y = sv / scale
     factors = shrinkage_factors(y, small / big)
     kept = factors > 0.0
-    est = (u[:, kept] * (sv[kept] * factors[kept])) @ vt[kept]
+    k = int(kept.sum())
+    est = (u[:, :k] * (sv[:k] * factors[:k])) @ vt[:k]
     x = _signal(y[kept], small / big)
     eta = y[kept] * factors[kept]
     error = sigma**2 * float(np.sum(x**2 - eta**2)) / small
-    return est, int(kept.sum()), error
+    return est, k, error
 
 
 def _filled(flat: F64, missing: NDArray[np.bool_], sigma: float) -> tuple[F64, F64, int, float]:
@@ -175,7 +166,7 @@ def bulk_noise(frames: ArrayLike, fill_noise: float) -> float | None:
         flat = _filled(flat, missing, fill_noise)[0]
     elif missing.any():
         flat = np.where(missing, np.nanmean(flat, axis=0), flat)
-    _, sv, _ = _svd(flat - flat.mean(axis=0))
+    _, sv, _ = thin_svd(flat - flat.mean(axis=0))
     ev = np.sort(sv**2)[::-1][:m]
     r, sigma2 = 0, 0.0
     for _ in range(m):

@@ -48,6 +48,7 @@ from lgi.plan.leave_out import (
     take_frames,
 )
 from lgi.solve.local import UNBOUNDED
+from lgi.solve.spectrum import shrinkage_factors
 from lgi.solve.take_prior import TakePrior
 
 if TYPE_CHECKING:
@@ -70,18 +71,6 @@ DIRECTION_TOLERANCE = 1e-9
 
 #: Rounds of filling frames' missing rows by their fit under the prior and reading it again.
 REFILL_ROUNDS = 3
-
-
-def shrinkage_factors(singular_values: F64, beta: float) -> F64:
-    """Each singular value's optimal factor η(y)/y for white noise of level 1 (Gavish & Donoho
-    2017, Frobenius loss) in a matrix of aspect ratio `beta` ≤ 1: 0 inside the noise's bulk
-    edge 1 + √β, else √((y² - β - 1)² - 4β) / y²."""
-    y = np.asarray(singular_values, dtype=np.float64)
-    out = np.zeros_like(y)
-    above = y > 1.0 + np.sqrt(beta)
-    ya = y[above]
-    out[above] = np.sqrt(np.maximum((ya**2 - beta - 1.0) ** 2 - 4.0 * beta, 0.0)) / ya**2
-    return out
 
 
 def _shrunk(zeta: F64) -> tuple[F64, F64]:

@@ -3,12 +3,13 @@
 gathered per marker into frame ranges, short ones called spikes; two markers off over the same
 frames whose positions fit each other's tracks at the range's edges are a likely label swap. A
 marker fault leaves the marker's own track where its neighbours do not follow (its position
-relative to its neighbours steps at the range's edge); a residual that comes and goes smoothly
-while the marker moves with its neighbours is a model gap, where the dataset does not reach the
-motion: reported as such, never as a fault. The rule (docs/reliability.md): a sample is an
-outlier when its residual exceeds the median of all present samples by `OUTLIER_MADS` scaled
-median absolute deviations, and is at least `FLOOR` of the face's size (an exact solve's
-residuals are round-off)."""
+relative to its neighbours steps at the range's edge, and the take's own motion elsewhere does
+not put it there); a residual that comes and goes while the marker moves with its neighbours,
+or as the take's low-rank motion predicts it from the other markers, is a model gap, where the
+dataset does not reach the motion: reported as such, never as a fault. The rule
+(docs/reliability.md): a sample is an outlier when its residual exceeds the median of all
+present samples by `OUTLIER_MADS` scaled median absolute deviations, and is at least `FLOOR` of
+the face's size (an exact solve's residuals are round-off)."""
 
 from __future__ import annotations
 
@@ -20,6 +21,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from lgi.io.result import Result
+from lgi.solve.spectrum import shrinkage_factors, thin_svd
 
 __all__ = [
     "FAULTS",
@@ -98,7 +100,7 @@ class Finding:
         if self.kind == "gap":
             return (
                 f"the dataset does not follow {self.markers[0]} at {span}: up to "
-                f"{self.worst:.3g}{u} (the marker moves with its neighbours; not repaired)"
+                f"{self.worst:.3g}{u} (the marker moves with the face; not repaired)"
             )
         what = "spike" if self.kind == "spike" else "marker off"
         return f"{what}: {self.markers[0]}, {span} (residual up to {self.worst:.3g}{u})"
@@ -278,6 +280,66 @@ def _leaves_track(steps: NDArray[np.float64], b: int, first: int, last: int) -> 
     return all(stepped)
 
 
+def _take_deviations(
+    x: NDArray[np.float64], sigma: float, suspects: NDArray[np.bool_]
+) -> NDArray[np.float64]:
+    """(F, B) each present marker's distance from where the take's own motion puts it given the
+    frame's other markers (NaN where missing): the take as a Gaussian of low rank (probabilistic
+    PCA: its directions above the noise's bulk edge at `sigma`, `lgi.solve.spectrum`, each with
+    its variance less the noise's, plus white noise `sigma`), and each marker's conditional
+    mean given the rest, `x_b - P_bb⁻¹ (P x)_b` for the precision `P`. A frame's missing
+    samples are first filled by their conditional mean given its present ones. Skin that moves
+    fast, a blink, a lip the dataset cannot follow, still moves as the take moves elsewhere and
+    is predicted; a spike or a marker off its track is not. The `suspects` (F, B) samples are
+    left out of the directions (a short take keeps nearly a direction per frame, and a spike's
+    frame would otherwise carry it), not out of what is predicted from."""
+    f, b = x.shape[:2]
+    flat = x.reshape(f, 3 * b)
+    missing = np.isnan(flat)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # a marker never seen: NaN, left out
+        mean = np.nanmean(flat, axis=0)
+    missing |= ~np.isfinite(mean)
+    centred = np.where(missing, 0.0, flat - np.where(np.isfinite(mean), mean, 0.0))
+    _, sv, vt = thin_svd(np.where(np.repeat(suspects, 3, axis=1), 0.0, centred))
+    big, small = max(f - 1, 3 * b), min(f - 1, 3 * b)
+    keep = shrinkage_factors(sv / (np.sqrt(big) * sigma), small / big) > 0.0
+    v = vt[keep[: vt.shape[0]]]
+    variance = np.maximum(sv[keep] ** 2 / max(f - 1, 1) - sigma**2, 0.0)
+    # sigma² P = I - Vᵀ diag(w) V with w = λ / (λ + sigma²) (V's rows orthonormal).
+    w = variance / (variance + sigma**2)
+
+    def scaled_precision(z: NDArray[np.float64]) -> NDArray[np.float64]:
+        return np.asarray(z - ((z @ v.T) * w) @ v)
+
+    y = scaled_precision(centred)
+    for t in np.flatnonzero(missing.any(axis=1)):
+        m = np.flatnonzero(missing[t])
+        vm = v[:, m]
+        centred[t, m] = np.linalg.solve(np.eye(m.size) - (vm.T * w) @ vm, -y[t, m])
+    y = scaled_precision(centred).reshape(f, b, 3)
+    vb = v.reshape(-1, b, 3)
+    own = np.eye(3)[None] - np.einsum("kbi,k,kbj->bij", vb, w, vb)  # sigma² P_bb
+    off = np.linalg.norm(np.einsum("bij,fbj->fbi", np.linalg.inv(own), y), axis=2)
+    off[np.isnan(x).any(axis=2)] = np.nan
+    return off
+
+
+def _off_the_take(deviations: NDArray[np.float64], b: int, first: int, last: int) -> bool:
+    """Whether marker `b` is off the take's own motion over frames first..last
+    (`_take_deviations`): its median there above `STEP_MADS` scaled MADs over its median in
+    the take. A range with no sample to read is not asked (True)."""
+    col = deviations[:, b]
+    vals = col[np.isfinite(col)]
+    inside = col[first : last + 1]
+    inside = inside[np.isfinite(inside)]
+    if vals.size < 3 or inside.size == 0:
+        return True
+    med = float(np.median(vals))
+    limit = med + STEP_MADS * 1.4826 * float(np.median(np.abs(vals - med)))
+    return bool(np.median(inside) > limit)
+
+
 def diagnose(
     residuals: ArrayLike,
     missing: ArrayLike,
@@ -337,7 +399,12 @@ def diagnose(
                     swapped += [(a, first, last), (b, first, last)]
     singles = []
     nearest = None if x is None else _nearest(x)
+    suspects = np.zeros(r.shape, dtype=bool)  # every range asked about, left out of the take's
+    for b, rs in (runs if residual_runs is None else residual_runs).items():
+        for s, e in rs:
+            suspects[s : e + 1, b] = True
     steps: NDArray[np.float64] | None = None  # read on first need: most takes need none
+    deviations: NDArray[np.float64] | None = None  # likewise; with the solve's sigma only
     for b, rs in (runs if residual_runs is None else residual_runs).items():
         for s, e in rs:
             if (b, s, e) in taken or any(k == b and s <= e1 and s1 <= e for k, s1, e1 in swapped):
@@ -351,6 +418,11 @@ def diagnose(
                     steps = _relative_steps(x, nearest)
                 if not _leaves_track(steps, b, s, e):
                     kind = "gap"  # the marker moves with its neighbours: the dataset's, not its
+                elif noise:
+                    if deviations is None:
+                        deviations = _take_deviations(x, noise, suspects)
+                    if not _off_the_take(deviations, b, s, e):
+                        kind = "gap"  # the take moves it so elsewhere: fast skin, not a fault
             singles.append(Finding(kind, (names[b],), s, e, _worst(r[s : e + 1, b])))
     singles.sort(key=lambda f: -f.worst)
     if x is not None:

@@ -1,0 +1,46 @@
+"""A take's spectrum: the thin SVD of a frames-by-coordinates matrix through the Gram matrix of
+its smaller side, and the optimal singular-value shrinker for white noise of known level
+(Gavish & Donoho 2017, Frobenius loss), which says which directions of a take are motion
+and which are noise. Read by the take prior and the denoiser (`lgi.plan`) and by the fault
+finder (`lgi.solve.diagnose`: a marker off the take's own motion)."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import numpy as np
+from numpy.typing import NDArray
+
+__all__ = ["shrinkage_factors", "thin_svd"]
+
+F64 = NDArray[np.float64]
+
+
+def shrinkage_factors(singular_values: F64, beta: float) -> F64:
+    """Each singular value's optimal factor η(y)/y for white noise of level 1 (Gavish & Donoho
+    2017, Frobenius loss) in a matrix of aspect ratio `beta` ≤ 1: 0 inside the noise's bulk
+    edge 1 + √β, else √((y² - β - 1)² - 4β) / y²."""
+    y = np.asarray(singular_values, dtype=np.float64)
+    out = np.zeros_like(y)
+    above = y > 1.0 + np.sqrt(beta)
+    ya = y[above]
+    out[above] = np.sqrt(np.maximum((ya**2 - beta - 1.0) ** 2 - 4.0 * beta, 0.0)) / ya**2
+    return out
+
+
+def thin_svd(a: F64, leading: Callable[[F64], int] | None = None) -> tuple[F64, F64, F64]:
+    """The thin SVD of `a` (F, p) through the Gram matrix of its smaller side: several times
+    faster than the full SVD, and exact enough above the noise's bulk edge (all that is kept).
+    `leading`: how many of the singular values (descending) need their vectors, read from them
+    (the rest are not made: their side's product is most of the cost); None: all."""
+    f, p = a.shape
+    if f < p:
+        v, sv, ut = thin_svd(a.T, leading)
+        return ut.T, sv, v.T
+    evals, v = np.linalg.eigh(a.T @ a)
+    order = np.argsort(evals)[::-1]
+    sv = np.sqrt(np.maximum(evals[order], 0.0))
+    k = sv.size if leading is None else leading(sv)
+    v = v[:, order[:k]]
+    u = (a @ v) / np.where(sv[:k] > 0.0, sv[:k], 1.0)
+    return u, sv, v.T
