@@ -202,7 +202,10 @@ fn frames_fitted_in_order_from_the_last_frames_fit_equal_each_frame_fitted_alone
         .collect();
     let a = matrix(&scans);
     let fits = LocalFits::new(&a, shapes, &rest, FIT_L2, FIT_PENALTY).unwrap();
-    assert!(fits.windows.iter().all(|w| w.solver.low_rank().is_some()));
+    assert!(fits
+        .windows
+        .iter()
+        .all(|w| matches!(&w.fit, WindowFit::Boxed(s) if s.low_rank().is_some())));
     let frames = 6;
     let mut targets = Vec::new();
     for f in 0..frames {
@@ -333,4 +336,75 @@ fn the_blend_of_local_fits_is_each_vertexs_sewn_weights_on_its_shapes_by_brute_f
     let few = &weights[..3 * q];
     let e = blend_local(&neutral, &shapes, sewing, few, &mut out).unwrap_err();
     assert!(e.to_string().contains("sewing rows"), "{e}");
+}
+
+#[test]
+fn unbounded_windows_solve_in_closed_form_the_minimum_the_iteration_reaches() {
+    // Without a penalty a window's fit is the ridge fit alone (`WindowFit::Ridge`); the
+    // reference is each window's active-set solver at penalty 0 over the same rows, frames
+    // with and without missing markers, weights far outside [0, 1].
+    let rest: Vec<DVec3> = (0..12)
+        .map(|i| DVec3::new(i as f64, 0.5 * (i % 3) as f64, 0.0))
+        .collect();
+    let shapes: Vec<Vec<DVec3>> = (0..5i32)
+        .map(|k| {
+            rest.iter()
+                .map(|p| {
+                    let x = p.x / 11.0;
+                    DVec3::new(
+                        (x * f64::from(k + 2)).cos(),
+                        x.powi(k % 3 + 1),
+                        p.y * f64::from(k),
+                    )
+                })
+                .collect()
+        })
+        .collect();
+    let a = matrix(&shapes);
+    let fits = LocalFits::new(&a, 5, &rest, FIT_L2, 0.0).unwrap();
+    assert!(fits
+        .windows
+        .iter()
+        .all(|w| matches!(w.fit, WindowFit::Ridge(_))));
+    let frames = 3;
+    let mut targets = vec![0.0; frames * 36];
+    for (i, t) in targets.iter_mut().enumerate() {
+        *t = 3.0 * ((i * 13 % 17) as f64 / 17.0 - 0.5);
+    }
+    for &(f, m) in &[(1usize, 4usize), (2, 0), (2, 7)] {
+        for c in 0..3 {
+            targets[f * 36 + 3 * m + c] = f64::NAN;
+        }
+    }
+    let got = fits.solve(&targets, &vec![0.0; frames * 5]).unwrap();
+    assert_eq!(got.kept_start, 0);
+    for (b, w) in fits.windows.iter().enumerate() {
+        // The window's rows and ridge as `with_length` makes them.
+        let mut rows = Vec::new();
+        for (&m, &g) in w.markers.iter().zip(&w.root_weights) {
+            for r in 3 * m..3 * m + 3 {
+                rows.extend(a[r * 5..(r + 1) * 5].iter().map(|x| x * g));
+            }
+        }
+        let l2 = FIT_L2 * fit_scale(&rows, 5);
+        let solver = BlendshapeSolver::new(rows, 3 * w.markers.len(), 5, l2, 0.0).unwrap();
+        for f in 0..frames {
+            let mut target = Vec::new();
+            for (&m, &g) in w.markers.iter().zip(&w.root_weights) {
+                target.extend(
+                    targets[f * 36 + 3 * m..f * 36 + 3 * m + 3]
+                        .iter()
+                        .map(|t| t * g),
+                );
+            }
+            let want = solver.solve(&target).unwrap().weights;
+            for (k, x) in want.iter().enumerate() {
+                let g = got.weights[(f * 12 + b) * 5 + k];
+                assert!(
+                    (g - x).abs() <= 1e-9 * (1.0 + x.abs()),
+                    "window {b} frame {f}: {g} vs {x}"
+                );
+            }
+        }
+    }
 }
