@@ -280,20 +280,31 @@ def _leaves_track(steps: NDArray[np.float64], b: int, first: int, last: int) -> 
     return all(stepped)
 
 
+FOLD_FRAMES = 8
+"""`_take_deviations` reads the take's motion from every other block of this many frames and
+predicts the blocks between: every sample is judged by motion read without it (a sample read
+into the motion it is judged by looks predicted, a spike's included)."""
+
+
 def _take_deviations(
-    x: NDArray[np.float64], sigma: float, suspects: NDArray[np.bool_]
-) -> NDArray[np.float64]:
+    x: NDArray[np.float64], sigma: float, left_out: NDArray[np.bool_] | None = None
+) -> NDArray[np.float64] | None:
     """(F, B) each present marker's distance from where the take's own motion puts it given the
-    frame's other markers (NaN where missing): the take as a Gaussian of low rank (probabilistic
-    PCA: its directions above the noise's bulk edge at `sigma`, `lgi.solve.spectrum`, each with
-    its variance less the noise's, plus white noise `sigma`), and each marker's conditional
-    mean given the rest, `x_b - P_bb⁻¹ (P x)_b` for the precision `P`. A frame's missing
-    samples are first filled by their conditional mean given its present ones. Skin that moves
-    fast, a blink, a lip the dataset cannot follow, still moves as the take moves elsewhere and
-    is predicted; a spike or a marker off its track is not. The `suspects` (F, B) samples are
-    left out of the directions (a short take keeps nearly a direction per frame, and a spike's
-    frame would otherwise carry it), not out of what is predicted from."""
+    frame's other markers (NaN where missing), or None for a take too short to read (fewer than
+    two blocks of `FOLD_FRAMES` frames). The take's motion is a Gaussian of low rank
+    (probabilistic PCA: its directions above the noise's bulk edge at `sigma`,
+    `lgi.solve.spectrum`, each with its variance less the noise's, plus white noise `sigma`),
+    read from every other block of frames for the blocks between (`FOLD_FRAMES`), and each
+    marker's distance is from its conditional mean given the rest, `x_b - P_bb⁻¹ (P x)_b` for
+    the precision `P`; a frame's missing samples are first filled by their conditional mean
+    given its present ones. Skin that moves fast, a blink, a lip the dataset cannot follow,
+    still moves as the take moves elsewhere and is predicted; a spike or a marker off its track
+    is not. `left_out` (F, B): samples not read into the motion (still judged): a 2 cm spike
+    is a direction of its own, carried by its marker alone, which makes that marker's
+    conditional ill-posed in the blocks beside it."""
     f, b = x.shape[:2]
+    if f < 2 * FOLD_FRAMES:
+        return None
     flat = x.reshape(f, 3 * b)
     missing = np.isnan(flat)
     with warnings.catch_warnings():
@@ -301,34 +312,45 @@ def _take_deviations(
         mean = np.nanmean(flat, axis=0)
     missing |= ~np.isfinite(mean)
     centred = np.where(missing, 0.0, flat - np.where(np.isfinite(mean), mean, 0.0))
-    _, sv, vt = thin_svd(np.where(np.repeat(suspects, 3, axis=1), 0.0, centred))
-    big, small = max(f - 1, 3 * b), min(f - 1, 3 * b)
-    keep = shrinkage_factors(sv / (np.sqrt(big) * sigma), small / big) > 0.0
-    v = vt[keep[: vt.shape[0]]]
-    variance = np.maximum(sv[keep] ** 2 / max(f - 1, 1) - sigma**2, 0.0)
-    # sigma² P = I - Vᵀ diag(w) V with w = λ / (λ + sigma²) (V's rows orthonormal).
-    w = variance / (variance + sigma**2)
+    fold = (np.arange(f) // FOLD_FRAMES) % 2
+    off = np.full((f, b), np.nan)
+    for judged in (0, 1):
+        rows = np.flatnonzero(fold == judged)
+        seen = centred[fold != judged]
+        if left_out is not None:
+            seen = np.where(np.repeat(left_out[fold != judged], 3, axis=1), 0.0, seen)
+        _, sv, vt = thin_svd(seen)
+        big, small = max(seen.shape[0] - 1, 3 * b), min(seen.shape[0] - 1, 3 * b)
+        keep = shrinkage_factors(sv / (np.sqrt(big) * sigma), small / big) > 0.0
+        v = vt[keep[: vt.shape[0]]]
+        variance = np.maximum(sv[keep] ** 2 / max(seen.shape[0] - 1, 1) - sigma**2, 0.0)
+        # sigma² P = I - Vᵀ diag(w) V with w = λ / (λ + sigma²) (V's rows orthonormal).
+        w = variance / (variance + sigma**2)
 
-    def scaled_precision(z: NDArray[np.float64]) -> NDArray[np.float64]:
-        return np.asarray(z - ((z @ v.T) * w) @ v)
+        def scaled_precision(z: NDArray[np.float64]) -> NDArray[np.float64]:
+            return np.asarray(z - ((z @ v.T) * w) @ v)  # noqa: B023 (used in this round only)
 
-    y = scaled_precision(centred)
-    for t in np.flatnonzero(missing.any(axis=1)):
-        m = np.flatnonzero(missing[t])
-        vm = v[:, m]
-        centred[t, m] = np.linalg.solve(np.eye(m.size) - (vm.T * w) @ vm, -y[t, m])
-    y = scaled_precision(centred).reshape(f, b, 3)
-    vb = v.reshape(-1, b, 3)
-    own = np.eye(3)[None] - np.einsum("kbi,k,kbj->bij", vb, w, vb)  # sigma² P_bb
-    off = np.linalg.norm(np.einsum("bij,fbj->fbi", np.linalg.inv(own), y), axis=2)
+        part = centred[rows]
+        y = scaled_precision(part)
+        for t in np.flatnonzero(missing[rows].any(axis=1)):
+            m = np.flatnonzero(missing[rows[t]])
+            vm = v[:, m]
+            part[t, m] = np.linalg.solve(np.eye(m.size) - (vm.T * w) @ vm, -y[t, m])
+        y = scaled_precision(part).reshape(rows.size, b, 3)
+        vb = v.reshape(-1, b, 3)
+        own = np.eye(3)[None] - np.einsum("kbi,k,kbj->bij", vb, w, vb)  # sigma² P_bb
+        off[rows] = np.linalg.norm(np.einsum("bij,fbj->fbi", np.linalg.inv(own), y), axis=2)
     off[np.isnan(x).any(axis=2)] = np.nan
     return off
 
 
 def _off_the_take(deviations: NDArray[np.float64], b: int, first: int, last: int) -> bool:
     """Whether marker `b` is off the take's own motion over frames first..last
-    (`_take_deviations`): its median there above `STEP_MADS` scaled MADs over its median in
-    the take. A range with no sample to read is not asked (True)."""
+    (`_take_deviations`) as a fault puts it: its median there above `STEP_MADS` scaled MADs over
+    its median in the take, and back on the take's motion on the frames either side (each under
+    half that median). A fault leaves the motion in one frame and comes back in one; skin the
+    take does not predict (a fast lip, a blink) eases out and back over several. A range with
+    no sample to read is not asked (True)."""
     col = deviations[:, b]
     vals = col[np.isfinite(col)]
     inside = col[first : last + 1]
@@ -337,7 +359,42 @@ def _off_the_take(deviations: NDArray[np.float64], b: int, first: int, last: int
         return True
     med = float(np.median(vals))
     limit = med + STEP_MADS * 1.4826 * float(np.median(np.abs(vals - med)))
-    return bool(np.median(inside) > limit)
+    off = float(np.median(inside))
+    edges = [col[k] for k in (first - 1, last + 1) if 0 <= k < col.size and np.isfinite(col[k])]
+    return off > limit and all(e < 0.5 * off for e in edges)
+
+
+def _merge(known: list[tuple[int, int]], ranges: list[tuple[int, int]]) -> None:
+    """`ranges` added to a marker's `known` runs in place; a run over the same frames is the
+    same event: the two become the wider one."""
+    for s0, e0 in ranges:
+        overlap = [(s1, e1) for s1, e1 in known if s1 <= e0 and s0 <= e1]
+        for o in overlap:
+            known.remove(o)
+        known.append((min([s0, *(o[0] for o in overlap)]), max([e0, *(o[1] for o in overlap)])))
+    known.sort()
+
+
+def _deviation_runs(
+    deviations: NDArray[np.float64], size: float, noise: float
+) -> dict[int, list[tuple[int, int]]]:
+    """Per marker, the frame ranges where it is off the take's own motion (`_take_deviations`):
+    by `OUTLIER_MADS` scaled MADs over its median there, and at least `FLOOR` of the face's
+    size and `NOISE_SIGMAS` sigma (as a residual must be)."""
+    out: dict[int, list[tuple[int, int]]] = {}
+    for b in range(deviations.shape[1]):
+        col = deviations[:, b]
+        vals = col[np.isfinite(col)]
+        if vals.size < 3:
+            continue
+        med = float(np.median(vals))
+        mad = 1.4826 * float(np.median(np.abs(vals - med)))
+        limit = max(med + OUTLIER_MADS * mad, FLOOR * size, NOISE_SIGMAS * noise)
+        with np.errstate(invalid="ignore"):
+            ranges = _runs(col > limit)
+        if ranges:
+            out[b] = ranges
+    return out
 
 
 def diagnose(
@@ -368,16 +425,24 @@ def diagnose(
             if b < 0:
                 face_jumps = [Finding("cut", (), k, k, float("nan")) for k, _ in ranges]
                 continue
-            known = runs[b]
-            for s0, e0 in ranges:
-                # A residual run over the same frames is the same event: keep the wider one.
-                overlap = [(s1, e1) for s1, e1 in known if s1 <= e0 and s0 <= e1]
-                for o in overlap:
-                    known.remove(o)
-                known.append(
-                    (min([s0, *(o[0] for o in overlap)]), max([e0, *(o[1] for o in overlap)]))
-                )
-            known.sort()
+            _merge(runs[b], ranges)
+    deviations: NDArray[np.float64] | None = None  # with the solve's sigma and the take only
+    if x is not None and residual_runs is not None and noise:
+        # Samples off the take's own motion are runs too, whatever the solve made of them: a
+        # noise-aware solve can follow a spike (a 2 cm spike left a 1 mm residual where the
+        # dataset's shapes let the marker move), the take's other markers do not.
+        deviations = _take_deviations(x, noise)
+        if deviations is not None:
+            # Read again without the samples found off it (`_take_deviations`).
+            off = np.zeros(r.shape, dtype=bool)
+            for b, ranges in _deviation_runs(deviations, size, noise).items():
+                for s, e in ranges:
+                    off[s : e + 1, b] = True
+            deviations = _take_deviations(x, noise, off)
+        off_runs = {} if deviations is None else _deviation_runs(deviations, size, noise)
+        for b, ranges in off_runs.items():
+            _merge(runs[b], ranges)
+            _merge(residual_runs[b], ranges)
     findings: list[Finding] = []
     taken: set[tuple[int, int, int]] = set()
     swapped: list[tuple[int, int, int]] = []  # (marker, first, last) of each named swap
@@ -399,12 +464,7 @@ def diagnose(
                     swapped += [(a, first, last), (b, first, last)]
     singles = []
     nearest = None if x is None else _nearest(x)
-    suspects = np.zeros(r.shape, dtype=bool)  # every range asked about, left out of the take's
-    for b, rs in (runs if residual_runs is None else residual_runs).items():
-        for s, e in rs:
-            suspects[s : e + 1, b] = True
     steps: NDArray[np.float64] | None = None  # read on first need: most takes need none
-    deviations: NDArray[np.float64] | None = None  # likewise; with the solve's sigma only
     for b, rs in (runs if residual_runs is None else residual_runs).items():
         for s, e in rs:
             if (b, s, e) in taken or any(k == b and s <= e1 and s1 <= e for k, s1, e1 in swapped):
@@ -418,9 +478,7 @@ def diagnose(
                     steps = _relative_steps(x, nearest)
                 if not _leaves_track(steps, b, s, e):
                     kind = "gap"  # the marker moves with its neighbours: the dataset's, not its
-                elif noise:
-                    if deviations is None:
-                        deviations = _take_deviations(x, noise, suspects)
+                elif deviations is not None:
                     if not _off_the_take(deviations, b, s, e):
                         kind = "gap"  # the take moves it so elsewhere: fast skin, not a fault
             singles.append(Finding(kind, (names[b],), s, e, _worst(r[s : e + 1, b])))
