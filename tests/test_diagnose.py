@@ -194,3 +194,87 @@ def test_lgi_solve_prints_the_findings_and_lgi_info_names_them_from_the_file(
     assert frames is not None
     for code, marker in re.findall(r"(\d+) [\d.]+ cm (m\d{3})", frames.group(1)):
         assert marker == "m047" and 101 <= int(code) <= 150, frames.group(1)
+
+
+def _performance(frames: int = 400, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """Markers on the `_skin` grid moved by three directions of motion (smooth) and a fast one
+    that markers 5 and 6 carry together (a lid's blink: a two-frame pulse every 40 frames),
+    0.02 noise; with that pulse's frames."""
+    rng = np.random.default_rng(seed)
+    rest = _skin(1, 16, seed)[0]
+    t = np.arange(frames)[:, None] / 60.0
+    dirs = rng.normal(size=(3, 16, 3))
+    slow = np.c_[np.sin(2.1 * t), np.cos(1.3 * t), np.sin(0.7 * t + 1.0)]
+    x = rest[None] + np.einsum("fk,kbi->fbi", slow, 0.4 * dirs)
+    pulses = np.arange(20, frames - 5, 40)
+    fast = np.zeros(frames)
+    fast[pulses], fast[pulses + 1] = 1.0, 0.6
+    x[:, 5] += fast[:, None] * [0.0, -0.8, 0.2]
+    x[:, 6] += fast[:, None] * [0.0, -0.7, 0.3]
+    return x + rng.normal(0.0, 0.02, x.shape), pulses
+
+
+def test_take_deviations_are_each_markers_gaussian_conditional_given_the_others() -> None:
+    """On a complete frame, a marker's deviation is its distance from the conditional mean
+    given the frame's other markers under the Gaussian read from the other blocks of frames
+    (mean, its directions above the noise's bulk edge with their variance less the noise's,
+    white noise sigma): here conditioned by the explicit covariance, by numpy."""
+    from lgi.solve.diagnose import FOLD_FRAMES, _take_deviations
+    from lgi.solve.spectrum import shrinkage_factors
+
+    x, _ = _performance()
+    sigma = 0.02
+    got = _take_deviations(x, sigma)
+    assert got is not None
+    f = x.shape[0]
+    flat = x.reshape(f, -1)
+    centred = flat - flat.mean(axis=0)
+    fold = (np.arange(f) // FOLD_FRAMES) % 2
+    for judged in (0, 1):
+        seen = centred[fold != judged]
+        _, sv, vt = np.linalg.svd(seen, full_matrices=False)
+        n, p = seen.shape
+        keep = (
+            shrinkage_factors(sv / (np.sqrt(max(n - 1, p)) * sigma), min(n - 1, p) / max(n - 1, p))
+            > 0
+        )
+        lam = np.maximum(sv[keep] ** 2 / (n - 1) - sigma**2, 0.0)
+        cov = vt[keep].T @ np.diag(lam) @ vt[keep] + sigma**2 * np.eye(p)
+        for frame in np.flatnonzero(fold == judged)[::25]:
+            for k in (0, 5, 11):
+                own = np.arange(3 * k, 3 * k + 3)
+                rest = np.setdiff1d(np.arange(p), own)
+                mean = cov[np.ix_(own, rest)] @ np.linalg.solve(
+                    cov[np.ix_(rest, rest)], centred[frame, rest]
+                )
+                want = np.linalg.norm(centred[frame, own] - mean)
+                np.testing.assert_allclose(got[frame, k], want, rtol=1e-6, atol=1e-9)
+
+
+def test_skin_the_take_moves_so_elsewhere_is_a_gap_and_a_spike_the_solve_followed_is_named() -> (
+    None
+):
+    """Markers 5 and 6 blink together: a residual over one blink on marker 5 (it leaves its
+    four nearest markers' track and comes back) is the dataset's gap, since the take's own
+    motion puts it there from marker 6. A 1 cm spike the solve followed (no residual) is
+    named with its frames from the take alone; the same offset on half the markers at one
+    frame is the face's own motion, no fault."""
+    x, pulses = _performance()
+    names = [f"m{k:02d}" for k in range(16)]
+    rng = np.random.default_rng(2)
+    r = np.abs(rng.normal(0.01, 0.003, x.shape[:2]))
+    blink = int(pulses[3])
+    r[blink : blink + 2, 5] = 0.3
+    none = np.zeros(r.shape, bool)
+    found = diagnose(r, none, names, size=20.0, markers=x, noise=0.02)
+    assert [(f.kind, f.markers, f.first) for f in found] == [("gap", ("m05",), blink)], found
+    spiked = x.copy()
+    spiked[300:302, 9] += [1.0, 0.0, 0.0]
+    r_clean = np.abs(rng.normal(0.01, 0.003, x.shape[:2]))
+    found = diagnose(r_clean, none, names, size=20.0, markers=spiked, noise=0.02)
+    assert [(f.kind, f.markers, f.first, f.last) for f in found] == [("spike", ("m09",), 300, 301)]
+    face = x.copy()
+    face[300, ::2] += [1.0, 0.0, 0.0]
+    assert [
+        f for f in diagnose(r_clean, none, names, size=20.0, markers=face, noise=0.02) if f.fault
+    ] == []

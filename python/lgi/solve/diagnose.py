@@ -291,8 +291,8 @@ def _take_deviations(
 ) -> NDArray[np.float64] | None:
     """(F, B) each present marker's distance from where the take's own motion puts it given the
     frame's other markers (NaN where missing), or None for a take too short to read (fewer than
-    two blocks of `FOLD_FRAMES` frames). The take's motion is a Gaussian of low rank
-    (probabilistic PCA: its directions above the noise's bulk edge at `sigma`,
+    two blocks of `FOLD_FRAMES` frames) or a `sigma` that is not > 0. The take's motion is a
+    Gaussian of low rank (probabilistic PCA: its directions above the noise's bulk edge at `sigma`,
     `lgi.solve.spectrum`, each with its variance less the noise's, plus white noise `sigma`),
     read from every other block of frames for the blocks between (`FOLD_FRAMES`), and each
     marker's distance is from its conditional mean given the rest, `x_b - P_bb⁻¹ (P x)_b` for
@@ -303,7 +303,7 @@ def _take_deviations(
     is a direction of its own, carried by its marker alone, which makes that marker's
     conditional ill-posed in the blocks beside it."""
     f, b = x.shape[:2]
-    if f < 2 * FOLD_FRAMES:
+    if f < 2 * FOLD_FRAMES or not (np.isfinite(sigma) and sigma > 0.0):
         return None
     flat = x.reshape(f, 3 * b)
     missing = np.isnan(flat)
@@ -380,10 +380,13 @@ def _deviation_runs(
 ) -> dict[int, list[tuple[int, int]]]:
     """Per marker, the frame ranges where it is off the take's own motion (`_take_deviations`):
     by `OUTLIER_MADS` scaled MADs over its median there, and at least `FLOOR` of the face's
-    size and `NOISE_SIGMAS` sigma (as a residual must be)."""
-    out: dict[int, list[tuple[int, int]]] = {}
-    for b in range(deviations.shape[1]):
-        col = deviations[:, b]
+    size and `NOISE_SIGMAS` sigma (as a residual must be). A range over a frame where many
+    markers are off at once (more than `FACE_SHARE` of them, and 3) is the face's own motion
+    (a glitch of the performance itself), not a marker's, and is left out."""
+    f, b = deviations.shape
+    off = np.zeros((f, b), dtype=bool)
+    for k in range(b):
+        col = deviations[:, k]
         vals = col[np.isfinite(col)]
         if vals.size < 3:
             continue
@@ -391,9 +394,13 @@ def _deviation_runs(
         mad = 1.4826 * float(np.median(np.abs(vals - med)))
         limit = max(med + OUTLIER_MADS * mad, FLOOR * size, NOISE_SIGMAS * noise)
         with np.errstate(invalid="ignore"):
-            ranges = _runs(col > limit)
+            off[:, k] = col > limit
+    together = off.sum(axis=1) > max(3, FACE_SHARE * b)
+    out: dict[int, list[tuple[int, int]]] = {}
+    for k in range(b):
+        ranges = [(s, e) for s, e in _runs(off[:, k]) if not together[s : e + 1].any()]
         if ranges:
-            out[b] = ranges
+            out[k] = ranges
     return out
 
 
@@ -426,11 +433,17 @@ def diagnose(
                 face_jumps = [Finding("cut", (), k, k, float("nan")) for k, _ in ranges]
                 continue
             _merge(runs[b], ranges)
-    deviations: NDArray[np.float64] | None = None  # with the solve's sigma and the take only
-    if x is not None and residual_runs is not None and noise:
-        # Samples off the take's own motion are runs too, whatever the solve made of them: a
-        # noise-aware solve can follow a spike (a 2 cm spike left a 1 mm residual where the
-        # dataset's shapes let the marker move), the take's other markers do not.
+    deviations: NDArray[np.float64] | None = None
+    # The take's own motion is read at the solve's sigma, where it is one a residual could
+    # count at (`FLOOR` over `NOISE_SIGMAS`): under it (a noise-free take's reading,
+    # round-off) the motion read takes the face's own fast motion for faults (a lip's 0.5-1
+    # mm in two frames), and without a sigma (an exact solve) it has none to read at.
+    if (
+        x is not None
+        and residual_runs is not None
+        and noise
+        and noise >= FLOOR * size / NOISE_SIGMAS
+    ):
         deviations = _take_deviations(x, noise)
         if deviations is not None:
             # Read again without the samples found off it (`_take_deviations`).
@@ -439,8 +452,12 @@ def diagnose(
                 for s, e in ranges:
                     off[s : e + 1, b] = True
             deviations = _take_deviations(x, noise, off)
-        off_runs = {} if deviations is None else _deviation_runs(deviations, size, noise)
-        for b, ranges in off_runs.items():
+        # Samples off the take's own motion are runs too, whatever the solve made of them: a
+        # noise-aware solve can follow a spike (a 2 cm spike left a 1 mm residual where the
+        # dataset's shapes let the marker move), the take's other markers do not.
+        for b, ranges in (
+            {} if deviations is None else _deviation_runs(deviations, size, noise)
+        ).items():
             _merge(runs[b], ranges)
             _merge(residual_runs[b], ranges)
     findings: list[Finding] = []
