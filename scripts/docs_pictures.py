@@ -22,7 +22,7 @@ from pipeline_files import write_actor, write_c3d  # noqa: E402
 
 
 def lgi(*args: object) -> None:
-    subprocess.run([sys.executable, "-m", "lgi.app.cli", *map(str, args)], check=True)
+    subprocess.run([sys.executable, "-m", "lgi.app.main", *map(str, args)], check=True)
 
 
 def main() -> None:
@@ -61,7 +61,7 @@ def main() -> None:
                 [
                     sys.executable,
                     "-m",
-                    "lgi.app.cli",
+                    "lgi.app.main",
                     "view",
                     d / "solved.npz",
                     "--compare",

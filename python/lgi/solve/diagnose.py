@@ -455,11 +455,16 @@ def diagnose(
         # Samples off the take's own motion are runs too, whatever the solve made of them: a
         # noise-aware solve can follow a spike (a 2 cm spike left a 1 mm residual where the
         # dataset's shapes let the marker move), the take's other markers do not.
+        # Only where nothing else is: a range the residuals or the tracks already have keeps
+        # its own edges (a marker the take's motion misses for a while before a spike would
+        # move them off the spike's steps).
         for b, ranges in (
             {} if deviations is None else _deviation_runs(deviations, size, noise)
         ).items():
-            _merge(runs[b], ranges)
-            _merge(residual_runs[b], ranges)
+            for rs in (runs[b], residual_runs[b]):
+                new = [(s, e) for s, e in ranges if not any(s <= e1 and s1 <= e for s1, e1 in rs)]
+                rs.extend(new)
+                rs.sort()
     findings: list[Finding] = []
     taken: set[tuple[int, int, int]] = set()
     swapped: list[tuple[int, int, int]] = []  # (marker, first, last) of each named swap
