@@ -16,6 +16,9 @@ quarter of its shapes held out, driven by the shared Live Link recordings; docs/
         spikes of 0.3-2 cm lasting 1-5 frames, six planted per take in their own 200 frames;
         per cell, how many were named as faults (and swaps as the swap of that pair), and the
         marker faults named on the clean takes.
+    python scripts/measure_faults.py clean [--seeds 0 1] [--dataset ict|scans]
+        the study's clean takes solved as `lgi solve` solves them, the fast call and
+        --recommended: what the pipeline repairs (nothing where no fault is named).
     python scripts/measure_faults.py cost
         the steady solve's cost: the same take solved each frame alone and steady, in-process.
     python scripts/measure_faults.py pops [--seeds 0] [--dataset ict|scans] [--list]
@@ -360,6 +363,26 @@ def study(seeds: list[int], dataset: str) -> None:
         print(f"| {kind} | {cm} cm | {n} | {named[key]}/{tried[key]} | {swap} |")
 
 
+def clean(seeds: list[int], dataset: str) -> None:
+    """What the pipeline repairs on the study's clean takes (both layouts, each seed), with the
+    fast call and with `--recommended`, as `lgi solve` solves them: nothing, where no fault is
+    named."""
+    d, markers_120, random_160, folder = data()
+    for layout, pos in (("markers_120", markers_120), ("random 160", random_160)):
+        for seed in seeds:
+            t, given = _take_of(d, pos, folder, seed, dataset)
+            m = lgi.Model.build(given, pos)
+            for call, opts in (
+                ("--marker-noise auto", lgi.SolveOptions(marker_noise="auto")),
+                ("--recommended", lgi.SolveOptions(recommended=True)),
+            ):
+                with warnings.catch_warnings():
+                    warnings.simplefilter("ignore", lgi.LgiWarning)
+                    solved, _, _ = solve_take(plan_take(t.frames, m, opts), m, opts)
+                repairs = solved.settings.repairs
+                print(f"{dataset}, {layout}, seed {seed}, {call}: repaired {list(repairs)}")
+
+
 def steady_cost(seeds: list[int]) -> None:
     """`Model.solve` of the 1,200-frame take with `--marker-noise auto`'s sigma, each frame alone
     and steady (no repair), three runs alternating, in-process."""
@@ -386,7 +409,7 @@ def steady_cost(seeds: list[int]) -> None:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
-    ap.add_argument("what", choices=["findings", "repair", "pops", "study", "cost"])
+    ap.add_argument("what", choices=["findings", "repair", "pops", "study", "clean", "cost"])
     ap.add_argument("--sigma", type=float, nargs="+", default=[0.0, 0.02, 0.05])
     ap.add_argument("--seeds", type=int, nargs="+", default=[0])
     ap.add_argument("--call", choices=["auto", "recommended"], default="auto")
@@ -401,6 +424,8 @@ def main() -> None:
         repair(args.seeds, args.call)
     elif args.what == "study":
         study(args.seeds, args.dataset)
+    elif args.what == "clean":
+        clean(args.seeds, args.dataset)
     elif args.what == "cost":
         steady_cost(args.seeds)
     else:

@@ -18,7 +18,15 @@ from headless import chromium
 
 def time_report(solved: str, compare: str | None) -> float:
     with tempfile.TemporaryDirectory() as d:
-        cmd = [sys.executable, "-m", "lgi.app.cli", "report", solved, "-o", str(Path(d) / "r.html")]
+        cmd = [
+            sys.executable,
+            "-m",
+            "lgi.app.main",
+            "report",
+            solved,
+            "-o",
+            str(Path(d) / "r.html"),
+        ]
         t = time.perf_counter()
         subprocess.run(cmd + (["--compare", compare] if compare else []), check=True)
         return time.perf_counter() - t
@@ -27,7 +35,7 @@ def time_report(solved: str, compare: str | None) -> float:
 def time_view(solved: str, compare: str | None) -> float:
     driver = chromium()
     driver.get("about:blank")  # the browser's own start is not lgi's time
-    cmd = [sys.executable, "-m", "lgi.app.cli", "view", solved]
+    cmd = [sys.executable, "-m", "lgi.app.main", "view", solved]
     t = time.perf_counter()
     proc = subprocess.Popen(
         cmd + (["--compare", compare] if compare else []), stdout=subprocess.PIPE, text=True

@@ -455,16 +455,21 @@ def diagnose(
         # Samples off the take's own motion are runs too, whatever the solve made of them: a
         # noise-aware solve can follow a spike (a 2 cm spike left a 1 mm residual where the
         # dataset's shapes let the marker move), the take's other markers do not.
-        # Only where nothing else is: a range the residuals or the tracks already have keeps
-        # its own edges (a marker the take's motion misses for a while before a spike would
-        # move them off the spike's steps).
-        for b, ranges in (
-            {} if deviations is None else _deviation_runs(deviations, size, noise)
-        ).items():
-            for rs in (runs[b], residual_runs[b]):
-                new = [(s, e) for s, e in ranges if not any(s <= e1 and s1 <= e for s1, e1 in rs)]
-                rs.extend(new)
-                rs.sort()
+        # Over a range the residuals or the tracks already have, only where it is itself off
+        # the take's motion as a fault is (`_off_the_take`): then its edges are the fault's (a
+        # solve that followed a spike's first frame starts its residuals a frame late); else
+        # the range keeps its own (a marker the take's motion misses for a while before a
+        # spike would move them off the spike's steps).
+        off_runs = {} if deviations is None else _deviation_runs(deviations, size, noise)
+        for b, ranges in off_runs.items():
+            assert deviations is not None
+            for s, e in ranges:
+                for rs in (runs[b], residual_runs[b]):
+                    if not any(s <= e1 and s1 <= e for s1, e1 in rs):
+                        rs.append((s, e))
+                        rs.sort()
+                    elif _off_the_take(deviations, b, s, e):
+                        _merge(rs, [(s, e)])
     findings: list[Finding] = []
     taken: set[tuple[int, int, int]] = set()
     swapped: list[tuple[int, int, int]] = []  # (marker, first, last) of each named swap
