@@ -286,6 +286,12 @@ predicts the blocks between: every sample is judged by motion read without it (a
 into the motion it is judged by looks predicted, a spike's included)."""
 
 
+MOTION_FRAMES = 200
+"""Frames a take needs for samples off its own motion to be ranges of their own (a spike the
+solve followed): a take of 40 frames a second apart named a marker's noise a spike. Shorter takes
+are still asked whether a range is off their motion (`_off_the_take`)."""
+
+
 def _take_deviations(
     x: NDArray[np.float64], sigma: float, left_out: NDArray[np.bool_] | None = None
 ) -> NDArray[np.float64] | None:
@@ -434,6 +440,7 @@ def diagnose(
                 continue
             _merge(runs[b], ranges)
     deviations: NDArray[np.float64] | None = None
+    motion_only: set[tuple[int, int, int]] = set()  # ranges the take's motion alone shows
     # The take's own motion is read at the solve's sigma, where it is one a residual could
     # count at (`FLOOR` over `NOISE_SIGMAS`): under it (a noise-free take's reading,
     # round-off) the motion read takes the face's own fast motion for faults (a lip's 0.5-1
@@ -460,7 +467,12 @@ def diagnose(
         # solve that followed a spike's first frame starts its residuals a frame late); else
         # the range keeps its own (a marker the take's motion misses for a while before a
         # spike would move them off the spike's steps).
-        off_runs = {} if deviations is None else _deviation_runs(deviations, size, noise)
+        # Found from the motion alone only in a take long enough to show it (`MOTION_FRAMES`).
+        off_runs = (
+            {}
+            if deviations is None or x.shape[0] < MOTION_FRAMES
+            else _deviation_runs(deviations, size, noise)
+        )
         for b, ranges in off_runs.items():
             assert deviations is not None
             for s, e in ranges:
@@ -468,6 +480,7 @@ def diagnose(
                     if not any(s <= e1 and s1 <= e for s1, e1 in rs):
                         rs.append((s, e))
                         rs.sort()
+                        motion_only.add((b, s, e))
                     elif _off_the_take(deviations, b, s, e):
                         _merge(rs, [(s, e)])
     findings: list[Finding] = []
@@ -508,6 +521,8 @@ def diagnose(
                 elif deviations is not None:
                     if not _off_the_take(deviations, b, s, e):
                         kind = "gap"  # the take moves it so elsewhere: fast skin, not a fault
+            if kind == "gap" and (b, s, e) in motion_only:
+                continue  # the solve followed it: no gap of the dataset's either
             singles.append(Finding(kind, (names[b],), s, e, _worst(r[s : e + 1, b])))
     singles.sort(key=lambda f: -f.worst)
     if x is not None:
