@@ -120,13 +120,18 @@ def _runs(flags: NDArray[np.bool_]) -> list[tuple[int, int]]:
     return [(a, b) for a, b in runs]
 
 
+def _above_median(vals: NDArray[np.float64], mads: float) -> float:
+    """The median of `vals` plus `mads` scaled MADs (1.4826 x MAD: sigma for Gaussian values):
+    every outlier limit of the findings."""
+    med = float(np.median(vals))
+    return med + mads * 1.4826 * float(np.median(np.abs(vals - med)))
+
+
 def _threshold(r: NDArray[np.float64], size: float) -> float:
     vals = r[np.isfinite(r)]
     if vals.size == 0:
         return np.inf
-    med = float(np.median(vals))
-    mad = 1.4826 * float(np.median(np.abs(vals - med)))
-    return max(med + OUTLIER_MADS * mad, FLOOR * size)
+    return max(_above_median(vals, OUTLIER_MADS), FLOOR * size)
 
 
 def _swapped(x: NDArray[np.float64], a: int, b: int, first: int, last: int) -> bool:
@@ -187,8 +192,7 @@ def _track_ranges(x: NDArray[np.float64], size: float) -> dict[int, list[tuple[i
     vals = step[np.isfinite(step)]
     if vals.size == 0:
         return {}
-    med = float(np.median(vals))
-    limit = max(med + JUMP_MADS * 1.4826 * float(np.median(np.abs(vals - med))), JUMP_FLOOR * size)
+    limit = max(_above_median(vals, JUMP_MADS), JUMP_FLOOR * size)
     with np.errstate(invalid="ignore"):
         jumped = step > limit
     # Many markers jumping together is the whole face moving (a cut, a tracking glitch of
@@ -267,8 +271,7 @@ def _leaves_track(steps: NDArray[np.float64], b: int, first: int, last: int) -> 
     vals = col[np.isfinite(col)]
     if vals.size < 3:
         return True  # too little track to read: a fault, as before this test
-    med = float(np.median(vals))
-    limit = med + STEP_MADS * 1.4826 * float(np.median(np.abs(vals - med)))
+    limit = _above_median(vals, STEP_MADS)
     stepped = []
     for edge in (first, last + 1):
         if not 0 < edge < col.shape[0]:
@@ -363,8 +366,7 @@ def _off_the_take(deviations: NDArray[np.float64], b: int, first: int, last: int
     inside = inside[np.isfinite(inside)]
     if vals.size < 3 or inside.size == 0:
         return True
-    med = float(np.median(vals))
-    limit = med + STEP_MADS * 1.4826 * float(np.median(np.abs(vals - med)))
+    limit = _above_median(vals, STEP_MADS)
     off = float(np.median(inside))
     edges = [col[k] for k in (first - 1, last + 1) if 0 <= k < col.size and np.isfinite(col[k])]
     return off > limit and all(e < 0.5 * off for e in edges)
@@ -396,9 +398,7 @@ def _deviation_runs(
         vals = col[np.isfinite(col)]
         if vals.size < 3:
             continue
-        med = float(np.median(vals))
-        mad = 1.4826 * float(np.median(np.abs(vals - med)))
-        limit = max(med + OUTLIER_MADS * mad, FLOOR * size, NOISE_SIGMAS * noise)
+        limit = max(_above_median(vals, OUTLIER_MADS), FLOOR * size, NOISE_SIGMAS * noise)
         with np.errstate(invalid="ignore"):
             off[:, k] = col > limit
     together = off.sum(axis=1) > max(3, FACE_SHARE * b)
