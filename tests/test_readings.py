@@ -16,17 +16,17 @@ from test_take_prior import SIGMA, two_directions  # noqa: F401  (the fixture)
 
 
 def _counting(monkeypatch: pytest.MonkeyPatch, model: Any) -> list[tuple[bytes, Any, bool]]:
-    """Every row each `Model.solve` solves: its markers (bytes), its fit and whether it had a
-    take prior."""
+    """Every row each `Model.solve_markers` (the readings' solve) solves: its markers (bytes),
+    its fit and whether it had a take prior."""
     calls: list[tuple[bytes, Any, bool]] = []
-    solve = type(model).solve
+    solve = type(model).solve_markers
 
     def counted(self: Any, frames: Any, *args: Any, **kw: Any) -> Any:
         fit, prior = kw.get("fit"), kw.get("take_prior") is not None
         calls.extend((np.asarray(f).tobytes(), fit, prior) for f in frames)
         return solve(self, frames, *args, **kw)
 
-    monkeypatch.setattr(type(model), "solve", counted)
+    monkeypatch.setattr(type(model), "solve_markers", counted)
     return calls
 
 

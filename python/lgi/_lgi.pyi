@@ -2,7 +2,7 @@
 
 import os
 from collections.abc import Callable, Mapping, Sequence
-from typing import Any, TypedDict, final
+from typing import Any, Literal, TypedDict, final
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -464,6 +464,7 @@ class Model:
         previous: SolveState | None = None,
         unbounded_fit: bool = False,
         take_prior: tuple[ArrayLike, ArrayLike, float] | None = None,
+        surface: Literal["mesh", "markers", "none"] | None = None,
     ) -> SolveResult:
         """Solves (F, B, 3) frames (vertices into `out` if given); ``jaw`` is ``"auto"``,
         ``"fit"``, ``"track"``, (F, 3) poses or None (rest); ``fit`` offers the global fit as a
@@ -471,7 +472,11 @@ class Model:
         solves noise-aware, ``previous`` (a temporal solve's ``state``) continues that solve,
         ``unbounded_fit`` fits the frame's weights without the [0, 1] box (at the pose the
         boxed fit refined), ``take_prior`` ``(mean, factor, noise_variance)`` puts the take's
-        prior on that fit in place of its ridge."""
+        prior on that fit in place of its ridge; ``surface``: ``"mesh"`` (every vertex; None too),
+        ``"markers"`` (the markers' positions on the sewn surfaces, the same bits, no vertex
+        written) or ``"none"`` (no choice, no sewing: targets, fits and poses; each present
+        marker's choice reported as a fit), the last two with ``vertices`` ``out`` as given
+        or an empty (F, 0, 3) array."""
     def fit_residuals(
         self, frames: ArrayLike, jaw: str | ArrayLike | None = None
     ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:

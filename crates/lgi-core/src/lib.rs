@@ -21,6 +21,7 @@ mod cloud;
 mod correspond;
 mod dataset;
 mod error;
+mod frame_blocks;
 mod geodesic;
 mod geom;
 mod hash;
@@ -54,7 +55,10 @@ pub use augment::{augment, recipes, Recipe};
 pub use basis::ShapeBasis;
 pub use dataset::Dataset;
 pub use error::{LgiError, Result};
-pub use local_fit::{blend_local, LocalFits, LocalWeights, SewingRows, LOCAL_LENGTH, WINDOW_REACH};
+pub use local_fit::{
+    blend_local, blend_local_frames, LocalFits, LocalWeights, SewingRows, LOCAL_LENGTH,
+    WINDOW_REACH,
+};
 pub use magnitude::{
     check_dataset, Extent, Naming, MAGNITUDE_LIMIT, MAX_COORDINATE, MIN_PRESENT_MARKERS,
 };
@@ -63,7 +67,7 @@ pub use missing_rows::{FillFit, MissingRows};
 pub use model::{
     default_marker_names, BinParts, BinPartsRef, BuildConfig, BundleStats, FitResiduals, FrameInfo,
     FrameState, JawInput, JawPose, JawSetup, LocalShapeId, Lookup, Model, ModelParts,
-    ModelPartsRef, PartsError, ShapeId, SolveOptions, MAX_UNIT_LEN,
+    ModelPartsRef, PartsError, Sewn, ShapeId, SolveOptions, MAX_UNIT_LEN,
 };
 pub use polygons::Polygons;
 pub use prior::{

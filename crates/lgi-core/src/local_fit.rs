@@ -8,9 +8,11 @@
 
 use crate::baselines::{BlendshapeSolver, FitStart};
 use crate::error::{LgiError, Result};
+use crate::frame_blocks::frame_blocks;
 use crate::linalg::dot8;
 use crate::prior::{correlation_over, fit_scale};
 use crate::ridge::RidgeFit;
+use crate::simd::with_avx2;
 use glam::DVec3;
 use rayon::prelude::*;
 
@@ -241,19 +243,43 @@ pub fn blend_local(
     weights: &[f64],
     out: &mut [DVec3],
 ) -> Result<()> {
+    if out.len() != neutral.len() {
+        return Err(LgiError::Input(format!(
+            "local fits' blend: expected {} vertices' output, got {}",
+            neutral.len(),
+            out.len()
+        )));
+    }
+    blend_local_frames(neutral, shapes, sewing, weights, out)
+}
+
+/// [`blend_local`] of F frames at once: `weights` F × B × q, `out` F × V (frame after frame),
+/// each frame's vertices the same bits as its own `blend_local`. A block of vertices is
+/// blended for every frame in turn, so its shapes are read from memory once for all of them.
+pub fn blend_local_frames(
+    neutral: &[DVec3],
+    shapes: &[f32],
+    sewing: SewingRows<'_>,
+    weights: &[f64],
+    out: &mut [DVec3],
+) -> Result<()> {
     let v = neutral.len();
     let q = shapes.len().checked_div(3 * v).unwrap_or(0);
-    let bundles = weights.len().checked_div(q).unwrap_or(0);
+    let frames = out.len().checked_div(v).unwrap_or(0);
+    let bundles = weights.len().checked_div(q * frames).unwrap_or(0);
     let bad = |what: String| Err(LgiError::Input(format!("local fits' blend: {what}")));
-    if v == 0 || q == 0 || shapes.len() != 3 * v * q || out.len() != v {
+    if v == 0 || q == 0 || shapes.len() != 3 * v * q || frames == 0 || out.len() != frames * v {
         return bad(format!(
-            "expected {v} vertices' shapes (V × 3 × q) and output, got {} values and {} outputs",
+            "expected {v} vertices' shapes (V × 3 × q) and whole frames of output, got {} values and {} outputs",
             shapes.len(),
             out.len()
         ));
     }
-    if weights.len() != bundles * q || bundles == 0 {
-        return bad(format!("{} weights are not bundles × {q}", weights.len()));
+    if weights.len() != frames * bundles * q || bundles == 0 {
+        return bad(format!(
+            "{} weights are not {frames} frames × bundles × {q}",
+            weights.len()
+        ));
     }
     let nnz = sewing.indices.len();
     if sewing.indptr.len() != v + 1
@@ -266,25 +292,59 @@ pub fn blend_local(
             "the sewing rows are not {v} vertices' entries over {bundles} bundles"
         ));
     }
-    out.par_chunks_mut(BLEND_VERTICES)
+    let per_frame = bundles * q;
+    frame_blocks(out, v, BLEND_VERTICES)
+        .into_par_iter()
         .enumerate()
-        .for_each(|(c, chunk)| {
+        .for_each(|(c, mut parts)| {
             let mut mixed = vec![0.0f64; q];
-            for (k, o) in chunk.iter_mut().enumerate() {
-                let vert = c * BLEND_VERTICES + k;
-                mixed.iter_mut().for_each(|m| *m = 0.0);
-                for e in sewing.indptr[vert]..sewing.indptr[vert + 1] {
-                    let (b, s) = (sewing.indices[e], sewing.data[e]);
-                    for (m, w) in mixed.iter_mut().zip(&weights[b * q..(b + 1) * q]) {
-                        *m += s * w;
-                    }
-                }
-                let rows = &shapes[3 * vert * q..3 * (vert + 1) * q];
-                let dot = |d: usize| dot8(&rows[d * q..(d + 1) * q], &mixed);
-                *o = neutral[vert] + DVec3::new(dot(0), dot(1), dot(2));
-            }
+            blend_block(
+                neutral,
+                shapes,
+                sewing,
+                weights,
+                per_frame,
+                c * BLEND_VERTICES,
+                &mut parts,
+                &mut mixed,
+            );
         });
     Ok(())
+}
+
+with_avx2! {
+/// One block of [`blend_local_frames`]: vertices `first..` (as many as `parts`' slices hold)
+/// of every frame in `parts`, `mixed` a scratch of q values.
+#[allow(clippy::too_many_arguments)]
+fn blend_block(
+    neutral: &[DVec3],
+    shapes: &[f32],
+    sewing: SewingRows<'_>,
+    weights: &[f64],
+    per_frame: usize,
+    first: usize,
+    parts: &mut [&mut [DVec3]],
+    mixed: &mut [f64],
+) {
+    let q = mixed.len();
+    let len = parts.first().map_or(0, |p| p.len());
+    for k in 0..len {
+        let vert = first + k;
+        let rows = &shapes[3 * vert * q..3 * (vert + 1) * q];
+        for (f, part) in parts.iter_mut().enumerate() {
+            let frame = &weights[f * per_frame..(f + 1) * per_frame];
+            mixed.iter_mut().for_each(|m| *m = 0.0);
+            for e in sewing.indptr[vert]..sewing.indptr[vert + 1] {
+                let (b, s) = (sewing.indices[e], sewing.data[e]);
+                for (m, w) in mixed.iter_mut().zip(&frame[b * q..(b + 1) * q]) {
+                    *m += s * w;
+                }
+            }
+            let dot = |d: usize| dot8(&rows[d * q..(d + 1) * q], mixed);
+            part[k] = neutral[vert] + DVec3::new(dot(0), dot(1), dot(2));
+        }
+    }
+}
 }
 
 /// A window's fit of one frame: its weights, its dual point where the iteration found it

@@ -150,10 +150,10 @@ pub fn shape_basis<'py>(
     )))
 }
 
-/// The local fits' blend over the mesh, frame by frame (`lgi_core::blend_local`): `neutral`
-/// (V, 3), `shapes` (V, 3, q) float32 C-contiguous (read in place), the sewing weights as CSR
-/// rows (`indptr` (V+1,), `indices`, `data`; int64, int64, float64) and `weights` (F, B, q)
-/// -> (F, V, 3).
+/// The local fits' blend over the mesh of several frames (`lgi_core::blend_local_frames`):
+/// `neutral` (V, 3), `shapes` (V, 3, q) float32 C-contiguous (read in place), the sewing
+/// weights as CSR rows (`indptr` (V+1,), `indices`, `data`; int64, int64, float64) and
+/// `weights` (F, B, q) -> (F, V, 3).
 #[pyfunction]
 pub fn blend_local<'py>(
     py: Python<'py>,
@@ -172,7 +172,7 @@ pub fn blend_local<'py>(
     let indices = indices_of(&indices, "blend_local: indices")?;
     let data: Vec<f64> = data.as_array().iter().copied().collect();
     let w = float_array(weights, "weights", &[None, None, Some(q)])?;
-    let (f, b) = (w.shape()[0], w.shape()[1]);
+    let f = w.shape()[0];
     let w: Vec<f64> = w.iter().copied().collect();
     let sewing = lgi_core::SewingRows {
         indptr: &indptr,
@@ -180,19 +180,12 @@ pub fn blend_local<'py>(
         data: &data,
     };
     let out = threads::detach(py, || -> lgi_core::Result<Vec<f64>> {
-        let mut all = Vec::with_capacity(f * v * 3);
-        let mut frame = vec![glam::DVec3::ZERO; v];
-        for k in 0..f {
-            lgi_core::blend_local(
-                &x0,
-                flat,
-                sewing,
-                &w[k * b * q..(k + 1) * b * q],
-                &mut frame,
-            )?;
-            all.extend(frame.iter().flat_map(|p| [p.x, p.y, p.z]));
+        if f == 0 {
+            return Ok(Vec::new());
         }
-        Ok(all)
+        let mut all = vec![glam::DVec3::ZERO; f * v];
+        lgi_core::blend_local_frames(&x0, flat, sewing, &w, &mut all)?;
+        Ok(all.iter().flat_map(|p| [p.x, p.y, p.z]).collect())
     })
     .map_err(PyLgiError)?;
     flat_to_array(py, out, &[f, v, 3])
@@ -306,43 +299,38 @@ impl LocalSurface {
             indices: &self.indices,
             data: &self.data,
         };
-        let frame = |k: usize, o: &mut [DVec3]| -> lgi_core::Result<Vec<DVec3>> {
-            let mut blend = vec![DVec3::ZERO; v];
-            lgi_core::blend_local(
-                &self.neutral,
-                &self.shapes,
-                sewing,
-                &w[k * b * q..(k + 1) * b * q],
-                &mut blend,
-            )?;
-            let posed = match (rig, &poses) {
-                (Some(rig), Some(poses)) => {
-                    let mut posed = vec![DVec3::ZERO; v];
-                    rig.skin(&blend, poses[k], &mut posed)?;
-                    posed
-                }
-                _ => blend,
-            };
-            let on = model.bundle_positions(&posed)?;
-            let misses: Vec<DVec3> = t[k * b..(k + 1) * b]
-                .iter()
-                .zip(&on)
-                .map(|(target, at)| *target - *at)
-                .collect();
-            let corrective = rbf.interpolate(&misses)?;
-            for ((o, p), c) in o.iter_mut().zip(&posed).zip(&corrective) {
-                *o = *p + *c;
+        // In stages over the chunk's frames, each frame's arithmetic as its own: the blend of
+        // every frame a block of vertices at a time (its shapes read once for all the
+        // frames), then per frame its jaw pose and what the blend misses at the markers, then
+        // the corrective of every frame (its matrix read once for all), then the markers.
+        let surface = |out: &mut [DVec3]| -> lgi_core::Result<Vec<Vec<DVec3>>> {
+            if f == 0 {
+                return Ok(Vec::new());
             }
-            model.bundle_positions(o)
+            lgi_core::blend_local_frames(&self.neutral, &self.shapes, sewing, &w, out)?;
+            let misses = out
+                .par_chunks_mut(v)
+                .enumerate()
+                .map(|(k, o)| {
+                    if let (Some(rig), Some(poses)) = (rig, &poses) {
+                        let blend = o.to_vec();
+                        rig.skin(&blend, poses[k], o)?;
+                    }
+                    let on = model.bundle_positions(o)?;
+                    Ok(t[k * b..(k + 1) * b]
+                        .iter()
+                        .zip(&on)
+                        .map(|(target, at)| *target - *at)
+                        .collect::<Vec<DVec3>>())
+                })
+                .collect::<lgi_core::Result<Vec<Vec<DVec3>>>>()?;
+            rbf.add_interpolated_frames(&misses.concat(), out)?;
+            out.par_chunks(v)
+                .map(|o| model.bundle_positions(o))
+                .collect()
         };
         let positions = crate::solve_args::with_points_mut(&arr, |out| {
-            threads::detach(py, || {
-                out.par_chunks_mut(v)
-                    .enumerate()
-                    .map(|(k, o)| frame(k, o))
-                    .collect::<lgi_core::Result<Vec<Vec<DVec3>>>>()
-            })
-            .map_err(|e| PyLgiError(e).into())
+            threads::detach(py, || surface(out)).map_err(|e| PyLgiError(e).into())
         })?;
         let flat: Vec<f64> = positions
             .iter()

@@ -11,7 +11,9 @@ use crate::result::{self, SolveResult, SolveState};
 use crate::solve_args;
 use crate::threads;
 use glam::{DMat3, DVec3};
-use lgi_core::{JawBins, JawInput, JawParams, JawRig as CoreRig, Model as CoreModel, SolveOptions};
+use lgi_core::{
+    JawBins, JawInput, JawParams, JawRig as CoreRig, Model as CoreModel, Sewn, SolveOptions,
+};
 use numpy::{PyArray3, PyArrayDyn};
 use pyo3::prelude::*;
 use pyo3::types::{PyBytes, PyDict};
@@ -203,8 +205,12 @@ impl Model {
     /// and keeps its jaw bin, so chunks solved in turn equal one call. `unbounded_fit`: the
     /// frame's global fit without the [0, 1] box (at the pose the boxed fit refined);
     /// `take_prior` (`(mean, factor, noise_variance)`, with `unbounded_fit`): the take's own
-    /// prior on its weights in place of its ridge (`lgi.take_prior`).
-    #[pyo3(signature = (frames, progress=None, temporal=true, jaw=None, smooth_window=0, out=None, fit=None, marker_noise=None, previous=None, unbounded_fit=false, take_prior=None))]
+    /// prior on its weights in place of its ridge (`lgi.take_prior`). `surface`: `"mesh"`
+    /// (every vertex; None too), `"markers"` (the markers' positions on the sewn surfaces,
+    /// the same bits, no vertex written) or `"none"` (no choice and no sewing: the targets,
+    /// fits and poses, for a caller that makes the surface itself); with either of the last
+    /// two, `vertices` is `out` as given, or an empty (F, 0, 3) array.
+    #[pyo3(signature = (frames, progress=None, temporal=true, jaw=None, smooth_window=0, out=None, fit=None, marker_noise=None, previous=None, unbounded_fit=false, take_prior=None, surface=None))]
     #[allow(clippy::too_many_arguments)]
     fn solve<'py>(
         &self,
@@ -222,22 +228,26 @@ impl Model {
         #[pyo3(from_py_with = solve_args::take_prior)] take_prior: Option<
             std::sync::Arc<lgi_core::TakePrior>,
         >,
+        surface: Option<&Bound<'py, PyAny>>,
     ) -> PyResult<SolveResult> {
         let b = self.inner.num_bundles();
+        let surface = solve_args::sewn(surface)?;
         let frames = point_sets(frames, "frames", ("frame", "bundle"), Some(b), true)?;
         let options = SolveOptions {
             jaw: solve_args::jaw_pose(jaw, &self.inner, frames.len())?,
             unbounded_fit,
             take_prior,
+            sewn: surface,
             ..SolveOptions::new(temporal, smooth_window, fit, marker_noise)
         };
         let previous = previous.map(|p| p.inner.clone());
         let (nf, nv) = (frames.len(), self.inner.dataset().num_vertices());
         // The vertices go straight into the numpy array the caller gets (no copy, no second
         // F × V × 3 buffer).
-        let vertices = match out {
-            None => PyArray3::<f64>::zeros(py, [nf, nv, 3], false),
-            Some(o) => solve_args::output_array(o, [nf, nv, 3])?,
+        let vertices = match (out, surface) {
+            (Some(o), _) => solve_args::output_array(o, [nf, nv, 3])?,
+            (None, Sewn::Mesh) => PyArray3::<f64>::zeros(py, [nf, nv, 3], false),
+            (None, Sewn::Markers | Sewn::Nothing) => PyArray3::<f64>::zeros(py, [nf, 0, 3], false),
         };
         let solved = solve_args::with_points_mut(&vertices, |out| {
             let model = self.inner.clone();

@@ -5,7 +5,7 @@
 use crate::convert::{any_numbers, count, float_array};
 use crate::error::input_error;
 use crate::error::PyLgiError;
-use lgi_core::{JawParams, JawPose, Model as CoreModel, TakePrior};
+use lgi_core::{JawParams, JawPose, Model as CoreModel, Sewn, TakePrior};
 use numpy::{PyArray3, PyUntypedArrayMethods};
 use pyo3::prelude::*;
 use pyo3::types::{PyFloat, PyString};
@@ -22,6 +22,26 @@ pub fn fit(obj: &Bound<'_, PyAny>) -> PyResult<Option<bool>> {
         return Ok(None);
     }
     obj.is_truthy().map(Some)
+}
+
+/// `surface`: how much of each frame's surface to make, `"mesh"` (None too), `"markers"` or
+/// `"none"` ([`Sewn`]).
+pub fn sewn(obj: Option<&Bound<'_, PyAny>>) -> PyResult<Sewn> {
+    let Some(obj) = obj.filter(|o| !o.is_none()) else {
+        return Ok(Sewn::Mesh);
+    };
+    let word = obj.cast::<PyString>().ok().map(|s| s.to_string());
+    match word.as_deref() {
+        Some("mesh") => Ok(Sewn::Mesh),
+        Some("markers") => Ok(Sewn::Markers),
+        Some("none") => Ok(Sewn::Nothing),
+        _ => {
+            let shown = obj.repr().map_or_else(|_| "?".into(), |r| r.to_string());
+            Err(input_error(format!(
+                "surface must be 'mesh', 'markers' or 'none', got {shown}"
+            )))
+        }
+    }
 }
 
 /// `marker_noise`: None (exact), else whatever Python's `float` makes of it (the core checks

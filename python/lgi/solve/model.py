@@ -395,6 +395,37 @@ class Model:
         again = once(fixed)
         return _with(again, repaired=changed, repairs=faults)
 
+    def solve_markers(
+        self,
+        frames: ArrayLike,
+        *,
+        jaw: str | None = "auto",
+        marker_noise: float | None = None,
+        fit: bool | str | None = None,
+        take_prior: TakePrior | None = None,
+    ) -> SolveResult:
+        """`frames` (F, B, 3) solved as independent frames, as `solve(frames, temporal=False,
+        ...)` with the same options solves them, for their markers alone: each marker's
+        position on its frame's solved surface (the same bits as `solve`'s), the residuals,
+        choices, global fits and jaw poses; the surfaces are not made (only the markers'
+        triangles are sewn), and the result's `vertices` are an empty (F, 0, 3) array. What
+        a take's left-out readings need (`lgi.plan`), at a fraction of a solve's cost."""
+        opts, jaw = self._options(
+            None, jaw, marker_noise=marker_noise, fit=fit, take_prior=take_prior
+        )
+        offer, unbounded, prior, sigma = _core_fit(opts)
+        arr = np.asarray(frames)
+        return self._core.solve(
+            arr[None] if arr.ndim == 2 else arr,
+            temporal=False,
+            jaw=jaw,
+            fit=offer,
+            marker_noise=sigma,
+            unbounded_fit=unbounded,
+            take_prior=prior,
+            surface="markers",
+        )
+
     def _solved(
         self,
         arr: NDArray[Any],
@@ -407,30 +438,61 @@ class Model:
         out: NDArray[np.float64] | None,
     ) -> SolveResult:
         """One solve of `arr` (`solve` without the repair)."""
-        offer, unbounded, prior, sigma = _core_fit(opts)
         total = int(arr.shape[0]) if arr.ndim == 3 else 0
         given = arr
         steady = temporal and opts.steady
         if steady:
             arr = self._gaps_filled(arr)
         with _progress_bar(total, "lgi solve", quiet) as bar:
-            res = self._core.solve(
+            res = self._core_solve(
                 arr,
+                opts,
                 progress=lambda _f: bar.update(1),
                 temporal=temporal,
                 jaw=jaw,
                 smooth_window=smooth_window,
                 out=out,
-                fit=offer,
-                marker_noise=sigma,
-                unbounded_fit=unbounded,
-                take_prior=prior,
             )
         res = self._finish(res, arr, opts)
         if not steady:
             return res
         v, p = np.asarray(res.vertices), np.asarray(res.bundle_positions)
         return self._as_given(res, steadied(self, v, p), given)
+
+    def _core_solve(
+        self,
+        frames: NDArray[Any],
+        opts: SolveOptions,
+        *,
+        progress: Any,
+        temporal: bool,
+        jaw: Any,
+        out: NDArray[np.float64] | None,
+        smooth_window: int = 0,
+        previous: _lgi.SolveState | None = None,
+    ) -> SolveResult:
+        """The core's solve of `frames` with `opts`. With local fits, whose surface replaces
+        the core's, the core makes no surface (`surface="none"`: the targets, fits and poses
+        they read), and the vertices go into `out` or a new (F, V, 3) array, which
+        `_finish` fills."""
+        offer, unbounded, prior, sigma = _core_fit(opts)
+        own_surface = local_bounds(opts.local_fits) is not None
+        if own_surface and out is None and frames.ndim == 3:
+            out = np.empty((frames.shape[0], self.num_vertices, 3))
+        return self._core.solve(
+            frames,
+            progress=progress,
+            temporal=temporal,
+            jaw=jaw,
+            smooth_window=smooth_window,
+            out=out,
+            fit=offer,
+            marker_noise=sigma,
+            previous=previous,
+            unbounded_fit=unbounded,
+            take_prior=prior,
+            surface="none" if own_surface else "mesh",
+        )
 
     def _options(
         self, options: SolveOptions | None, jaw: Any, **given: Any
@@ -576,7 +638,6 @@ class Model:
             take_prior=take_prior,
             steady=steady,
         )
-        offer, unbounded, prior, sigma = _core_fit(opts)
         n = _lgi.check_count(chunk, "chunk")
         if n < 1:
             raise InputError(f"chunk must be >= 1 frames, got {n}")
@@ -589,17 +650,8 @@ class Model:
         before: tuple[NDArray[np.float64], NDArray[np.float64]] | None = None
 
         def solved(part: NDArray[Any], buf: Any, previous: Any, tick: Any) -> SolveResult:
-            res = self._core.solve(
-                part,
-                progress=tick,
-                temporal=temporal,
-                jaw=jaw,
-                out=buf,
-                fit=offer,
-                marker_noise=sigma,
-                previous=previous,
-                unbounded_fit=unbounded,
-                take_prior=prior,
+            res = self._core_solve(
+                part, opts, progress=tick, temporal=temporal, jaw=jaw, out=buf, previous=previous
             )
             return self._finish(res, part, opts)
 

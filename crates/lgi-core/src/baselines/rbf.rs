@@ -6,7 +6,9 @@
 use crate::correspond::correspond;
 use crate::dataset::Dataset;
 use crate::error::{LgiError, Result};
+use crate::frame_blocks::frame_blocks;
 use crate::linalg::Lu;
+use crate::simd::with_avx2;
 use glam::DVec3;
 use rayon::prelude::*;
 use std::collections::HashMap;
@@ -33,6 +35,9 @@ pub struct RbfInterpolator {
 
 /// Factorisations kept for sets of missing markers (each (B+4)² values).
 const MAX_CACHED: usize = 256;
+
+/// Points per parallel task of [`RbfInterpolator::add_interpolated_frames`].
+const RBF_BLOCK: usize = 256;
 
 fn kernel(a: DVec3, b: DVec3) -> f64 {
     (a - b).length()
@@ -213,6 +218,62 @@ impl RbfInterpolator {
         out
     }
 
+    /// Adds each frame's interpolation of its marker values (`values` F × B, as
+    /// [`interpolate`](Self::interpolate) reads them) to its points in `out` (F × V, frame
+    /// after frame): `out[f][v] += interpolate(values[f])[v]`, the same bits. The frames with
+    /// every marker present share one pass over the matrix (each block of its rows read once
+    /// for all of them, not once a frame); the others are interpolated one by one.
+    pub fn add_interpolated_frames(&self, values: &[DVec3], out: &mut [DVec3]) -> Result<()> {
+        let (b, v) = (self.samples.len(), self.points.len());
+        let frames = values.len() / b.max(1);
+        if values.len() != frames * b || out.len() != frames * v {
+            return Err(LgiError::Input(format!(
+                "expected frames of {b} marker values and of {v} points, got {} values and {} points",
+                values.len(),
+                out.len()
+            )));
+        }
+        if let Some(i) = values.iter().position(|p| p.is_finite() == p.is_nan()) {
+            return Err(LgiError::Input(format!(
+                "frame {}: marker value {} is infinite or partly NaN",
+                i / b,
+                i % b
+            )));
+        }
+        let whole: Vec<bool> = values
+            .chunks(b)
+            .map(|f| f.iter().all(|p| p.is_finite()))
+            .collect();
+        for (f, o) in out.chunks_mut(v.max(1)).enumerate() {
+            if !whole[f] {
+                let c = self.interpolate(&values[f * b..(f + 1) * b])?;
+                o.iter_mut().zip(c).for_each(|(o, c)| *o += c);
+            }
+        }
+        let full: Vec<usize> = (0..frames).filter(|&f| whole[f]).collect();
+        if full.is_empty() {
+            return Ok(());
+        }
+        // The present frames' values marker by marker (B × 3n): a row's products with every
+        // frame are then contiguous.
+        let n3 = 3 * full.len();
+        let mut by_marker = vec![0.0; b * n3];
+        for (i, &f) in full.iter().enumerate() {
+            for (m, d) in values[f * b..(f + 1) * b].iter().enumerate() {
+                by_marker[m * n3 + 3 * i..m * n3 + 3 * i + 3].copy_from_slice(&d.to_array());
+            }
+        }
+        frame_blocks(out, v, RBF_BLOCK)
+            .into_par_iter()
+            .enumerate()
+            .for_each(|(c, mut parts)| {
+                let mut acc = vec![0.0; n3];
+                let rows = &self.matrix[c * RBF_BLOCK * b..];
+                add_rows_block(rows, b, &by_marker, &full, &mut parts, &mut acc);
+            });
+        Ok(())
+    }
+
     /// Interpolates marker values (B; NaN rows are missing markers, refitted without them) to
     /// the V points.
     pub fn interpolate(&self, values: &[DVec3]) -> Result<Vec<DVec3>> {
@@ -295,6 +356,43 @@ mod tests {
     }
 
     #[test]
+    fn frames_interpolated_together_add_each_frames_own_interpolation_bit_for_bit() {
+        // 600 points (three blocks), 9 markers, 4 frames: two whole, one with a marker
+        // missing, one whole again.
+        let (v, b, f) = (600usize, 9usize, 4usize);
+        let rbf = RbfInterpolator::new(cloud(v, 3), barycentric_samples(b, v, 4)).unwrap();
+        let mut values: Vec<DVec3> = cloud(f * b, 5);
+        values[2 * b + 4] = DVec3::NAN;
+        let start = cloud(f * v, 6);
+        let bits = |x: &[DVec3]| -> Vec<[u64; 3]> {
+            x.iter().map(|p| p.to_array().map(f64::to_bits)).collect()
+        };
+        let (together, baseline) = crate::simd::both_builds(|| {
+            let mut out = start.clone();
+            rbf.add_interpolated_frames(&values, &mut out).unwrap();
+            bits(&out)
+        });
+        assert_eq!(together, baseline);
+        for k in 0..f {
+            let c = rbf.interpolate(&values[k * b..(k + 1) * b]).unwrap();
+            let want: Vec<DVec3> = start[k * v..(k + 1) * v]
+                .iter()
+                .zip(c)
+                .map(|(p, c)| *p + c)
+                .collect();
+            assert_eq!(bits(&want), together[k * v..(k + 1) * v], "frame {k}");
+        }
+        let mut out = start.clone();
+        let e = rbf
+            .add_interpolated_frames(&values[1..], &mut out)
+            .unwrap_err();
+        assert!(e.to_string().contains("marker values"), "{e}");
+        values[b + 1].y = f64::INFINITY;
+        let e = rbf.add_interpolated_frames(&values, &mut out).unwrap_err();
+        assert!(e.to_string().contains("frame 1: marker value 1"), "{e}");
+    }
+
+    #[test]
     fn interpolated_field_reproduces_every_sampled_marker_value() {
         let pts = cloud(60, 1);
         let samples = barycentric_samples(12, 60, 2);
@@ -354,4 +452,33 @@ mod tests {
         let bad: Vec<Sample> = (0..5).map(|i| ([i, 99, i], [1.0, 0.0, 0.0])).collect();
         assert!(RbfInterpolator::new(pts, bad).is_err());
     }
+}
+
+with_avx2! {
+/// One block of [`RbfInterpolator::add_interpolated_frames`]: for each point of the block (a
+/// row of `rows`, `b` wide), every present frame's `Σ_m row[m] values[m]` summed from 0 with
+/// markers ascending (the bits of `interpolate`'s fold), side by side in `acc` (3 per frame),
+/// added to frame `full[i]`'s point in `parts`.
+fn add_rows_block(
+    rows: &[f64],
+    b: usize,
+    by_marker: &[f64],
+    full: &[usize],
+    parts: &mut [&mut [DVec3]],
+    acc: &mut [f64],
+) {
+    let n3 = acc.len();
+    let len = parts.first().map_or(0, |p| p.len());
+    for k in 0..len {
+        acc.iter_mut().for_each(|a| *a = 0.0);
+        for (m, &w) in rows[k * b..(k + 1) * b].iter().enumerate() {
+            for (a, x) in acc.iter_mut().zip(&by_marker[m * n3..(m + 1) * n3]) {
+                *a += *x * w;
+            }
+        }
+        for (i, &f) in full.iter().enumerate() {
+            parts[f][k] += DVec3::new(acc[3 * i], acc[3 * i + 1], acc[3 * i + 2]);
+        }
+    }
+}
 }

@@ -339,6 +339,55 @@ fn the_blend_of_local_fits_is_each_vertexs_sewn_weights_on_its_shapes_by_brute_f
 }
 
 #[test]
+fn frames_blended_together_are_each_frame_blended_alone_bit_for_bit_on_both_builds() {
+    // 1,100 vertices (three blocks), 4 bundles, 13 shapes (a tail past dot8's lanes), 5 frames.
+    let (v, b, q, f) = (1100usize, 4usize, 13usize, 5usize);
+    let value = |i: usize, k: usize| ((i * 37 + k * 13) % 101) as f64 / 101.0 - 0.5;
+    let neutral: Vec<DVec3> = (0..v)
+        .map(|i| DVec3::new(value(i, 1), value(i, 2), value(i, 3)))
+        .collect();
+    let shapes: Vec<f32> = (0..3 * v * q).map(|i| value(i, 5) as f32).collect();
+    let weights: Vec<f64> = (0..f * b * q).map(|i| value(i, 7) * 1.7).collect();
+    let (mut indptr, mut indices, mut data) = (vec![0usize], Vec::new(), Vec::new());
+    for i in 0..v {
+        for e in 0..1 + i % 4 {
+            indices.push((i + e) % b);
+            data.push(0.1 + 0.07 * e as f64);
+        }
+        indptr.push(indices.len());
+    }
+    let sewing = SewingRows {
+        indptr: &indptr,
+        indices: &indices,
+        data: &data,
+    };
+    let bits = |x: &[DVec3]| -> Vec<[u64; 3]> {
+        x.iter().map(|p| p.to_array().map(f64::to_bits)).collect()
+    };
+    let (together, baseline) = crate::simd::both_builds(|| {
+        let mut out = vec![DVec3::ZERO; f * v];
+        blend_local_frames(&neutral, &shapes, sewing, &weights, &mut out).unwrap();
+        bits(&out)
+    });
+    assert_eq!(together, baseline);
+    for k in 0..f {
+        let mut alone = vec![DVec3::ZERO; v];
+        blend_local(
+            &neutral,
+            &shapes,
+            sewing,
+            &weights[k * b * q..(k + 1) * b * q],
+            &mut alone,
+        )
+        .unwrap();
+        assert_eq!(bits(&alone), together[k * v..(k + 1) * v], "frame {k}");
+    }
+    let mut ragged = vec![DVec3::ZERO; f * v - 1];
+    let e = blend_local_frames(&neutral, &shapes, sewing, &weights, &mut ragged).unwrap_err();
+    assert!(e.to_string().contains("whole frames"), "{e}");
+}
+
+#[test]
 fn unbounded_windows_solve_in_closed_form_the_minimum_the_iteration_reaches() {
     // Without a penalty a window's fit is the ridge fit alone (`WindowFit::Ridge`); the
     // reference is each window's active-set solver at penalty 0 over the same rows, frames

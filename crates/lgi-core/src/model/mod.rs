@@ -45,7 +45,7 @@ pub use lookup::{LocalShapeId, Lookup, ShapeId};
 pub use parts::{BinParts, BinPartsRef, ModelParts, ModelPartsRef, PartsError};
 pub use pose::JawPose;
 pub use residuals::FitResiduals;
-pub use solve::SolveOptions;
+pub use solve::{Sewn, SolveOptions};
 
 /// Jaw articulation of a model (paper Eq. 2): the rig, each dataset shape's jaw parameters
 /// (its jaw motion is unskinned before indexing) and each bundle's jaw weight.

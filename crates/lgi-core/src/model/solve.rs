@@ -22,6 +22,23 @@ use std::sync::Arc;
 /// (relative to the diagonal; the promise to users is 1e-6).
 pub(super) const RESIDUAL_TOLERANCE: f64 = 1e-12;
 
+/// How much of each frame's surface a solve makes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Sewn {
+    /// Every vertex: the solve's output.
+    #[default]
+    Mesh,
+    /// The choices and the sewing's corrections, and every bundle's position on the sewn
+    /// surface (the same bits as [`Mesh`](Self::Mesh) gives), with no vertex written: what a
+    /// reading of left-out markers needs, at a fraction of the work.
+    Markers,
+    /// No choice and no sewing: the frames' targets (noise-aware ones with a marker noise),
+    /// global fits and jaw poses, for a caller that makes the surface from pieces of its own
+    /// (local fits). A present bundle's position is its target and its choice is reported as
+    /// a fit (its piece is the caller's); a missing bundle's position is NaN.
+    Nothing,
+}
+
 /// How a sequence is solved.
 #[derive(Debug, Clone, PartialEq)]
 pub struct SolveOptions {
@@ -50,6 +67,8 @@ pub struct SolveOptions {
     /// Each frame's jaw pose (a model built with a jaw rig): none, given, from the fit or
     /// tracked ([`JawPose`]).
     pub jaw: JawPose,
+    /// How much of each frame's surface to make ([`Sewn`]; every vertex by default).
+    pub sewn: Sewn,
 }
 
 impl Default for SolveOptions {
@@ -70,6 +89,7 @@ impl SolveOptions {
             unbounded_fit: false,
             take_prior: None,
             jaw: JawPose::Rest,
+            sewn: Sewn::Mesh,
         }
     }
 
@@ -91,6 +111,7 @@ impl SolveOptions {
             unbounded_fit: false,
             take_prior: None,
             jaw: JawPose::Rest,
+            sewn: Sewn::Mesh,
         }
     }
 
@@ -111,16 +132,66 @@ impl SolveOptions {
 
 impl Model {
     /// Choice, then sewing of the unsmoothed choices, for a checked frame, writing the
-    /// vertices into `out` (V).
+    /// vertices into `out` (V; `None`: the bundles' positions only, [`Sewn::Markers`]).
     fn solve_prepared_into(
         &self,
         prep: &Prepared,
         previous: Option<&[Option<Choice>]>,
-        out: &mut [DVec3],
+        out: Option<&mut [DVec3]>,
     ) -> Result<FrameInfo> {
         let choices = self.choose_all(prep, previous);
         let pieces = Pieces::from_choices_with_fit(&choices, prep.fit_weights());
         self.sew_frame_into(prep, choices, &pieces, out)
+    }
+
+    /// A prepared frame without its surface ([`Sewn::Nothing`]): its targets as the
+    /// bundles' positions, each present bundle's piece reported as a fit.
+    fn unsewn_frame(&self, prep: &Prepared) -> FrameInfo {
+        let choices = prep
+            .targets
+            .iter()
+            .map(|t| {
+                (!t.is_nan()).then_some(Choice {
+                    shapes: [0; 4],
+                    weights: [0.0; 4],
+                    tet: NO_TET,
+                    projected: false,
+                    distance: 0.0,
+                    fit: true,
+                })
+            })
+            .collect();
+        let given = prep.given.as_deref().unwrap_or(&prep.targets);
+        let residuals = given
+            .iter()
+            .zip(&prep.targets)
+            .map(|(g, t)| if g.is_nan() { 0.0 } else { g.distance(*t) })
+            .collect();
+        FrameInfo {
+            choices,
+            residuals,
+            bundle_positions: prep.targets.clone(),
+            bin: prep.bin,
+            corrections: prep.corrections.clone(),
+            fit_weights: self.global_fit_weights(prep),
+            theta: prep.theta,
+        }
+    }
+
+    /// The frame's fit weights per dataset shape id (empty without a fit).
+    fn global_fit_weights(&self, prep: &Prepared) -> Vec<f64> {
+        let lk = &self.lookups[prep.bin];
+        match &prep.fit {
+            Some(fit) if lk.reference.is_some() => {
+                let mut global = vec![0.0; self.dataset.num_shapes() + 1];
+                for (j, &w) in fit.weights.iter().enumerate() {
+                    global[lk.global_id(LocalShapeId(j as u32)).0 as usize] = w;
+                }
+                global
+            }
+            Some(fit) => fit.weights.clone(),
+            None => Vec::new(),
+        }
     }
 
     /// A fit's weights over the dataset's shapes (S) as a start for bin `bin`'s fit: its
@@ -370,13 +441,15 @@ impl Model {
     }
 
     /// Blends `pieces`, maps them out of the bin and to the frame's jaw pose, and runs the
-    /// residual pass — one pass over the vertices, written into `out` (V).
+    /// residual pass — one pass over the vertices, written into `out` (V); with `out` `None`,
+    /// only the bundles' triangle corners are sewn and the bundles' positions measured on
+    /// them (the same bits, [`Sewn::Markers`]).
     pub(super) fn sew_frame_into(
         &self,
         prep: &Prepared,
         choices: Vec<Option<Choice>>,
         pieces: &Pieces,
-        out: &mut [DVec3],
+        out: Option<&mut [DVec3]>,
     ) -> Result<FrameInfo> {
         let b = self.bundles.len();
         let (targets_clean, theta) = (&prep.targets, prep.theta);
@@ -401,26 +474,27 @@ impl Model {
         };
         // Spans only pay where a fit sums dozens of shapes over every block.
         let spans = (!pieces.fit_shapes.is_empty()).then(|| lk.shape_spans());
-        let bad = plan.sew_into(
-            &lk.data.neutral().positions,
-            lk.data.displacements(),
-            spans,
-            pieces,
-            jaw_map.as_ref(),
-            &at,
-            out,
-        );
-        if let Some(v) = bad {
-            return Err(LgiError::Input(format!(
-                "the solve produced a non-finite vertex {v}: targets are probably far outside \
-                 the dataset's range"
-            )));
-        }
-        let bundle_positions: Vec<DVec3> = self
-            .bundles
-            .iter()
-            .map(|sp| sp.evaluate(&mesh.triangles, out))
-            .collect();
+        let x0 = &lk.data.neutral().positions;
+        let shapes = lk.data.displacements();
+        let bundle_positions: Vec<DVec3> = match out {
+            Some(out) => {
+                let bad = plan.sew_into(x0, shapes, spans, pieces, jaw_map.as_ref(), &at, out);
+                if let Some(v) = bad {
+                    return Err(non_finite(format!("vertex {v}")));
+                }
+                self.bundles
+                    .iter()
+                    .map(|sp| sp.evaluate(&mesh.triangles, out))
+                    .collect()
+            }
+            None => {
+                let at_bundles = plan.sew_markers(x0, shapes, spans, pieces, jaw_map.as_ref(), &at);
+                if let Some(b) = at_bundles.iter().position(|p| !p.is_finite()) {
+                    return Err(non_finite(format!("position at bundle {b}")));
+                }
+                at_bundles
+            }
+        };
         let given = prep.given.as_deref().unwrap_or(targets_clean);
         let residuals = (0..b)
             .map(|i| {
@@ -439,17 +513,7 @@ impl Model {
         } else {
             choices
         };
-        let fit_weights = match &prep.fit {
-            Some(fit) if lk.reference.is_some() => {
-                let mut global = vec![0.0; self.dataset.num_shapes() + 1];
-                for (j, &w) in fit.weights.iter().enumerate() {
-                    global[lk.global_id(LocalShapeId(j as u32)).0 as usize] = w;
-                }
-                global
-            }
-            Some(fit) => fit.weights.clone(),
-            None => Vec::new(),
-        };
+        let fit_weights = self.global_fit_weights(prep);
         Ok(FrameInfo {
             choices,
             residuals,
@@ -490,7 +554,9 @@ impl Model {
         Extent::new(&self.markers_rest, self.diagonal).check_marker_noise(options.marker_noise)?;
         let (temporal, smooth_window) = (options.temporal, options.smooth_window);
         let nv = self.dataset.num_vertices();
-        if vertices.len() != frames.len() * nv {
+        // A solve that writes no vertex takes an empty buffer (or a whole one, left as it is).
+        let unwritten = options.sewn != Sewn::Mesh && vertices.is_empty();
+        if vertices.len() != frames.len() * nv && !unwritten {
             return Err(LgiError::Input(format!(
                 "output buffer holds {} vertices, {} frames of {nv} need {}",
                 vertices.len(),
@@ -498,6 +564,10 @@ impl Model {
                 frames.len() * nv
             )));
         }
+        let vertices = match options.sewn {
+            Sewn::Mesh => vertices,
+            Sewn::Markers | Sewn::Nothing => &mut [],
+        };
         let FramePoses {
             poses,
             mut fit_starts,
@@ -552,6 +622,11 @@ impl Model {
                 .map_err(|e| frame_context(e, f))
             })?;
         }
+        if options.sewn == Sewn::Nothing {
+            let out: Vec<FrameInfo> = prepared.par_iter().map(|p| self.unsewn_frame(p)).collect();
+            (0..out.len()).for_each(on_frame);
+            return Ok(out);
+        }
         match (smooth_window <= 1, temporal) {
             (true, true) => self.solve_temporal_pipelined(&prepared, previous, vertices, on_frame),
             (true, false) => self.solve_independent(&prepared, vertices, on_frame),
@@ -559,6 +634,23 @@ impl Model {
                 self.solve_smoothed(&prepared, temporal, smooth_window, vertices, on_frame)
             }
         }
+    }
+
+    /// Each frame's slot of `vertices` (`None` for every frame when `vertices` is empty: a
+    /// [`Sewn::Markers`] solve writes no vertex; an empty mesh still gets an empty slot).
+    fn frame_slots<'v>(
+        &self,
+        vertices: &'v mut [DVec3],
+        frames: usize,
+    ) -> Vec<Option<&'v mut [DVec3]>> {
+        let nv = self.dataset.num_vertices();
+        if vertices.is_empty() && nv > 0 {
+            return (0..frames).map(|_| None).collect();
+        }
+        let mut slots: Vec<Option<&mut [DVec3]>> =
+            vertices.chunks_mut(nv.max(1)).map(Some).collect();
+        slots.resize_with(frames, || Some(&mut []));
+        slots
     }
 
     /// Frame by frame in order, each preferring the previous frame's choices; every frame is
@@ -572,8 +664,7 @@ impl Model {
         vertices: &mut [DVec3],
         mut on_frame: impl FnMut(usize),
     ) -> Result<Vec<FrameInfo>> {
-        // An empty mesh still gets one (empty) slot per frame.
-        let slots = vertices.chunks_mut(self.dataset.num_vertices().max(1));
+        let slots = self.frame_slots(vertices, prepared.len());
         let mut out: Vec<FrameInfo> = Vec::with_capacity(prepared.len());
         let mut current = prepared.first().map(|p| {
             // The frame before this call, as the loop below hands a frame to the next.
@@ -615,10 +706,9 @@ impl Model {
         vertices: &mut [DVec3],
         mut on_frame: impl FnMut(usize),
     ) -> Result<Vec<FrameInfo>> {
-        let nv = self.dataset.num_vertices();
         let out: Vec<FrameInfo> = prepared
             .par_iter()
-            .zip(vertices.par_chunks_mut(nv.max(1)))
+            .zip(self.frame_slots(vertices, prepared.len()).into_par_iter())
             .enumerate()
             .map(|(f, (prep, slot))| {
                 self.solve_prepared_into(prep, None, slot)
@@ -658,8 +748,7 @@ impl Model {
         };
         let bins: Vec<usize> = prepared.iter().map(|p| p.bin).collect();
         let pieces = smooth_choices_in_bins(&choices, &bins, smooth_window);
-        // An empty mesh still gets one (empty) slot per frame.
-        let slots = vertices.chunks_mut(self.dataset.num_vertices().max(1));
+        let slots = self.frame_slots(vertices, prepared.len());
         let mut out = Vec::with_capacity(prepared.len());
         for (f, ((prep, (ch, pc)), slot)) in prepared
             .iter()
@@ -675,4 +764,12 @@ impl Model {
         }
         Ok(out)
     }
+}
+
+/// The error of a solve that produced a non-finite `what` (a vertex, a bundle's position).
+fn non_finite(what: String) -> LgiError {
+    LgiError::Input(format!(
+        "the solve produced a non-finite {what}: targets are probably far outside the \
+         dataset's range"
+    ))
 }

@@ -425,7 +425,7 @@ fn staged_sewing(model: &Model, prep: &Prepared, pieces: &Pieces) -> Vec<DVec3> 
 }
 
 #[test]
-fn fused_sewing_equals_blend_then_jaw_maps_then_residual_pass_bit_for_bit() {
+fn fused_sewing_and_the_markers_alone_equal_blend_then_jaw_maps_then_residual_pass_bit_for_bit() {
     let (binned, data, thetas) = binned_model(vec![0.0, 0.25, 0.5], 0.06).unwrap();
     let plain = Model::build(&patch(24), binned.markers_rest(), &BuildConfig::default()).unwrap();
     let mut checked = 0;
@@ -450,13 +450,23 @@ fn fused_sewing_equals_blend_then_jaw_maps_then_residual_pass_bit_for_bit() {
                 let staged = staged_sewing(model, &prep, &pieces);
                 for sewing in 0..2 {
                     let mut fused = vec![DVec3::ZERO; model.dataset.num_vertices()];
-                    model
-                        .sew_frame_into(&prep, choices.clone(), &pieces, &mut fused)
+                    let info = model
+                        .sew_frame_into(&prep, choices.clone(), &pieces, Some(&mut fused))
                         .unwrap();
                     let bits = |v: &[DVec3]| -> Vec<[u64; 3]> {
                         v.iter().map(|p| p.to_array().map(f64::to_bits)).collect()
                     };
                     assert_eq!(bits(&fused), bits(&staged), "k {k}, sewing {sewing}");
+                    // The markers alone (their triangles' corners sewn): the same bits.
+                    let markers = model
+                        .sew_frame_into(&prep, choices.clone(), &pieces, None)
+                        .unwrap();
+                    assert_eq!(
+                        bits(&markers.bundle_positions),
+                        bits(&info.bundle_positions),
+                        "k {k}, sewing {sewing}"
+                    );
+                    assert_eq!(markers.residuals, info.residuals);
                 }
                 checked += 1;
             }
@@ -1177,4 +1187,80 @@ fn a_built_or_loaded_model_has_derived_what_a_first_solve_would() {
             );
         }
     }
+}
+
+#[test]
+fn a_solve_of_the_markers_alone_reports_the_same_bits_and_one_without_a_surface_its_targets() {
+    let (data, rig, thetas, markers) = jaw_patch();
+    let model = jaw_model(&data, &markers, rig, &thetas, None).unwrap();
+    let mut frames: Vec<Vec<DVec3>> = (0..6)
+        .map(|k| model.bundle_positions(&shape_mesh(&data, k % 4)).unwrap())
+        .collect();
+    // Off the dataset (noise) and a marker missing in two frames.
+    for (f, frame) in frames.iter_mut().enumerate() {
+        for (i, t) in frame.iter_mut().enumerate() {
+            *t += DVec3::new(0.002, -0.003, 0.001) * ((i * 5 + f) % 4) as f64;
+        }
+        if f % 3 == 1 {
+            frame[2] = DVec3::NAN;
+        }
+    }
+    let bits = |v: &[DVec3]| -> Vec<[u64; 3]> {
+        v.iter().map(|p| p.to_array().map(f64::to_bits)).collect()
+    };
+    for temporal in [true, false] {
+        let options = SolveOptions {
+            jaw: JawPose::Fit,
+            ..SolveOptions::new(temporal, 0, None, Some(0.004))
+        };
+        let whole = solve_with(&model, &frames, &options, None).unwrap();
+        let alone = |sewn: Sewn| {
+            let options = SolveOptions {
+                sewn,
+                ..options.clone()
+            };
+            model
+                .solve(&frames, &options, None, &mut [], |_| {})
+                .unwrap()
+        };
+        for (w, m) in whole.iter().zip(alone(Sewn::Markers)) {
+            assert_eq!(bits(&m.bundle_positions), bits(&w.info.bundle_positions));
+            assert_eq!(m.residuals, w.info.residuals);
+            assert_eq!(m.choices, w.info.choices);
+            assert_eq!(m.fit_weights, w.info.fit_weights);
+            assert_eq!(m.theta, w.info.theta);
+        }
+        for (f, (w, n)) in whole.iter().zip(alone(Sewn::Nothing)).enumerate() {
+            assert_eq!(n.fit_weights, w.info.fit_weights);
+            assert_eq!(n.theta, w.info.theta);
+            assert_eq!(n.corrections, w.info.corrections);
+            for (i, (p, q)) in n
+                .bundle_positions
+                .iter()
+                .zip(&w.info.bundle_positions)
+                .enumerate()
+            {
+                let present = !frames[f][i].is_nan();
+                assert_eq!(n.choices[i].is_some(), present);
+                assert!(n.choices[i].is_none_or(|c| c.fit && c.tet == NO_TET));
+                if present {
+                    // The sewn surface passes through the targets to the residual pass's
+                    // tolerance.
+                    assert!(
+                        p.distance(*q) <= 1e-9 * model.diagonal,
+                        "frame {f}, bundle {i}"
+                    );
+                    assert!((n.residuals[i] - w.info.residuals[i]).abs() <= 1e-9 * model.diagonal);
+                } else {
+                    assert!(p.is_nan() && n.residuals[i] == 0.0);
+                }
+            }
+        }
+    }
+    // A solve of the whole surface still needs a whole buffer.
+    let e = model
+        .solve(&frames, &SolveOptions::default(), None, &mut [], |_| {})
+        .err()
+        .unwrap();
+    assert!(e.to_string().contains("output buffer"), "{e}");
 }

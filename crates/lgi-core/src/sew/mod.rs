@@ -531,20 +531,15 @@ impl ResidualPass {
         })
     }
 
-    /// The whole of sewing in one pass over the vertices: `out[v] = map(v, blend(v))` plus the
-    /// residual corrections, bit for bit what [`blend`], `map` over every vertex and the
-    /// staged residual pass (`apply`, kept as the tests' reference) give one after another. The corrections only need the bundles'
-    /// triangle corners, so those are blended first and every other vertex is written once.
-    /// Returns the first vertex that is not finite, if any.
-    pub fn sew(
+    /// The correction rounds the residual pass adds (by bundle id): the first, and a second
+    /// only when the first left more than the tolerance (as in `apply`). They need only the
+    /// present bundles' triangle corners, blended and mapped here.
+    fn rounds(
         &self,
         input: &BlendInput<'_>,
-        columns: Option<&BlockColumns>,
-        map: impl Fn(usize, DVec3) -> DVec3 + Sync,
+        map: &(impl Fn(usize, DVec3) -> DVec3 + Sync),
         at: &BundleTargets<'_>,
-        out: &mut [DVec3],
-    ) -> Option<usize> {
-        let weights = input.weights;
+    ) -> Vec<Vec<DVec3>> {
         // The present bundles' corners, blended and mapped (3 per bundle, in `present` order).
         let corners: Vec<(usize, DVec3)> = self
             .present
@@ -562,28 +557,17 @@ impl ResidualPass {
             }
             out
         };
-        let corrected = |v: usize, x: DVec3, rounds: &[Vec<DVec3>]| {
-            let mut x = x;
-            let (cols, vals) = weights.row(v);
-            for c in rounds {
-                for (&b, &w) in cols.iter().zip(vals) {
-                    x += c[b as usize] * w;
-                }
-            }
-            x
-        };
         let residuals = |rounds: &[Vec<DVec3>]| -> Vec<[f64; 3]> {
             self.present
                 .iter()
                 .zip(corners.chunks(3))
                 .map(|(&b, c)| {
                     let sp = at.bundles[b as usize];
-                    let x = [0, 1, 2].map(|j| corrected(c[j].0, c[j].1, rounds));
+                    let x = [0, 1, 2].map(|j| corrected(input.weights, c[j].0, c[j].1, rounds));
                     (at.targets[b as usize] - interpolate3(x, sp.bary)).to_array()
                 })
                 .collect()
         };
-        // As in `apply`: a second round only when the first left more than the tolerance.
         let mut rounds = vec![by_bundle(self.lu.solve3(&residuals(&[])))];
         let r = residuals(&rounds);
         let worst = r
@@ -593,6 +577,47 @@ impl ResidualPass {
         if worst.is_nan() || worst > at.tolerance {
             rounds.push(by_bundle(self.lu.solve3(&r)));
         }
+        rounds
+    }
+
+    /// Every bundle's position (`at.bundles`, missing ones too) on the surface
+    /// [`sew`](Self::sew) makes, bit for bit, from its triangle's corners alone: no other
+    /// vertex is blended (what a reading of the markers needs, at a fraction of the work).
+    pub fn sew_markers(
+        &self,
+        input: &BlendInput<'_>,
+        map: impl Fn(usize, DVec3) -> DVec3 + Sync,
+        at: &BundleTargets<'_>,
+    ) -> Vec<DVec3> {
+        let rounds = self.rounds(input, &map, at);
+        at.bundles
+            .iter()
+            .map(|sp| {
+                let tri = at.triangles[sp.triangle as usize];
+                let x = tri.map(|v| {
+                    let v = v as usize;
+                    corrected(input.weights, v, map(v, input.vertex(v)), &rounds)
+                });
+                interpolate3(x, sp.bary)
+            })
+            .collect()
+    }
+
+    /// The whole of sewing in one pass over the vertices: `out[v] = map(v, blend(v))` plus the
+    /// residual corrections, bit for bit what [`blend`], `map` over every vertex and the
+    /// staged residual pass (`apply`, kept as the tests' reference) give one after another.
+    /// The corrections only need the bundles' triangle corners, so those are blended first
+    /// ([`rounds`](Self::rounds)) and every other vertex is written once. Returns the first
+    /// vertex that is not finite, if any.
+    pub fn sew(
+        &self,
+        input: &BlendInput<'_>,
+        columns: Option<&BlockColumns>,
+        map: impl Fn(usize, DVec3) -> DVec3 + Sync,
+        at: &BundleTargets<'_>,
+        out: &mut [DVec3],
+    ) -> Option<usize> {
+        let rounds = self.rounds(input, &map, at);
         out.par_chunks_mut(BLEND_BLOCK)
             .enumerate()
             .map(|(ci, chunk)| {
@@ -621,7 +646,7 @@ impl ResidualPass {
                         let block = input.block(base, len);
                         for (o, x) in chunk.iter_mut().enumerate() {
                             let v = base + o;
-                            *x = corrected(v, map(v, block.vertex(o)), &rounds);
+                            *x = corrected(input.weights, v, map(v, block.vertex(o)), &rounds);
                         }
                     }
                 }
@@ -677,6 +702,20 @@ impl ResidualPass {
                 });
         }
     }
+}
+
+/// Vertex `v` at `x` (blended and mapped) plus the correction rounds, each round's bundles
+/// ascending by the vertex's sewing weights: the one order every path of the sewing adds in.
+#[inline]
+fn corrected(weights: WeightRows<'_>, v: usize, x: DVec3, rounds: &[Vec<DVec3>]) -> DVec3 {
+    let mut x = x;
+    let (cols, vals) = weights.row(v);
+    for c in rounds {
+        for (&b, &w) in cols.iter().zip(vals) {
+            x += c[b as usize] * w;
+        }
+    }
+    x
 }
 
 #[cfg(test)]

@@ -123,6 +123,25 @@ impl SewPlan {
             None => self.residual.sew(&input, columns, |_, p| p, at, out),
         }
     }
+
+    /// Every bundle's position on the surface [`sew_into`](Self::sew_into) makes (the same
+    /// bits), without the surface: only the bundles' triangle corners are blended
+    /// ([`ResidualPass::sew_markers`]).
+    pub fn sew_markers(
+        &self,
+        x0: &[DVec3],
+        displacements: &[f32],
+        spans: Option<&ShapeSpans>,
+        pieces: &Pieces,
+        jaw: Option<&VertexMap<'_>>,
+        at: &BundleTargets<'_>,
+    ) -> Vec<DVec3> {
+        let input = BlendInput::new(x0, displacements, self.weights(), pieces).with_spans(spans);
+        match jaw {
+            Some(m) => self.residual.sew_markers(&input, |v, p| m.apply(v, p), at),
+            None => self.residual.sew_markers(&input, |_, p| p, at),
+        }
+    }
 }
 
 /// Plans kept for distinct sets of missing bundles (the oldest goes first).
