@@ -6,10 +6,11 @@ quarter of its shapes held out, driven by the shared Live Link recordings; docs/
         kind; then a swap of two markers 1-2 cm apart (60 frames) and spikes of 1 cm and 0.5 cm
         (3 frames) planted in each: which are named as faults.
     python scripts/measure_faults.py repair [--seeds 0 1] [--call auto|recommended]
+                                            [--dataset ict|scans]
         a 1,200-frame 60 Hz take (160 random markers, 0.2 mm noise, 2 % dropouts) with a swap
         (60 frames) and a 1 cm spike (3 frames): the face-skin error on those frames, repaired
         and kept as given, against the clean take's solve; and the clean take's error over all
-        frames with and without repair.
+        frames with and without repair (`--dataset scans`: the model's dataset as for `pops`).
     python scripts/measure_faults.py study [--seeds 0 1 2] [--dataset ict|scans]
         the detection study: on 1,200-frame takes (markers_120 and 160 random markers, 0.2 mm
         noise, 2 % dropouts) swaps of two markers 0.5-3 cm apart lasting 1-120 frames and
@@ -144,12 +145,12 @@ def _error(
     return float(e.mean()), float(e.max())
 
 
-def repair(seeds: list[int], call: str) -> None:
+def repair(seeds: list[int], call: str, dataset: str = "ict") -> None:
     d, _, pos, folder = data()
     opts = lgi.SolveOptions(marker_noise="auto", recommended=call == "recommended")
     for seed in seeds:
-        t = take(d, pos, folder, seed)
-        m = lgi.Model.build(t.dataset, pos)
+        t, given = _take_of(d, pos, folder, seed, dataset)
+        m = lgi.Model.build(given, pos)
         pose = np.nanmedian(t.frames, axis=0)
         dist = np.linalg.norm(pose[:, None] - pose[None], axis=2)
         rng = np.random.default_rng(seed)
@@ -161,7 +162,7 @@ def repair(seeds: list[int], call: str) -> None:
         x[700:703, c] += [0.0, 0.0, 1.0]
         truth = np.asarray(t.truth)
 
-        print(f"seed {seed}, {call}: the clean take's error, all frames (mean / max cm):")
+        print(f"seed {seed}, {dataset}, {call}: the clean take's error, all frames (mean / max cm):")
         fixed, kept = (
             _error(m, opts, t.frames, True, truth),
             _error(m, opts, t.frames, False, truth),
@@ -421,7 +422,7 @@ def main() -> None:
     if args.what == "findings":
         findings(args.sigma, args.seeds)
     elif args.what == "repair":
-        repair(args.seeds, args.call)
+        repair(args.seeds, args.call, args.dataset)
     elif args.what == "study":
         study(args.seeds, args.dataset)
     elif args.what == "clean":

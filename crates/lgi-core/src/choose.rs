@@ -33,6 +33,21 @@ pub struct Choice {
     pub fit: bool,
 }
 
+impl Choice {
+    /// A bundle whose piece is a fit (the frame's global fit, or a caller's own) instead of a
+    /// tet: no shapes, `distance` from its target to the fit's bundle position.
+    pub fn of_fit(distance: f64) -> Choice {
+        Choice {
+            shapes: [0; 4],
+            weights: [0.0; 4],
+            tet: NO_TET,
+            projected: false,
+            distance,
+            fit: true,
+        }
+    }
+}
+
 /// What the score of a candidate needs to know about the frame around the bundle.
 pub struct Scoring<'a> {
     /// Bundle surface positions on every shape, `(S + 1) × B`, index `[k * B + n]`.

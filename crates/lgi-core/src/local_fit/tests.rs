@@ -286,6 +286,26 @@ fn wrong_sizes_and_non_finite_input_are_errors_that_say_what() {
     assert!(LocalFits::new(&a, 1, &nan_rest, FIT_L2, FIT_PENALTY).is_err());
 }
 
+/// Sewing rows (CSR) of `v` vertices over `b` bundles: vertex i sewn to `1 + i % most`
+/// bundles `(i + step e) % b`, entry e weighing `weight[0] + weight[1] e`.
+fn sewing_rows(
+    v: usize,
+    b: usize,
+    most: usize,
+    step: usize,
+    weight: [f64; 2],
+) -> (Vec<usize>, Vec<usize>, Vec<f64>) {
+    let (mut indptr, mut indices, mut data) = (vec![0usize], Vec::new(), Vec::new());
+    for i in 0..v {
+        for e in 0..1 + i % most {
+            indices.push((i + step * e) % b);
+            data.push(weight[0] + weight[1] * e as f64);
+        }
+        indptr.push(indices.len());
+    }
+    (indptr, indices, data)
+}
+
 #[test]
 fn the_blend_of_local_fits_is_each_vertexs_sewn_weights_on_its_shapes_by_brute_force() {
     // 700 vertices (two parallel tasks), 5 bundles, 11 shapes; each vertex sewn to 1–3 bundles.
@@ -296,14 +316,7 @@ fn the_blend_of_local_fits_is_each_vertexs_sewn_weights_on_its_shapes_by_brute_f
         .collect();
     let shapes: Vec<f32> = (0..3 * v * q).map(|i| value(i, 5) as f32).collect();
     let weights: Vec<f64> = (0..b * q).map(|i| value(i, 7)).collect();
-    let (mut indptr, mut indices, mut data) = (vec![0usize], Vec::new(), Vec::new());
-    for i in 0..v {
-        for e in 0..1 + i % 3 {
-            indices.push((i + 2 * e) % b);
-            data.push(0.2 + 0.1 * e as f64);
-        }
-        indptr.push(indices.len());
-    }
+    let (indptr, indices, data) = sewing_rows(v, b, 3, 2, [0.2, 0.1]);
     let sewing = SewingRows {
         indptr: &indptr,
         indices: &indices,
@@ -348,14 +361,7 @@ fn frames_blended_together_are_each_frame_blended_alone_bit_for_bit_on_both_buil
         .collect();
     let shapes: Vec<f32> = (0..3 * v * q).map(|i| value(i, 5) as f32).collect();
     let weights: Vec<f64> = (0..f * b * q).map(|i| value(i, 7) * 1.7).collect();
-    let (mut indptr, mut indices, mut data) = (vec![0usize], Vec::new(), Vec::new());
-    for i in 0..v {
-        for e in 0..1 + i % 4 {
-            indices.push((i + e) % b);
-            data.push(0.1 + 0.07 * e as f64);
-        }
-        indptr.push(indices.len());
-    }
+    let (indptr, indices, data) = sewing_rows(v, b, 4, 1, [0.1, 0.07]);
     let sewing = SewingRows {
         indptr: &indptr,
         indices: &indices,

@@ -7,7 +7,7 @@
 use super::pose::{FramePoses, JawPose};
 use super::prepare::{frame_context, Prepared};
 use super::{FrameInfo, FrameState, LocalShapeId, Model};
-use crate::choose::{choose, Choice, ChoiceParams, FrameErrors, Scoring, Scratch, NO_TET};
+use crate::choose::{choose, Choice, ChoiceParams, FrameErrors, Scoring, Scratch};
 use crate::error::{LgiError, Result};
 use crate::jaw::JawParams;
 use crate::magnitude::Extent;
@@ -150,16 +150,7 @@ impl Model {
         let choices = prep
             .targets
             .iter()
-            .map(|t| {
-                (!t.is_nan()).then_some(Choice {
-                    shapes: [0; 4],
-                    weights: [0.0; 4],
-                    tet: NO_TET,
-                    projected: false,
-                    distance: 0.0,
-                    fit: true,
-                })
-            })
+            .map(|t| (!t.is_nan()).then_some(Choice::of_fit(0.0)))
             .collect();
         let given = prep.given.as_deref().unwrap_or(&prep.targets);
         let residuals = given
@@ -333,14 +324,7 @@ impl Model {
                 };
                 // The global fit against the tets, by the same score (ties keep the tet).
                 if scoring.positions_score(&fit.positions, i, true) < scoring.choice_score(&tet) {
-                    Some(Choice {
-                        shapes: [0; 4],
-                        weights: [0.0; 4],
-                        tet: NO_TET,
-                        projected: false,
-                        distance: fit.positions[i].distance(targets[i]),
-                        fit: true,
-                    })
+                    Some(Choice::of_fit(fit.positions[i].distance(targets[i])))
                 } else {
                     Some(tet)
                 }

@@ -931,14 +931,7 @@ fn a_shared_fit_piece_blends_as_the_fit_copied_into_every_bundle_that_took_it() 
     let choices: Vec<Option<Choice>> = (0..model.num_bundles())
         .map(|i| match i % 3 {
             0 => None,
-            1 => Some(Choice {
-                shapes: [0; 4],
-                weights: [0.0; 4],
-                tet: NO_TET,
-                projected: false,
-                distance: 0.0,
-                fit: true,
-            }),
+            1 => Some(Choice::of_fit(0.0)),
             _ => Some(Choice {
                 shapes: [(i % 6) as u32 + 1, 0, 0, 0],
                 weights: [1.0, 0.0, 0.0, 0.0],
