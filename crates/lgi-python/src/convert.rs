@@ -3,10 +3,29 @@
 
 use crate::error::{input_error, internal_error};
 use glam::DVec3;
+use numpy::ndarray::Dimension;
 use numpy::ndarray::{ArrayD, ArrayViewD, IxDyn};
-use numpy::{IntoPyArray, PyArrayDyn, PyArrayMethods, PyUntypedArrayMethods};
+use numpy::{
+    Element, IntoPyArray, PyArrayDyn, PyArrayMethods, PyReadonlyArray, PyUntypedArrayMethods,
+};
 use pyo3::prelude::*;
 use pyo3::types::{PyByteArray, PyBytes};
+
+/// A numpy array read in place: its values as one slice, where it is C-contiguous and each
+/// axis whose size `shape` gives has that size (`None` = any); else `None`, and the caller says
+/// what it expected. (`as_slice` alone takes Fortran order too, whose slice is another layout.)
+pub fn in_place<'a, T: Element, D: Dimension>(
+    a: &'a PyReadonlyArray<'_, T, D>,
+    shape: &[Option<usize>],
+) -> Option<&'a [T]> {
+    let got = a.shape();
+    let fits = got.len() == shape.len()
+        && got
+            .iter()
+            .zip(shape)
+            .all(|(&g, w)| w.is_none_or(|w| w == g));
+    a.as_slice().ok().filter(|_| fits && a.is_c_contiguous())
+}
 
 /// Reads any float32/float64 array-like of exactly `shape` (`None` = any length on that
 /// axis) into a contiguous f64 `ArrayD`. `name` appears in every error message.

@@ -1,7 +1,7 @@
 //! `lgi._lgi.LocalFits`: each bundle's blendshape fit of the markers around it
 //! (`lgi_core::LocalFits`); python/lgi/local.py blends the pieces over the mesh.
 
-use crate::convert::{flat_to_array, float_array, points as read_points};
+use crate::convert::{flat_to_array, float_array, in_place, points as read_points};
 use crate::error::PyLgiError;
 use crate::threads;
 use glam::DVec3;
@@ -98,17 +98,12 @@ fn vertex_shapes<'a>(
     v: usize,
     what: &str,
 ) -> PyResult<&'a [f32]> {
-    let bad = || {
+    in_place(shapes, &[Some(v), Some(3), None]).ok_or_else(|| {
         crate::error::input_error(format!(
             "{what}: shapes must be C-contiguous ({v}, 3, q) float32, got {:?}",
             shapes.shape()
         ))
-    };
-    // `as_slice` takes Fortran order too, whose slice is not vertex-major.
-    if shapes.shape()[..2] != [v, 3] || !shapes.is_c_contiguous() {
-        return Err(bad());
-    }
-    shapes.as_slice().map_err(|_| bad())
+    })
 }
 
 /// An int64 index array as `usize`s; `what` names it in the error for a negative one.

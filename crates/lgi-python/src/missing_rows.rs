@@ -1,7 +1,7 @@
 //! `lgi._lgi.fill_missing_rows`: a take's frames short of a row filled by their fits in the fit
 //! matrix's coordinates (`lgi_core::FillFit`), for the take prior's reading.
 
-use crate::convert::flat_to_array;
+use crate::convert::{flat_to_array, in_place};
 use crate::error::{input_error, PyLgiError};
 use lgi_core::{FillFit, MissingRows};
 use numpy::{PyArrayDyn, PyReadonlyArray1, PyReadonlyArray2, PyUntypedArrayMethods};
@@ -13,19 +13,13 @@ fn matrix<'a>(
     what: &str,
     shape: [Option<usize>; 2],
 ) -> PyResult<&'a [f64]> {
-    let fits = a
-        .shape()
-        .iter()
-        .zip(shape)
-        .all(|(&g, w)| w.is_none_or(|w| w == g));
-    match a.as_slice() {
-        Ok(flat) if fits && a.is_c_contiguous() => Ok(flat),
-        _ => Err(input_error(format!(
+    in_place(a, &shape).ok_or_else(|| {
+        input_error(format!(
             "fill_missing_rows: {what} must be a C-contiguous float64 array of shape {shape:?}, \
              got {:?}",
             a.shape()
-        ))),
-    }
+        ))
+    })
 }
 
 /// `zeta` (F, q) with every frame short of a row filled by its fit (`lgi_core::FillFit`): `u`
