@@ -48,7 +48,7 @@ from lgi.plan.leave_out import (
     take_frames,
 )
 from lgi.solve.local import UNBOUNDED
-from lgi.solve.spectrum import shrinkage_factors
+from lgi.solve.spectrum import right_singular, shrinkage_factors
 from lgi.solve.take_prior import TakePrior
 
 if TYPE_CHECKING:
@@ -84,12 +84,10 @@ def _shrunk(zeta: F64) -> tuple[F64, F64]:
     # The right singular vectors and values from the q x q Gram matrix (several times faster
     # than the SVD of the F x q frames; exact enough above the noise's bulk edge, all that is
     # kept: there a singular value is at least the noise's, 1).
-    evals, v = np.linalg.eigh(centred.T @ centred)
-    order = np.argsort(evals)[::-1]
-    sv = np.sqrt(np.maximum(evals[order], 0.0))
+    sv, v = right_singular(centred)
     f = shrinkage_factors(sv, m / n)
     used = f > 0.0
-    return mean, v[:, order[used]] * np.sqrt(f[used] / (1.0 - f[used]))
+    return mean, v[:, used] * np.sqrt(f[used] / (1.0 - f[used]))
 
 
 def _filled(

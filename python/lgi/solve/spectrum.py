@@ -11,7 +11,7 @@ from collections.abc import Callable
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["shrinkage_factors", "thin_svd"]
+__all__ = ["right_singular", "shrinkage_factors", "thin_svd"]
 
 F64 = NDArray[np.float64]
 
@@ -37,10 +37,17 @@ def thin_svd(a: F64, leading: Callable[[F64], int] | None = None) -> tuple[F64, 
     if f < p:
         v, sv, ut = thin_svd(a.T, leading)
         return ut.T, sv, v.T
-    evals, v = np.linalg.eigh(a.T @ a)
-    order = np.argsort(evals)[::-1]
-    sv = np.sqrt(np.maximum(evals[order], 0.0))
+    sv, v = right_singular(a)
     k = sv.size if leading is None else leading(sv)
-    v = v[:, order[:k]]
+    v = v[:, :k]
     u = (a @ v) / np.where(sv[:k] > 0.0, sv[:k], 1.0)
     return u, sv, v.T
+
+
+def right_singular(a: F64) -> tuple[F64, F64]:
+    """The singular values of `a` (F, p), descending, and its right singular vectors (p, p) as
+    columns in that order, from the eigendecomposition of the p x p Gram matrix `aᵀa`: what
+    `thin_svd` reads for a matrix taller than wide, without the left vectors."""
+    evals, v = np.linalg.eigh(a.T @ a)
+    order = np.argsort(evals)[::-1]
+    return np.sqrt(np.maximum(evals[order], 0.0)), v[:, order]
