@@ -162,7 +162,8 @@ def repair(seeds: list[int], call: str, dataset: str = "ict") -> None:
         x[700:703, c] += [0.0, 0.0, 1.0]
         truth = np.asarray(t.truth)
 
-        print(f"seed {seed}, {dataset}, {call}: the clean take's error, all frames (mean / max cm):")
+        head = f"seed {seed}, {dataset}, {call}"
+        print(f"{head}: the clean take's error, all frames (mean / max cm):")
         fixed, kept = (
             _error(m, opts, t.frames, True, truth),
             _error(m, opts, t.frames, False, truth),
