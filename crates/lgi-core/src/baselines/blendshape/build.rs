@@ -6,6 +6,7 @@ use super::low_rank::LowRank;
 use super::BlendshapeSolver;
 use crate::error::{LgiError, Result};
 use crate::linalg::cholesky;
+use crate::simd::with_avx2;
 
 impl BlendshapeSolver {
     /// `a` is row-major `rows × shapes`; `l2` and `penalty` are absolute, non-negative.
@@ -123,12 +124,7 @@ impl BlendshapeSolver {
         let s = self.shapes;
         let mut g = vec![0.0; s * s];
         for (r, _) in present.iter().enumerate().filter(|(_, &p)| p) {
-            let row = &self.a[r * s..(r + 1) * s];
-            for i in 0..s {
-                for j in 0..=i {
-                    g[i * s + j] += row[i] * row[j];
-                }
-            }
+            add_outer_lower(&mut g, &self.a[r * s..(r + 1) * s]);
         }
         for i in 0..s {
             g[i * s + i] += self.l2;
@@ -148,4 +144,17 @@ impl BlendshapeSolver {
         dense.keep_dense(dense.gram(&vec![true; dense.rows]))?;
         Ok(dense)
     }
+}
+
+with_avx2! {
+/// `g += row rowᵀ` on and below the diagonal (`g` S × S row-major, `row` S long): each entry
+/// adds its product as the Gram's rows come, the same bits on either build.
+fn add_outer_lower(g: &mut [f64], row: &[f64]) {
+    let s = row.len();
+    for (i, &ri) in row.iter().enumerate() {
+        for (gij, &rj) in g[i * s..i * s + i + 1].iter_mut().zip(&row[..=i]) {
+            *gij += ri * rj;
+        }
+    }
+}
 }

@@ -411,3 +411,28 @@ fn missing_rows_are_dropped_and_bad_inputs_are_errors() {
     assert!(BlendshapeSolver::new(vec![1.0, 1.0], 1, 2, 0.0, 0.0).is_err());
     assert!(BlendshapeSolver::new(vec![1.0, 1.0], 1, 2, -1.0, 0.0).is_err());
 }
+
+#[test]
+fn the_gram_of_present_rows_is_their_products_summed_in_row_order_on_both_builds() {
+    let (rows, shapes) = (23usize, 11usize);
+    let mut s = 7u64;
+    let a: Vec<f64> = (0..rows * shapes).map(|_| rnd(&mut s) - 0.5).collect();
+    let sol = BlendshapeSolver::new(a.clone(), rows, shapes, 1e-3, 5.0).unwrap();
+    let present: Vec<bool> = (0..rows).map(|r| r % 4 != 1).collect();
+    let bits = |g: Vec<f64>| g.into_iter().map(f64::to_bits).collect::<Vec<_>>();
+    let (fast, baseline) = crate::simd::both_builds(|| bits(sol.gram(&present)));
+    assert_eq!(fast, baseline);
+    for i in 0..shapes {
+        for j in 0..shapes {
+            let (lo, hi) = (i.max(j), i.min(j));
+            let mut want = 0.0;
+            for r in (0..rows).filter(|&r| present[r]) {
+                want += a[r * shapes + lo] * a[r * shapes + hi];
+            }
+            if i == j {
+                want += sol.l2;
+            }
+            assert_eq!(f64::from_bits(fast[i * shapes + j]), want, "({i}, {j})");
+        }
+    }
+}
