@@ -84,10 +84,10 @@ def _shrunk(zeta: F64) -> tuple[F64, F64]:
     # The right singular vectors and values from the q x q Gram matrix (several times faster
     # than the SVD of the F x q frames; exact enough above the noise's bulk edge, all that is
     # kept: there a singular value is at least the noise's, 1).
-    sv, v = right_singular(centred)
+    sv, v, order = right_singular(centred)
     f = shrinkage_factors(sv, m / n)
     used = f > 0.0
-    return mean, v[:, used] * np.sqrt(f[used] / (1.0 - f[used]))
+    return mean, v[:, order[used]] * np.sqrt(f[used] / (1.0 - f[used]))
 
 
 def _filled(

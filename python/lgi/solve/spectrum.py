@@ -37,17 +37,19 @@ def thin_svd(a: F64, leading: Callable[[F64], int] | None = None) -> tuple[F64, 
     if f < p:
         v, sv, ut = thin_svd(a.T, leading)
         return ut.T, sv, v.T
-    sv, v = right_singular(a)
+    sv, v, order = right_singular(a)
     k = sv.size if leading is None else leading(sv)
-    v = v[:, :k]
+    v = v[:, order[:k]]
     u = (a @ v) / np.where(sv[:k] > 0.0, sv[:k], 1.0)
     return u, sv, v.T
 
 
-def right_singular(a: F64) -> tuple[F64, F64]:
-    """The singular values of `a` (F, p), descending, and its right singular vectors (p, p) as
-    columns in that order, from the eigendecomposition of the p x p Gram matrix `aᵀa`: what
-    `thin_svd` reads for a matrix taller than wide, without the left vectors."""
+def right_singular(a: F64) -> tuple[F64, F64, NDArray[np.intp]]:
+    """The singular values of `a` (F, p), descending, from the eigendecomposition of the p x p
+    Gram matrix `aᵀa`: what `thin_svd` reads for a matrix taller than wide, without the left
+    vectors. With them its right singular vectors (p, p) as the eigendecomposition gives them
+    and the `order` that pairs them with the values (column `order[i]` is `sv[i]`'s): a caller
+    gathers only the columns it keeps."""
     evals, v = np.linalg.eigh(a.T @ a)
     order = np.argsort(evals)[::-1]
-    return np.sqrt(np.maximum(evals[order], 0.0)), v[:, order]
+    return np.sqrt(np.maximum(evals[order], 0.0)), v, order

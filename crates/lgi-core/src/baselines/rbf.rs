@@ -39,6 +39,11 @@ const MAX_CACHED: usize = 256;
 /// Points per parallel task of [`RbfInterpolator::add_interpolated_frames`].
 const RBF_BLOCK: usize = 256;
 
+/// The first marker value that is neither finite nor wholly NaN (a missing marker), if any.
+fn first_unreadable(values: &[DVec3]) -> Option<usize> {
+    values.iter().position(|p| p.is_finite() == p.is_nan())
+}
+
 fn kernel(a: DVec3, b: DVec3) -> f64 {
     (a - b).length()
 }
@@ -233,7 +238,7 @@ impl RbfInterpolator {
                 out.len()
             )));
         }
-        if let Some(i) = values.iter().position(|p| p.is_finite() == p.is_nan()) {
+        if let Some(i) = first_unreadable(values) {
             return Err(LgiError::Input(format!(
                 "frame {}: marker value {} is infinite or partly NaN",
                 i / b,
@@ -284,7 +289,7 @@ impl RbfInterpolator {
                 values.len()
             )));
         }
-        if let Some(i) = values.iter().position(|p| p.is_finite() == p.is_nan()) {
+        if let Some(i) = first_unreadable(values) {
             return Err(LgiError::Input(format!(
                 "marker value {i} is infinite or partly NaN"
             )));

@@ -34,6 +34,18 @@ pub(super) struct Prepared {
 }
 
 impl Prepared {
+    /// Each bundle's distance from the marker as given to its position `at` (0 for a missing
+    /// one): the residuals are measured against what the user gave, not the noise-aware
+    /// targets.
+    pub(super) fn residuals(&self, at: &[DVec3]) -> Vec<f64> {
+        let given = self.given.as_deref().unwrap_or(&self.targets);
+        given
+            .iter()
+            .zip(at)
+            .map(|(g, p)| if g.is_nan() { 0.0 } else { g.distance(*p) })
+            .collect()
+    }
+
     /// The fit's weights per local shape id, empty without a fit on offer.
     pub(super) fn fit_weights(&self) -> &[f64] {
         match &self.fit {

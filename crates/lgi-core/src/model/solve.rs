@@ -152,15 +152,9 @@ impl Model {
             .iter()
             .map(|t| (!t.is_nan()).then_some(Choice::of_fit(0.0)))
             .collect();
-        let given = prep.given.as_deref().unwrap_or(&prep.targets);
-        let residuals = given
-            .iter()
-            .zip(&prep.targets)
-            .map(|(g, t)| if g.is_nan() { 0.0 } else { g.distance(*t) })
-            .collect();
         FrameInfo {
             choices,
-            residuals,
+            residuals: prep.residuals(&prep.targets),
             bundle_positions: prep.targets.clone(),
             bin: prep.bin,
             corrections: prep.corrections.clone(),
@@ -435,7 +429,6 @@ impl Model {
         pieces: &Pieces,
         out: Option<&mut [DVec3]>,
     ) -> Result<FrameInfo> {
-        let b = self.bundles.len();
         let (targets_clean, theta) = (&prep.targets, prep.theta);
         let plan = self
             .sewing
@@ -479,16 +472,7 @@ impl Model {
                 at_bundles
             }
         };
-        let given = prep.given.as_deref().unwrap_or(targets_clean);
-        let residuals = (0..b)
-            .map(|i| {
-                if given[i].is_nan() {
-                    0.0
-                } else {
-                    given[i].distance(bundle_positions[i])
-                }
-            })
-            .collect();
+        let residuals = prep.residuals(&bundle_positions);
         let choices = if lk.reference.is_some() {
             choices
                 .into_iter()

@@ -533,22 +533,15 @@ impl ResidualPass {
 
     /// The correction rounds the residual pass adds (by bundle id): the first, and a second
     /// only when the first left more than the tolerance (as in `apply`). They need only the
-    /// present bundles' triangle corners, blended and mapped here.
+    /// present bundles' triangle corners, blended and mapped: `corners(b)` gives bundle b's.
     fn rounds(
         &self,
         input: &BlendInput<'_>,
-        map: &(impl Fn(usize, DVec3) -> DVec3 + Sync),
+        corners: impl Fn(u32) -> [(usize, DVec3); 3],
         at: &BundleTargets<'_>,
     ) -> Vec<Vec<DVec3>> {
-        // The present bundles' corners, blended and mapped (3 per bundle, in `present` order).
-        let corners: Vec<(usize, DVec3)> = self
-            .present
-            .iter()
-            .flat_map(|&b| {
-                let tri = at.triangles[at.bundles[b as usize].triangle as usize];
-                tri.map(|v| (v as usize, map(v as usize, input.vertex(v as usize))))
-            })
-            .collect();
+        // The present bundles' corners (3 per bundle, in `present` order).
+        let corners: Vec<(usize, DVec3)> = self.present.iter().flat_map(|&b| corners(b)).collect();
         // A round's corrections by bundle id (the weights' columns are present bundles only).
         let by_bundle = |c: Vec<[f64; 3]>| -> Vec<DVec3> {
             let mut out = vec![DVec3::ZERO; self.slot.len()];
@@ -589,15 +582,18 @@ impl ResidualPass {
         map: impl Fn(usize, DVec3) -> DVec3 + Sync,
         at: &BundleTargets<'_>,
     ) -> Vec<DVec3> {
-        let rounds = self.rounds(input, &map, at);
+        // Every bundle's corners, blended and mapped once: the rounds read the present ones'.
+        let corners: Vec<[(usize, DVec3); 3]> = at
+            .bundles
+            .iter()
+            .map(|sp| blended_corners(input, &map, at.triangles, sp))
+            .collect();
+        let rounds = self.rounds(input, |b| corners[b as usize], at);
         at.bundles
             .iter()
-            .map(|sp| {
-                let tri = at.triangles[sp.triangle as usize];
-                let x = tri.map(|v| {
-                    let v = v as usize;
-                    corrected(input.weights, v, map(v, input.vertex(v)), &rounds)
-                });
+            .zip(&corners)
+            .map(|(sp, c)| {
+                let x = c.map(|(v, x)| corrected(input.weights, v, x, &rounds));
                 interpolate3(x, sp.bary)
             })
             .collect()
@@ -617,7 +613,11 @@ impl ResidualPass {
         at: &BundleTargets<'_>,
         out: &mut [DVec3],
     ) -> Option<usize> {
-        let rounds = self.rounds(input, &map, at);
+        let rounds = self.rounds(
+            input,
+            |b| blended_corners(input, &map, at.triangles, &at.bundles[b as usize]),
+            at,
+        );
         out.par_chunks_mut(BLEND_BLOCK)
             .enumerate()
             .map(|(ci, chunk)| {
@@ -702,6 +702,16 @@ impl ResidualPass {
                 });
         }
     }
+}
+
+/// A bundle's triangle corners, each vertex with its position blended and mapped.
+fn blended_corners(
+    input: &BlendInput<'_>,
+    map: &impl Fn(usize, DVec3) -> DVec3,
+    triangles: &[[u32; 3]],
+    sp: &SurfacePoint,
+) -> [(usize, DVec3); 3] {
+    triangles[sp.triangle as usize].map(|v| (v as usize, map(v as usize, input.vertex(v as usize))))
 }
 
 /// Vertex `v` at `x` (blended and mapped) plus the correction rounds, each round's bundles
