@@ -99,12 +99,21 @@ impl Lu {
 
 /// Lower Cholesky factor of the row-major `n × n` symmetric matrix `g`; a pivot that is not
 /// positive is an [`LgiError::Input`] (shapes linearly dependent at the markers).
-pub fn cholesky(n: usize, mut g: Vec<f64>) -> Result<Vec<f64>> {
+pub fn cholesky(n: usize, g: Vec<f64>) -> Result<Vec<f64>> {
+    cholesky_from(n, g, 0)
+}
+
+/// [`cholesky`] from column `start` on: `g`'s columns before `start` (on and below the
+/// diagonal) already hold the factor's, the rest the matrix's. A factor's column depends only
+/// on the matrix's columns up to it, so two matrices that agree on their first `start`
+/// columns share those of their factors, and the rest made here are the bits a whole
+/// factorisation makes.
+pub(crate) fn cholesky_from(n: usize, mut g: Vec<f64>, start: usize) -> Result<Vec<f64>> {
     const ROWS: usize = 8;
     // Row slices rather than indices: no bounds checks in the inner products, which are
     // summed in the same order (k ascending) as ever.
     let dot = |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(x, y)| x * y).sum::<f64>();
-    for j in 0..n {
+    for j in start..n {
         let d = g[j * n + j] - dot(&g[j * n..j * n + j], &g[j * n..j * n + j]);
         if d.is_nan() || d <= 0.0 {
             return Err(LgiError::Input(format!(

@@ -6,7 +6,7 @@
 //! blended over the mesh by the sewing weights and the surface is put through the markers by
 //! the caller (`lgi.local`); docs/concepts.md says why and docs/results.md what it measures.
 
-use crate::baselines::{BlendshapeSolver, FitStart};
+use crate::baselines::{BlendshapeSolver, FitStart, PieceFactors};
 use crate::error::{LgiError, Result};
 use crate::frame_blocks::frame_blocks;
 use crate::linalg::dot8;
@@ -189,11 +189,12 @@ impl LocalFits {
             .map(|k| {
                 let window = &self.windows[k];
                 let mut previous: Option<Fitted> = None;
+                let mut pieces = PieceFactors::default();
                 (0..frames)
                     .map(|f| {
                         let frame = &targets[f * 3 * b..(f + 1) * 3 * b];
                         let start = &starts[f * s..(f + 1) * s];
-                        previous = window.fit(frame, start, previous.as_ref());
+                        previous = window.fit(frame, start, previous.as_ref(), &mut pieces);
                         match &previous {
                             Some(done) => (done.weights.clone(), false),
                             None => (start.to_vec(), true),
@@ -361,7 +362,13 @@ impl Window {
     /// window present, or neither path finished). It starts at `previous` (the last frame's
     /// fit: a nearby target, a few steps; at its dual point when the same rows are missing),
     /// else at `start`.
-    fn fit(&self, frame: &[f64], start: &[f64], previous: Option<&Fitted>) -> Option<Fitted> {
+    fn fit(
+        &self,
+        frame: &[f64],
+        start: &[f64],
+        previous: Option<&Fitted>,
+        pieces: &mut PieceFactors,
+    ) -> Option<Fitted> {
         let mut target = Vec::with_capacity(3 * self.markers.len());
         for (&m, &g) in self.markers.iter().zip(&self.root_weights) {
             target.extend(frame[3 * m..3 * m + 3].iter().map(|t| t * g));
@@ -389,16 +396,15 @@ impl Window {
             Some(p) => FitStart::Weights(&p.weights),
             None => FitStart::Weights(start),
         };
-        let fit = |solver: &BlendshapeSolver, from: FitStart<'_>| {
-            solver
-                .solve_with_derivatives(&target, &[], from)
-                .map(|(solution, _)| solution)
-        };
         // A warm start that does not finish is solved again from cold inside the solver
         // (`solve_with_derivatives`); the dense path is the last resort (S³/3 flops a step:
-        // seconds at 2,000 scans).
-        let solution = fit(solver, from)
-            .or_else(|_| solver.dense_only().and_then(|d| fit(&d, from)))
+        // seconds at 2,000 scans). The window's dense pieces are kept from frame to frame.
+        let solution = solver
+            .solve_keeping(&target, from, pieces)
+            .or_else(|_| {
+                let dense = solver.dense_only()?;
+                dense.solve_keeping(&target, from, &mut PieceFactors::default())
+            })
             .ok()?;
         Some(Fitted {
             weights: solution.weights,

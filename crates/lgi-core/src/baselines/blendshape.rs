@@ -13,6 +13,9 @@ mod build;
 mod fit;
 mod low_rank;
 mod newton;
+mod pieces;
+
+pub(crate) use pieces::PieceFactors;
 
 use low_rank::LowRank;
 

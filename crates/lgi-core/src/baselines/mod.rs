@@ -6,6 +6,6 @@
 pub mod blendshape;
 pub mod rbf;
 
-pub(crate) use blendshape::check_target;
+pub(crate) use blendshape::{check_target, PieceFactors};
 pub use blendshape::{BlendshapeSolution, BlendshapeSolver, FitStart};
 pub use rbf::RbfInterpolator;

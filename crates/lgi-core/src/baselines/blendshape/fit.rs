@@ -6,7 +6,8 @@ use super::low_rank::{DualStart, LowRank};
 use super::newton::{Steps, MAX_ITERATIONS};
 use super::{check_target, BlendshapeSolution, BlendshapeSolver, FitStart};
 use crate::error::{LgiError, Result};
-use crate::linalg::{cholesky, cholesky_solve};
+use super::pieces::PieceFactors;
+use crate::linalg::cholesky_solve;
 use rayon::prelude::*;
 
 impl BlendshapeSolver {
@@ -80,7 +81,8 @@ impl BlendshapeSolver {
             })
             .collect();
         let Some(lr) = &self.low_rank else {
-            return self.solve_dense(target, &along, start_weights);
+            let mut pieces = PieceFactors::default();
+            return self.solve_dense(target, &along, start_weights, &mut pieces);
         };
         let at = match start {
             FitStart::Cold => DualStart::Zero,
@@ -152,22 +154,52 @@ impl BlendshapeSolver {
             .sum()
     }
 
-    /// [`solve`](Self::solve) on the dense S × S normal equations.
+    /// A fit of a window's frame in turn (`crate::LocalFits`): [`solve`](Self::solve) from
+    /// `start`, the dense path's piece factors kept in `pieces` for the next frame's fit (the
+    /// same bits as without them).
+    pub(crate) fn solve_keeping(
+        &self,
+        target: &[f64],
+        start: FitStart<'_>,
+        pieces: &mut PieceFactors,
+    ) -> Result<BlendshapeSolution> {
+        if self.low_rank.is_some() {
+            return Ok(self.solve_with_derivatives(target, &[], start)?.0);
+        }
+        check_target(target, self.rows)?;
+        let weights = match start {
+            FitStart::Cold => None,
+            FitStart::Weights(w) | FitStart::Nearby { weights: w, .. } => Some(w),
+        };
+        if weights.is_some_and(|w| w.len() != self.shapes || w.iter().any(|x| !x.is_finite())) {
+            return Err(LgiError::Input(format!(
+                "a start must be {} finite weights",
+                self.shapes
+            )));
+        }
+        Ok(self.solve_dense(target, &[], weights, pieces)?.0)
+    }
+
+    /// [`solve`](Self::solve) on the dense S × S normal equations, each piece's factor from
+    /// `pieces` where kept there (and kept there when made).
     fn solve_dense(
         &self,
         target: &[f64],
         along: &[Vec<f64>],
         start: Option<&[f64]>,
+        pieces: &mut PieceFactors,
     ) -> Result<(BlendshapeSolution, Vec<Vec<f64>>)> {
         let s = self.shapes;
         let present: Vec<bool> = target.iter().map(|t| !t.is_nan()).collect();
         let complete = present.iter().all(|&p| p);
-        let partial;
-        let gram = if complete {
-            &self.full_gram
-        } else {
-            partial = self.gram(&present);
-            &partial
+        // A frame with rows missing makes its Gram matrix only if a piece is not kept.
+        let partial = std::cell::OnceCell::new();
+        let gram = || -> &Vec<f64> {
+            if complete {
+                &self.full_gram
+            } else {
+                partial.get_or_init(|| self.gram(&present))
+            }
         };
         let mut atr = vec![0.0; s];
         for (r, &t) in target.iter().enumerate().filter(|(_, t)| !t.is_nan()) {
@@ -179,13 +211,16 @@ impl BlendshapeSolver {
             if first && complete && clamped.iter().all(|&c| !c) {
                 return Ok(cholesky_solve(s, &self.full, rhs));
             }
-            let mut h = gram.clone();
-            for (i, &c) in clamped.iter().enumerate() {
-                if c {
-                    h[i * s + i] += self.penalty;
+            let factor = pieces.factor(s, &present, clamped, || {
+                let mut h = gram().clone();
+                for (i, &c) in clamped.iter().enumerate() {
+                    if c {
+                        h[i * s + i] += self.penalty;
+                    }
                 }
-            }
-            Ok(cholesky_solve(s, &cholesky(s, h)?, rhs))
+                Ok(h)
+            })?;
+            Ok(cholesky_solve(s, factor, rhs))
         };
         // The data term's slope parts, (A d)·(A w − t) + d·Aᵀt and (A d)·(A d), from A's rows.
         let products = |_: &[f64], w: &[f64], d: &[f64]| -> (f64, f64) {
