@@ -362,9 +362,10 @@ mod tests {
 
     #[test]
     fn frames_interpolated_together_add_each_frames_own_interpolation_bit_for_bit() {
-        // 600 points (three blocks), 9 markers, 4 frames: two whole, one with a marker
-        // missing, one whole again.
-        let (v, b, f) = (600usize, 9usize, 4usize);
+        // 602 points (three blocks, the last not a whole number of tiles), 9 markers, 7
+        // frames: two whole, one with a marker missing, four whole again (18 values a point:
+        // a tile of 12 and 6 after it).
+        let (v, b, f) = (602usize, 9usize, 7usize);
         let rbf = RbfInterpolator::new(cloud(v, 3), barycentric_samples(b, v, 4)).unwrap();
         let mut values: Vec<DVec3> = cloud(f * b, 5);
         values[2 * b + 4] = DVec3::NAN;
@@ -459,11 +460,18 @@ mod tests {
     }
 }
 
+/// Points and values per tile of [`add_rows_block`]: 4 points × 12 values (four frames'
+/// x, y, z) of sums kept in registers while the block's rows pass, each value of the markers
+/// read once for four points and each matrix entry once for twelve values.
+const TILE_POINTS: usize = 4;
+const TILE_VALUES: usize = 12;
+
 with_avx2! {
 /// One block of [`RbfInterpolator::add_interpolated_frames`]: for each point of the block (a
 /// row of `rows`, `b` wide), every present frame's `Σ_m row[m] values[m]` summed from 0 with
-/// markers ascending (the bits of `interpolate`'s fold), side by side in `acc` (3 per frame),
-/// added to frame `full[i]`'s point in `parts`.
+/// markers ascending (the bits of `interpolate`'s fold), added to frame `full[i]`'s point in
+/// `parts`; `acc` holds a point's sums (3 per frame). Tiles of points and values side by
+/// side where they fit, each sum in the same order.
 fn add_rows_block(
     rows: &[f64],
     b: usize,
@@ -474,16 +482,47 @@ fn add_rows_block(
 ) {
     let n3 = acc.len();
     let len = parts.first().map_or(0, |p| p.len());
-    for k in 0..len {
-        acc.iter_mut().for_each(|a| *a = 0.0);
+    let tiled_points = len - len % TILE_POINTS;
+    let tiled_values = n3 - n3 % TILE_VALUES;
+    for k0 in (0..tiled_points).step_by(TILE_POINTS) {
+        for c0 in (0..tiled_values).step_by(TILE_VALUES) {
+            let mut t = [[0.0f64; TILE_VALUES]; TILE_POINTS];
+            for m in 0..b {
+                let x = &by_marker[m * n3 + c0..m * n3 + c0 + TILE_VALUES];
+                for (i, ti) in t.iter_mut().enumerate() {
+                    let w = rows[(k0 + i) * b + m];
+                    for (a, x) in ti.iter_mut().zip(x) {
+                        *a += *x * w;
+                    }
+                }
+            }
+            for (i, ti) in t.iter().enumerate() {
+                for (j, &sum) in ti.iter().enumerate() {
+                    let c = c0 + j;
+                    parts[full[c / 3]][k0 + i][c % 3] += sum;
+                }
+            }
+        }
+    }
+    // What the tiles leave: the last values of the tiled points, then the last points whole.
+    let mut add = |k: usize, from: usize, acc: &mut [f64]| {
+        acc[from..].iter_mut().for_each(|a| *a = 0.0);
         for (m, &w) in rows[k * b..(k + 1) * b].iter().enumerate() {
-            for (a, x) in acc.iter_mut().zip(&by_marker[m * n3..(m + 1) * n3]) {
+            for (a, x) in acc[from..].iter_mut().zip(&by_marker[m * n3 + from..(m + 1) * n3]) {
                 *a += *x * w;
             }
         }
-        for (i, &f) in full.iter().enumerate() {
-            parts[f][k] += DVec3::new(acc[3 * i], acc[3 * i + 1], acc[3 * i + 2]);
+        for (c, &sum) in acc.iter().enumerate().skip(from) {
+            parts[full[c / 3]][k][c % 3] += sum;
         }
+    };
+    if tiled_values < n3 {
+        for k in 0..tiled_points {
+            add(k, tiled_values, acc);
+        }
+    }
+    for k in tiled_points..len {
+        add(k, 0, acc);
     }
 }
 }
