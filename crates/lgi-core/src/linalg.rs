@@ -149,6 +149,8 @@ pub(crate) fn cholesky_from(n: usize, mut g: Vec<f64>, start: usize) -> Result<V
 
 /// `Σ a_i b_i` in f64 with eight independent partial sums (a single running sum is one
 /// dependent chain of additions, ~4× slower); `a`'s values widened to f64 (exact for f32).
+/// Inlined, so a caller built for AVX2 builds it so too.
+#[inline(always)]
 pub(crate) fn dot8<A: Copy + Into<f64>>(a: &[A], b: &[f64]) -> f64 {
     let mut acc = [0.0f64; 8];
     let (ca, cb) = (a.chunks_exact(8), b.chunks_exact(8));

@@ -58,6 +58,11 @@ FITS_CHUNK = 16
 """Frames whose local fits (and then whose blend) one call to the core makes (a few hundred
 ms at most: Ctrl-C is seen between calls)."""
 
+SURFACE_CHUNK = 64
+"""Frames whose surface one call to the core makes (~0.2 s on ICT): the corrective's matrix
+(V x B doubles, 34 MB on ICT at 160 markers) is read from memory once a call, so a call
+covers more frames than a fit's; each frame's surface is the same bits in any chunk."""
+
 
 class LocalPieces:
     """A model's local fits and what blends them over its mesh (made once per model by
@@ -233,8 +238,8 @@ class LocalPieces:
             return out, np.empty((0, b, 3))
         targets, weights, theta = self._fits(res, bounded, lengths)
         positions = np.empty((f, b, 3))
-        for a in range(0, f, FITS_CHUNK):
-            part = slice(a, a + FITS_CHUNK)
+        for a in range(0, f, SURFACE_CHUNK):
+            part = slice(a, a + SURFACE_CHUNK)
             positions[part] = self._surface.surface(
                 weights[part], targets[part], out[part], None if theta is None else theta[part]
             )
