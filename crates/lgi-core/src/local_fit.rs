@@ -341,8 +341,12 @@ fn blend_block(
                     *m += s * w;
                 }
             }
-            let dot = |d: usize| dot8(&rows[d * q..(d + 1) * q], mixed);
-            part[k] = neutral[vert] + DVec3::new(dot(0), dot(1), dot(2));
+            // Called directly, not through a closure: a closure is a function of its own,
+            // built without AVX2.
+            let x = dot8(&rows[..q], mixed);
+            let y = dot8(&rows[q..2 * q], mixed);
+            let z = dot8(&rows[2 * q..3 * q], mixed);
+            part[k] = neutral[vert] + DVec3::new(x, y, z);
         }
     }
 }
