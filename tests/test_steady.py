@@ -96,6 +96,41 @@ def test_steadying_keeps_every_marker_where_the_solve_put_it_and_spreads_a_one_f
     assert jump > 0.1 and left == pytest.approx(0.3989 * jump, rel=0.02)
 
 
+@pytest.mark.parametrize("frames", [1, 2, 70])
+def test_a_surface_steadied_with_its_corrective_left_as_misses_is_the_surface_steadied(
+    sample, sample_model, frames
+) -> None:  # type: ignore[no-untyped-def]
+    res = sample_model.solve(sample.performance[:frames], temporal=False, quiet=True)
+    v, p = np.array(res.vertices), np.array(res.bundle_positions)
+    misses = np.random.default_rng(frames).normal(0.0, 0.05, p.shape)
+    interp = np.asarray(steady.surface_interpolator(sample_model).matrix)
+    # u + S m = v: the surface less the interpolation of the misses over it.
+    u = v - np.einsum("vb,fbd->fvd", interp, misses)
+    want = steady.steadied(sample_model, v.copy(), p)
+    got = steady.steadied(sample_model, u, p, misses=misses)
+    assert np.abs(got - want).max() < 1e-12
+    with pytest.raises(ValueError, match="whole take"):
+        steady.steadied(sample_model, u, p, misses=misses, before=(v[:1], p[:1]))
+
+
+def test_a_steady_solve_with_local_fits_adds_their_corrective_once_to_round_off(
+    sample, sample_model, monkeypatch
+) -> None:  # type: ignore[no-untyped-def]
+    from lgi.solve.model import Model
+
+    frames = np.array(sample.performance[:40])
+    opts = {"marker_noise": 0.02, "local_fits": True, "quiet": True, "repair": False}
+    fused = sample_model.solve(frames, **opts)
+    # The corrective made over the mesh first, then the steady's own: the same surface.
+    monkeypatch.setattr(
+        Model, "_finish_steadied", lambda self, res, fr, o: (self._finish(res, fr, o), None)
+    )
+    twice = sample_model.solve(frames, **opts)
+    assert np.abs(np.asarray(fused.vertices) - np.asarray(twice.vertices)).max() < 1e-9
+    np.testing.assert_allclose(fused.bundle_positions, twice.bundle_positions, atol=1e-9)
+    np.testing.assert_allclose(fused.bundle_residuals, twice.bundle_residuals, atol=1e-9)
+
+
 @pytest.mark.parametrize("block", [1, 5, 64])
 def test_a_take_steadied_in_chunks_equals_it_steadied_whole_bit_for_bit(
     sample, sample_model, block, monkeypatch

@@ -575,9 +575,11 @@ class LocalSurface:
         targets: ArrayLike,
         out: NDArray[np.float64],
         theta: ArrayLike | None = None,
+        corrective: bool = True,
     ) -> NDArray[np.float64]:
         """Weights (F, B, q), targets (F, B, 3), `out` (F, V, 3) receiving the surface, jaw
-        poses (F, 3) -> the markers' positions on it (F, B, 3)."""
+        poses (F, 3) -> the markers' positions on it (F, B, 3). `corrective=False`: the posed
+        blend alone (without the corrective through the targets) and the positions on it."""
 
 @final
 class BlendshapeSolver:

@@ -259,8 +259,10 @@ impl LocalSurface {
 
     /// `weights` (F, B, q), `targets` (F, B, 3) (NaN rows: missing markers), `out` (F, V, 3)
     /// float64 C-contiguous (receives the surface), `theta` (F, 3) jaw poses (None: unposed)
-    /// -> the markers' positions on the surface (F, B, 3).
-    #[pyo3(signature = (weights, targets, out, theta=None))]
+    /// -> the markers' positions on the surface (F, B, 3). `corrective=False`: the posed blend
+    /// only, without the corrective that puts it through the targets (a caller that adds the
+    /// corrective itself, `lgi.solve.steady`), and the positions on it.
+    #[pyo3(signature = (weights, targets, out, theta=None, corrective=true))]
     fn surface<'py>(
         &self,
         py: Python<'py>,
@@ -268,6 +270,7 @@ impl LocalSurface {
         targets: &Bound<'py, PyAny>,
         out: &Bound<'py, PyAny>,
         theta: Option<&Bound<'py, PyAny>>,
+        corrective: bool,
     ) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
         let model = &self.model.get().inner;
         let (v, b, q) = (self.neutral.len(), model.num_bundles(), self.q);
@@ -319,7 +322,9 @@ impl LocalSurface {
                         .collect::<Vec<DVec3>>())
                 })
                 .collect::<lgi_core::Result<Vec<Vec<DVec3>>>>()?;
-            rbf.add_interpolated_frames(&misses.concat(), out)?;
+            if corrective {
+                rbf.add_interpolated_frames(&misses.concat(), out)?;
+            }
             out.par_chunks(v)
                 .map(|o| model.bundle_positions(o))
                 .collect()

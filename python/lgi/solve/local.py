@@ -141,6 +141,7 @@ class LocalPieces:
         self._corner_corrective = _lgi.RbfInterpolator(
             self.neutral[corners], self._corner_tris, bary
         )
+        self._bundles_matrix: F64 | None = None
 
     def fits_for(self, bounded: bool, lengths: float = _lgi.LOCAL_LENGTH) -> _lgi.LocalFits:
         """The windows' fits with weights held to [0, 1] (`bounded`) or not (`UNBOUNDED`: the
@@ -244,6 +245,42 @@ class LocalPieces:
                 weights[part], targets[part], out[part], None if theta is None else theta[part]
             )
         return out, positions
+
+    def posed_and_misses(
+        self, res: SolveResult, out: F64, *, bounded: bool = True
+    ) -> tuple[F64, F64, F64]:
+        """`surface_and_markers` without the corrective's pass over the mesh, for a caller
+        that adds it itself (`lgi.solve.steady`, which adds a corrective of its own anyway):
+        `out` holds the posed blend; returned with the markers' positions on the whole
+        surface (the blend plus the corrective, measured at the bundles: the same to
+        round-off) and the misses (F, B, 3) whose interpolation over the mesh
+        (`surface_interpolator`, the same interpolant) is the corrective."""
+        f = np.asarray(res.missing).shape[0]
+        b = self.rest.shape[0]
+        if f == 0:
+            return out, np.empty((0, b, 3)), np.empty((0, b, 3))
+        targets, weights, theta = self._fits(res, bounded, _lgi.LOCAL_LENGTH)
+        on_blend = np.empty((f, b, 3))
+        for a in range(0, f, SURFACE_CHUNK):
+            part = slice(a, a + SURFACE_CHUNK)
+            on_blend[part] = self._surface.surface(
+                weights[part],
+                targets[part],
+                out[part],
+                None if theta is None else theta[part],
+                corrective=False,
+            )
+        misses = targets - on_blend
+        return out, on_blend + np.einsum("bj,fjd->fbd", self._at_bundles_matrix(), misses), misses
+
+    def _at_bundles_matrix(self) -> F64:
+        """(B, B): the corrective of unit misses measured at the bundles."""
+        if self._bundles_matrix is None:
+            rows = np.asarray(self._corner_corrective.matrix)  # (corners, B)
+            self._bundles_matrix = np.einsum(
+                "bjk,bj->bk", rows[self._corner_tris], self._corner_bary
+            )
+        return self._bundles_matrix
 
     def at_bundles(self, res: Solution, *, bounded: bool = True) -> F64:
         """Every bundle's position (F, B, 3) on the local fits' surface of `res`: the same

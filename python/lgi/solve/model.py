@@ -453,11 +453,11 @@ class Model:
                 smooth_window=smooth_window,
                 out=out,
             )
-        res = self._finish(res, arr, opts)
         if not steady:
-            return res
+            return self._finish(res, arr, opts)
+        res, misses = self._finish_steadied(res, arr, opts)
         v, p = np.asarray(res.vertices), np.asarray(res.bundle_positions)
-        return self._as_given(res, steadied(self, v, p), given)
+        return self._as_given(res, steadied(self, v, p, misses=misses), given)
 
     def _core_solve(
         self,
@@ -565,6 +565,22 @@ class Model:
         if weight is None or weight == 1.0:
             return res
         return self._with_detail(res, frames, float(weight))
+
+    def _finish_steadied(
+        self, res: SolveResult, frames: NDArray[Any], opts: SolveOptions
+    ) -> tuple[SolveResult, NDArray[np.float64] | None]:
+        """`_finish` for a whole take steadied next: with local fits (every marker solved, the
+        detail kept whole) their corrective is left to `steadied`, which adds one over the mesh
+        anyway: the vertices are the posed blend, the positions and residuals the whole
+        surface's, and the misses returned (else None, `_finish`)."""
+        bounded = local_bounds(opts.local_fits)
+        weight = opts.detail_weight
+        whole = weight is None or weight == 1.0
+        if bounded is None or not whole or np.asarray(res.missing).any():
+            return self._finish(res, frames, opts), None
+        v = np.asarray(res.vertices)
+        _, pos, misses = local_pieces(self).posed_and_misses(res, v, bounded=bounded)
+        return self._remeasured(res, v, frames, pos), misses
 
     def _with_local(self, res: SolveResult, frames: NDArray[Any], bounded: bool) -> SolveResult:
         """`res` with the local fits' surface (`lgi.plan.local`) in place in its vertices (an `out`

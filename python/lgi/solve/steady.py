@@ -59,17 +59,29 @@ def steadied(
     first: int = 0,
     before: Frames | None = None,
     after: Frames | None = None,
+    misses: F64 | None = None,
 ) -> F64:
     """`vertices` (F, V, 3), a take's solved frames in order from its frame `first`, with their
     detail steadied in place (returned); `positions` (F, B, 3): the markers' positions on them
     (`SolveResult.bundle_positions`). `before` and `after`: up to `RADIUS` solved frames just
     before and after them with their positions (unsteadied; a chunk's neighbours), none at the
-    take's ends."""
+    take's ends.
+
+    `misses` (F, B, 3; a whole take, no `before` or `after`): `vertices` are the solve less
+    the interpolation `S m` of these values at the markers (the local fits' corrective,
+    `lgi.solve.local.LocalPieces.posed_and_misses`), and `positions` the whole solve's. Then
+    `steady = G*u + S (G*m + p - G*p)` for those vertices `u`: the same surface (to
+    round-off) with one pass of `S` over the mesh instead of two."""
     f = vertices.shape[0]
-    if f + (0 if before is None else len(before[0])) + (0 if after is None else len(after[0])) < 2:
-        return vertices
     interp = np.asarray(surface_interpolator(model).matrix)  # (V, B)
     nb = positions.shape[1]
+    if misses is not None and (before is not None or after is not None):
+        raise ValueError("steadied: misses are read over a whole take, without neighbours")
+    if f + (0 if before is None else len(before[0])) + (0 if after is None else len(after[0])) < 2:
+        if misses is not None and f:
+            added = interp @ misses.transpose(1, 0, 2).reshape(nb, -1)
+            vertices += added.reshape(-1, f, 3).transpose(1, 0, 2)
+        return vertices
 
     def ends(got: Frames | None, head: bool) -> Frames:
         if got is None:
@@ -95,6 +107,11 @@ def steadied(
         rough = np.zeros((_BLOCK, nb, 3))  # what the filter takes off the markers
         at = (first + s) % _BLOCK + np.arange(e - s)
         rough[at] = window_p[mid] - _filtered(window_p)[mid]
+        if misses is not None:
+            # The same frames' misses (no neighbours outside the take: `tail_v`'s frames).
+            lo = s - tail_v.shape[0]
+            window_m = misses[lo : lo + window_v.shape[0]]
+            rough[at] += _filtered(window_m)[mid]
         back = (interp @ rough.transpose(1, 0, 2).reshape(nb, -1)).reshape(-1, _BLOCK, 3)
         vertices[s:e] = _filtered(window_v)[mid] + back[:, at].transpose(1, 0, 2)
         tail_v, tail_p = next_v, next_p

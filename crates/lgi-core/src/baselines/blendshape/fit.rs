@@ -4,9 +4,9 @@
 
 use super::low_rank::{DualStart, LowRank};
 use super::newton::{Steps, MAX_ITERATIONS};
+use super::pieces::PieceFactors;
 use super::{check_target, BlendshapeSolution, BlendshapeSolver, FitStart};
 use crate::error::{LgiError, Result};
-use super::pieces::PieceFactors;
 use crate::linalg::{cholesky_solve, dot_rows};
 use rayon::prelude::*;
 
@@ -264,7 +264,10 @@ impl BlendshapeSolver {
         let first = target.len() - groups.remainder().len();
         for (r, &t) in target.iter().enumerate().skip(first) {
             if !t.is_nan() {
-                each(t, xs.map(|x| row(r).iter().zip(x).map(|(a, b)| a * b).sum()));
+                each(
+                    t,
+                    xs.map(|x| row(r).iter().zip(x).map(|(a, b)| a * b).sum()),
+                );
             }
         }
     }
