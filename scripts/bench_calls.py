@@ -87,13 +87,14 @@ STAGES = [
     ("plan: take prior", "lgi.plan.choices", "take_prior_choice"),
     ("plan: detail weight", "lgi.plan.choices", "detail_weight"),
     ("solve: gaps filled", "lgi.solve.model", "Model._gaps_filled"),
-    ("solve: local fits / detail", "lgi.solve.model", "Model._finish"),
+    ("solve: local fits / detail", "lgi.solve.model", "Model._finish_steadied"),
     ("solve: steady", "lgi.solve.model", "steadied"),
     ("solve and repair (all; core = the rest)", "lgi.app.pipeline", "solve_take"),
     ("write", "lgi.app.pipeline", "write_solved"),
 ]
 """(stage, module, function): the `solve:` stages count only within `solve_take` (the readings
-solve their left-out rows with the same functions)."""
+solve their left-out rows with the same functions). The calls here are steady solves, whose
+local fits and detail are `Model._finish_steadied`'s."""
 
 
 def staged(argv: list[str]) -> None:
