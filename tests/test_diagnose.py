@@ -117,6 +117,25 @@ def test_the_same_residual_with_the_marker_off_its_track_is_a_fault() -> None:
         assert found[0].fault
 
 
+def test_a_marker_off_its_track_from_the_takes_first_frame_or_to_its_last_is_a_gap() -> None:
+    """The same 1 cm excursion of twelve frames, run from the take's first frame or to its
+    last: one step off the track at most, as a blink the dataset cannot follow shows at a
+    take's start, so the dataset's gap, not a fault; a three-frame spike there still is one."""
+    names = [f"m{k:02d}" for k in range(16)]
+    frames = _skin().shape[0]
+    cases = ((0, 11, "gap"), (frames - 12, frames - 1, "gap"), (0, 2, "spike"))
+    for first, last, kind in cases:
+        x = _skin()
+        x[first : last + 1, 5] += [0.0, 0.0, 1.0]
+        rng = np.random.default_rng(1)
+        r = np.abs(rng.normal(0.01, 0.003, x.shape[:2]))
+        r[first : last + 1, 5] = 0.3
+        found = diagnose(r, np.zeros(r.shape, bool), names, size=20.0, markers=x)
+        assert [(f.kind, f.markers, f.first, f.last) for f in found] == [
+            (kind, ("m05",), first, last)
+        ], (first, last, found)
+
+
 def test_a_neighbours_residual_over_a_spike_is_the_spikes_echo_not_a_gap() -> None:
     """A noise-aware solve spreads a spiking marker's correction to its neighbour: the
     neighbour's residual over the spike's frames is neither a fault nor a gap of the dataset."""

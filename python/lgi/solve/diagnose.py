@@ -521,6 +521,11 @@ def diagnose(
                 elif deviations is not None:
                     if not _off_the_take(deviations, b, s, e):
                         kind = "gap"  # the take moves it so elsewhere: fast skin, not a fault
+            if kind == "off" and (s == 0 or e == r.shape[0] - 1):
+                # A fault steps off its track and back: a range longer than a spike that runs
+                # from the take's first frame or to its last shows one step at most, as a blink
+                # the dataset cannot follow does (an eyelid marker, from a take's frame 0).
+                kind = "gap"
             if kind == "gap" and (b, s, e) in motion_only:
                 continue  # the solve followed it: no gap of the dataset's either
             singles.append(Finding(kind, (names[b],), s, e, _worst(r[s : e + 1, b])))
