@@ -159,3 +159,24 @@ def test_model_solve_repairs_a_swap_and_a_spike_and_says_what_it_repaired(
     assert next(sample_model.solve_iter(x, chunk=50, marker_noise=0.02, quiet=True)).repairs is None
     with pytest.raises(lgi.InputError, match="repair must be True or False"):
         sample_model.solve(x, repair="yes", quiet=True)  # type: ignore[arg-type]
+
+
+def test_a_repair_reads_faults_at_the_given_markers_noise_and_a_denoised_plan_keeps_it(
+    sample, sample_model
+) -> None:  # type: ignore[no-untyped-def]
+    x = np.array(sample.performance)
+    x[100:102, 7] += [0.0, 0.0, 1.0]  # a 1 cm spike, 2 frames
+    name = sample_model.marker_names[7]
+    # Read at 0.2 mm (5 sigma: 1 mm) the spike is a fault; at 5 mm (5 sigma: 2.5 cm) nothing is.
+    at_given = sample_model.solve(x, marker_noise=0.02, fault_noise=0.02, quiet=True)
+    assert [(f.kind, f.markers, f.first, f.last) for f in at_given.repairs] == [
+        ("spike", (name,), 100, 101)
+    ]
+    assert sample_model.solve(x, marker_noise=0.02, fault_noise=0.5, quiet=True).repairs == ()
+    # A plan of a denoised take reads faults at the noise before denoising, as `lgi solve`.
+    plan = lgi.plan_solve(x, sample_model, marker_noise=0.02, denoise=True)
+    assert plan.denoised is not None and plan.options.marker_noise < 0.02
+    assert plan.options.fault_noise == plan.given_noise == 0.02
+    assert lgi.plan_solve(x, sample_model, marker_noise=0.02).options.fault_noise is None
+    with pytest.raises(lgi.InputError, match="fault_noise"):
+        sample_model.solve(x, marker_noise=0.02, fault_noise=-1.0, quiet=True)

@@ -439,5 +439,7 @@ def plan_solve(
             jaw=o.jaw,
             steady=o.steady,
             repair=o.repair,
+            # A denoised take's faults are read at its given noise, as `lgi solve` reads them.
+            fault_noise=given_noise if den is not None else None,
         ),
     )

@@ -272,6 +272,7 @@ class Model:
         local_fits: bool | str = False,
         take_prior: TakePrior | None = None,
         repair: bool | None = None,
+        fault_noise: float | None = None,
         options: SolveOptions | None = None,
     ) -> SolveResult:
         """Solves frames (F, B, 3) of marker positions (a single (B, 3) frame gives F = 1).
@@ -348,7 +349,9 @@ class Model:
         never a model gap) are repaired on a copy of the frames (`lgi.solve.repair`: the swap
         undone, the others solved as missing and filled) and the frames solved again;
         `result.repairs` lists the faults repaired (empty: none found) and `result.repaired`
-        marks the samples changed. `repair=False` keeps the markers as given."""
+        marks the samples changed. `repair=False` keeps the markers as given. Faults are read at
+        `fault_noise` (the markers' noise as the take gave them; None: `marker_noise`): a plan
+        of a denoised take sets it (`lgi.plan_solve`), as `lgi solve` reads the given markers."""
         opts, jaw = self._options(
             options,
             jaw,
@@ -359,6 +362,7 @@ class Model:
             take_prior=take_prior,
             steady=steady,
             repair=repair,
+            fault_noise=fault_noise,
         )
         arr = np.asarray(frames)
         if arr.ndim == 2:
@@ -379,7 +383,10 @@ class Model:
         if not (temporal and opts.steady and opts.repair and arr.shape[0] >= 2):
             return res
         names = self.marker_names
+        # Faults are read at the noise the markers were given with (`SolveOptions.fault_noise`).
         sigma = None if opts.marker_noise is None else float(opts.marker_noise)
+        if opts.fault_noise is not None:
+            sigma = opts.fault_noise
         found = diagnose(
             res.bundle_residuals,
             res.missing,

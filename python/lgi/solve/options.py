@@ -49,6 +49,7 @@ _FLAGS = {
     "recommended": "--recommended",
     "steady": "--no-steady",
     "repair": "--no-repair",
+    "fault_noise": "fault_noise",
 }
 
 
@@ -80,7 +81,11 @@ class SolveOptions:
       neighbouring frames (`lgi.solve.gaps`, `lgi.solve.steady`); False solves each frame from
       its own markers alone (frames that are not a take's consecutive frames);
     - `repair`: in a steady solve, the marker faults it shows repaired and the take solved
-      again (`lgi.solve.repair`); False keeps the markers as given.
+      again (`lgi.solve.repair`); False keeps the markers as given;
+    - `fault_noise`: the noise sigma of the markers as the take gave them, which a repair
+      reads faults at (None: `marker_noise`). A plan of a denoised take sets it to the noise
+      before denoising, as `lgi solve` reads the given markers: a denoised take's own small
+      sigma made a blink the dataset cannot follow (1 mm on an eyelid) a fault.
 
     Built from the command line with `from_cli` (strings as typed); `cli` only changes how
     errors name the options."""
@@ -95,6 +100,7 @@ class SolveOptions:
     recommended: bool = False
     steady: bool = True
     repair: bool = True
+    fault_noise: float | None = None
     cli: bool = field(default=False, compare=False, repr=False)
 
     def __post_init__(self) -> None:
@@ -103,6 +109,7 @@ class SolveOptions:
         put(self, "steady", self._flag("steady", self.steady))
         put(self, "repair", self._flag("repair", self.repair))
         put(self, "marker_noise", self._noise(self.marker_noise))
+        put(self, "fault_noise", self._fault_noise(self.fault_noise))
         put(self, "detail_weight", self._weight(self.detail_weight))
         put(self, "denoise", self._flag_or_auto("denoise", self.denoise))
         put(self, "fit", self._fit(self.fit))
@@ -240,6 +247,16 @@ class SolveOptions:
                 raise InputError(f"--marker-noise {value}: must be a finite number >= 0")
             raise InputError(
                 f"marker_noise must be a finite distance >= 0 (data units), got {value}"
+            )
+        return sigma
+
+    def _fault_noise(self, value: Any) -> float | None:
+        if value is None:
+            return None
+        sigma = self._number("fault_noise", value, "a number (data units) or None")
+        if not math.isfinite(sigma) or sigma < 0:
+            raise InputError(
+                f"fault_noise must be a finite distance >= 0 (data units), got {value}"
             )
         return sigma
 
