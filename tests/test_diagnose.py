@@ -100,17 +100,23 @@ def test_a_residual_shared_by_a_marker_moving_with_its_neighbours_is_a_gap_not_a
     assert found[0].describe(100, "cm").startswith("the dataset does not follow m05 at time codes")
 
 
+def _excursion_found(first: int, last: int) -> list[Finding]:
+    """What `diagnose` finds where marker 5 jumps 1 cm away from its neighbours over frames
+    first..last and back, its residual 3 mm there."""
+    x = _skin()
+    x[first : last + 1, 5] += [0.0, 0.0, 1.0]
+    rng = np.random.default_rng(1)
+    r = np.abs(rng.normal(0.01, 0.003, x.shape[:2]))
+    r[first : last + 1, 5] = 0.3
+    names = [f"m{k:02d}" for k in range(16)]
+    return diagnose(r, np.zeros(r.shape, bool), names, size=20.0, markers=x)
+
+
 def test_the_same_residual_with_the_marker_off_its_track_is_a_fault() -> None:
     """The same residual where marker 5 itself jumps 1 cm away from its neighbours for three
     frames and back (a spike), or for twelve (a marker off): faults."""
-    names = [f"m{k:02d}" for k in range(16)]
     for first, last, kind in ((40, 42, "spike"), (40, 51, "off")):
-        x = _skin()
-        x[first : last + 1, 5] += [0.0, 0.0, 1.0]
-        rng = np.random.default_rng(1)
-        r = np.abs(rng.normal(0.01, 0.003, x.shape[:2]))
-        r[first : last + 1, 5] = 0.3
-        found = diagnose(r, np.zeros(r.shape, bool), names, size=20.0, markers=x)
+        found = _excursion_found(first, last)
         assert [(f.kind, f.markers, f.first, f.last) for f in found] == [
             (kind, ("m05",), first, last)
         ], found
@@ -121,16 +127,10 @@ def test_a_marker_off_its_track_from_the_takes_first_frame_or_to_its_last_is_a_g
     """The same 1 cm excursion of twelve frames, run from the take's first frame or to its
     last: one step off the track at most, as a blink the dataset cannot follow shows at a
     take's start, so the dataset's gap, not a fault; a three-frame spike there still is one."""
-    names = [f"m{k:02d}" for k in range(16)]
     frames = _skin().shape[0]
     cases = ((0, 11, "gap"), (frames - 12, frames - 1, "gap"), (0, 2, "spike"))
     for first, last, kind in cases:
-        x = _skin()
-        x[first : last + 1, 5] += [0.0, 0.0, 1.0]
-        rng = np.random.default_rng(1)
-        r = np.abs(rng.normal(0.01, 0.003, x.shape[:2]))
-        r[first : last + 1, 5] = 0.3
-        found = diagnose(r, np.zeros(r.shape, bool), names, size=20.0, markers=x)
+        found = _excursion_found(first, last)
         assert [(f.kind, f.markers, f.first, f.last) for f in found] == [
             (kind, ("m05",), first, last)
         ], (first, last, found)
