@@ -268,15 +268,7 @@ mod tests {
     fn lu_factors_are_the_textbook_eliminations_bits_on_both_builds() {
         // 37 x 37 (a tail past any vector width), pivoting needed on some rows.
         let n = 37usize;
-        let mut seed = 11u64;
-        let a: Vec<f64> = (0..n * n)
-            .map(|_| {
-                seed = seed
-                    .wrapping_mul(6364136223846793005)
-                    .wrapping_add(1442695040888963407);
-                (seed >> 11) as f64 / (1u64 << 53) as f64 - 0.5
-            })
-            .collect();
+        let a = crate::test_values::values(n * n, 11);
         let (fast, baseline) = crate::simd::both_builds(|| {
             Lu::factor(n, a.clone()).map(|lu| (lu.lu, lu.perm)).unwrap()
         });

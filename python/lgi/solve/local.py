@@ -238,13 +238,24 @@ class LocalPieces:
         if f == 0:
             return out, np.empty((0, b, 3))
         targets, weights, theta = self._fits(res, bounded, lengths)
-        positions = np.empty((f, b, 3))
-        for a in range(0, f, SURFACE_CHUNK):
+        return out, self._surface_chunks(weights, targets, out, theta, corrective=True)
+
+    def _surface_chunks(
+        self, weights: F64, targets: F64, out: F64, theta: F64 | None, *, corrective: bool
+    ) -> F64:
+        """The surface of every frame into `out`, `SURFACE_CHUNK` frames a call to the core
+        (`_lgi.LocalSurface.surface`, `corrective` as there): the markers' positions on it."""
+        positions = np.empty((out.shape[0], self.rest.shape[0], 3))
+        for a in range(0, out.shape[0], SURFACE_CHUNK):
             part = slice(a, a + SURFACE_CHUNK)
             positions[part] = self._surface.surface(
-                weights[part], targets[part], out[part], None if theta is None else theta[part]
+                weights[part],
+                targets[part],
+                out[part],
+                None if theta is None else theta[part],
+                corrective=corrective,
             )
-        return out, positions
+        return positions
 
     def posed_and_misses(
         self, res: SolveResult, out: F64, *, bounded: bool = True
@@ -259,17 +270,8 @@ class LocalPieces:
         b = self.rest.shape[0]
         if f == 0:
             return out, np.empty((0, b, 3)), np.empty((0, b, 3))
-        targets, weights, theta = self._fits(res, bounded, _lgi.LOCAL_LENGTH)
-        on_blend = np.empty((f, b, 3))
-        for a in range(0, f, SURFACE_CHUNK):
-            part = slice(a, a + SURFACE_CHUNK)
-            on_blend[part] = self._surface.surface(
-                weights[part],
-                targets[part],
-                out[part],
-                None if theta is None else theta[part],
-                corrective=False,
-            )
+        targets, weights, theta = self._fits(res, bounded)
+        on_blend = self._surface_chunks(weights, targets, out, theta, corrective=False)
         misses = targets - on_blend
         return out, on_blend + np.einsum("bj,fjd->fbd", self._at_bundles_matrix(), misses), misses
 

@@ -49,7 +49,6 @@ _FLAGS = {
     "recommended": "--recommended",
     "steady": "--no-steady",
     "repair": "--no-repair",
-    "fault_noise": "fault_noise",
 }
 
 
@@ -228,7 +227,8 @@ class SolveOptions:
     # --- checks ----------------------------------------------------------------------------
 
     def _name(self, option: str) -> str:
-        return _FLAGS[option] if self.cli else option
+        # An option the command line does not take (`fault_noise`) is named as Python names it.
+        return _FLAGS.get(option, option) if self.cli else option
 
     def _given_none(self, value: Any) -> bool:
         return isinstance(value, str) and value == NONE

@@ -51,6 +51,14 @@ def _filtered(x: F64) -> F64:
     )
 
 
+def _spread(interp: F64, values: F64) -> F64:
+    """Values at the markers (n, B, 3) interpolated over the mesh by `interp` (V, B): (n, V, 3),
+    one (V, B) x (B, 3n) product."""
+    n, nb = values.shape[:2]
+    out = interp @ values.transpose(1, 0, 2).reshape(nb, -1)
+    return out.reshape(-1, n, 3).transpose(1, 0, 2)
+
+
 def steadied(
     model: Model,
     vertices: F64,
@@ -73,15 +81,14 @@ def steadied(
     `steady = G*u + S (G*m + p - G*p)` for those vertices `u`: the same surface (to
     round-off) with one pass of `S` over the mesh instead of two."""
     f = vertices.shape[0]
-    interp = np.asarray(surface_interpolator(model).matrix)  # (V, B)
-    nb = positions.shape[1]
     if misses is not None and (before is not None or after is not None):
         raise ValueError("steadied: misses are read over a whole take, without neighbours")
     if f + (0 if before is None else len(before[0])) + (0 if after is None else len(after[0])) < 2:
         if misses is not None and f:
-            added = interp @ misses.transpose(1, 0, 2).reshape(nb, -1)
-            vertices += added.reshape(-1, f, 3).transpose(1, 0, 2)
+            vertices += _spread(np.asarray(surface_interpolator(model).matrix), misses)
         return vertices
+    interp = np.asarray(surface_interpolator(model).matrix)  # (V, B)
+    nb = positions.shape[1]
 
     def ends(got: Frames | None, head: bool) -> Frames:
         if got is None:
@@ -112,8 +119,7 @@ def steadied(
             lo = s - tail_v.shape[0]
             window_m = misses[lo : lo + window_v.shape[0]]
             rough[at] += _filtered(window_m)[mid]
-        back = (interp @ rough.transpose(1, 0, 2).reshape(nb, -1)).reshape(-1, _BLOCK, 3)
-        vertices[s:e] = _filtered(window_v)[mid] + back[:, at].transpose(1, 0, 2)
+        vertices[s:e] = _filtered(window_v)[mid] + _spread(interp, rough)[at]
         tail_v, tail_p = next_v, next_p
         s = e
     return vertices

@@ -41,6 +41,30 @@ impl BlendshapeSolver {
         directions: &[Vec<f64>],
         start: FitStart<'_>,
     ) -> Result<(BlendshapeSolution, Vec<Vec<f64>>)> {
+        self.solve_with_pieces(target, directions, start, &mut PieceFactors::default())
+    }
+
+    /// A fit of a window's frame in turn (`crate::LocalFits`): [`solve`](Self::solve) from
+    /// `start`, the dense path's piece factors kept in `pieces` for the next frame's fit (the
+    /// same bits as without them).
+    pub(crate) fn solve_keeping(
+        &self,
+        target: &[f64],
+        start: FitStart<'_>,
+        pieces: &mut PieceFactors,
+    ) -> Result<BlendshapeSolution> {
+        Ok(self.solve_with_pieces(target, &[], start, pieces)?.0)
+    }
+
+    /// [`solve_with_derivatives`](Self::solve_with_derivatives), the dense path's piece
+    /// factors from and into `pieces`.
+    fn solve_with_pieces(
+        &self,
+        target: &[f64],
+        directions: &[Vec<f64>],
+        start: FitStart<'_>,
+        pieces: &mut PieceFactors,
+    ) -> Result<(BlendshapeSolution, Vec<Vec<f64>>)> {
         let rows = self.rows;
         check_target(target, rows)?;
         let start_weights = match start {
@@ -76,8 +100,7 @@ impl BlendshapeSolver {
             })
             .collect();
         let Some(lr) = &self.low_rank else {
-            let mut pieces = PieceFactors::default();
-            return self.solve_dense(target, &along, start_weights, &mut pieces);
+            return self.solve_dense(target, &along, start_weights, pieces);
         };
         let at = match start {
             FitStart::Cold => DualStart::Zero,
@@ -147,32 +170,6 @@ impl BlendshapeSolver {
                 self.l2 * x * x + self.penalty * out * out
             })
             .sum()
-    }
-
-    /// A fit of a window's frame in turn (`crate::LocalFits`): [`solve`](Self::solve) from
-    /// `start`, the dense path's piece factors kept in `pieces` for the next frame's fit (the
-    /// same bits as without them).
-    pub(crate) fn solve_keeping(
-        &self,
-        target: &[f64],
-        start: FitStart<'_>,
-        pieces: &mut PieceFactors,
-    ) -> Result<BlendshapeSolution> {
-        if self.low_rank.is_some() {
-            return Ok(self.solve_with_derivatives(target, &[], start)?.0);
-        }
-        check_target(target, self.rows)?;
-        let weights = match start {
-            FitStart::Cold => None,
-            FitStart::Weights(w) | FitStart::Nearby { weights: w, .. } => Some(w),
-        };
-        if weights.is_some_and(|w| w.len() != self.shapes || w.iter().any(|x| !x.is_finite())) {
-            return Err(LgiError::Input(format!(
-                "a start must be {} finite weights",
-                self.shapes
-            )));
-        }
-        Ok(self.solve_dense(target, &[], weights, pieces)?.0)
     }
 
     /// [`solve`](Self::solve) on the dense S × S normal equations, each piece's factor from

@@ -84,16 +84,11 @@ impl PieceFactors {
 mod tests {
     use super::*;
     use crate::linalg::cholesky;
+    use crate::test_values::values;
 
+    /// A symmetric positive definite `n × n` matrix: M Mᵀ + 0.1 I.
     fn matrix(n: usize, seed: u64) -> Vec<f64> {
-        let mut s = seed;
-        let mut rnd = || {
-            s = s
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            (s >> 11) as f64 / (1u64 << 53) as f64 - 0.5
-        };
-        let m: Vec<f64> = (0..n * n).map(|_| rnd()).collect();
+        let m = values(n * n, seed);
         let mut g = vec![0.0; n * n];
         for i in 0..n {
             for j in 0..n {
