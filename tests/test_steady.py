@@ -1,5 +1,6 @@
-"""A take's frames read together: dropouts filled from the marker's track and its neighbours
-(`lgi.solve.gaps`) and the dataset's detail kept steady across frames (`lgi.solve.steady`)."""
+"""A take's frames read together: dropouts filled from the take's motion or the marker's
+neighbours (`lgi.solve.gaps`) and the dataset's detail kept steady across frames
+(`lgi.solve.steady`)."""
 
 from __future__ import annotations
 
@@ -11,6 +12,7 @@ from hypothesis import strategies as st
 import lgi
 from lgi.solve import gaps, steady
 from lgi.solve.detail import rest_positions
+from lgi.solve.motion import read_motion
 
 
 def _rigid_take(
@@ -64,14 +66,76 @@ def test_a_chunk_filled_with_its_context_equals_the_take_filled_whole(
     lost = rng.random((200, 8)) < 0.15
     x[lost] = np.nan
     rest = rng.normal(size=(8, 3))
-    whole, done = gaps.filled(x, rest)
-    stop = min(200, start + size)
-    lo, hi = max(0, start - gaps.CONTEXT), min(200, stop + gaps.CONTEXT)
-    part, part_done = gaps.filled(x[lo:hi], rest)
-    np.testing.assert_array_equal(part[start - lo : stop - lo], whole[start:stop])
-    np.testing.assert_array_equal(part_done[start - lo : stop - lo], done[start:stop])
-    seen = ~lost
-    np.testing.assert_array_equal(whole[seen], x[seen])  # what was seen is kept
+    # By the neighbours, and by the whole take's motion (read once, as `solve_iter` reads it).
+    motion = read_motion(x, 0.0, 3)
+    for by in (None, motion):
+        whole, done = gaps.filled(x, rest, by)
+        stop = min(200, start + size)
+        lo, hi = max(0, start - gaps.CONTEXT), min(200, stop + gaps.CONTEXT)
+        part, part_done = gaps.filled(x[lo:hi], rest, by)
+        np.testing.assert_array_equal(part[start - lo : stop - lo], whole[start:stop])
+        np.testing.assert_array_equal(part_done[start - lo : stop - lo], done[start:stop])
+        seen = ~lost
+        np.testing.assert_array_equal(whole[seen], x[seen])  # what was seen is kept
+
+
+def _moving_take(frames: int, markers: int, rank: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """Markers moving in `rank` smooth random directions of the whole face (noise-free): a
+    marker moves with markers anywhere on it, not with its nearest ones."""
+    rng = np.random.default_rng(seed)
+    rest = rng.normal(size=(markers, 3))
+    t = np.arange(frames, dtype=float)[:, None]
+    paths = np.sin(t / rng.uniform(3.0, 12.0, rank) + rng.uniform(0.0, 6.0, rank))  # (F, rank)
+    x = rest[None] + (paths @ rng.normal(size=(rank, markers * 3))).reshape(frames, markers, 3)
+    return x, rest
+
+
+def test_a_dropout_its_neighbours_do_not_follow_is_filled_exactly_from_the_takes_motion() -> None:
+    x, rest = _moving_take(300, 20, 4, seed=3)
+    given_ = x.copy()
+    given_[100:106, 2] = np.nan
+    given_[200, 7] = given_[200, 11] = np.nan
+    # With the take's motion read whole, the fill is exact.
+    exact = read_motion(x, 0.0, 4)
+    out, done = gaps.filled(given_, rest, exact)
+    np.testing.assert_allclose(out, x, atol=1e-9)
+    assert done.sum() == 8 and np.isnan(given_[100, 2, 0])
+    # Read from the take with its gaps (`fill_motion`: the gaps pull the directions a
+    # little), within 1e-3 of a motion ~1 across; the neighbours' fill misses by 0.59.
+    motion = gaps.fill_motion(given_, rest, 0.0)
+    assert motion is not None and motion.rank == 4
+    read = gaps.filled(given_, rest, motion)[0]
+    by_neighbours = gaps.filled(given_, rest)[0]
+    assert np.abs(read - x).max() < 1e-3
+    assert np.abs(by_neighbours - x)[done].max() > 0.5
+
+
+def test_a_take_whose_markers_move_with_their_neighbours_only_is_filled_by_the_neighbours() -> None:
+    # Eight clusters of markers, each carried by its own random walk: 24 directions, more than
+    # a fill reads, and each marker exactly where its cluster puts it.
+    rng = np.random.default_rng(4)
+    centres = 10.0 * rng.normal(size=(8, 3))
+    rest = (centres[:, None] + 0.1 * rng.normal(size=(8, 5, 3))).reshape(40, 3)
+    walks = rng.normal(size=(300, 8, 3)).cumsum(axis=0)
+    x = rest[None] + np.repeat(walks, 5, axis=1)
+    given_ = x.copy()
+    given_[rng.random((300, 40)) < 0.02] = np.nan
+    assert gaps.fill_motion(given_, rest, 0.0) is None
+    out, done = gaps.filled(given_, rest)
+    np.testing.assert_allclose(out[done], x[done], atol=1e-9)
+
+
+def test_reading_the_fill_holds_out_the_same_runs_each_time_and_leaves_the_take_alone() -> None:
+    x, rest = _moving_take(200, 12, 3, seed=5)
+    x += 0.01 * np.random.default_rng(5).normal(size=x.shape)
+    x[np.random.default_rng(6).random((200, 12)) < 0.03] = np.nan
+    before = x.copy()
+    first, second = gaps.fill_motion(x, rest, 0.01), gaps.fill_motion(x, rest, 0.01)
+    np.testing.assert_array_equal(x, before)
+    assert first is not None and second is not None
+    np.testing.assert_array_equal(first.directions, second.directions)
+    # A take too short to hold out the runs is filled by the neighbours.
+    assert gaps.fill_motion(x[:5], rest, 0.01) is None
 
 
 def test_steadying_keeps_every_marker_where_the_solve_put_it_and_spreads_a_one_frame_flip(

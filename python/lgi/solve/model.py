@@ -20,9 +20,10 @@ from lgi.data.dataset import Dataset
 from lgi.errors import InputError
 from lgi.solve.detail import blend_detail, rest_positions
 from lgi.solve.diagnose import diagnose, face_size
-from lgi.solve.gaps import CONTEXT, filled
+from lgi.solve.gaps import CONTEXT, fill_motion, filled
 from lgi.solve.jaw import JawRig, auto_rig
 from lgi.solve.local import local_pieces
+from lgi.solve.motion import TakeMotion
 from lgi.solve.options import UNBOUNDED, SolveOptions, local_bounds
 from lgi.solve.repair import repaired
 from lgi.solve.steady import RADIUS, steadied
@@ -449,7 +450,7 @@ class Model:
         given = arr
         steady = temporal and opts.steady
         if steady:
-            arr = self._gaps_filled(arr)
+            arr = self._gaps_filled(arr, opts)
         with _progress_bar(total, "lgi solve", quiet) as bar:
             res = self._core_solve(
                 arr,
@@ -531,21 +532,40 @@ class Model:
         opts.check_model(self.jaw_bins is not None)
         return opts, jaw
 
-    def _gaps_filled(self, frames: NDArray[Any]) -> NDArray[Any]:
+    def _gaps_filled(
+        self, frames: NDArray[Any], opts: SolveOptions, motion: TakeMotion | str | None = "read"
+    ) -> NDArray[Any]:
         """A take's frames with the missing samples it can fill filled (`lgi.solve.gaps`; a row
-        with any NaN is missing, as the core reads it); frames the core will refuse (shape,
-        dtype, an infinite value) go to it as given, so its error names the problem."""
+        with any NaN is missing, as the core reads it) by the take's `motion` ("read": read
+        from these frames, `_fill_motion`; None: by the markers' neighbours); frames the core
+        will refuse (shape, dtype, an infinite value) go to it as given, so its error names
+        the problem."""
+        if not self._fillable(frames):
+            return frames
+        by = self._fill_motion(frames, opts) if isinstance(motion, str) else motion
+        return filled(frames, rest_positions(self), by)[0]
+
+    def _fillable(self, frames: NDArray[Any]) -> bool:
+        """Whether `frames` are a take whose gaps `_gaps_filled` fills: (F ≥ 2, B, 3) floats,
+        some missing, every present value finite."""
         if (
             frames.ndim != 3
             or frames.dtype.kind != "f"
             or frames.shape[1:] != (self.num_bundles, 3)
             or frames.shape[0] < 2
         ):
-            return frames
+            return False
         nan = np.isnan(frames)
-        if not nan.any() or not np.isfinite(frames[~nan]).all():
-            return frames
-        return filled(frames, rest_positions(self))[0]
+        return bool(nan.any()) and bool(np.isfinite(frames[~nan]).all())
+
+    def _fill_motion(self, frames: NDArray[Any], opts: SolveOptions) -> TakeMotion | None:
+        """The take's motion its gaps are filled by (`lgi.solve.gaps.fill_motion`: None, by the
+        markers' neighbours), read at the markers' noise as the take gave them."""
+        if not self._fillable(frames):
+            return None
+        noise = opts.fault_noise if opts.fault_noise is not None else opts.marker_noise
+        sigma = float(noise) if isinstance(noise, (int, float)) else 0.0
+        return fill_motion(np.asarray(frames, dtype=np.float64), rest_positions(self), sigma)
 
     def _as_given(
         self, res: SolveResult, vertices: NDArray[np.float64], given: NDArray[Any]
@@ -671,6 +691,8 @@ class Model:
         steady = temporal and opts.steady
         state: _lgi.SolveState | None = None
         before: tuple[NDArray[np.float64], NDArray[np.float64]] | None = None
+        # Every chunk is filled by the whole take's motion, so the chunks equal one solve.
+        motion = self._fill_motion(np.asarray(arr), opts) if steady else None
 
         def solved(part: NDArray[Any], buf: Any, previous: Any, tick: Any) -> SolveResult:
             res = self._core_solve(
@@ -692,7 +714,7 @@ class Model:
                 # (`lgi.solve.gaps`, `lgi.solve.steady`), so the chunks equal one solve.
                 lo, hi = max(0, a - CONTEXT), min(total, b + RADIUS + CONTEXT)
                 given = np.asarray(arr[lo:hi])
-                window = self._gaps_filled(given)
+                window = self._gaps_filled(given, opts, motion)
                 part = window[a - lo : b - lo]
                 buf = None if out is None else out[: b - a]
                 res = solved(part, buf, state, lambda _f: bar.update(1))
