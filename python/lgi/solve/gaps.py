@@ -108,19 +108,34 @@ def filled(
         x[frame_at, marker_at] = values[0]
         done[frame_at, marker_at] = True
         return x, done
-    near = nearest(np.asarray(rest, dtype=np.float64))
+    _by_neighbours(x, seen, np.asarray(rest, dtype=np.float64), done)
+    return x, done
+
+
+def _by_neighbours(
+    x: F64,
+    seen: NDArray[np.bool_],
+    rest: F64,
+    done: NDArray[np.bool_],
+    wanted: NDArray[np.bool_] | None = None,
+) -> None:
+    """`x`'s gaps filled in place by each marker's neighbours, `done` marked (module text);
+    `wanted` (F, B): only the gaps holding one of these samples."""
+    f = x.shape[0]
+    near = nearest(rest)
     frame_kept: NDArray[np.bool_] = np.asarray(
         seen.mean(axis=1) >= MIN_SEEN
     )  # frames that are there, a few markers lost
     moved = x - rest[None]  # each marker's displacement from rest; NaN where missing
-    for k in np.flatnonzero(~seen.all(axis=0)):
+    lacking = ~seen.all(axis=0) if wanted is None else wanted.any(axis=0)
+    for k in np.flatnonzero(lacking):
         with_neighbour: NDArray[np.bool_] = np.asarray(seen[:, near[k]].any(axis=1))
         usable = seen[:, k] & with_neighbour  # frames that say where the marker sits
         if not usable.any():
             continue
         runs = []
         for a, z in _runs(~usable):
-            if z - a > MAX_GAP:
+            if z - a > MAX_GAP or (wanted is not None and not wanted[a:z, k].any()):
                 continue
             gone = np.flatnonzero(~seen[a:z, k] & with_neighbour[a:z] & frame_kept[a:z]) + a
             if gone.size == 0:
@@ -139,7 +154,6 @@ def filled(
             value = np.stack([np.interp(gone, ends, offset[ends, c]) for c in range(3)], axis=1)
             x[gone, k] = value + carried[gone]
             done[gone, k] = True
-    return x, done
 
 
 _Run = tuple[int, NDArray[np.int64], list[int]]
@@ -261,12 +275,13 @@ def fill_motion(frames: F64, rest: F64, noise: float) -> TakeMotion | None:
         return None
     ranks = list(range(1, motion.rank + 1))
     frame_at, marker_at, fills = _by_motion(lacking, seen & ~held, motion, ranks, runs)
-    fills.append(filled(lacking, rest)[0][frame_at, marker_at])
+    by_neighbours, marked = lacking.copy(), np.zeros((f, b), dtype=bool)
+    _by_neighbours(by_neighbours, seen & ~held, np.asarray(rest, dtype=np.float64), marked, held)
+    fills.append(by_neighbours[frame_at, marker_at])
     errors = np.array([np.linalg.norm(y - x[frame_at, marker_at], axis=1) for y in fills])
     reached = np.isfinite(errors).all(axis=0)  # the neighbours leave some unfilled
     if not reached.any():
         return None
     best = int(np.argmin(errors[:, reached].mean(axis=1)))
-    if best == len(ranks):
-        return None
-    return read_motion(x, noise, ranks[best])
+    # Read again from the whole take at the rank chosen (its refill at that rank too).
+    return None if best == len(ranks) else read_motion(x, noise, ranks[best])
