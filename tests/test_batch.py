@@ -397,9 +397,7 @@ def test_a_batch_with_denoise_solves_the_denoised_take_and_records_it(
     written = _one_shot(client, named_model, take, tmp_path / "o", marker_noise=0.01, denoise=True)
     den = lgi.denoise_take(take, 0.01)
     # Faults and gaps are read at the given markers' noise (`fault_noise`), as the plan says.
-    ref = named_model.solve(
-        den.frames, quiet=True, marker_noise=den.marker_noise, fault_noise=0.01
-    )
+    ref = named_model.solve(den.frames, quiet=True, marker_noise=den.marker_noise, fault_noise=0.01)
     assert np.array_equal(written.vertices, ref.vertices.astype(np.float32))
     assert written.settings is not None and written.settings.denoised_from == 0.01
     assert written.settings.marker_noise == den.marker_noise < 0.01

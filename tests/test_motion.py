@@ -5,6 +5,7 @@ against the covariance written out in full and conditioned directly."""
 from __future__ import annotations
 
 import numpy as np
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -31,9 +32,15 @@ def test_the_motions_directions_are_the_centred_takes_leading_right_singular_vec
     centred = flat - flat.mean(axis=0)
     _, sv, vt = np.linalg.svd(centred, full_matrices=False)
     np.testing.assert_allclose(motion.mean, flat.mean(axis=0), atol=1e-12)
-    # Each direction up to its sign; each variance the direction's share less the noise's.
+    # Each direction up to its sign, the spectrum the variance along each.
     np.testing.assert_allclose(np.abs(np.sum(motion.directions * vt[:6], axis=1)), 1.0, atol=1e-9)
-    np.testing.assert_allclose(motion.variances, sv[:6] ** 2 / 79 - 0.01**2, rtol=1e-9)
+    np.testing.assert_allclose(motion.spectrum[:30], sv[:30] ** 2 / 79, rtol=1e-9)
+    # Probabilistic PCA's noise at rank r: the mean variance of the 30 - r directions beyond
+    # (Tipping & Bishop), at least the noise given.
+    for r in (2, 4, 6):
+        beyond = np.sum(sv[r:] ** 2 / 79) / (30 - r)
+        assert motion.noise_at(r) == pytest.approx(np.sqrt(max(beyond, 0.01**2)), rel=1e-9)
+    assert motion.noise_at(2) > 0.1 > 0.01 == pytest.approx(motion.noise_at(4), rel=0.2)
 
 
 def test_a_motion_read_from_a_take_with_a_marker_never_seen_leaves_that_marker_out() -> None:
@@ -65,10 +72,12 @@ def test_a_prediction_is_the_conditional_mean_of_the_gaussian_the_motion_describ
     rng = np.random.default_rng(seed)
     p = 24
     q, _ = np.linalg.qr(rng.normal(size=(p, rank)))
+    variances = np.sort(rng.uniform(0.5, 4.0, rank))[::-1]
     motion = TakeMotion(
         mean=rng.normal(size=p),
         directions=q.T,
-        variances=np.sort(rng.uniform(0.5, 4.0, rank))[::-1],
+        spectrum=np.r_[variances + noise**2, np.full(p - rank, noise**2)],
+        coordinates=p,
         noise=noise,
     )
     r = min(used, rank)
@@ -78,13 +87,15 @@ def test_a_prediction_is_the_conditional_mean_of_the_gaussian_the_motion_describ
         hidden[i, rng.choice(p, size=hidden_count, replace=False)] = True
     rows[hidden] = np.nan  # a hidden coordinate may be missing
     got = motion.predictions(rows, hidden, [r])[0]
-    v, lam = motion.directions[:r], motion.variances[:r]
+    v = motion.directions[:r]
+    sigma = motion.noise_at(r)  # the noise given, and the directions beyond r as noise
+    lam = motion.spectrum[:r] - sigma**2
     for i in range(3):
         o, h = ~hidden[i], hidden[i]
-        if noise > 0.0:
+        if sigma > 0.0:
             # x = μ + Vᵀ a + e, a ~ N(0, Λ), e ~ N(0, sigma² I): its covariance written out and
             # the hidden coordinates conditioned on the others directly.
-            cov = (v.T * lam) @ v + noise**2 * np.eye(p)
+            cov = (v.T * lam) @ v + sigma**2 * np.eye(p)
             want = motion.mean[h] + cov[np.ix_(h, o)] @ np.linalg.solve(
                 cov[np.ix_(o, o)], rows[i, o] - motion.mean[o]
             )

@@ -10,8 +10,12 @@ their conditional mean given its others: the directions' posterior weights
     a = (sigma² Λ⁻¹ + V_O V_Oᵀ)⁻¹ V_O (x_O - μ_O),   prediction μ + Vᵀ a,
 
 with V (k, 3B) the directions (orthonormal rows), V_O their columns at the frame's present
-coordinates and Λ the variances. The directions of a rank-k motion are the first k of a
-rank-K one, so one reading serves every rank up to K (`TakeMotion.predictions`).
+coordinates and Λ the variances. At rank k the noise is at least what the directions beyond the
+k-th carry per coordinate (probabilistic PCA's maximum-likelihood noise): motion a rank-k
+reading does not hold is noise to it, and on a noise-free take a direction a frame barely sees
+is then held to its share instead of read from a near-singular system. The directions of a
+rank-k motion are the first k of a rank-K one, so one reading serves every rank up to K
+(`TakeMotion.predictions`).
 
 Read by `lgi.solve.gaps` (a dropout filled from what the take says about it)."""
 
@@ -30,9 +34,9 @@ __all__ = ["TakeMotion", "read_motion"]
 F64 = NDArray[np.float64]
 
 RIDGE = 1e-10
-"""Smallest noise-to-variance ratio a direction is held with: a take read at sigma 0 (an exact
-solve) still predicts from a well-posed system where a frame hides most of a direction's
-coordinates."""
+"""Smallest noise-to-variance ratio a direction is held with: a take whose every direction is
+read (no noise left at any rank) still predicts from a well-posed system where a frame hides
+most of a direction's coordinates."""
 
 
 REFILLS = 1
@@ -44,20 +48,33 @@ directions toward it)."""
 @dataclass(frozen=True)
 class TakeMotion:
     """The take's motion (module text): `mean` (3B,), `directions` (K, 3B) with orthonormal
-    rows, strongest first, their `variances` (K,) and the markers' `noise` sigma."""
+    rows, strongest first, the centred take's `spectrum` (its variance along each of its
+    directions, descending, K or more), the `coordinates` it has (3B less those never seen) and
+    the markers' `noise` sigma. At rank r the noise is the larger of `noise` and what the
+    directions beyond the r-th carry per coordinate (probabilistic PCA's maximum-likelihood
+    noise, Tipping & Bishop 1999: motion a rank-r reading does not hold is noise to it), and
+    each direction's variance is its spectrum less that noise."""
 
     mean: F64
     directions: F64
-    variances: F64
+    spectrum: F64
+    coordinates: int
     noise: float
 
     @property
     def rank(self) -> int:
-        return int(self.variances.size)
+        return int(self.directions.shape[0])
 
     def truncated(self, rank: int) -> TakeMotion:
         """The same motion with its `rank` strongest directions only."""
-        return TakeMotion(self.mean, self.directions[:rank], self.variances[:rank], self.noise)
+        return TakeMotion(
+            self.mean, self.directions[:rank], self.spectrum, self.coordinates, self.noise
+        )
+
+    def noise_at(self, rank: int) -> float:
+        """The noise sigma of a rank-`rank` reading (class text)."""
+        beyond = float(np.sum(self.spectrum[rank:])) / max(self.coordinates - rank, 1)
+        return float(np.sqrt(max(self.noise**2, beyond)))
 
     def predictions(self, flat: F64, hidden: NDArray[np.bool_], ranks: Sequence[int]) -> list[F64]:
         """Each row of `flat` (n, 3B) predicted from its coordinates that are not `hidden`
@@ -70,10 +87,9 @@ class TakeMotion:
         k = v.shape[0]
         z = np.where(hidden, 0.0, flat - self.mean)
         b = z @ v.T  # (n, K): V_O (x_O - μ_O)
-        # A = sigma² Λ⁻¹ + V Vᵀ - V_H V_Hᵀ, V Vᵀ = I: the hidden coordinates' outer products
-        # summed per row (few per row: a row's dropouts and what is asked of it).
-        ridge = np.maximum(self.noise**2 / self.variances, RIDGE)
-        a = np.broadcast_to(np.diag(ridge + 1.0), (n, k, k)).copy()
+        # V_O V_Oᵀ = I - V_H V_Hᵀ (V's rows orthonormal): the hidden coordinates' outer
+        # products summed per row (few per row: a row's dropouts and what is asked of it).
+        a = np.broadcast_to(np.eye(k), (n, k, k)).copy()
         rows, cols = np.nonzero(hidden)
         if rows.size:
             vh = v[:, cols].T  # (m, K)
@@ -82,7 +98,11 @@ class TakeMotion:
             a[rows[starts]] -= np.add.reduceat(outer, starts, axis=0)
         out = []
         for r in ranks:
-            w = np.linalg.solve(a[:, :r, :r], b[:, :r, None])[..., 0]
+            sigma2 = self.noise_at(r) ** 2
+            variances = self.spectrum[:r] - sigma2
+            ridge = np.maximum(sigma2 / np.maximum(variances, 1e-300), RIDGE)
+            system = a[:, :r, :r] + np.diag(ridge)
+            w = np.linalg.solve(system, b[:, :r, None])[..., 0]
             out.append(self.mean + w @ v[:r])
         return out
 
@@ -98,6 +118,7 @@ def read_motion(frames: F64, noise: float, rank: int) -> TakeMotion | None:
         return None
     # A coordinate never seen has mean 0 and no share in any direction (always hidden).
     seen_anywhere = ~missing.all(axis=0)
+    coordinates = int(seen_anywhere.sum())
     filled = np.where(missing, 0.0, flat)
     motion = None
     for _ in range(REFILLS + 1):
@@ -110,11 +131,11 @@ def read_motion(frames: F64, noise: float, rank: int) -> TakeMotion | None:
         centred[:, ~seen_anywhere] = 0.0
         mean[~seen_anywhere] = 0.0
         _, sv, vt = thin_svd(centred, lambda s: min(rank, s.size))
-        variances = sv[: vt.shape[0]] ** 2 / (f - 1) - noise**2
-        kept = int(np.count_nonzero(variances > 0.0))
+        spectrum = sv**2 / (f - 1)
+        kept = int(np.count_nonzero(spectrum[: vt.shape[0]] > noise**2))
         if kept == 0:
             return None
-        motion = TakeMotion(mean, vt[:kept], variances[:kept], float(noise))
+        motion = TakeMotion(mean, vt[:kept], spectrum, coordinates, float(noise))
         if not missing.any():
             break
         rows = np.flatnonzero(missing.any(axis=1))
