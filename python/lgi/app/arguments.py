@@ -53,9 +53,10 @@ def add_solve_options(parser: argparse.ArgumentParser) -> None:
         dest="steady",
         action="store_false",
         help="solve each frame from its own markers alone: by default a dropout is filled from "
-        "the marker's track and its neighbours and the dataset's detail is averaged over "
-        "neighbouring frames, so the surface does not pop (for frames that are not a take's "
-        "consecutive frames, e.g. a take sampled once a second)",
+        "the take (its motion given the frame's other markers, or the marker's neighbours) and "
+        "the dataset's detail is averaged over neighbouring frames, so the surface does not pop "
+        "(for frames that are not a take's consecutive frames, e.g. a take sampled once a "
+        "second)",
     )
     parser.add_argument(
         "--no-repair",

@@ -282,8 +282,9 @@ class Model:
         independent (e.g. one frame per dataset shape) and solves them in parallel.
 
         `steady` (default True; with `temporal`, the frames a take's consecutive frames): a missing
-        marker sample is filled from its own track and its neighbours before the frame is
-        solved (`lgi.solve.gaps`; it stays missing in the result), and the dataset's detail
+        marker sample is filled from the take before the frame is solved (its low-rank motion
+        given the frame's other markers, or the marker's neighbours, as the take's held-out
+        samples say: `lgi.solve.gaps`; it stays missing in the result), and the dataset's detail
         between the markers is averaged over neighbouring frames (`lgi.solve.steady`; every
         marker stays where the solve put it), so a dropout or a flip between two pieces of
         local geometry does not pop. `steady=False` for frames that are not consecutive (a
