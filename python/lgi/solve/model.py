@@ -451,7 +451,7 @@ class Model:
         given = arr
         steady = temporal and opts.steady
         if steady:
-            arr = self._gaps_filled(arr, opts)
+            arr = self._gaps_filled(arr, self._fill_motion(arr, opts))
         with _progress_bar(total, "lgi solve", quiet) as bar:
             res = self._core_solve(
                 arr,
@@ -533,18 +533,14 @@ class Model:
         opts.check_model(self.jaw_bins is not None)
         return opts, jaw
 
-    def _gaps_filled(
-        self, frames: NDArray[Any], opts: SolveOptions, motion: TakeMotion | str | None = "read"
-    ) -> NDArray[Any]:
+    def _gaps_filled(self, frames: NDArray[Any], motion: TakeMotion | None) -> NDArray[Any]:
         """A take's frames with the missing samples it can fill filled (`lgi.solve.gaps`; a row
-        with any NaN is missing, as the core reads it) by the take's `motion` ("read": read
-        from these frames, `_fill_motion`; None: by the markers' neighbours); frames the core
-        will refuse (shape, dtype, an infinite value) go to it as given, so its error names
-        the problem."""
+        with any NaN is missing, as the core reads it) by the take's `motion` (`_fill_motion`;
+        None: by the markers' neighbours); frames the core will refuse (shape, dtype, an
+        infinite value) go to it as given, so its error names the problem."""
         if not self._fillable(frames):
             return frames
-        by = self._fill_motion(frames, opts) if isinstance(motion, str) else motion
-        return filled(frames, rest_positions(self), by)[0]
+        return filled(frames, rest_positions(self), motion)[0]
 
     def _fillable(self, frames: NDArray[Any]) -> bool:
         """Whether `frames` are a take whose gaps `_gaps_filled` fills: (F ≥ 2, B, 3) floats,
@@ -715,7 +711,7 @@ class Model:
                 # (`lgi.solve.gaps`, `lgi.solve.steady`), so the chunks equal one solve.
                 lo, hi = max(0, a - CONTEXT), min(total, b + RADIUS + CONTEXT)
                 given = np.asarray(arr[lo:hi])
-                window = self._gaps_filled(given, opts, motion)
+                window = self._gaps_filled(given, motion)
                 part = window[a - lo : b - lo]
                 buf = None if out is None else out[: b - a]
                 res = solved(part, buf, state, lambda _f: bar.update(1))

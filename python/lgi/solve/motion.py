@@ -117,29 +117,36 @@ def read_motion(frames: F64, noise: float, rank: int) -> TakeMotion | None:
     if f < 2 or rank < 1:
         return None
     # A coordinate never seen has mean 0 and no share in any direction (always hidden).
-    seen_anywhere = ~missing.all(axis=0)
-    coordinates = int(seen_anywhere.sum())
+    seen_anywhere: NDArray[np.bool_] = np.asarray(~missing.all(axis=0))
     filled = np.where(missing, 0.0, flat)
-    motion = None
-    for _ in range(REFILLS + 1):
-        mean = (
-            filled.sum(axis=0) / f
-            if motion is not None
-            else (filled.sum(axis=0) / np.maximum((~missing).sum(axis=0), 1))
-        )
-        centred = np.where(missing & (motion is None), 0.0, filled - mean)
-        centred[:, ~seen_anywhere] = 0.0
-        mean[~seen_anywhere] = 0.0
-        _, sv, vt = thin_svd(centred, lambda s: min(rank, s.size))
-        spectrum = sv**2 / (f - 1)
-        kept = int(np.count_nonzero(spectrum[: vt.shape[0]] > noise**2))
-        if kept == 0:
-            return None
-        motion = TakeMotion(mean, vt[:kept], spectrum, coordinates, float(noise))
-        if not missing.any():
+    # The first reading has the missing samples at the mean of the frames that have them.
+    mean = filled.sum(axis=0) / np.maximum((~missing).sum(axis=0), 1)
+    centred = np.where(missing, 0.0, filled - mean)
+    rows = np.flatnonzero(missing.any(axis=1))
+    motion = _reading(centred, mean, seen_anywhere, noise, rank)
+    for _ in range(REFILLS if rows.size else 0):
+        if motion is None:
             break
-        rows = np.flatnonzero(missing.any(axis=1))
+        # Read again with the missing samples at what this reading predicts of them.
         guess = motion.predictions(flat[rows], missing[rows], [motion.rank])[0]
         filled[rows] = np.where(missing[rows], guess, flat[rows])
         filled[:, ~seen_anywhere] = 0.0
+        mean = filled.sum(axis=0) / f
+        motion = _reading(filled - mean, mean, seen_anywhere, noise, rank)
     return motion
+
+
+def _reading(
+    centred: F64, mean: F64, seen: NDArray[np.bool_], noise: float, rank: int
+) -> TakeMotion | None:
+    """One reading of the centred take `centred` (F, 3B) about `mean`: its `rank` strongest
+    directions at most, those above the noise (None: none is); coordinates not `seen` have no
+    share in any."""
+    centred[:, ~seen] = 0.0
+    mean[~seen] = 0.0
+    _, sv, vt = thin_svd(centred, lambda s: min(rank, s.size))
+    spectrum = sv**2 / (centred.shape[0] - 1)
+    kept = int(np.count_nonzero(spectrum[: vt.shape[0]] > noise**2))
+    if kept == 0:
+        return None
+    return TakeMotion(mean, vt[:kept], spectrum, int(seen.sum()), float(noise))
