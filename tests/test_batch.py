@@ -207,6 +207,8 @@ def test_the_model_is_scattered_once_to_both_workers_and_every_task_uses_that_co
         # worker that joins later fetches the model from a peer: right, but not what this
         # test measures).
         rec.wait_for_workers(2)
+        # The workers' transfer logs last as long as the module's cluster: this batch's only.
+        rec.run(lambda dask_worker: dask_worker.transfer_incoming_log.clear())
         result = batch.solve_shots(named_model, many, tmp_path, client=rec, quiet=True)
         models = [(f, kw) for f, kw in rec.scattered if f.type is lgi.Model]
         assert len(models) == 1 and models[0][1].get("broadcast") is True
