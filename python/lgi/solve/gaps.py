@@ -95,6 +95,32 @@ def _runs(flags: NDArray[np.bool_]) -> list[tuple[int, int]]:
     return list(zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1), strict=True))
 
 
+def _frames_kept(seen: NDArray[np.bool_]) -> NDArray[np.bool_]:
+    """(F,) the frames that are there, a few markers lost (at least `MIN_SEEN` of them seen):
+    the frames whose dropouts are filled."""
+    return np.asarray(seen.mean(axis=1) >= MIN_SEEN)
+
+
+def _gaps(
+    usable: NDArray[np.bool_], fillable: NDArray[np.bool_]
+) -> list[tuple[NDArray[np.int64], list[int]]]:
+    """One marker's gaps (F,): its runs of frames not `usable`, no longer than `MAX_GAP`, each
+    with its `fillable` frames (none: no gap) and its bounds, the usable frames either side (one
+    at the take's first or last frame). No gap of a marker no frame says anything of."""
+    f = usable.size
+    found: list[tuple[NDArray[np.int64], list[int]]] = []
+    if not usable.any():
+        return found
+    for a, z in _runs(~usable):
+        if z - a > MAX_GAP:
+            continue
+        gone = np.flatnonzero(fillable[a:z]) + a
+        if gone.size:
+            lo, hi = max(a - 1, 0), min(z, f - 1)
+            found.append((gone, [int(t) for t in (lo, hi) if usable[t]]))
+    return found
+
+
 def filled(
     frames: F64, rest: F64, motion: TakeMotion | None = None
 ) -> tuple[F64, NDArray[np.bool_]]:
@@ -125,29 +151,18 @@ def _by_neighbours(
     wanted: NDArray[np.bool_] | None = None,
 ) -> None:
     """`x`'s gaps filled in place by each marker's neighbours, `done` marked (module text);
-    `wanted` (F, B): only the gaps holding one of these samples."""
+    `wanted` (F, B): only the gaps filling one of these samples."""
     f = x.shape[0]
     near = nearest(rest)
-    frame_kept: NDArray[np.bool_] = np.asarray(
-        seen.mean(axis=1) >= MIN_SEEN
-    )  # frames that are there, a few markers lost
+    frame_kept = _frames_kept(seen)
     moved = x - rest[None]  # each marker's displacement from rest; NaN where missing
     lacking = ~seen.all(axis=0) if wanted is None else wanted.any(axis=0)
     for k in np.flatnonzero(lacking):
         with_neighbour: NDArray[np.bool_] = np.asarray(seen[:, near[k]].any(axis=1))
         usable = seen[:, k] & with_neighbour  # frames that say where the marker sits
-        if not usable.any():
-            continue
-        runs = []
-        for a, z in _runs(~usable):
-            if z - a > MAX_GAP or (wanted is not None and not wanted[a:z, k].any()):
-                continue
-            gone = np.flatnonzero(~seen[a:z, k] & with_neighbour[a:z] & frame_kept[a:z]) + a
-            if gone.size == 0:
-                continue
-            # The run's bounds are usable frames (or the take's ends, held constant).
-            lo, hi = max(a - 1, 0), min(z, f - 1)
-            runs.append((gone, [t for t in (lo, hi) if usable[t]]))
+        runs = _gaps(usable, ~seen[:, k] & with_neighbour & frame_kept)
+        if wanted is not None:
+            runs = [(gone, ends) for gone, ends in runs if wanted[gone, k].any()]
         if not runs:
             continue
         # The neighbours' median displacement, read only where a fill needs it.
@@ -170,20 +185,12 @@ def _motion_runs(seen: NDArray[np.bool_]) -> list[_Run]:
     """The gaps the take's motion fills: each marker's runs of missing frames no longer than
     `MAX_GAP`, in frames where at least `MIN_SEEN` of the markers are seen, with a frame either
     side where the marker was."""
-    f = seen.shape[0]
-    frame_kept = seen.mean(axis=1) >= MIN_SEEN
-    runs: list[_Run] = []
-    for k in np.flatnonzero(~seen.all(axis=0)):
-        if not seen[:, k].any():
-            continue
-        for a, z in _runs(~seen[:, k]):
-            if z - a > MAX_GAP:
-                continue
-            gone = np.flatnonzero(frame_kept[a:z]) + a
-            ends = [int(t) for t in (a - 1, z) if 0 <= t < f]
-            if gone.size:
-                runs.append((int(k), gone, ends))
-    return runs
+    frame_kept = _frames_kept(seen)
+    return [
+        (int(k), gone, ends)
+        for k in np.flatnonzero(~seen.all(axis=0))
+        for gone, ends in _gaps(seen[:, k], frame_kept)
+    ]
 
 
 def _by_motion(
@@ -249,7 +256,7 @@ def fill_motion(frames: F64, rest: F64, noise: float) -> TakeMotion | None:
     seen: NDArray[np.bool_] = np.asarray(np.isfinite(x).all(axis=2))
     if f < 2 or b < 2:
         return None
-    frame_kept = seen.mean(axis=1) >= MIN_SEEN
+    frame_kept = _frames_kept(seen)
     rng = np.random.default_rng(HELD_SEED)
     held = np.zeros((f, b), dtype=bool)
     cap = max(1, int(HELD_SHARE * b))

@@ -385,17 +385,13 @@ class Model:
         if not (temporal and opts.steady and opts.repair and arr.shape[0] >= 2):
             return res
         names = self.marker_names
-        # Faults are read at the noise the markers were given with (`SolveOptions.fault_noise`).
-        sigma = None if opts.marker_noise is None else float(opts.marker_noise)
-        if opts.fault_noise is not None:
-            sigma = opts.fault_noise
         found = diagnose(
             res.bundle_residuals,
             res.missing,
             names,
             size=face_size(np.asarray(res.vertices)[0]),
             markers=arr,
-            noise=sigma,
+            noise=opts.given_noise,
         )
         faults = tuple(f for f in found if f.fault)
         if not faults:
@@ -560,8 +556,7 @@ class Model:
         markers' neighbours), read at the markers' noise as the take gave them."""
         if not self._fillable(frames):
             return None
-        noise = opts.fault_noise if opts.fault_noise is not None else opts.marker_noise
-        sigma = float(noise) if isinstance(noise, (int, float)) else 0.0
+        sigma = opts.given_noise or 0.0
         return fill_motion(np.asarray(frames, dtype=np.float64), rest_positions(self), sigma)
 
     def _as_given(

@@ -171,6 +171,15 @@ class SolveOptions:
     # --- what they ask for -----------------------------------------------------------------
 
     @property
+    def given_noise(self) -> float | None:
+        """The markers' noise sigma as the take gave them, which faults are read and dropouts
+        filled at: `fault_noise`, else `marker_noise` (None: no number for it)."""
+        if self.fault_noise is not None:
+            return self.fault_noise
+        sigma = self.marker_noise
+        return float(sigma) if isinstance(sigma, (int, float)) else None
+
+    @property
     def resolved(self) -> bool:
         """Nothing left to read from a take: what `Model.solve` applies."""
         read = (self.marker_noise, self.fit, self.local_fits, self.take_prior, self.detail_weight)
