@@ -74,6 +74,27 @@ def test_settings_round_trip_as_json_and_describe_themselves() -> None:
     )
 
 
+def test_how_dropouts_were_filled_round_trips_and_is_said() -> None:
+    steady = SolveSettings(
+        marker_noise=None, jaw=None, detail_weight=None, version="1", steady=True
+    )
+    by_motion = steady.with_fill(True, 5)
+    assert (by_motion.dropout_fill, by_motion.fill_rank) == ("motion", 5)
+    assert SolveSettings.from_json(by_motion.to_json(), "x") == by_motion
+    assert (
+        ", dropouts filled from the take's own motion (5 directions), detail steady over frames "
+        "(lgi 1)" in by_motion.describe(None)
+    )
+    by_neighbours = steady.with_fill(True, None)
+    assert SolveSettings.from_json(by_neighbours.to_json(), "x") == by_neighbours
+    assert "dropouts filled from each marker's neighbours, detail" in by_neighbours.describe(None)
+    # Nothing filled (a take without dropouts): nothing recorded, as older files read.
+    assert steady.with_fill(False, 5) == steady
+    old = json.loads(steady.to_json())
+    del old["dropout_fill"], old["fill_rank"]
+    assert SolveSettings.from_json(json.dumps(old), "x") == steady
+
+
 @pytest.mark.parametrize(
     ("text", "message"),
     [
@@ -106,6 +127,21 @@ def test_settings_round_trip_as_json_and_describe_themselves() -> None:
             '"denoised_from": "much", "denoised_rank": 3}',
             "denoised_from must be a finite number or null, got 'much'",
         ),
+        (
+            '{"marker_noise": null, "jaw": null, "detail_weight": null, "version": "1", '
+            '"dropout_fill": "motion", "fill_rank": 0}',
+            "dropout_fill must be 'motion' with a fill_rank >= 1, 'neighbours' or null",
+        ),
+        (
+            '{"marker_noise": null, "jaw": null, "detail_weight": null, "version": "1", '
+            '"dropout_fill": "neighbours", "fill_rank": 3}',
+            "got 'neighbours' and 3",
+        ),
+        (
+            '{"marker_noise": null, "jaw": null, "detail_weight": null, "version": "1", '
+            '"dropout_fill": "guessed"}',
+            "got 'guessed' and None",
+        ),
     ],
 )
 def test_damaged_settings_are_refused_naming_the_file_and_key(text: str, message: str) -> None:
@@ -131,6 +167,8 @@ def test_lgi_solve_records_its_settings_in_the_npz_and_info_and_report_show_them
         detail_weight=0.4,
         version=lgi.__version__,
         steady=True,
+        # The sample's dropouts, in a 12-frame take too short to read its motion's rank on.
+        dropout_fill="neighbours",
     )
     capsys.readouterr()
     assert cli.main(["info", str(out)]) == 0
@@ -172,6 +210,12 @@ def test_the_usd_cache_keeps_the_settings_and_export_carries_them_on(
     argv = ["solve", model, take, "-o", direct, "--detail-weight", "0.25", "-q"]
     assert cli.main([str(a) for a in argv]) == 0
     assert read_usd_cache(direct).settings == read_result_npz(npz).settings
+    # Solved in chunks, the settings are written when the fill is known: the same.
+    chunked = tmp_path / "c.usdc"
+    argv = ["solve", model, take, "-o", chunked, "--detail-weight", "0.25", "--chunk", "5", "-q"]
+    assert cli.main([str(a) for a in argv]) == 0
+    assert read_usd_cache(chunked).settings == read_result_npz(npz).settings
+    assert read_result_npz(npz).settings.dropout_fill == "neighbours"  # type: ignore[union-attr]
     # `lgi info` on a USD cache names the noise in the stage's unit.
     noisy = tmp_path / "n.usda"
     argv = ["solve", model, take, "-o", noisy, "--marker-noise", "0.02", "-q"]

@@ -243,6 +243,33 @@ def test_a_take_with_dropouts_solves_the_same_in_chunks_reports_its_gaps_missing
     assert err(whole) < 0.95 * err(alone)
 
 
+def test_a_solve_says_the_rank_of_the_motion_that_filled_its_dropouts_whole_and_in_chunks(
+    sample, sample_model
+) -> None:  # type: ignore[no-untyped-def]
+    frames = np.array(sample.performance)
+    frames[np.random.default_rng(7).random(frames.shape[:2]) < 0.02] = np.nan
+    # The fill read directly (`fill_motion`, at the exact interpolation's noise 0).
+    motion = gaps.fill_motion(frames, rest_positions(sample_model), 0.0)
+    assert motion is not None
+    whole = sample_model.solve(frames, quiet=True)
+    assert whole.filled is not None and whole.filled.any()
+    assert whole.fill_rank == motion.rank
+    parts = list(sample_model.solve_iter(frames, chunk=50, quiet=True))
+    assert {p.fill_rank for p in parts if p.filled.any()} == {motion.rank}
+    # Nothing to fill, or each frame alone: no rank.
+    clean = sample_model.solve(sample_model.bundle_positions(sample.truth[:40]), quiet=True)
+    assert clean.fill_rank is None and not clean.filled.any()
+    assert sample_model.solve(frames, quiet=True, steady=False).fill_rank is None
+
+
+def test_a_take_filled_by_its_neighbours_solves_with_no_rank(sample_model) -> None:  # type: ignore[no-untyped-def]
+    # Three frames: too short to hold out the runs a motion's rank is chosen on.
+    x = np.array(sample_model.markers_rest)[None].repeat(3, axis=0)
+    x[1, 4] = np.nan
+    r = sample_model.solve(x, quiet=True)
+    assert r.filled is not None and r.filled[1, 4] and r.fill_rank is None
+
+
 def test_rest_positions_give_each_marker_its_nearest_neighbours(sample_model) -> None:  # type: ignore[no-untyped-def]
     rest = rest_positions(sample_model)
     near = gaps.nearest(rest)

@@ -324,6 +324,7 @@ class SolveResult:
         filled: NDArray[np.bool_] | None = None,
         repaired: NDArray[np.bool_] | None = None,
         repairs: tuple[Any, ...] | None = None,
+        fill_rank: int | None = None,
     ) -> SolveResult: ...
     @property
     def vertices(self) -> NDArray[np.float64]:
@@ -369,6 +370,11 @@ class SolveResult:
     def repairs(self) -> tuple[Any, ...] | None:
         """The marker faults repaired before the solve (`lgi.solve.diagnose.Finding`s); None
         when the solve did not look for them (`repair=False`, frames solved each alone)."""
+    @property
+    def fill_rank(self) -> int | None:
+        """How many directions of the take's own motion filled its dropouts
+        (`lgi.solve.gaps.fill_motion`); None where each marker's neighbours filled them, or
+        nothing was filled (`filled` None or all False)."""
     def __reduce__(self) -> tuple[type[SolveResult], tuple[object, ...]]: ...
 
 @final

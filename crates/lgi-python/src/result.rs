@@ -56,13 +56,18 @@ pub struct SolveResult {
     /// None when the solve did not look for them (`repair=False`, frames solved each alone).
     #[pyo3(get)]
     repairs: Option<Py<PyAny>>,
+    /// How many directions of the take's own motion filled its dropouts
+    /// (`lgi.solve.gaps.fill_motion`); None where each marker's neighbours filled them, or
+    /// nothing was filled (`filled` None or all False).
+    #[pyo3(get)]
+    fill_rank: Option<usize>,
 }
 
 #[pymethods]
 impl SolveResult {
     /// A result from its arrays (what the baselines return; `Model.solve` makes its own).
     #[new]
-    #[pyo3(signature = (vertices, bundle_residuals, bundle_positions, missing, choices, jaw_theta=None, jaw_bin=None, marker_corrections=None, fit_weights=None, state=None, filled=None, repaired=None, repairs=None))]
+    #[pyo3(signature = (vertices, bundle_residuals, bundle_positions, missing, choices, jaw_theta=None, jaw_bin=None, marker_corrections=None, fit_weights=None, state=None, filled=None, repaired=None, repairs=None, fill_rank=None))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         vertices: Py<PyAny>,
@@ -78,6 +83,7 @@ impl SolveResult {
         filled: Option<Py<PyAny>>,
         repaired: Option<Py<PyAny>>,
         repairs: Option<Py<PyAny>>,
+        fill_rank: Option<usize>,
     ) -> Self {
         SolveResult {
             vertices,
@@ -93,6 +99,7 @@ impl SolveResult {
             filled,
             repaired,
             repairs,
+            fill_rank,
         }
     }
 
@@ -120,6 +127,7 @@ impl SolveResult {
                 opt(&r.filled),
                 opt(&r.repaired),
                 opt(&r.repairs),
+                r.fill_rank.into_pyobject(py)?.into_any().unbind(),
             ],
         )?;
         Ok((slf.get_type().into_any(), args))
@@ -315,5 +323,6 @@ pub fn pack(
         filled: None,
         repaired: None,
         repairs: None,
+        fill_rank: None,
     })
 }

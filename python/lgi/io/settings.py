@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import json
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING, Any
 
 from lgi.errors import InputError
@@ -44,7 +44,11 @@ class SolveSettings:
     repair`), each `{"kind", "markers", "first", "last"}` with frames 0-based in the solve
     (a swap undone; a spike or a marker off its track solved as missing; none in older
     files); `steady`: dropouts filled from the take and the detail averaged over neighbouring
-    frames (`lgi.solve.steady`; files written before it read as False, as they were solved)."""
+    frames (`lgi.solve.steady`; files written before it read as False, as they were solved);
+    `dropout_fill`: how the steady solve filled the take's missing samples, 'motion' (the take's
+    own motion, `lgi.solve.gaps.fill_motion`, of `fill_rank` directions) or 'neighbours' (each
+    marker's neighbours), None where nothing was filled (and in files written before it was
+    recorded)."""
 
     marker_noise: float | None
     jaw: str | None
@@ -57,6 +61,8 @@ class SolveSettings:
     denoised_rank: int | None = None
     repairs: tuple[tuple[str, tuple[str, ...], int, int], ...] = ()
     steady: bool = False
+    dropout_fill: str | None = None
+    fill_rank: int | None = None
 
     @staticmethod
     def of(
@@ -96,6 +102,16 @@ class SolveSettings:
             steady=bool(steady),
         )
 
+    def with_fill(self, filled: bool, rank: int | None) -> SolveSettings:
+        """These settings with how the solve filled the take's dropouts: `filled`, whether it
+        filled any sample; `rank`, the directions of the take's motion that filled them (None:
+        each marker's neighbours did; `SolveResult.fill_rank`)."""
+        if not filled:
+            return replace(self, dropout_fill=None, fill_rank=None)
+        return replace(
+            self, dropout_fill="neighbours" if rank is None else "motion", fill_rank=rank
+        )
+
     @property
     def given_noise(self) -> float | None:
         """The noise of the markers the user gave (the residuals written are theirs): the
@@ -115,6 +131,8 @@ class SolveSettings:
                 "denoised_from": self.denoised_from,
                 "denoised_rank": self.denoised_rank,
                 "steady": self.steady,
+                "dropout_fill": self.dropout_fill,
+                "fill_rank": self.fill_rank,
                 "repairs": [
                     {"kind": k, "markers": list(m), "first": a, "last": b}
                     for k, m, a, b in self.repairs
@@ -140,12 +158,14 @@ class SolveSettings:
             "denoised_rank",
             "repairs",
             "steady",
+            "dropout_fill",
+            "fill_rank",
         }
         if not isinstance(d, dict) or not keys <= set(d) <= keys | optional:
             raise InputError(
                 f"{where}: expected the keys marker_noise, jaw, detail_weight, version and "
                 "(optionally) local_fits, unbounded_fit, take_prior, denoised_from, "
-                "denoised_rank, repairs and steady"
+                "denoised_rank, repairs, steady, dropout_fill and fill_rank"
             )
         local = d.get("local_fits", False)
         if not isinstance(local, bool) and local != "unbounded":
@@ -174,6 +194,15 @@ class SolveSettings:
         if rank is not None and (isinstance(rank, bool) or not isinstance(rank, int) or rank < 0):
             raise InputError(
                 f"{where}: denoised_rank must be a whole number >= 0 or null, got {rank!r}"
+            )
+        fill, fill_rank = d.get("dropout_fill"), d.get("fill_rank")
+        whole = isinstance(fill_rank, int) and not isinstance(fill_rank, bool) and fill_rank >= 1
+        if (fill, fill_rank is None) not in ((None, True), ("neighbours", True)) and not (
+            fill == "motion" and whole
+        ):
+            raise InputError(
+                f"{where}: dropout_fill must be 'motion' with a fill_rank >= 1, 'neighbours' or "
+                f"null (without a fill_rank), got {fill!r} and {fill_rank!r}"
             )
         repairs = []
         items: list[Any] = d.get("repairs", [])
@@ -211,6 +240,8 @@ class SolveSettings:
             denoised_rank=rank,
             repairs=tuple(repairs),
             steady=steady,
+            dropout_fill=fill,
+            fill_rank=fill_rank,
         )
 
     def describe(self, units: str | None, start: int = 0) -> str:
@@ -233,14 +264,26 @@ class SolveSettings:
             if self.detail_weight is None
             else f"detail weight {self.detail_weight:.3f}"
         )
-        frames = (
-            ", dropouts filled and detail steady over frames"
-            if self.steady
-            else ", each frame alone"
-        )
+        frames = ", each frame alone"
+        if self.steady:
+            fill = self.fill_words()
+            frames = (
+                ", dropouts filled and detail steady over frames"
+                if fill is None
+                else f", dropouts filled {fill}, detail steady over frames"
+            )
         version = self.version or "version unknown"
         line = f"{noise}, {jaw}, {detail}{self.pieces()}{frames} (lgi {version})"
         return line + "".join(f"; repaired: {r}" for r in self.repair_lines(start))
+
+    def fill_words(self) -> str | None:
+        """How the dropouts were filled, e.g. "from the take's own motion (4 directions)";
+        None where nothing was filled (or it was not recorded)."""
+        if self.dropout_fill == "motion":
+            return f"from the take's own motion ({self.fill_rank} directions)"
+        if self.dropout_fill == "neighbours":
+            return "from each marker's neighbours"
+        return None
 
     def repair_lines(self, start: int = 0) -> list[str]:
         """Each repair in a few words, frames as time codes from `start`: 'm063 <-> m153

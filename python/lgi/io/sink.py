@@ -115,7 +115,13 @@ class FrameSink:
             self.parts.append((vertices.astype(np.float32), residuals, missing, jaw_theta, markers))
         self.next += int(vertices.shape[0])
 
-    def close(self) -> Path:
+    def close(self, settings: SolveSettings | None = None) -> Path:
+        """The output finished and in place; `settings`, where given, replace the ones the sink
+        was opened with (what a solve learns as it goes: how its dropouts were filled)."""
+        if settings is not None:
+            self.settings = settings
+            if self.usd is not None:
+                self.usd.record(settings)
         if self.usd is not None:
             return self.usd.close()
         if self.cache is not None:

@@ -151,9 +151,7 @@ class UsdCache:
                 "lgi:markerNames", Sdf.ValueTypeNames.StringArray, custom=True
             ).Set(Vt.StringArray(list(marker_names)))
         if settings is not None:  # how the take was solved (read_usd_cache, lgi report)
-            mesh.GetPrim().CreateAttribute(
-                "lgi:solveSettings", Sdf.ValueTypeNames.String, custom=True
-            ).Set(settings.to_json())
+            self.record(settings)
         self._extent = mesh.CreateExtentAttr()
         self._jaw = None
         self._residual = None
@@ -227,6 +225,15 @@ class UsdCache:
                 self._head[0].Set(Gf.Matrix3d(*map(float, rot[i].ravel())), t)
                 self._head[1].Set(Gf.Vec3d(*map(float, shift[i])), t)
             self._next += 1
+
+    def record(self, settings: SolveSettings) -> None:
+        """Records how the take was solved (`lgi:solveSettings`, read back by
+        `read_usd_cache`), replacing what was recorded before."""
+        from pxr import Sdf
+
+        self._mesh.GetPrim().CreateAttribute(
+            "lgi:solveSettings", Sdf.ValueTypeNames.String, custom=True
+        ).Set(settings.to_json())
 
     def close(self) -> Path:
         """Writes the file (the frames added so far) and returns its path."""

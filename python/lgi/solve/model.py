@@ -446,8 +446,9 @@ class Model:
         total = int(arr.shape[0]) if arr.ndim == 3 else 0
         given = arr
         steady = temporal and opts.steady
+        motion = self._fill_motion(arr, opts) if steady else None
         if steady:
-            arr = self._gaps_filled(arr, self._fill_motion(arr, opts))
+            arr = self._gaps_filled(arr, motion)
         with _progress_bar(total, "lgi solve", quiet) as bar:
             res = self._core_solve(
                 arr,
@@ -462,7 +463,7 @@ class Model:
             return self._finish(res, arr, opts)
         res, misses = self._finish_steadied(res, arr, opts)
         v, p = np.asarray(res.vertices), np.asarray(res.bundle_positions)
-        return self._as_given(res, steadied(self, v, p, misses=misses), given)
+        return self._as_given(res, steadied(self, v, p, misses=misses), given, motion)
 
     def _core_solve(
         self,
@@ -560,19 +561,26 @@ class Model:
         return fill_motion(np.asarray(frames, dtype=np.float64), rest_positions(self), sigma)
 
     def _as_given(
-        self, res: SolveResult, vertices: NDArray[np.float64], given: NDArray[Any]
+        self,
+        res: SolveResult,
+        vertices: NDArray[np.float64],
+        given: NDArray[Any],
+        motion: TakeMotion | None,
     ) -> SolveResult:
         """`res` of a take's gap-filled frames with its steadied `vertices`, reported against the
-        frames `given`: a filled sample is missing (residual 0), as the take had it."""
+        frames `given`: a filled sample is missing (residual 0), as the take had it; the fill's
+        rank where the take's `motion` filled some."""
         missing = np.asarray(res.missing) | np.isnan(given).any(axis=2)
         moved = res.marker_corrections
+        filled = missing & ~np.asarray(res.missing)  # missing as given, solved as filled
         return _with(
             res,
             vertices=vertices,
             bundle_residuals=np.where(missing, 0.0, np.asarray(res.bundle_residuals)),
             missing=missing,
             marker_corrections=None if moved is None else np.where(missing, 0.0, moved),
-            filled=missing & ~np.asarray(res.missing),  # missing as given, solved as filled
+            filled=filled,
+            fill_rank=motion.rank if motion is not None and filled.any() else None,
         )
 
     def _finish(self, res: SolveResult, frames: NDArray[Any], opts: SolveOptions) -> SolveResult:
@@ -728,7 +736,7 @@ class Model:
                         np.concatenate([before[1], tail[1]])[-RADIUS:],
                     )
                 )
-                yield self._as_given(res, v, given[a - lo : b - lo])
+                yield self._as_given(res, v, given[a - lo : b - lo], motion)
 
     def bundle_positions(self, meshes: ArrayLike) -> NDArray[np.float64]:
         """Marker surface positions (F, B, 3) on meshes (F, V, 3) or (V, 3) -> (B, 3)."""
@@ -757,6 +765,7 @@ def _with(res: SolveResult, **fields: Any) -> SolveResult:
         "filled": res.filled,
         "repaired": res.repaired,
         "repairs": res.repairs,
+        "fill_rank": res.fill_rank,
     }
     return SolveResult(**{**keep, **fields})
 
