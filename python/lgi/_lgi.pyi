@@ -325,6 +325,7 @@ class SolveResult:
         repaired: NDArray[np.bool_] | None = None,
         repairs: tuple[Any, ...] | None = None,
         fill_rank: int | None = None,
+        marker_pulls: NDArray[np.float64] | None = None,
     ) -> SolveResult: ...
     @property
     def vertices(self) -> NDArray[np.float64]:
@@ -375,6 +376,11 @@ class SolveResult:
         """How many directions of the take's own motion filled its dropouts
         (`lgi.solve.gaps.fill_motion`); None where each marker's neighbours filled them, or
         nothing was filled (`filled` None or all False)."""
+    @property
+    def marker_pulls(self) -> NDArray[np.float64] | None:
+        """(F, B, 3) how far a steady solve moved its surface at each marker to follow it where
+        the marker is more than 5 sigma from where the solve put it (`lgi.solve.steady`): the
+        surface's markers are `bundle_positions + marker_pulls`; None where it did not."""
     def __reduce__(self) -> tuple[type[SolveResult], tuple[object, ...]]: ...
 
 @final

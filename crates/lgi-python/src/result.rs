@@ -61,13 +61,18 @@ pub struct SolveResult {
     /// nothing was filled (`filled` None or all False).
     #[pyo3(get)]
     fill_rank: Option<usize>,
+    /// (F, B, 3) how far a steady solve moved its surface at each marker to follow it where
+    /// the marker is more than 5 sigma from where the solve put it (`lgi.solve.steady`): the
+    /// surface's markers are `bundle_positions + marker_pulls`; None where it did not.
+    #[pyo3(get)]
+    marker_pulls: Option<Py<PyAny>>,
 }
 
 #[pymethods]
 impl SolveResult {
     /// A result from its arrays (what the baselines return; `Model.solve` makes its own).
     #[new]
-    #[pyo3(signature = (vertices, bundle_residuals, bundle_positions, missing, choices, jaw_theta=None, jaw_bin=None, marker_corrections=None, fit_weights=None, state=None, filled=None, repaired=None, repairs=None, fill_rank=None))]
+    #[pyo3(signature = (vertices, bundle_residuals, bundle_positions, missing, choices, jaw_theta=None, jaw_bin=None, marker_corrections=None, fit_weights=None, state=None, filled=None, repaired=None, repairs=None, fill_rank=None, marker_pulls=None))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         vertices: Py<PyAny>,
@@ -84,6 +89,7 @@ impl SolveResult {
         repaired: Option<Py<PyAny>>,
         repairs: Option<Py<PyAny>>,
         fill_rank: Option<usize>,
+        marker_pulls: Option<Py<PyAny>>,
     ) -> Self {
         SolveResult {
             vertices,
@@ -100,6 +106,7 @@ impl SolveResult {
             repaired,
             repairs,
             fill_rank,
+            marker_pulls,
         }
     }
 
@@ -128,6 +135,7 @@ impl SolveResult {
                 opt(&r.repaired),
                 opt(&r.repairs),
                 r.fill_rank.into_pyobject(py)?.into_any().unbind(),
+                opt(&r.marker_pulls),
             ],
         )?;
         Ok((slf.get_type().into_any(), args))
@@ -324,5 +332,6 @@ pub fn pack(
         repaired: None,
         repairs: None,
         fill_rank: None,
+        marker_pulls: None,
     })
 }

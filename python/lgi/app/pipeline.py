@@ -40,6 +40,7 @@ from lgi.solve.model import PROGRESS_DELAY, Model
 from lgi.solve.options import JAW_MODES, SolveOptions
 from lgi.solve.placement import ScaleFit, check_scale
 from lgi.solve.repair import repaired
+from lgi.solve.steady import PULL_SIGMAS
 
 __all__ = [
     "JAW_POSES",
@@ -307,6 +308,7 @@ def solve_file(
             residuals=given_residuals,
         )
         _say_fill(say, settings, res.filled)
+        _say_pulls(say, *_pulled(res), m.units)
         if found is None:
             found = planned.findings(given_residuals, res.missing, res.vertices[0], m)
         _say_summary(say, given_residuals, res.missing, found, m, start)
@@ -350,6 +352,7 @@ def solve_file(
     first_frame: np.ndarray | None = None
     jaws: list[np.ndarray | None] = []
     filled_count, fill_rank = 0, None
+    pulled, farthest = 0, 0.0
     try:
         with tqdm(
             total=n,
@@ -371,6 +374,8 @@ def solve_file(
                 # Every chunk is filled by the whole take's motion (`Model.solve_iter`).
                 filled_count += 0 if res.filled is None else int(np.sum(res.filled))
                 fill_rank = res.fill_rank if res.fill_rank is not None else fill_rank
+                count, most = _pulled(res)
+                pulled, farthest = pulled + count, max(farthest, most)
                 sink.add(
                     res.vertices,
                     chunk_residuals,
@@ -392,6 +397,7 @@ def solve_file(
         raise
     assert first_frame is not None  # a take has at least one frame (takes.read)
     _say_fill(say, settings, filled_count)
+    _say_pulls(say, pulled, farthest, m.units)
     all_residuals, all_absent = np.concatenate(residuals), np.concatenate(absent)
     found = planned.findings(all_residuals, all_absent, first_frame, m)
     _say_summary(say, all_residuals, all_absent, found, m, start)
@@ -412,3 +418,22 @@ def _say_fill(say: Say, settings: SolveSettings, filled: np.ndarray | int | None
     words = settings.fill_words()
     if count and words is not None:
         say(f"{count} missing samples filled {words} before the solve")
+
+
+def _pulled(res: SolveResult) -> tuple[int, float]:
+    """How many marker samples the steady surface of `res` followed beyond their noise
+    (`SolveResult.marker_pulls`), and the longest pull."""
+    if res.marker_pulls is None:
+        return 0, 0.0
+    size = np.linalg.norm(np.asarray(res.marker_pulls), axis=2)
+    return int(np.count_nonzero(size)), float(size.max(initial=0.0))
+
+
+def _say_pulls(say: Say, count: int, farthest: float, units: str | None) -> None:
+    """Says how many marker samples the surface followed beyond their noise, where any."""
+    if count:
+        unit = f" {units}" if units else ""
+        say(
+            f"the surface follows {count} marker samples beyond {PULL_SIGMAS:g} sigma of where "
+            f"the solve put them (up to {farthest:.3g}{unit}): motion the dataset does not reach"
+        )

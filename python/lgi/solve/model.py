@@ -26,7 +26,7 @@ from lgi.solve.local import local_pieces
 from lgi.solve.motion import TakeMotion
 from lgi.solve.options import UNBOUNDED, SolveOptions, local_bounds
 from lgi.solve.repair import repaired
-from lgi.solve.steady import RADIUS, steadied
+from lgi.solve.steady import RADIUS, marker_pulls, steadied
 from lgi.solve.take_prior import TakePrior
 
 
@@ -463,7 +463,9 @@ class Model:
             return self._finish(res, arr, opts)
         res, misses = self._finish_steadied(res, arr, opts)
         v, p = np.asarray(res.vertices), np.asarray(res.bundle_positions)
-        return self._as_given(res, steadied(self, v, p, misses=misses), given, motion)
+        pulls = marker_pulls(np.asarray(given, dtype=np.float64), p, opts.solve_noise)
+        v = steadied(self, v, p, misses=misses, pulls=pulls)
+        return self._as_given(res, v, given, motion, pulls)
 
     def _core_solve(
         self,
@@ -566,10 +568,11 @@ class Model:
         vertices: NDArray[np.float64],
         given: NDArray[Any],
         motion: TakeMotion | None,
+        pulls: NDArray[np.float64] | None,
     ) -> SolveResult:
         """`res` of a take's gap-filled frames with its steadied `vertices`, reported against the
         frames `given`: a filled sample is missing (residual 0), as the take had it; the fill's
-        rank where the take's `motion` filled some."""
+        rank where the take's `motion` filled some, and the markers' `pulls`."""
         missing = np.asarray(res.missing) | np.isnan(given).any(axis=2)
         moved = res.marker_corrections
         filled = missing & ~np.asarray(res.missing)  # missing as given, solved as filled
@@ -581,6 +584,7 @@ class Model:
             marker_corrections=None if moved is None else np.where(missing, 0.0, moved),
             filled=filled,
             fill_rank=motion.rank if motion is not None and filled.any() else None,
+            marker_pulls=pulls,
         )
 
     def _finish(self, res: SolveResult, frames: NDArray[Any], opts: SolveOptions) -> SolveResult:
@@ -727,7 +731,9 @@ class Model:
                     after = (np.asarray(nxt.vertices), np.asarray(nxt.bundle_positions))
                 p = np.asarray(res.bundle_positions)
                 tail = (v[-RADIUS:].copy(), p[-RADIUS:].copy())
-                steadied(self, v, p, first=a, before=before, after=after)
+                mine = np.asarray(given[a - lo : b - lo], dtype=np.float64)
+                pulls = marker_pulls(mine, p, opts.solve_noise)
+                steadied(self, v, p, first=a, before=before, after=after, pulls=pulls)
                 before = (
                     tail
                     if before is None
@@ -736,7 +742,7 @@ class Model:
                         np.concatenate([before[1], tail[1]])[-RADIUS:],
                     )
                 )
-                yield self._as_given(res, v, given[a - lo : b - lo], motion)
+                yield self._as_given(res, v, given[a - lo : b - lo], motion, pulls)
 
     def bundle_positions(self, meshes: ArrayLike) -> NDArray[np.float64]:
         """Marker surface positions (F, B, 3) on meshes (F, V, 3) or (V, 3) -> (B, 3)."""
@@ -766,6 +772,7 @@ def _with(res: SolveResult, **fields: Any) -> SolveResult:
         "repaired": res.repaired,
         "repairs": res.repairs,
         "fill_rank": res.fill_rank,
+        "marker_pulls": res.marker_pulls,
     }
     return SolveResult(**{**keep, **fields})
 
@@ -786,5 +793,4 @@ def _core_fit(
     if local_bounds(opts.local_fits) is False:
         unbounded = True
     prior = opts.take_prior.as_core() if isinstance(opts.take_prior, TakePrior) else None
-    sigma = None if opts.marker_noise is None else float(opts.marker_noise)
-    return offer, unbounded, prior, sigma  # type: ignore[return-value]
+    return offer, unbounded, prior, opts.solve_noise  # type: ignore[return-value]

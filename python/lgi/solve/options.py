@@ -171,13 +171,19 @@ class SolveOptions:
     # --- what they ask for -----------------------------------------------------------------
 
     @property
+    def solve_noise(self) -> float | None:
+        """The marker noise sigma the solve applies: `marker_noise` as a number (None: the
+        exact interpolation, or not yet read from the take)."""
+        sigma = self.marker_noise
+        return float(sigma) if isinstance(sigma, (int, float)) else None
+
+    @property
     def given_noise(self) -> float | None:
         """The markers' noise sigma as the take gave them, which faults are read and dropouts
         filled at: `fault_noise`, else `marker_noise` (None: no number for it)."""
         if self.fault_noise is not None:
             return self.fault_noise
-        sigma = self.marker_noise
-        return float(sigma) if isinstance(sigma, (int, float)) else None
+        return self.solve_noise
 
     @property
     def resolved(self) -> bool:

@@ -9,7 +9,14 @@ neighbouring frames with a Gaussian of `SIGMA_FRAMES` frames, the smooth part is
 interpolation is linear, `steady = G*v + S (p - G*p)` for vertices `v`, marker positions `p`
 and the interpolation `S`: every marker stays exactly where the solve put it, and the time
 filter `G` reaches `RADIUS` frames either side, so a take steadied in blocks (or chunk by
-chunk, given its neighbours' frames) equals the take steadied whole."""
+chunk, given its neighbours' frames) equals the take steadied whole.
+
+Where a noise-aware solve put a marker more than `PULL_SIGMAS` sigma from where the take has it,
+the marker's miss is more than its noise explains: motion the dataset does not reach (a blink
+the dataset lacks; a fault is repaired before, `lgi.solve.repair`). The surface then follows
+the marker to within `PULL_SIGMAS` sigma of it (`marker_pulls`: the excess, added at the
+markers with their share, unfiltered), so the face moves as its markers do where the dataset
+cannot, and eases back as the marker comes back within its noise."""
 
 from __future__ import annotations
 
@@ -20,11 +27,12 @@ from numpy.typing import NDArray
 from scipy.ndimage import gaussian_filter1d
 
 from lgi.solve.detail import surface_interpolator
+from lgi.solve.diagnose import NOISE_SIGMAS
 
 if TYPE_CHECKING:
     from lgi.solve.model import Model
 
-__all__ = ["RADIUS", "SIGMA_FRAMES", "steadied"]
+__all__ = ["PULL_SIGMAS", "RADIUS", "SIGMA_FRAMES", "marker_pulls", "steadied"]
 
 F64 = NDArray[np.float64]
 
@@ -40,6 +48,11 @@ _BLOCK = 64
 """Frames steadied at once, in blocks aligned to the take's frame numbers: the markers' share is
 one (V, B) x (B, 3 x 64) product per block, the same arithmetic for a frame whichever chunk it
 came in (memory: a block of vertices beside the take's)."""
+
+PULL_SIGMAS = NOISE_SIGMAS
+"""How far (in the solve's marker noise sigma) a steady surface may stay from a marker: the 5
+sigma a residual must exceed to be a finding (`lgi.solve.diagnose`), beyond which a Gaussian
+marker lies once in 65,000 samples."""
 
 Frames = tuple[F64, F64]
 """Solved frames and their markers' positions on them: (n, V, 3), (n, B, 3)."""
@@ -59,6 +72,22 @@ def _spread(interp: F64, values: F64) -> F64:
     return out.reshape(-1, n, 3).transpose(1, 0, 2)
 
 
+def marker_pulls(frames: F64, positions: F64, sigma: float | None) -> F64 | None:
+    """(F, B, 3): how far the surface moves at each marker to come within `PULL_SIGMAS` sigma
+    of it, where the take's sample (`frames`; NaN: missing, no pull) is further than that
+    from where the solve put it (`positions`); 0 elsewhere. None without a noise (an exact
+    solve interpolates its markers)."""
+    if not sigma:
+        return None
+    seen = np.asarray(~np.isnan(frames).any(axis=2))
+    miss = np.where(seen[..., None], frames - positions, 0.0)
+    far = np.linalg.norm(miss, axis=2)
+    reach = PULL_SIGMAS * float(sigma)
+    beyond = far > reach
+    share = np.where(beyond, 1.0 - reach / np.where(beyond, far, 1.0), 0.0)
+    return np.asarray(miss * share[..., None])
+
+
 def steadied(
     model: Model,
     vertices: F64,
@@ -68,6 +97,7 @@ def steadied(
     before: Frames | None = None,
     after: Frames | None = None,
     misses: F64 | None = None,
+    pulls: F64 | None = None,
 ) -> F64:
     """`vertices` (F, V, 3), a take's solved frames in order from its frame `first`, with their
     detail steadied in place (returned); `positions` (F, B, 3): the markers' positions on them
@@ -79,13 +109,19 @@ def steadied(
     the interpolation `S m` of these values at the markers (the local fits' corrective,
     `lgi.solve.local.LocalPieces.posed_and_misses`), and `positions` the whole solve's. Then
     `steady = G*u + S (G*m + p - G*p)` for those vertices `u`: the same surface (to
-    round-off) with one pass of `S` over the mesh instead of two."""
+    round-off) with one pass of `S` over the mesh instead of two.
+
+    `pulls` (F, B, 3; `marker_pulls`): each marker of `vertices`' frames is moved by its pull,
+    with the markers' share (`S`, unfiltered in time: a frame's pull is its own)."""
     f = vertices.shape[0]
     if misses is not None and (before is not None or after is not None):
         raise ValueError("steadied: misses are read over a whole take, without neighbours")
     if f + (0 if before is None else len(before[0])) + (0 if after is None else len(after[0])) < 2:
-        if misses is not None and f:
-            vertices += _spread(np.asarray(surface_interpolator(model).matrix), misses)
+        moved = [m for m in (misses, pulls) if m is not None]
+        if moved and f:
+            vertices += _spread(
+                np.asarray(surface_interpolator(model).matrix), sum(moved[1:], moved[0])
+            )
         return vertices
     interp = np.asarray(surface_interpolator(model).matrix)  # (V, B)
     nb = positions.shape[1]
@@ -119,6 +155,8 @@ def steadied(
             lo = s - tail_v.shape[0]
             window_m = misses[lo : lo + window_v.shape[0]]
             rough[at] += _filtered(window_m)[mid]
+        if pulls is not None:
+            rough[at] += pulls[s:e]
         vertices[s:e] = _filtered(window_v)[mid] + _spread(interp, rough)[at]
         tail_v, tail_p = next_v, next_p
         s = e
