@@ -404,9 +404,11 @@ def test_a_batch_with_denoise_solves_the_denoised_take_and_records_it(
     assert written.settings is not None and written.settings.denoised_from == 0.01
     assert written.settings.marker_noise == den.marker_noise < 0.01
     assert written.settings.denoised_rank == den.rank
-    # The residuals written are the given markers' distances from that surface.
+    # The residuals written are the given markers' distances from where the solve put them:
+    # that surface's markers less the pulls that moved it to markers beyond their noise.
     on_surface = named_model.bundle_positions(np.asarray(written.vertices, dtype=np.float64))
-    expected = np.nan_to_num(np.linalg.norm(np.asarray(take) - on_surface, axis=2))
+    put = on_surface - (0.0 if ref.marker_pulls is None else ref.marker_pulls)
+    expected = np.nan_to_num(np.linalg.norm(np.asarray(take) - put, axis=2))
     np.testing.assert_allclose(written.bundle_residuals, expected, atol=1e-5)
 
 

@@ -160,9 +160,22 @@ def test_lgi_solve_denoise_says_what_it_kept_and_measures_residuals_on_the_given
     info = capsys.readouterr().out
     assert spike in info
     assert sum("spike:" in line or "swap:" in line for line in info.splitlines()) == len(findings)
-    # The residuals written are the given markers' distances from the surface written.
+    # The residuals written are the given markers' distances from where the solve put them:
+    # the surface written less the pulls that moved it to markers beyond their noise (the
+    # same solve from Python: the take denoised, faults read at the given noise).
+    den = lgi.denoise_take(markers, float(noise))
+    ref = model.solve(
+        den.frames,
+        quiet=True,
+        marker_noise=den.marker_noise,
+        fault_noise=float(noise),
+        repair=False,
+    )
+    assert np.array_equal(r.vertices, np.asarray(ref.vertices).astype(np.float32))
+    assert ref.marker_pulls is not None and np.linalg.norm(ref.marker_pulls, axis=2).max() > 0
     on_surface = model.bundle_positions(np.asarray(r.vertices, dtype=np.float64))
-    expected = np.nan_to_num(np.linalg.norm(markers - on_surface, axis=2))  # 0: missing
+    put = on_surface - ref.marker_pulls
+    expected = np.nan_to_num(np.linalg.norm(markers - put, axis=2))  # 0: missing
     np.testing.assert_allclose(r.bundle_residuals, expected, atol=1e-5)  # float32 meshes
     # Repaired (the default), the spike is solved as missing and said so, denoised or not.
     assert main([*argv, "--denoise", "--force"]) == 0
