@@ -329,6 +329,8 @@ def pop_counts(seeds: list[int], dataset: str, listed: bool) -> None:
             solved = m.solve(plan.frames, options=opts, quiet=True)
             took = time.perf_counter() - t0
             _pops(f"seed {seed}, --recommended, {how}", solved.vertices, truth, took)
+            if listed and steady and not fix:
+                _pop_list(solved.vertices, truth, np.asarray(given.neutral))
 
 
 SWAP_CM = (0.5, 1.0, 2.0, 3.0)
@@ -477,7 +479,9 @@ def main() -> None:
     ap.add_argument("--call", choices=["auto", "recommended"], default="auto")
     ap.add_argument("--dataset", choices=["ict", "scans"], default="ict")
     ap.add_argument(
-        "--list", action="store_true", help="pops: each pop of the steady fast call, where and why"
+        "--list",
+        action="store_true",
+        help="pops: each pop of both steady calls (markers as given), where and why",
     )
     args = ap.parse_args()
     if args.what == "findings":
