@@ -86,6 +86,7 @@ STAGES = [
     ("plan: fits' choice (local fits, box)", "lgi.plan.choices", "fits_choice"),
     ("plan: take prior", "lgi.plan.choices", "take_prior_choice"),
     ("plan: detail weight", "lgi.plan.choices", "detail_weight"),
+    ("solve: the take's motion read (the fill's choice)", "lgi.solve.model", "Model._fill_motion"),
     ("solve: gaps filled", "lgi.solve.model", "Model._gaps_filled"),
     ("solve: local fits / detail", "lgi.solve.model", "Model._finish_steadied"),
     ("solve: steady", "lgi.solve.model", "steadied"),
