@@ -297,3 +297,19 @@ def test_skin_the_take_moves_so_elsewhere_is_a_gap_and_a_spike_the_solve_followe
     assert [
         f for f in diagnose(r_clean, none, names, size=20.0, markers=face, noise=0.02) if f.fault
     ] == []
+
+
+def test_a_range_off_the_takes_motion_and_the_surface_needs_one_step_off_its_track_not_two() -> (
+    None
+):
+    from lgi.solve.diagnose import _above_median, _leaves_track
+
+    rng = np.random.default_rng(3)
+    steps = np.abs(rng.normal(size=(200, 2)))  # marker 0's steps relative to its neighbours
+    limit = _above_median(steps[:, 0], 8.0)
+    steps[100, 0] = 2.0 * limit  # it steps off at frame 100 ...
+    steps[104, 0] = 0.5 * limit  # ... and back at 104 within its noise
+    assert not _leaves_track(steps, 0, 100, 103)  # both edges asked: a blink steps once
+    assert _leaves_track(steps, 0, 100, 103, either=True)
+    steps[100, 0] = 0.5 * limit
+    assert not _leaves_track(steps, 0, 100, 103, either=True)  # no step at all: never
