@@ -522,10 +522,10 @@ def diagnose(
                 # (its residuals), one step off its track is enough: the other may be lost in
                 # the noise (a 5 mm spike's way back at 0.5 mm). A glitch of the performance
                 # itself that the solve follows keeps needing both.
-                off = deviations is not None and _off_the_take(deviations, b, s, e)
-                if not _leaves_track(steps, b, s, e, either=off and backed):
+                left = deviations is not None and bool(_off_the_take(deviations, b, s, e))
+                if not _leaves_track(steps, b, s, e, either=left and backed):
                     kind = "gap"  # the marker moves with its neighbours: the dataset's, not its
-                elif deviations is not None and not off:
+                elif deviations is not None and not left:
                     kind = "gap"  # the take moves it so elsewhere: fast skin, not a fault
             if kind == "off" and (s == 0 or e == r.shape[0] - 1):
                 # A fault steps off its track and back: a range longer than a spike that runs
