@@ -127,7 +127,7 @@ class PlannedTake:
 
     def filled_by(self, res: SolveResult) -> PlannedTake:
         """This take with its settings saying how the solve `res` filled its dropouts."""
-        settings = self.settings.with_fill(_any_filled(res), res.fill_rank)
+        settings = self.settings.with_fill(_filled_count(res) > 0, res.fill_rank)
         return PlannedTake(self.given, self.plan, settings)
 
     def findings(
@@ -307,7 +307,7 @@ def solve_file(
             settings=settings,
             residuals=given_residuals,
         )
-        _say_fill(say, settings, res.filled)
+        _say_fill(say, settings, _filled_count(res))
         _say_pulls(say, *_pulled(res), m.units)
         if found is None:
             found = planned.findings(given_residuals, res.missing, res.vertices[0], m)
@@ -372,7 +372,7 @@ def solve_file(
                 fits.append(None if res.fit_weights is None else res.fit_weights.copy())
                 jaws.append(None if res.jaw_theta is None else res.jaw_theta.copy())
                 # Every chunk is filled by the whole take's motion (`Model.solve_iter`).
-                filled_count += 0 if res.filled is None else int(np.sum(res.filled))
+                filled_count += _filled_count(res)
                 fill_rank = res.fill_rank if res.fill_rank is not None else fill_rank
                 count, most = _pulled(res)
                 pulled, farthest = pulled + count, max(farthest, most)
@@ -406,15 +406,14 @@ def solve_file(
     return written, n
 
 
-def _any_filled(res: SolveResult) -> bool:
-    """Whether the solve `res` filled some missing sample from the take (`SolveResult.filled`)."""
-    return res.filled is not None and bool(np.asarray(res.filled).any())
+def _filled_count(res: SolveResult) -> int:
+    """How many missing samples the solve `res` filled from the take (`SolveResult.filled`)."""
+    return 0 if res.filled is None else int(np.count_nonzero(res.filled))
 
 
-def _say_fill(say: Say, settings: SolveSettings, filled: np.ndarray | int | None) -> None:
-    """Says how many missing samples the solve filled (`filled`: its mask or count) and how
-    (`settings`), where it filled any."""
-    count = 0 if filled is None else int(np.sum(filled))
+def _say_fill(say: Say, settings: SolveSettings, count: int) -> None:
+    """Says how many missing samples (`count`) the solve filled and how (`settings`), where it
+    filled any."""
     words = settings.fill_words()
     if count and words is not None:
         say(f"{count} missing samples filled {words} before the solve")

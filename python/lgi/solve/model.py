@@ -446,8 +446,9 @@ class Model:
         total = int(arr.shape[0]) if arr.ndim == 3 else 0
         given = arr
         steady = temporal and opts.steady
-        motion = self._fill_motion(arr, opts) if steady else None
+        motion = None
         if steady:
+            motion = self._fill_motion(arr, opts)
             arr = self._gaps_filled(arr, motion)
         with _progress_bar(total, "lgi solve", quiet) as bar:
             res = self._core_solve(

@@ -119,9 +119,8 @@ def steadied(
     if f + (0 if before is None else len(before[0])) + (0 if after is None else len(after[0])) < 2:
         moved = [m for m in (misses, pulls) if m is not None]
         if moved and f:
-            vertices += _spread(
-                np.asarray(surface_interpolator(model).matrix), sum(moved[1:], moved[0])
-            )
+            interp = np.asarray(surface_interpolator(model).matrix)
+            vertices += _spread(interp, np.sum(moved, axis=0))
         return vertices
     interp = np.asarray(surface_interpolator(model).matrix)  # (V, B)
     nb = positions.shape[1]
