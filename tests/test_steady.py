@@ -138,8 +138,9 @@ def test_reading_the_fill_holds_out_the_same_runs_each_time_and_leaves_the_take_
     assert gaps.fill_motion(x[:5], rest, 0.01) is None
 
 
+@pytest.mark.parametrize("width", [steady.SIGMA_FRAMES, steady.LOCAL_SIGMA_FRAMES])
 def test_steadying_keeps_every_marker_where_the_solve_put_it_and_spreads_a_one_frame_flip(
-    sample, sample_model
+    sample, sample_model, width
 ) -> None:  # type: ignore[no-untyped-def]
     res = sample_model.solve(sample.performance[:30], temporal=False, quiet=True)
     v = np.array(res.vertices)
@@ -152,12 +153,23 @@ def test_steadying_keeps_every_marker_where_the_solve_put_it_and_spreads_a_one_f
         sample_model.bundle_positions(flip[15:16]) - p[15:16]
     )[0]  # ... that leaves the markers where they were
     np.testing.assert_allclose(sample_model.bundle_positions(flip), p, atol=1e-9)
-    out = steady.steadied(sample_model, flip.copy(), p)
+    out = steady.steadied(sample_model, flip.copy(), p, width=width)
     np.testing.assert_allclose(sample_model.bundle_positions(out), p, atol=1e-9)
     jump = np.abs(flip[15] - v[15]).max()
-    left = np.abs(out[15] - steady.steadied(sample_model, v.copy(), p)[15]).max()
-    # A Gaussian of one frame keeps 0.399 of a one-frame excursion at its frame.
-    assert jump > 0.1 and left == pytest.approx(0.3989 * jump, rel=0.02)
+    left = np.abs(out[15] - steady.steadied(sample_model, v.copy(), p, width=width)[15]).max()
+    # A Gaussian of `width` frames, cut at 4 widths, keeps its centre's share of a one-frame
+    # excursion at its frame (0.399 at 1 frame, 0.570 at 0.7).
+    reach = int(4.0 * width + 0.5)
+    kernel = np.exp(-0.5 * (np.arange(-reach, reach + 1) / width) ** 2)
+    assert jump > 0.1 and left == pytest.approx(jump / kernel.sum(), rel=0.02)
+
+
+def test_steadying_refuses_a_filter_wider_than_its_chunks_reach(sample, sample_model) -> None:  # type: ignore[no-untyped-def]
+    res = sample_model.solve(sample.performance[:5], temporal=False, quiet=True)
+    v, p = np.array(res.vertices), np.array(res.bundle_positions)
+    for width in (0.0, 1.5):
+        with pytest.raises(ValueError, match="width"):
+            steady.steadied(sample_model, v.copy(), p, width=width)
 
 
 @pytest.mark.parametrize("frames", [1, 2, 70])
@@ -334,6 +346,12 @@ def test_a_steady_surface_meets_each_marker_within_five_sigma_whole_and_in_chunk
     on_fits = sample_model.bundle_positions(fits.vertices)
     np.testing.assert_allclose(on_fits, fits.bundle_positions + fits.marker_pulls, atol=1e-9)
     assert np.linalg.norm(frames - on_fits, axis=2)[seen].max() <= 5.0 * sigma + 1e-9
+    # ... steadied by the local fits' narrower filter, whole and in chunks alike.
+    fits_parts = sample_model.solve_iter(
+        frames, chunk=16, marker_noise=sigma, local_fits=True, quiet=True
+    )
+    in_chunks = np.concatenate([p.vertices for p in fits_parts])
+    assert np.abs(in_chunks - np.asarray(fits.vertices)).max() < 1e-9
     # Each frame alone: nothing is pulled.
     assert (
         sample_model.solve(frames, marker_noise=sigma, steady=False, quiet=True).marker_pulls

@@ -26,7 +26,7 @@ from lgi.solve.local import local_pieces
 from lgi.solve.motion import TakeMotion
 from lgi.solve.options import UNBOUNDED, SolveOptions, local_bounds
 from lgi.solve.repair import repaired
-from lgi.solve.steady import RADIUS, marker_pulls, steadied
+from lgi.solve.steady import RADIUS, marker_pulls, steadied, width_for
 from lgi.solve.take_prior import TakePrior
 
 
@@ -465,7 +465,8 @@ class Model:
         res, misses = self._finish_steadied(res, arr, opts)
         v, p = np.asarray(res.vertices), np.asarray(res.bundle_positions)
         pulls = marker_pulls(np.asarray(given, dtype=np.float64), p, opts.solve_noise)
-        v = steadied(self, v, p, misses=misses, pulls=pulls)
+        width = width_for(local_bounds(opts.local_fits) is not None)
+        v = steadied(self, v, p, misses=misses, pulls=pulls, width=width)
         return self._as_given(res, v, given, motion, pulls)
 
     def _core_solve(
@@ -734,7 +735,16 @@ class Model:
                 tail = (v[-RADIUS:].copy(), p[-RADIUS:].copy())
                 mine = np.asarray(given[a - lo : b - lo], dtype=np.float64)
                 pulls = marker_pulls(mine, p, opts.solve_noise)
-                steadied(self, v, p, first=a, before=before, after=after, pulls=pulls)
+                steadied(
+                    self,
+                    v,
+                    p,
+                    first=a,
+                    before=before,
+                    after=after,
+                    pulls=pulls,
+                    width=width_for(local_bounds(opts.local_fits) is not None),
+                )
                 before = (
                     tail
                     if before is None

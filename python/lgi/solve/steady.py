@@ -9,7 +9,10 @@ neighbouring frames with a Gaussian of `SIGMA_FRAMES` frames, the smooth part is
 interpolation is linear, `steady = G*v + S (p - G*p)` for vertices `v`, marker positions `p`
 and the interpolation `S`: every marker stays exactly where the solve put it, and the time
 filter `G` reaches `RADIUS` frames either side, so a take steadied in blocks (or chunk by
-chunk, given its neighbours' frames) equals the take steadied whole.
+chunk, given its neighbours' frames) equals the take steadied whole. The filter is narrower
+(`LOCAL_SIGMA_FRAMES`) where the detail is the local fits' (`lgi.solve.local`): a blend fitted
+to each window's markers, continuous in them, flips far less than a pick of pieces, and a
+wider filter then only takes away a blink's real one-frame change.
 
 Where a noise-aware solve put a marker more than `PULL_SIGMAS` sigma from where the take has it,
 the marker's miss is more than its noise explains: motion the dataset does not reach (a blink
@@ -32,13 +35,28 @@ from lgi.solve.diagnose import NOISE_SIGMAS
 if TYPE_CHECKING:
     from lgi.solve.model import Model
 
-__all__ = ["PULL_SIGMAS", "RADIUS", "SIGMA_FRAMES", "marker_pulls", "steadied"]
+__all__ = [
+    "LOCAL_SIGMA_FRAMES",
+    "PULL_SIGMAS",
+    "RADIUS",
+    "SIGMA_FRAMES",
+    "marker_pulls",
+    "steadied",
+    "width_for",
+]
 
 F64 = NDArray[np.float64]
 
 SIGMA_FRAMES = 1.0
-"""The time filter's width: the least that spreads a one-frame flip over its neighbours
-(0.7 to 2 frames measured alike on the capture protocol's takes: docs/reliability.md)."""
+"""The time filter's width for the core's pieces: the least that spreads a one-frame flip over
+its neighbours (0.7 to 2 frames measured alike on the capture protocol's takes'
+mean errors, docs/reliability.md; 0.7 and 0.5 frames popped more on both datasets' pop takes,
+docs/results.md)."""
+
+LOCAL_SIGMA_FRAMES = 0.7
+"""The width for the local fits' detail: 0.7 frames popped less than 1 frame on all four pop
+takes (ICT and scans, two seeds) with an equal or lower mean error, and on the takes held out
+of that choice (docs/results.md); 0.5 frames popped more on one of the four."""
 
 _TRUNCATE = 4.0
 RADIUS = int(_TRUNCATE * SIGMA_FRAMES + 0.5)
@@ -55,13 +73,19 @@ sigma a residual must exceed to be a finding (`lgi.solve.diagnose`), beyond whic
 marker lies once in 65,000 samples."""
 
 Frames = tuple[F64, F64]
+
+
+def width_for(local_fits: bool) -> float:
+    """The time filter's width for a solve whose detail is the local fits' (`local_fits`) or the
+    core's pieces."""
+    return LOCAL_SIGMA_FRAMES if local_fits else SIGMA_FRAMES
+
+
 """Solved frames and their markers' positions on them: (n, V, 3), (n, B, 3)."""
 
 
-def _filtered(x: F64) -> F64:
-    return np.asarray(
-        gaussian_filter1d(x, SIGMA_FRAMES, axis=0, mode="nearest", truncate=_TRUNCATE)
-    )
+def _filtered(x: F64, width: float) -> F64:
+    return np.asarray(gaussian_filter1d(x, width, axis=0, mode="nearest", truncate=_TRUNCATE))
 
 
 def _spread(interp: F64, values: F64) -> F64:
@@ -98,6 +122,7 @@ def steadied(
     after: Frames | None = None,
     misses: F64 | None = None,
     pulls: F64 | None = None,
+    width: float = SIGMA_FRAMES,
 ) -> F64:
     """`vertices` (F, V, 3), a take's solved frames in order from its frame `first`, with their
     detail steadied in place (returned); `positions` (F, B, 3): the markers' positions on them
@@ -112,7 +137,12 @@ def steadied(
     round-off) with one pass of `S` over the mesh instead of two.
 
     `pulls` (F, B, 3; `marker_pulls`): each marker of `vertices`' frames is moved by its pull,
-    with the markers' share (`S`, unfiltered in time: a frame's pull is its own)."""
+    with the markers' share (`S`, unfiltered in time: a frame's pull is its own).
+
+    `width`: the time filter's sigma in frames, at most `SIGMA_FRAMES` (`LOCAL_SIGMA_FRAMES` for
+    the local fits' detail)."""
+    if not 0.0 < width <= SIGMA_FRAMES:
+        raise ValueError(f"steadied: width must be in (0, {SIGMA_FRAMES}] frames, got {width}")
     f = vertices.shape[0]
     if misses is not None and (before is not None or after is not None):
         raise ValueError("steadied: misses are read over a whole take, without neighbours")
@@ -148,15 +178,15 @@ def steadied(
         next_p = np.concatenate([tail_p, positions[s:e]])[-RADIUS:].copy()
         rough = np.zeros((_BLOCK, nb, 3))  # what the filter takes off the markers
         at = (first + s) % _BLOCK + np.arange(e - s)
-        rough[at] = window_p[mid] - _filtered(window_p)[mid]
+        rough[at] = window_p[mid] - _filtered(window_p, width)[mid]
         if misses is not None:
             # The same frames' misses (no neighbours outside the take: `tail_v`'s frames).
             lo = s - tail_v.shape[0]
             window_m = misses[lo : lo + window_v.shape[0]]
-            rough[at] += _filtered(window_m)[mid]
+            rough[at] += _filtered(window_m, width)[mid]
         if pulls is not None:
             rough[at] += pulls[s:e]
-        vertices[s:e] = _filtered(window_v)[mid] + _spread(interp, rough)[at]
+        vertices[s:e] = _filtered(window_v, width)[mid] + _spread(interp, rough)[at]
         tail_v, tail_p = next_v, next_p
         s = e
     return vertices
