@@ -50,13 +50,14 @@ F64 = NDArray[np.float64]
 SIGMA_FRAMES = 1.0
 """The time filter's width for the core's pieces: the least that spreads a one-frame flip over
 its neighbours (0.7 to 2 frames measured alike on the capture protocol's takes'
-mean errors, docs/reliability.md; 0.7 and 0.5 frames popped more on both datasets' pop takes,
-docs/results.md)."""
+mean errors, docs/reliability.md; 0.7 and 0.5 frames popped more on three of the four pop takes,
+docs/journal/2026-12-07-local-fits-steadied.md)."""
 
 LOCAL_SIGMA_FRAMES = 0.7
 """The width for the local fits' detail: 0.7 frames popped less than 1 frame on all four pop
 takes (ICT and scans, two seeds) with an equal or lower mean error, and on the takes held out
-of that choice (docs/results.md); 0.5 frames popped more on one of the four."""
+of that choice; 0.5 frames popped more on one of the four
+(docs/journal/2026-12-07-local-fits-steadied.md)."""
 
 _TRUNCATE = 4.0
 RADIUS = int(_TRUNCATE * SIGMA_FRAMES + 0.5)
