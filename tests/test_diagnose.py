@@ -53,6 +53,45 @@ def test_a_swapped_pair_and_a_spike_are_named_with_their_frames(
     assert len(found) == 2
 
 
+def test_a_noise_free_take_read_at_round_off_names_a_spike_by_its_track_as_an_exact_solve(
+    ict_dataset, ict_markers, ict_path, ict_model
+) -> None:  # type: ignore[no-untyped-def]
+    import warnings
+
+    import lgi
+    from lgi.io.livelink import read_livelinkface
+    from lgi.lab import ict
+    from lgi.lab.capture import make_capture
+    from lgi.solve.diagnose import FLOOR, NOISE_SIGMAS
+
+    rec = ict.livelinkface(ict_path.parent)
+    curves = read_livelinkface(next(p for p in rec if "jmtechart" in p.name))
+    w = curves.for_dataset(ict_dataset.names)[:300]
+    clean = make_capture(
+        ict_dataset, w, ict_markers, sigma=0.0, dropout=0.02, holdout=0, seed=1, jaw=None
+    ).frames
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # the reading of a noise-free take warns so
+        sigma = lgi.estimate_marker_noise(clean, ict_model)
+    # The noise read is round-off, under any a residual could count at.
+    assert 0.0 < sigma < FLOOR * ict_model.diagonal / NOISE_SIGMAS
+    names = list(ict_model.marker_names)
+
+    def found(x: np.ndarray) -> list[Finding]:
+        res = ict_model.solve(x, marker_noise=sigma, repair=False, quiet=True)
+        return diagnose(
+            res.bundle_residuals, res.missing, names, size=ict_model.diagonal, markers=x,
+            noise=sigma,
+        )  # fmt: skip
+
+    assert [f for f in found(clean) if f.fault] == []
+    x = clean.copy()
+    x[200:203, 33] += [0.0, 0.0, 1.0]  # 1 cm for 3 frames: the solve interpolates it exactly
+    assert [(f.kind, f.markers, f.first, f.last) for f in found(x) if f.fault] == [
+        ("spike", ("m033",), 200, 202)
+    ]
+
+
 @pytest.mark.parametrize("noise", [None, 0.05])
 def test_the_clean_capture_is_not_flagged(ict_model, capture, noise: float | None) -> None:  # type: ignore[no-untyped-def]
     res = ict_model.solve(capture, marker_noise=noise, quiet=True)

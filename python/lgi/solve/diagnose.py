@@ -430,9 +430,13 @@ def diagnose(
     with np.errstate(invalid="ignore"):
         out = r > limit
     runs = {b: _runs(out[:, b]) for b in range(r.shape[1])}
-    # With the solve's sigma known its residuals say which markers it corrected and when; the
-    # tracks' jumps (motion, where frames are far apart) then serve the swap test only.
-    residual_runs = {b: list(rs) for b, rs in runs.items()} if (noise or 0.0) > 0.0 else None
+    # With the solve's sigma known, and one a residual could count at (`FLOOR` over
+    # `NOISE_SIGMAS`), its residuals say which markers it corrected and when; the tracks' jumps
+    # (motion, where frames are far apart) then serve the swap test only. Under it (a
+    # noise-free take's reading, round-off) the solve interpolates its markers as the exact
+    # one does, and its tracks are read as an exact solve's are.
+    read_noise = (noise or 0.0) >= FLOOR * size / NOISE_SIGMAS
+    residual_runs = {b: list(rs) for b, rs in runs.items()} if read_noise else None
     x = None if markers is None else np.asarray(markers, dtype=np.float64)
     face_jumps: list[Finding] = []
     if x is not None:
@@ -447,12 +451,7 @@ def diagnose(
     # count at (`FLOOR` over `NOISE_SIGMAS`): under it (a noise-free take's reading,
     # round-off) the motion read takes the face's own fast motion for faults (a lip's 0.5-1
     # mm in two frames), and without a sigma (an exact solve) it has none to read at.
-    if (
-        x is not None
-        and residual_runs is not None
-        and noise
-        and noise >= FLOOR * size / NOISE_SIGMAS
-    ):
+    if x is not None and residual_runs is not None and noise:
         deviations = _take_deviations(x, noise)
         if deviations is not None:
             # Read again without the samples found off it (`_take_deviations`).
