@@ -1,10 +1,11 @@
 """Marker faults, model gaps, repair and pops on the capture protocol's takes (ICT-FaceKit with a
 quarter of its shapes held out, driven by the shared Live Link recordings; docs/reliability.md).
 
-    python scripts/measure_faults.py findings [--sigma 0 0.02 0.05] [--seeds 0]
+    python scripts/measure_faults.py findings [--sigma 0 0.02 0.05] [--seeds 0] [--list]
         clean takes (markers_120 and 160 random markers, both recordings whole): findings by
         kind; then a swap of two markers 1-2 cm apart (60 frames) and spikes of 1 cm and 0.5 cm
-        (3 frames) planted in each: which are named as faults.
+        (3 frames) planted in each: which are named as faults (`--list`: each take's, with
+        its markers' dropouts near them and, where missed, what was found on them).
     python scripts/measure_faults.py repair [--seeds 0 1] [--call auto|recommended]
                                             [--dataset ict|scans]
         a 1,200-frame 60 Hz take (160 random markers, 0.2 mm noise, 2 % dropouts) with a swap
@@ -87,7 +88,7 @@ def _found(m: lgi.Model, x: np.ndarray, sig: float) -> list:  # type: ignore[typ
     return diagnose(r.bundle_residuals, r.missing, names, size=m.diagonal, markers=x, noise=sig)
 
 
-def findings(sigmas: list[float], seeds: list[int]) -> None:
+def findings(sigmas: list[float], seeds: list[int], listed: bool = False) -> None:
     d, markers_120, random_160, folder = data()
     clean: collections.Counter[str] = collections.Counter()
     named: collections.Counter[str] = collections.Counter()
@@ -120,16 +121,36 @@ def findings(sigmas: list[float], seeds: list[int]) -> None:
                     x[s1 : s1 + 3, c] += [0.0, 0.0, 1.0]
                     x[s2 : s2 + 3, e] += [0.0, 0.5, 0.0]
                     got = _found(m, x, sig)
-                    named["swap"] += any(
-                        g.kind == "swap" and set(g.markers) == {names[a], names[b]} for g in got
-                    )
+                    hit = {
+                        "swap": any(
+                            g.kind == "swap" and set(g.markers) == {names[a], names[b]} for g in got
+                        )
+                    }
                     for key, k, s in (("spike 1 cm", c, s1), ("spike 0.5 cm", e, s2)):
-                        named[key] += any(
+                        hit[key] = any(
                             g.fault and names[k] in g.markers and g.first <= s + 2 and g.last >= s
                             for g in got
                         )
+                    named.update({key: int(v) for key, v in hit.items()})
                     takes, frames = takes + 1, frames + n
-                    print(layout, rec, sigma, seed, n, flush=True)
+                    print(layout, rec, sigma, seed, n, f"noise read {sig:.2g}", flush=True)
+                    if listed:
+                        lost = np.isnan(t.frames).any(axis=2)
+                        for key, ks, s, length in (
+                            ("swap", (a, b), s0, 60),
+                            ("spike 1 cm", (c,), s1, 3),
+                            ("spike 0.5 cm", (e,), s2, 3),
+                        ):
+                            gone = [int(lost[max(s - 8, 0) : s + length + 8, k].sum()) for k in ks]
+                            print(
+                                f"  {key} {' '.join(names[k] for k in ks)}, frames {s}-"
+                                f"{s + length - 1}: {'named' if hit[key] else 'MISSED'} "
+                                f"(missing within 8 frames: {gone})"
+                            )
+                            if not hit[key]:
+                                for g in got:
+                                    if {names[k] for k in ks} & set(g.markers):
+                                        print(f"    {g.describe()}")
     print(f"clean takes: {takes}, {frames} frames; findings by kind: {dict(clean)}")
     print(f"planted faults named (of {takes}): {dict(named)}")
 
@@ -481,11 +502,12 @@ def main() -> None:
     ap.add_argument(
         "--list",
         action="store_true",
-        help="pops: each pop of both steady calls (markers as given), where and why",
+        help="pops: each pop of both steady calls (markers as given), where and why; findings: "
+        "each take's planted faults, named or missed, and what was found on their markers",
     )
     args = ap.parse_args()
     if args.what == "findings":
-        findings(args.sigma, args.seeds)
+        findings(args.sigma, args.seeds, args.list)
     elif args.what == "repair":
         repair(args.seeds, args.call, args.dataset)
     elif args.what == "study":
