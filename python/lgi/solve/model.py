@@ -699,6 +699,7 @@ class Model:
         before: tuple[NDArray[np.float64], NDArray[np.float64]] | None = None
         # Every chunk is filled by the whole take's motion, so the chunks equal one solve.
         motion = self._fill_motion(np.asarray(arr), opts) if steady else None
+        width = width_for(local_bounds(opts.local_fits) is not None)
 
         def solved(part: NDArray[Any], buf: Any, previous: Any, tick: Any) -> SolveResult:
             res = self._core_solve(
@@ -735,16 +736,7 @@ class Model:
                 tail = (v[-RADIUS:].copy(), p[-RADIUS:].copy())
                 mine = np.asarray(given[a - lo : b - lo], dtype=np.float64)
                 pulls = marker_pulls(mine, p, opts.solve_noise)
-                steadied(
-                    self,
-                    v,
-                    p,
-                    first=a,
-                    before=before,
-                    after=after,
-                    pulls=pulls,
-                    width=width_for(local_bounds(opts.local_fits) is not None),
-                )
+                steadied(self, v, p, first=a, before=before, after=after, pulls=pulls, width=width)
                 before = (
                     tail
                     if before is None
