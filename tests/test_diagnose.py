@@ -139,6 +139,33 @@ def test_a_residual_shared_by_a_marker_moving_with_its_neighbours_is_a_gap_not_a
     assert found[0].describe(100, "cm").startswith("the dataset does not follow m05 at time codes")
 
 
+def test_a_swap_made_across_both_markers_dropouts_is_named_as_that_swap() -> None:
+    """Two markers 2 cm apart trade labels for frames 40-79, where one drops out for the 5
+    frames before and the other for the 8 over the end (a label taken up again under the
+    other's name): each shows one step of its own, read across its dropout against its
+    neighbours, and the swap is named from each one's own edges. Before, a step across a
+    dropout was read per frame elapsed (2 cm over 6 frames: no jump) and nothing was named."""
+    x = _skin()
+    a, b = 5, 6  # neighbours on the grid, 2 cm apart
+    x[40:80, [a, b]] = x[40:80, [b, a]]
+    x[35:40, a] = np.nan
+    x[78:86, b] = np.nan
+    missing = np.isnan(x).any(axis=2)
+    rng = np.random.default_rng(1)
+    r = np.where(missing, 0.0, np.abs(rng.normal(0.01, 0.003, x.shape[:2])))
+    names = [f"m{k:02d}" for k in range(16)]
+    found = diagnose(r, missing, names, size=20.0, markers=x)
+    swaps = [(f.markers, f.first) for f in found if f.kind == "swap"]
+    assert swaps == [(("m05", "m06"), 40)], found
+    assert 79 <= next(f.last for f in found if f.kind == "swap") <= 85
+    # Without the dropouts the same swap is named with its exact frames, as before.
+    clean = _skin()
+    clean[40:80, [a, b]] = clean[40:80, [b, a]]
+    r0 = np.abs(rng.normal(0.01, 0.003, clean.shape[:2]))
+    got = diagnose(r0, np.zeros(r0.shape, bool), names, size=20.0, markers=clean)
+    assert [(f.kind, f.markers, f.first, f.last) for f in got] == [("swap", ("m05", "m06"), 40, 79)]
+
+
 def _excursion_found(first: int, last: int) -> list[Finding]:
     """What `diagnose` finds where marker 5 jumps 1 cm away from its neighbours over frames
     first..last and back, its residual 3 mm there."""

@@ -21,6 +21,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from lgi.io.result import Result
+from lgi.solve.gaps import MAX_GAP
 from lgi.solve.spectrum import shrinkage_factors, thin_svd
 
 __all__ = [
@@ -134,21 +135,57 @@ def _threshold(r: NDArray[np.float64], size: float) -> float:
     return max(_above_median(vals, OUTLIER_MADS), FLOOR * size)
 
 
-def _swapped(x: NDArray[np.float64], a: int, b: int, first: int, last: int) -> bool:
+def _swapped(
+    x: NDArray[np.float64],
+    a: int,
+    b: int,
+    first: int,
+    last: int,
+    own: tuple[tuple[int, int], tuple[int, int]] | None = None,
+) -> bool:
     """Whether markers `a` and `b` trade tracks over frames first..last: at an edge of the
     range where both are seen on both sides, each one's position is nearer the other's on the
-    far side than its own."""
+    far side than its own. `own`: each marker's own range (a, then b); where one of them is
+    missing at an edge of first..last (a swap is often made where a marker drops out and is
+    taken up again under the other's label), that edge is read at each marker's own edge,
+    from its nearest frames seen on either side (up to `gaps.MAX_GAP` away)."""
     votes = []
-    for inside, outside in ((first, first - 1), (last, last + 1)):
+    for end in (0, 1):
+        inside, outside = (first, first - 1) if end == 0 else (last, last + 1)
         if not 0 <= outside < x.shape[0]:
             continue
         pa, pb, qa, qb = x[inside, a], x[inside, b], x[outside, a], x[outside, b]
         if np.isnan([pa, pb, qa, qb]).any():
-            continue
+            if own is None:
+                continue
+            near = [_seen_across(x, k, own[i][end], end) for i, k in enumerate((a, b))]
+            if any(n is None for n in near):
+                continue
+            (pa, qa), (pb, qb) = near  # type: ignore[misc]
         same = np.linalg.norm(pa - qa) + np.linalg.norm(pb - qb)
         traded = np.linalg.norm(pa - qb) + np.linalg.norm(pb - qa)
         votes.append(traded < 0.5 * same)
     return bool(votes) and all(votes)
+
+
+def _seen_across(
+    x: NDArray[np.float64], k: int, edge: int, end: int
+) -> tuple[NDArray[np.float64], NDArray[np.float64]] | None:
+    """Marker `k`'s positions nearest a range's edge (`end` 0: its first frame `edge`; 1: its
+    last) on either side, each seen and up to `MAX_GAP` frames away: (inside, outside), or
+    None where either side has none."""
+    seen = np.flatnonzero(np.isfinite(x[:, k]).all(axis=1))
+    if end == 0:
+        ins = seen[(seen >= edge) & (seen < edge + MAX_GAP)]
+        outs = seen[(seen < edge) & (seen >= edge - MAX_GAP)]
+        pick = (ins[:1], outs[-1:])
+    else:
+        ins = seen[(seen <= edge) & (seen > edge - MAX_GAP)]
+        outs = seen[(seen > edge) & (seen <= edge + MAX_GAP)]
+        pick = (ins[-1:], outs[:1])
+    if pick[0].size == 0 or pick[1].size == 0:
+        return None
+    return x[int(pick[0][0]), k], x[int(pick[1][0]), k]
 
 
 JUMP_MADS = 12.0
@@ -177,24 +214,33 @@ def _is_spike(track: NDArray[np.float64], first: int, last: int) -> bool:
     return bool(np.linalg.norm(back - before) < 0.5 * np.linalg.norm(away - before))
 
 
-def _track_ranges(x: NDArray[np.float64], size: float) -> dict[int, list[tuple[int, int]]]:
+def _track_ranges(
+    x: NDArray[np.float64], size: float, nearest: NDArray[np.int64]
+) -> dict[int, list[tuple[int, int]]]:
     """Per marker, the frame ranges it spends off its track: from a jump away to the jump
     back, read from the take alone, so an exact solve, whose residuals
-    are zero, still shows them."""
+    are zero, still shows them. Across a dropout the step is read against the marker's
+    `nearest` neighbours' over the same frames (`_relative_steps`), whole: the face moved
+    for several frames, the skin between the markers barely; a label taken up again
+    under another marker's name moves it by their distance."""
     f, b = x.shape[:2]
     step = np.full((f, b), np.nan)
+    across = np.zeros((f, b), dtype=bool)
     for k in range(b):
         seen = np.flatnonzero(~np.isnan(x[:, k]).any(axis=1))
         if seen.size > 1:
-            # Per frame elapsed: across a dropout the face moved for several frames.
+            # Per frame elapsed for the limit's reading.
             gap = np.diff(seen).astype(np.float64)
             step[seen[1:], k] = np.linalg.norm(x[seen[1:], k] - x[seen[:-1], k], axis=1) / gap
+            across[seen[1:][gap > 1], k] = True
     vals = step[np.isfinite(step)]
     if vals.size == 0:
         return {}
     limit = max(_above_median(vals, JUMP_MADS), JUMP_FLOOR * size)
     with np.errstate(invalid="ignore"):
         jumped = step > limit
+        if across.any():
+            jumped |= across & (_relative_steps(x, nearest, per_frame=False) > limit)
     # Many markers jumping together is the whole face moving (a cut, a tracking glitch of
     # the head), not a marker leaving its track: those frames are set aside.
     count = jumped.sum(axis=1)
@@ -230,12 +276,14 @@ def _nearest(x: NDArray[np.float64]) -> NDArray[np.int64]:
     return order
 
 
-def _relative_steps(x: NDArray[np.float64], nearest: NDArray[np.int64]) -> NDArray[np.float64]:
+def _relative_steps(
+    x: NDArray[np.float64], nearest: NDArray[np.int64], *, per_frame: bool = True
+) -> NDArray[np.float64]:
     """(F, B) each marker's step between the frames it is seen in, less the median step of its
-    `NEIGHBOURS` nearest markers (`_nearest`) seen in both, per frame elapsed; NaN where none
-    of them is. Skin carries a marker with its neighbours; a fault moves it alone. (A
-    neighbour's dropout changes which neighbours are averaged, not the step: each neighbour's
-    own step is taken between the same two frames.)"""
+    `NEIGHBOURS` nearest markers (`_nearest`) seen in both, per frame elapsed (`per_frame`;
+    else whole); NaN where none of them is. Skin carries a marker with its neighbours; a
+    fault moves it alone. (A neighbour's dropout changes which neighbours are averaged, not
+    the step: each neighbour's own step is taken between the same two frames.)"""
     f, b = x.shape[:2]
     steps = np.full((f, b), np.nan)
     idx = np.flatnonzero(nearest[:, 0] >= 0) if b > 1 else np.zeros(0, np.int64)
@@ -256,7 +304,8 @@ def _relative_steps(x: NDArray[np.float64], nearest: NDArray[np.int64]) -> NDArr
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", RuntimeWarning)
             skin = np.nanmedian(moved[keep], axis=1)
-        steps[q[keep], k] = np.linalg.norm(own[keep] - skin, axis=1) / (q - p)[keep]
+        apart = (q - p)[keep] if per_frame else 1
+        steps[q[keep], k] = np.linalg.norm(own[keep] - skin, axis=1) / apart
     return steps
 
 
@@ -439,8 +488,10 @@ def diagnose(
     residual_runs = {b: list(rs) for b, rs in runs.items()} if read_noise else None
     x = None if markers is None else np.asarray(markers, dtype=np.float64)
     face_jumps: list[Finding] = []
+    nearest = None if x is None else _nearest(x)
     if x is not None:
-        for b, ranges in _track_ranges(x, size).items():
+        assert nearest is not None
+        for b, ranges in _track_ranges(x, size, nearest).items():
             if b < 0:
                 face_jumps = [Finding("cut", (), k, k, float("nan")) for k, _ in ranges]
                 continue
@@ -497,14 +548,13 @@ def diagnose(
                 if hi < lo or (hi - lo + 1) < 0.5 * (max(e1, e2) - min(s1, s2) + 1):
                     continue
                 first, last = min(s1, s2), max(e1, e2)
-                if _swapped(x, a, b, first, last):
+                if _swapped(x, a, b, first, last, ((s1, e1), (s2, e2))):
                     worst = _worst(r[first : last + 1][:, [a, b]])
                     pair = tuple(sorted((names[a], names[b])))
                     findings.append(Finding("swap", pair, first, last, worst))
                     taken |= {(a, s1, e1), (b, s2, e2)}
                     swapped += [(a, first, last), (b, first, last)]
     singles = []
-    nearest = None if x is None else _nearest(x)
     steps: NDArray[np.float64] | None = None  # read on first need: most takes need none
     for b, rs in (runs if residual_runs is None else residual_runs).items():
         for s, e in rs:
