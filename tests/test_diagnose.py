@@ -115,6 +115,25 @@ def test_residual_outliers_alone_name_a_marker_when_the_take_is_not_kept() -> No
     assert lines[1] == "marker off: e, time codes 1031-1040 (residual up to 0.5 cm)"
 
 
+def test_a_finding_whose_samples_were_all_solved_as_missing_says_so_and_never_nan() -> None:
+    nan = float("nan")
+    assert (
+        Finding("spike", ("m033",), 200, 202, nan).describe(0, "cm")
+        == "spike: m033, time codes 200-202 (no residual: solved as missing)"
+    )
+    assert (
+        Finding("swap", ("a", "b"), 3, 9, nan)
+        .describe()
+        .endswith("(no residual: solved as missing)")
+    )
+    for kind in ("off", "gap"):
+        assert "nan" not in Finding(kind, ("m1",), 1, 4, nan).describe(10, "cm")
+    # A residual that is there is given as before.
+    assert Finding("spike", ("m033",), 5, 5, 0.5).describe(0, "cm") == (
+        "spike: m033, time code 5 (residual up to 0.5 cm)"
+    )
+
+
 def _skin(frames: int = 120, markers: int = 16, seed: int = 0) -> np.ndarray:
     """Markers on a grid (2 cm apart) carried by a smooth non-rigid motion, 0.02 noise."""
     rng = np.random.default_rng(seed)

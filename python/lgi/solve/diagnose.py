@@ -88,6 +88,9 @@ class Finding:
 
     def describe(self, start: int = 0, units: str | None = None) -> str:
         u = f" {units}" if units else ""
+        # A range whose samples were all solved as missing (repaired, or dropouts) has no
+        # residual to give: said so, never as "nan".
+        size = f"{self.worst:.3g}{u}" if np.isfinite(self.worst) else None
         span = (
             f"time code {start + self.first}"
             if self.first == self.last
@@ -97,14 +100,17 @@ class Finding:
             return f"the whole face jumps at {span}: a cut in the take or a tracking glitch"
         if self.kind == "swap":
             a, b = self.markers
-            return f"likely label swap: {a} <-> {b}, {span} (residuals up to {self.worst:.3g}{u})"
+            up = f"residuals up to {size}" if size else "no residual: solved as missing"
+            return f"likely label swap: {a} <-> {b}, {span} ({up})"
         if self.kind == "gap":
             return (
-                f"the dataset does not follow {self.markers[0]} at {span}: up to "
-                f"{self.worst:.3g}{u} (the marker moves with the face; not repaired)"
+                f"the dataset does not follow {self.markers[0]} at {span}: "
+                f"{f'up to {size}' if size else 'no residual'} (the marker moves with the "
+                "face; not repaired)"
             )
         what = "spike" if self.kind == "spike" else "marker off"
-        return f"{what}: {self.markers[0]}, {span} (residual up to {self.worst:.3g}{u})"
+        up = f"residual up to {size}" if size else "no residual: solved as missing"
+        return f"{what}: {self.markers[0]}, {span} ({up})"
 
 
 def _runs(flags: NDArray[np.bool_]) -> list[tuple[int, int]]:
