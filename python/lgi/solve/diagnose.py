@@ -164,10 +164,11 @@ def _swapped(
         if np.isnan([pa, pb, qa, qb]).any():
             if own is None:
                 continue
-            near = [_seen_across(x, k, own[i][end], end) for i, k in enumerate((a, b))]
-            if any(n is None for n in near):
+            near_a = _seen_across(x, a, own[0][end], end)
+            near_b = _seen_across(x, b, own[1][end], end)
+            if near_a is None or near_b is None:
                 continue
-            (pa, qa), (pb, qb) = near  # type: ignore[misc]
+            (pa, qa), (pb, qb) = near_a, near_b
         same = np.linalg.norm(pa - qa) + np.linalg.norm(pb - qb)
         traded = np.linalg.norm(pa - qb) + np.linalg.norm(pb - qa)
         votes.append(traded < 0.5 * same)
