@@ -247,7 +247,7 @@ def _track_ranges(
     with np.errstate(invalid="ignore"):
         jumped = step > limit
         if across.any():
-            jumped |= across & (_relative_steps(x, nearest, per_frame=False) > limit)
+            jumped |= _relative_steps(x, nearest, per_frame=False, only=across) > limit
     # Many markers jumping together is the whole face moving (a cut, a tracking glitch of
     # the head), not a marker leaving its track: those frames are set aside.
     count = jumped.sum(axis=1)
@@ -284,13 +284,18 @@ def _nearest(x: NDArray[np.float64]) -> NDArray[np.int64]:
 
 
 def _relative_steps(
-    x: NDArray[np.float64], nearest: NDArray[np.int64], *, per_frame: bool = True
+    x: NDArray[np.float64],
+    nearest: NDArray[np.int64],
+    *,
+    per_frame: bool = True,
+    only: NDArray[np.bool_] | None = None,
 ) -> NDArray[np.float64]:
     """(F, B) each marker's step between the frames it is seen in, less the median step of its
     `NEIGHBOURS` nearest markers (`_nearest`) seen in both, per frame elapsed (`per_frame`;
     else whole); NaN where none of them is. Skin carries a marker with its neighbours; a
     fault moves it alone. (A neighbour's dropout changes which neighbours are averaged, not
-    the step: each neighbour's own step is taken between the same two frames.)"""
+    the step: each neighbour's own step is taken between the same two frames.) `only` (F, B):
+    the steps read, by the frame they end at (the rest NaN)."""
     f, b = x.shape[:2]
     steps = np.full((f, b), np.nan)
     idx = np.flatnonzero(nearest[:, 0] >= 0) if b > 1 else np.zeros(0, np.int64)
@@ -303,6 +308,11 @@ def _relative_steps(
         if seen.size < 2:
             continue
         p, q = seen[:-1], seen[1:]
+        if only is not None:
+            asked = only[q, k]
+            if not asked.any():
+                continue
+            p, q = p[asked], q[asked]
         own = x[q, k] - x[p, k]  # (S, 3)
         both = present[p][:, near[i]] & present[q][:, near[i]]  # (S, N)
         moved = np.where(both[..., None], x[q][:, near[i]] - x[p][:, near[i]], np.nan)

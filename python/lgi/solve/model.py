@@ -465,7 +465,7 @@ class Model:
         res, misses = self._finish_steadied(res, arr, opts)
         v, p = np.asarray(res.vertices), np.asarray(res.bundle_positions)
         pulls = marker_pulls(np.asarray(given, dtype=np.float64), p, opts.solve_noise)
-        width = width_for(local_bounds(opts.local_fits) is not None)
+        width = width_for(opts)
         v = steadied(self, v, p, misses=misses, pulls=pulls, width=width)
         return self._as_given(res, v, given, motion, pulls)
 
@@ -699,7 +699,7 @@ class Model:
         before: tuple[NDArray[np.float64], NDArray[np.float64]] | None = None
         # Every chunk is filled by the whole take's motion, so the chunks equal one solve.
         motion = self._fill_motion(np.asarray(arr), opts) if steady else None
-        width = width_for(local_bounds(opts.local_fits) is not None)
+        width = width_for(opts)
 
         def solved(part: NDArray[Any], buf: Any, previous: Any, tick: Any) -> SolveResult:
             res = self._core_solve(

@@ -31,6 +31,7 @@ from scipy.ndimage import gaussian_filter1d
 
 from lgi.solve.detail import surface_interpolator
 from lgi.solve.diagnose import NOISE_SIGMAS
+from lgi.solve.options import SolveOptions, local_bounds
 
 if TYPE_CHECKING:
     from lgi.solve.model import Model
@@ -74,15 +75,13 @@ sigma a residual must exceed to be a finding (`lgi.solve.diagnose`), beyond whic
 marker lies once in 65,000 samples."""
 
 Frames = tuple[F64, F64]
-
-
-def width_for(local_fits: bool) -> float:
-    """The time filter's width for a solve whose detail is the local fits' (`local_fits`) or the
-    core's pieces."""
-    return LOCAL_SIGMA_FRAMES if local_fits else SIGMA_FRAMES
-
-
 """Solved frames and their markers' positions on them: (n, V, 3), (n, B, 3)."""
+
+
+def width_for(opts: SolveOptions) -> float:
+    """The time filter's width for a solve with options `opts`: `LOCAL_SIGMA_FRAMES` where its
+    detail is the local fits', else the core's pieces' `SIGMA_FRAMES`."""
+    return LOCAL_SIGMA_FRAMES if local_bounds(opts.local_fits) is not None else SIGMA_FRAMES
 
 
 def _filtered(x: F64, width: float) -> F64:
