@@ -289,6 +289,28 @@ impl JawRig {
         self.apply(positions, theta, out, Blend::skin)
     }
 
+    /// [`JawRig::skin`] in place, one thread: for a caller that already runs frames in
+    /// parallel (a frame's mesh, skinned where it lies, without a copy or nested tasks). The
+    /// same arithmetic, bit for bit; a vertex of weight 0 is left as it is (`p + 0 · moved`
+    /// is `p`).
+    pub fn skin_in_place(&self, points: &mut [DVec3], theta: JawParams) -> Result<()> {
+        theta.validate()?;
+        if points.len() != self.weights.len() {
+            return Err(LgiError::Input(format!(
+                "jaw skinning needs one weight per point: {} points, {} weights",
+                points.len(),
+                self.weights.len()
+            )));
+        }
+        let blend = self.blend(theta);
+        for (p, &w) in points.iter_mut().zip(&self.weights) {
+            if w != 0.0 {
+                *p = blend.skin(*p, w);
+            }
+        }
+        Ok(())
+    }
+
     /// Unskins every vertex with its own weight into `out` (inverse of [`JawRig::skin`]).
     pub fn unskin(&self, positions: &[DVec3], theta: JawParams, out: &mut [DVec3]) -> Result<()> {
         self.apply(positions, theta, out, Blend::unskin)

@@ -329,11 +329,13 @@ fn blend_block(
 ) {
     let q = mixed.len();
     let len = parts.first().map_or(0, |p| p.len());
-    for k in 0..len {
-        let vert = first + k;
-        let rows = &shapes[3 * vert * q..3 * (vert + 1) * q];
-        for (f, part) in parts.iter_mut().enumerate() {
-            let frame = &weights[f * per_frame..(f + 1) * per_frame];
+    // Frame by frame over the block: the block's shapes stay in cache across the frames and
+    // a frame's weights of the few bundles sewn here in the nearest one.
+    for (f, part) in parts.iter_mut().enumerate() {
+        let frame = &weights[f * per_frame..(f + 1) * per_frame];
+        for k in 0..len {
+            let vert = first + k;
+            let rows = &shapes[3 * vert * q..3 * (vert + 1) * q];
             mixed.iter_mut().for_each(|m| *m = 0.0);
             for e in sewing.indptr[vert]..sewing.indptr[vert + 1] {
                 let (b, s) = (sewing.indices[e], sewing.data[e]);

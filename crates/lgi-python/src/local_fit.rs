@@ -311,8 +311,7 @@ impl LocalSurface {
                 .enumerate()
                 .map(|(k, o)| {
                     if let (Some(rig), Some(poses)) = (rig, &poses) {
-                        let blend = o.to_vec();
-                        rig.skin(&blend, poses[k], o)?;
+                        rig.skin_in_place(o, poses[k])?;
                     }
                     let on = model.bundle_positions(o)?;
                     Ok(t[k * b..(k + 1) * b]

@@ -536,3 +536,25 @@ proptest! {
         }
     }
 }
+
+#[test]
+fn skinning_in_place_is_the_parallel_skin_bit_for_bit_and_checks_its_length() {
+    let (points, weights) = blob(0x51d);
+    let r = tilted_rig(weights, axis_angle([0.2, 1.0, -0.3], 0.4));
+    for theta in [
+        JawParams::ZERO,
+        JawParams::from_array([0.3, 0.1, 0.2]),
+        JawParams::from_array([-0.1, -0.05, 0.4]),
+    ] {
+        let mut out = vec![DVec3::ZERO; points.len()];
+        r.skin(&points, theta, &mut out).unwrap();
+        let mut in_place = points.clone();
+        r.skin_in_place(&mut in_place, theta).unwrap();
+        assert_eq!(in_place, out);
+    }
+    let err = r
+        .skin_in_place(&mut points[..3].to_vec(), JawParams::ZERO)
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("3 points, 400 weights"), "{err}");
+}
