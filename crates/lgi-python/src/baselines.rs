@@ -10,6 +10,7 @@ use glam::DVec3;
 use lgi_core::{BlendshapeSolver as CoreBlend, RbfInterpolator as CoreRbf};
 use numpy::PyArrayDyn;
 use pyo3::prelude::*;
+use rayon::prelude::*;
 
 /// Fitted weights (F, S) and iteration counts (F,).
 type WeightsAndIterations<'py> = (Bound<'py, PyArrayDyn<f64>>, Bound<'py, PyArrayDyn<i64>>);
@@ -128,9 +129,11 @@ impl RbfInterpolator {
             .collect();
         let nf = frames.len();
         let inner = &self.inner;
+        // Frames in parallel: a frame with its own missing markers factors its own system
+        // (the left-out rows of a reading: one each), which is one thread's work.
         let out = threads::detach(py, || {
             frames
-                .iter()
+                .par_iter()
                 .map(|f| inner.interpolate(f))
                 .collect::<lgi_core::Result<Vec<_>>>()
         })
