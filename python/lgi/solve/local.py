@@ -29,6 +29,7 @@ from numpy.typing import NDArray
 
 import lgi._lgi as _lgi
 from lgi.errors import InputError
+from lgi.solve.detail import surface_interpolator
 from lgi.solve.options import UNBOUNDED
 
 if TYPE_CHECKING:
@@ -123,7 +124,9 @@ class LocalPieces:
         v, b = self.neutral.shape[0], model.num_bundles
         sewing = sp.csr_matrix((sw["data"], sw["indices"], sw["indptr"]), shape=(v, b))
         self._sew_rows = _csr_rows(sewing)
-        self.corrective = _lgi.RbfInterpolator(self.neutral, tris, bary)
+        # The model's one biharmonic interpolation over the mesh (the steady pass's too): made
+        # once per model, not again here.
+        self.corrective = surface_interpolator(model)
         # Blend, skinning, corrective and the markers measured, frame by frame in the core.
         self._surface = _lgi.LocalSurface(
             self.neutral, self.shapes, *self._sew_rows, self.rig, self.corrective, model.core
