@@ -291,8 +291,8 @@ impl JawRig {
 
     /// [`JawRig::skin`] in place, one thread: for a caller that already runs frames in
     /// parallel (a frame's mesh, skinned where it lies, without a copy or nested tasks). The
-    /// same arithmetic, bit for bit; a vertex of weight 0 is left as it is (`p + 0 · moved`
-    /// is `p`).
+    /// same arithmetic, bit for bit, where a vertex moves; a vertex of weight 0 is left as it
+    /// is (`p + 0 · moved` equals `p`; only a coordinate of −0.0 would read +0.0 there).
     pub fn skin_in_place(&self, points: &mut [DVec3], theta: JawParams) -> Result<()> {
         theta.validate()?;
         if points.len() != self.weights.len() {

@@ -505,9 +505,9 @@ def diagnose(
     residual_runs = {b: list(rs) for b, rs in runs.items()} if read_noise else None
     x = None if markers is None else np.asarray(markers, dtype=np.float64)
     face_jumps: list[Finding] = []
-    nearest = None if x is None else _nearest(x)
+    nearest: NDArray[np.int64] | None = None
     if x is not None:
-        assert nearest is not None
+        nearest = _nearest(x)
         for b, ranges in _track_ranges(x, size, nearest).items():
             if b < 0:
                 face_jumps = [Finding("cut", (), k, k, float("nan")) for k, _ in ranges]
