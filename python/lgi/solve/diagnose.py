@@ -13,6 +13,7 @@ the face's size (an exact solve's residuals are round-off)."""
 
 from __future__ import annotations
 
+import itertools
 import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -63,6 +64,11 @@ pose): skin moves them together, a fault moves one alone."""
 STEP_MADS = 8.0
 """How many scaled MADs above the median step of a marker's position relative to its
 neighbours a step must be to leave its track (as `OUTLIER_MADS` for residuals)."""
+
+RELATIVE_STEP_NOISE = 1.61
+"""The noise of a marker's step against its neighbours (`_relative_steps`) per coordinate, in
+units of the markers' sigma: its own step's (variance 2) and its `NEIGHBOURS` neighbours' median
+step's (the median of 4 normals: 0.30 of their variance 2), sqrt(2 x 1.30)."""
 
 _GAP = 1
 """Frames a range may skip and stay one range (a sample that dips under the threshold)."""
@@ -202,6 +208,12 @@ jump (a sample leaving or rejoining its track)."""
 JUMP_FLOOR = 0.02
 """Smallest jump, as a share of the face's size: 1 cm on ICT's 47.5 cm head."""
 
+RELATIVE_JUMP_FLOOR = 0.005
+"""Smallest jump of a marker against its neighbours (`_relative_steps`), as a share of the
+face's size (0.24 cm on ICT), read where the solve has no residual to read (a noise-free take):
+the neighbours take most of fast skin's step off, and what is left of a blink or a lip is told
+from a fault by the spike's shape and the take's own motion (`diagnose`)."""
+
 
 FACE_SHARE = 0.1
 """Share of the markers that, jumping at one frame, make it the face's motion, not theirs."""
@@ -210,19 +222,38 @@ CUT_SHARE = 0.5
 """Share of the markers that, jumping at one frame, is reported as a cut in the take."""
 
 
-def _is_spike(track: NDArray[np.float64], first: int, last: int) -> bool:
+def _is_spike(
+    track: NDArray[np.float64], first: int, last: int, skin: NDArray[np.float64] | None = None
+) -> bool:
     """Whether a marker's excursion over first..last is a spike: short, and back where it left
-    (the jump back lands within half the jump away of the frame before)."""
+    (the jump back lands within half the jump away of the frame before). `skin` (F, 3): the
+    marker's neighbours' motion (`_skin_track`), taken off first: back where it left on the
+    skin, which moved on meanwhile."""
     if last - first + 1 > SPIKE_FRAMES or first == 0 or last + 1 >= track.shape[0]:
         return False
-    before, away, back = track[first - 1], track[first], track[last + 1]
+    at = [first - 1, first, last + 1]
+    before, away, back = track[at] if skin is None else track[at] - skin[at]
     if np.isnan([before, away, back]).any():
         return False
     return bool(np.linalg.norm(back - before) < 0.5 * np.linalg.norm(away - before))
 
 
+def _skin_track(x: NDArray[np.float64], nearest: NDArray[np.int64], b: int) -> NDArray[np.float64]:
+    """(F, 3) the median position of marker `b`'s `NEIGHBOURS` nearest markers, each less its
+    own median over the take (NaN where none is seen): how the skin around `b` moved."""
+    near = nearest[b, :NEIGHBOURS]
+    if (near < 0).any():
+        return np.full((x.shape[0], 3), np.nan)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # a frame none of them is seen in
+        moved = x[:, near] - np.nanmedian(x[:, near], axis=0)
+        return np.asarray(np.nanmedian(moved, axis=1))
+
+
 def _track_ranges(
-    x: NDArray[np.float64], size: float, nearest: NDArray[np.int64]
+    x: NDArray[np.float64],
+    size: float,
+    nearest: NDArray[np.int64],
 ) -> dict[int, list[tuple[int, int]]]:
     """Per marker, the frame ranges it spends off its track: from a jump away to the jump
     back, read from the take alone, so an exact solve, whose residuals
@@ -265,6 +296,21 @@ def _track_ranges(
         if ranges:
             out[k] = ranges
     return out
+
+
+def _relative_jumps(steps: NDArray[np.float64], size: float) -> NDArray[np.bool_]:
+    """(F, B) where a marker jumps against its neighbours, from `steps` (`_relative_steps`, per
+    frame): a step above median + `JUMP_MADS` scaled MADs of all markers' steps and
+    `RELATIVE_JUMP_FLOOR` of the face's `size`. Frames where many markers jump against their
+    neighbours at once (`FACE_SHARE`) are the face's own motion, and have none."""
+    vals = steps[np.isfinite(steps)]
+    if vals.size == 0:
+        return np.zeros(steps.shape, dtype=bool)
+    limit = max(_above_median(vals, JUMP_MADS), RELATIVE_JUMP_FLOOR * size)
+    with np.errstate(invalid="ignore"):
+        jumped: NDArray[np.bool_] = steps > limit
+    jumped[jumped.sum(axis=1) > max(3, FACE_SHARE * steps.shape[1])] = False
+    return jumped
 
 
 def _nearest(x: NDArray[np.float64]) -> NDArray[np.int64]:
@@ -327,19 +373,30 @@ def _relative_steps(
 
 
 def _leaves_track(
-    steps: NDArray[np.float64], b: int, first: int, last: int, *, either: bool = False
+    steps: NDArray[np.float64],
+    b: int,
+    first: int,
+    last: int,
+    *,
+    either: bool = False,
+    noise: float | None = None,
 ) -> bool:
     """Whether marker `b` steps off its track relative to its neighbours both where a range of
     frames first..last begins and where it ends (the frame entering it, the frame after it;
     each within a frame, so a range read a frame long or short still meets its steps). A fault
     leaves the track and comes back to it; skin that moves fast and eases back (a blink on an
     eyelid marker) steps only once. An edge at the take's first or last frame, or without a
-    step to read, is not asked. `either`: one edge's step is enough."""
+    step to read, is not asked. `either`: one edge's step is enough, and with the markers'
+    `noise` sigma a step that noise makes once in 65,000 (`NOISE_SIGMAS` of its own sigma,
+    `RELATIVE_STEP_NOISE`, as a residual must be) is a step too: the MADs of a marker's own
+    steps, where its noise makes most of them, put 8 of them at 11 sigma (5.6 mm at 0.5 mm)."""
     col = steps[:, b]
     vals = col[np.isfinite(col)]
     if vals.size < 3:
         return True  # too little track to read: a fault, as before this test
     limit = _above_median(vals, STEP_MADS)
+    if either and noise:
+        limit = min(limit, NOISE_SIGMAS * RELATIVE_STEP_NOISE * noise)
     stepped = []
     for edge in (first, last + 1):
         if not 0 < edge < col.shape[0]:
@@ -589,7 +646,7 @@ def diagnose(
                 # the noise (a 5 mm spike's way back at 0.5 mm). A glitch of the performance
                 # itself that the solve follows keeps needing both.
                 left = deviations is not None and bool(_off_the_take(deviations, b, s, e))
-                if not _leaves_track(steps, b, s, e, either=left and backed):
+                if not _leaves_track(steps, b, s, e, either=left and backed, noise=noise):
                     kind = "gap"  # the marker moves with its neighbours: the dataset's, not its
                 elif deviations is not None and not left:
                     kind = "gap"  # the take moves it so elsewhere: fast skin, not a fault
@@ -601,11 +658,64 @@ def diagnose(
             if kind == "gap" and (b, s, e) in motion_only:
                 continue  # the solve followed it: no gap of the dataset's either
             singles.append(Finding(kind, (names[b],), s, e, _worst(r[s : e + 1, b])))
+    if x is not None and nearest is not None and not read_noise:
+        if steps is None:
+            steps = _relative_steps(x, nearest)
+        for b, s, e in _noise_free_spikes(x, nearest, steps, size, runs):
+            singles.append(Finding("spike", (names[b],), s, e, _worst(r[s : e + 1, b])))
     singles.sort(key=lambda f: -f.worst)
     if x is not None:
         assert nearest is not None
         singles = _without_echoes(findings + singles, nearest, names)[len(findings) :]
     return findings + singles + face_jumps
+
+
+def _noise_free_spikes(
+    x: NDArray[np.float64],
+    nearest: NDArray[np.int64],
+    steps: NDArray[np.float64],
+    size: float,
+    known: dict[int, list[tuple[int, int]]],
+) -> list[tuple[int, int, int]]:
+    """(marker, first, last) of each spike a noise-free take shows against the marker's
+    neighbours (where the solve interpolates its markers and has no residual to read): a jump
+    away from them and one back (`_relative_jumps`) over at most `SPIKE_FRAMES` frames, from a
+    settled track and back to it, back where it left on the skin (`_is_spike`), stepping off
+    its track at both edges (`_leaves_track`), and off the take's own motion there as a fault
+    is (`_off_the_take`, the motion read at the least sigma a residual counts at, `FLOOR` over
+    `NOISE_SIGMAS`, without the candidates' samples): a blink or a fast lip steps as far
+    against its neighbours, and the take's other markers predict it or it eases over several
+    frames. Ranges over a marker's `known` runs are not asked again."""
+    jumped = _relative_jumps(steps, size)
+    f = jumped.shape[0]
+    candidates = []
+    for b in np.flatnonzero(jumped.sum(axis=0) > 1):
+        jumps = np.flatnonzero(jumped[:, b])
+        skin: NDArray[np.float64] | None = None
+        for s, after in itertools.pairwise(jumps):
+            e = after - 1
+            # Away from a settled track and back to it: no jump into the frame before or out
+            # of the frame after (a blink's lid steps two or three frames running each way).
+            settled = (s < 1 or not jumped[s - 1, b]) and (e + 2 >= f or not jumped[e + 2, b])
+            if (
+                e - s + 1 > SPIKE_FRAMES
+                or not settled
+                or any(s <= e1 and s1 <= e for s1, e1 in known[b])
+            ):
+                continue
+            if skin is None:
+                skin = _skin_track(x, nearest, b)
+            if _is_spike(x[:, b], s, e, skin) and _leaves_track(steps, b, s, e):
+                candidates.append((int(b), int(s), int(e)))
+    if not candidates:
+        return []
+    left_out = np.zeros(x.shape[:2], dtype=bool)
+    for b, s, e in candidates:
+        left_out[s : e + 1, b] = True
+    deviations = _take_deviations(x, FLOOR * size / NOISE_SIGMAS, left_out)
+    if deviations is None:
+        return candidates
+    return [(b, s, e) for b, s, e in candidates if _off_the_take(deviations, b, s, e)]
 
 
 def _without_echoes(
