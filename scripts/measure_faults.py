@@ -2,6 +2,7 @@
 quarter of its shapes held out, driven by the shared Live Link recordings; docs/reliability.md).
 
     python scripts/measure_faults.py findings [--sigma 0 0.02 0.05] [--seeds 0] [--list]
+                                              [--holdout 0.25]
         clean takes (markers_120 and 160 random markers, both recordings whole): findings by
         kind; then a swap of two markers 1-2 cm apart (60 frames) and spikes of 1 cm and 0.5 cm
         (3 frames) planted in each: which are named as faults (`--list`: each take's, with
@@ -88,7 +89,9 @@ def _found(m: lgi.Model, x: np.ndarray, sig: float) -> list:  # type: ignore[typ
     return diagnose(r.bundle_residuals, r.missing, names, size=m.diagonal, markers=x, noise=sig)
 
 
-def findings(sigmas: list[float], seeds: list[int], listed: bool = False) -> None:
+def findings(
+    sigmas: list[float], seeds: list[int], listed: bool = False, holdout: float = 0.25
+) -> None:
     d, markers_120, random_160, folder = data()
     clean: collections.Counter[str] = collections.Counter()
     named: collections.Counter[str] = collections.Counter()
@@ -99,7 +102,7 @@ def findings(sigmas: list[float], seeds: list[int], listed: bool = False) -> Non
             for sigma in sigmas:
                 for seed in seeds:
                     t = make_capture(
-                        d, w, pos, sigma=sigma, dropout=0.02, holdout=0.25, seed=seed, jaw=None
+                        d, w, pos, sigma=sigma, dropout=0.02, holdout=holdout, seed=seed, jaw=None
                     )
                     m = lgi.Model.build(t.dataset, pos)
                     names, n = list(m.marker_names), t.frames.shape[0]
@@ -497,6 +500,9 @@ def main() -> None:
     )
     ap.add_argument("--sigma", type=float, nargs="+", default=[0.0, 0.02, 0.05])
     ap.add_argument("--seeds", type=int, nargs="+", default=[0])
+    ap.add_argument(
+        "--holdout", type=float, default=0.25, help="findings: the share of ICT's shapes held out"
+    )
     ap.add_argument("--call", choices=["auto", "recommended"], default="auto")
     ap.add_argument("--dataset", choices=["ict", "scans"], default="ict")
     ap.add_argument(
@@ -507,7 +513,7 @@ def main() -> None:
     )
     args = ap.parse_args()
     if args.what == "findings":
-        findings(args.sigma, args.seeds, args.list)
+        findings(args.sigma, args.seeds, args.list, args.holdout)
     elif args.what == "repair":
         repair(args.seeds, args.call, args.dataset)
     elif args.what == "study":

@@ -463,12 +463,8 @@ def test_off_the_takes_motion_and_the_surface_a_step_noise_makes_once_in_65000_i
     its own step and its neighbours' median step): the marker's 8 MADs put a step at about
     11 sigma; with the range off the take's motion and the surface (`either`), a step above 5 of
     the step's own sigma (8.05 sigma) is one, as a residual above 5 sigma is an outlier."""
-    from lgi.solve.diagnose import (
-        NOISE_SIGMAS,
-        RELATIVE_STEP_NOISE,
-        _above_median,
-        _leaves_track,
-    )
+    from lgi.solve.diagnose import NOISE_SIGMAS, _above_median, _leaves_track
+    from lgi.solve.tracks import RELATIVE_STEP_NOISE
 
     sigma = 0.05
     rng = np.random.default_rng(5)

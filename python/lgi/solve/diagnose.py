@@ -24,6 +24,13 @@ from numpy.typing import ArrayLike, NDArray
 from lgi.io.result import Result
 from lgi.solve.gaps import MAX_GAP
 from lgi.solve.spectrum import shrinkage_factors, thin_svd
+from lgi.solve.tracks import (
+    NEIGHBOURS,
+    RELATIVE_STEP_NOISE,
+    nearest_markers,
+    relative_steps,
+    skin_track,
+)
 
 __all__ = [
     "FAULTS",
@@ -57,18 +64,9 @@ SPIKE_FRAMES = 5
 FAULTS = ("swap", "spike", "off")
 """The kinds of finding that are a marker's fault (a "gap" is the dataset's, a "cut" the take's)."""
 
-NEIGHBOURS = 4
-"""Markers whose mean a marker's track is read against (its nearest in the take's median
-pose): skin moves them together, a fault moves one alone."""
-
 STEP_MADS = 8.0
 """How many scaled MADs above the median step of a marker's position relative to its
 neighbours a step must be to leave its track (as `OUTLIER_MADS` for residuals)."""
-
-RELATIVE_STEP_NOISE = 1.61
-"""The noise of a marker's step against its neighbours (`_relative_steps`) per coordinate, in
-units of the markers' sigma: its own step's (variance 2) and its `NEIGHBOURS` neighbours' median
-step's (the median of 4 normals: 0.30 of their variance 2), sqrt(2 x 1.30)."""
 
 _GAP = 1
 """Frames a range may skip and stay one range (a sample that dips under the threshold)."""
@@ -209,7 +207,7 @@ JUMP_FLOOR = 0.02
 """Smallest jump, as a share of the face's size: 1 cm on ICT's 47.5 cm head."""
 
 RELATIVE_JUMP_FLOOR = 0.005
-"""Smallest jump of a marker against its neighbours (`_relative_steps`), as a share of the
+"""Smallest jump of a marker against its neighbours (`relative_steps`), as a share of the
 face's size (0.24 cm on ICT), read where the solve has no residual to read (a noise-free take):
 the neighbours take most of fast skin's step off, and what is left of a blink or a lip is told
 from a fault by the spike's shape and the take's own motion (`diagnose`)."""
@@ -227,7 +225,7 @@ def _is_spike(
 ) -> bool:
     """Whether a marker's excursion over first..last is a spike: short, and back where it left
     (the jump back lands within half the jump away of the frame before). `skin` (F, 3): the
-    marker's neighbours' motion (`_skin_track`), taken off first: back where it left on the
+    marker's neighbours' motion (`skin_track`), taken off first: back where it left on the
     skin, which moved on meanwhile."""
     if last - first + 1 > SPIKE_FRAMES or first == 0 or last + 1 >= track.shape[0]:
         return False
@@ -238,18 +236,6 @@ def _is_spike(
     return bool(np.linalg.norm(back - before) < 0.5 * np.linalg.norm(away - before))
 
 
-def _skin_track(x: NDArray[np.float64], nearest: NDArray[np.int64], b: int) -> NDArray[np.float64]:
-    """(F, 3) the median position of marker `b`'s `NEIGHBOURS` nearest markers, each less its
-    own median over the take (NaN where none is seen): how the skin around `b` moved."""
-    near = nearest[b, :NEIGHBOURS]
-    if (near < 0).any():
-        return np.full((x.shape[0], 3), np.nan)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", RuntimeWarning)  # a frame none of them is seen in
-        moved = x[:, near] - np.nanmedian(x[:, near], axis=0)
-        return np.asarray(np.nanmedian(moved, axis=1))
-
-
 def _track_ranges(
     x: NDArray[np.float64],
     size: float,
@@ -258,7 +244,7 @@ def _track_ranges(
     """Per marker, the frame ranges it spends off its track: from a jump away to the jump
     back, read from the take alone, so an exact solve, whose residuals
     are zero, still shows them. Across a dropout the step is read against the marker's
-    `nearest` neighbours' over the same frames (`_relative_steps`), whole: the face moved
+    `nearest` neighbours' over the same frames (`relative_steps`), whole: the face moved
     for several frames, the skin between the markers barely; a label taken up again
     under another marker's name moves it by their distance."""
     f, b = x.shape[:2]
@@ -278,7 +264,7 @@ def _track_ranges(
     with np.errstate(invalid="ignore"):
         jumped = step > limit
         if across.any():
-            jumped |= _relative_steps(x, nearest, per_frame=False, only=across) > limit
+            jumped |= relative_steps(x, nearest, per_frame=False, only=across) > limit
     # Many markers jumping together is the whole face moving (a cut, a tracking glitch of
     # the head), not a marker leaving its track: those frames are set aside.
     count = jumped.sum(axis=1)
@@ -299,7 +285,7 @@ def _track_ranges(
 
 
 def _relative_jumps(steps: NDArray[np.float64], size: float) -> NDArray[np.bool_]:
-    """(F, B) where a marker jumps against its neighbours, from `steps` (`_relative_steps`, per
+    """(F, B) where a marker jumps against its neighbours, from `steps` (`relative_steps`, per
     frame): a step above median + `JUMP_MADS` scaled MADs of all markers' steps and
     `RELATIVE_JUMP_FLOOR` of the face's `size`. Frames where many markers jump against their
     neighbours at once (`FACE_SHARE`) are the face's own motion, and have none."""
@@ -311,83 +297,6 @@ def _relative_jumps(steps: NDArray[np.float64], size: float) -> NDArray[np.bool_
         jumped: NDArray[np.bool_] = steps > limit
     jumped[jumped.sum(axis=1) > max(3, FACE_SHARE * steps.shape[1])] = False
     return jumped
-
-
-def _nearest(x: NDArray[np.float64]) -> NDArray[np.int64]:
-    """(B, B - 1) each marker's other markers, nearest first in the take's median pose; a
-    marker never seen is nobody's near neighbour (it sorts last) and has no order of its own
-    (all -1)."""
-    b = x.shape[1]
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", RuntimeWarning)  # a marker never seen: NaN, left out
-        pose = np.nanmedian(x, axis=0) if x.shape[0] else np.full((b, 3), np.nan)
-    d = np.linalg.norm(pose[:, None] - pose[None], axis=2)
-    d[~np.isfinite(d)] = np.inf
-    np.fill_diagonal(d, -1.0)  # itself first, then dropped
-    order = np.argsort(d, axis=1, kind="stable")[:, 1:]
-    order[~np.isfinite(pose).all(axis=1)] = -1
-    return order
-
-
-def _median_seen(values: NDArray[np.float64], seen: NDArray[np.bool_]) -> NDArray[np.float64]:
-    """(S, 3) the median over axis 1 of `values` (S, N, 3) where `seen` (S, N), each row with
-    at least one seen: the mean of the middle two of an even count, as `np.nanmedian` (the same
-    values, without its per-call cost)."""
-    ranked = np.sort(np.where(seen[..., None], values, np.inf), axis=1)
-    count = seen.sum(axis=1)
-    rows = np.arange(values.shape[0])
-    low = ranked[rows, (count - 1) // 2]
-    high = ranked[rows, count // 2]
-    return np.asarray((low + high) / 2.0)
-
-
-def _relative_steps(
-    x: NDArray[np.float64],
-    nearest: NDArray[np.int64],
-    *,
-    per_frame: bool = True,
-    only: NDArray[np.bool_] | None = None,
-) -> NDArray[np.float64]:
-    """(F, B) each marker's step between the frames it is seen in, less the median step of its
-    `NEIGHBOURS` nearest markers (`_nearest`) seen in both, per frame elapsed (`per_frame`;
-    else whole); NaN where none of them is. Skin carries a marker with its neighbours; a
-    fault moves it alone. (A neighbour's dropout changes which neighbours are averaged, not
-    the step: each neighbour's own step is taken between the same two frames.) `only` (F, B):
-    the steps read, by the frame they end at (the rest NaN)."""
-    f, b = x.shape[:2]
-    steps = np.full((f, b), np.nan)
-    idx = np.flatnonzero(nearest[:, 0] >= 0) if b > 1 else np.zeros(0, np.int64)
-    if idx.size <= NEIGHBOURS:
-        return steps
-    near = nearest[idx, :NEIGHBOURS]
-    present: NDArray[np.bool_] = np.asarray(np.isfinite(x).all(axis=2))
-    for i, k in enumerate(idx):
-        seen = np.flatnonzero(present[:, k])
-        if seen.size < 2:
-            continue
-        p, q = seen[:-1], seen[1:]
-        if only is not None:
-            asked = only[q, k]
-            if not asked.any():
-                continue
-            p, q = p[asked], q[asked]
-        own = x[q, k] - x[p, k]  # (S, 3)
-        nb = near[i][None, :]
-        both = present[p[:, None], nb] & present[q[:, None], nb]  # (S, N)
-        moved = x[q[:, None], nb] - x[p[:, None], nb]  # (S, N, 3), NaN where one is missing
-        keep = both.any(axis=1)
-        # The neighbours' median step: one faulty neighbour does not move the reference.
-        # Where all of them are seen (most steps) the plain median, the same values as the
-        # NaN-aware one that the rest need, at a fraction of its cost.
-        skin = np.full((p.size, 3), np.nan)
-        whole = both.all(axis=1)
-        skin[whole] = np.median(moved[whole], axis=1)
-        some = keep & ~whole
-        if some.any():
-            skin[some] = _median_seen(moved[some], both[some])
-        apart = (q - p)[keep] if per_frame else 1
-        steps[q[keep], k] = np.linalg.norm(own[keep] - skin[keep], axis=1) / apart
-    return steps
 
 
 def _leaves_track(
@@ -582,7 +491,7 @@ def diagnose(
     face_jumps: list[Finding] = []
     nearest: NDArray[np.int64] | None = None
     if x is not None:
-        nearest = _nearest(x)
+        nearest = nearest_markers(x)
         for b, ranges in _track_ranges(x, size, nearest).items():
             if b < 0:
                 face_jumps = [Finding("cut", (), k, k, float("nan")) for k, _ in ranges]
@@ -658,7 +567,7 @@ def diagnose(
             kind = "spike" if e - s + 1 <= SPIKE_FRAMES else "off"
             if x is not None and nearest is not None:
                 if steps is None:
-                    steps = _relative_steps(x, nearest)
+                    steps = relative_steps(x, nearest)
                 # Off the take's motion and back at both edges, and off the solve's surface
                 # (its residuals), one step off its track is enough: the other may be lost in
                 # the noise (a 5 mm spike's way back at 0.5 mm). A glitch of the performance
@@ -678,7 +587,7 @@ def diagnose(
             singles.append(Finding(kind, (names[b],), s, e, _worst(r[s : e + 1, b])))
     if x is not None and nearest is not None and not read_noise:
         if steps is None:
-            steps = _relative_steps(x, nearest)
+            steps = relative_steps(x, nearest)
         for b, s, e in _noise_free_spikes(x, nearest, steps, size, runs):
             singles.append(Finding("spike", (names[b],), s, e, _worst(r[s : e + 1, b])))
     singles.sort(key=lambda f: -f.worst)
@@ -722,7 +631,7 @@ def _noise_free_spikes(
             ):
                 continue
             if skin is None:
-                skin = _skin_track(x, nearest, b)
+                skin = skin_track(x, nearest, b)
             if _is_spike(x[:, b], s, e, skin) and _leaves_track(steps, b, s, e):
                 candidates.append((b, s, e))
     if not candidates:
@@ -742,7 +651,7 @@ def _without_echoes(
     """`found` less the gaps that are a fault's echo: a noise-aware solve spreads a faulty
     marker's correction to its neighbours, whose residuals then rise over the fault's frames
     without any track of theirs moving. A gap of one of a fault's `2 * NEIGHBOURS` nearest
-    markers (`_nearest`) overlapping the fault's frames is dropped."""
+    markers (`nearest_markers`) overlapping the fault's frames is dropped."""
     faults = [f for f in found if f.fault]
     if not faults:
         return found
