@@ -479,3 +479,20 @@ def test_off_the_takes_motion_and_the_surface_a_step_noise_makes_once_in_65000_i
     assert not _leaves_track(steps, 0, 1000, 1003, either=True, noise=sigma)
     # The noise's own steps: over 4,000 frames none reaches the bar (1.5e-5 a step).
     assert (np.delete(steps[:, 0], [1000, 1004]) < bar).all()
+
+
+def test_off_the_takes_motion_a_range_a_frame_short_still_comes_back_and_a_blink_does_not() -> None:
+    """Deviations from the take's motion (cm) of a marker at 0.5 mm noise: a 0.5 cm spike over
+    frames 100-102 whose noisy residuals made a range of 100-101 only (frame 102 still off, 103
+    back), against skin easing out and back over several frames."""
+    from lgi.solve.diagnose import _off_the_take
+
+    rng = np.random.default_rng(2)
+    dev = np.abs(rng.normal(0.0, 0.05, (300, 1))) + 0.02
+    dev[100:104, 0] = [0.57, 0.61, 0.37, 0.2]
+    assert _off_the_take(dev, 0, 100, 102)  # the whole spike
+    assert _off_the_take(dev, 0, 100, 101)  # a frame short: back at the frame beyond
+    dev[98:100, 0] = [0.33, 0.42]  # eased in over two frames before the range as well
+    assert not _off_the_take(dev, 0, 100, 101)
+    dev[200:209, 0] = [0.2, 0.35, 0.45, 0.6, 0.62, 0.5, 0.42, 0.35, 0.2]  # a blink
+    assert not _off_the_take(dev, 0, 203, 204)

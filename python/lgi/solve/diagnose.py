@@ -408,10 +408,11 @@ def _take_deviations(
 def _off_the_take(deviations: NDArray[np.float64], b: int, first: int, last: int) -> bool:
     """Whether marker `b` is off the take's own motion over frames first..last
     (`_take_deviations`) as a fault puts it: its median there above `STEP_MADS` scaled MADs over
-    its median in the take, and back on the take's motion on the frames either side (each under
-    half that median). A fault leaves the motion in one frame and comes back in one; skin the
-    take does not predict (a fast lip, a blink) eases out and back over several. A range with
-    no sample to read is not asked (True)."""
+    its median in the take, and back on the take's motion either side (under half that median,
+    at the frame beside the range or the one beyond it: a range read from noisy residuals can
+    end a frame short, as `_leaves_track` allows). A fault leaves the motion in one frame and
+    comes back in one; skin the take does not predict (a fast lip, a blink) eases out and back
+    over several. A range with no sample to read is not asked (True)."""
     col = deviations[:, b]
     vals = col[np.isfinite(col)]
     inside = col[first : last + 1]
@@ -420,8 +421,12 @@ def _off_the_take(deviations: NDArray[np.float64], b: int, first: int, last: int
         return True
     limit = _above_median(vals, STEP_MADS)
     off = float(np.median(inside))
-    edges = [col[k] for k in (first - 1, last + 1) if 0 <= k < col.size and np.isfinite(col[k])]
-    return off > limit and all(e < 0.5 * off for e in edges)
+    back = []
+    for side in ((first - 1, first - 2), (last + 1, last + 2)):
+        seen = [col[k] for k in side if 0 <= k < col.size and np.isfinite(col[k])]
+        if seen:
+            back.append(min(seen) < 0.5 * off)
+    return off > limit and all(back)
 
 
 def _merge(known: list[tuple[int, int]], ranges: list[tuple[int, int]]) -> None:
