@@ -137,14 +137,15 @@ def test_a_finding_whose_samples_were_all_solved_as_missing_says_so_and_never_na
     )
 
 
-def _skin(frames: int = 120, markers: int = 16, seed: int = 0) -> np.ndarray:
-    """Markers on a grid (2 cm apart) carried by a smooth non-rigid motion, 0.02 noise."""
+def _skin(frames: int = 120, markers: int = 16, seed: int = 0, noise: float = 0.02) -> np.ndarray:
+    """Markers on a grid (2 cm apart) carried by a smooth non-rigid motion, `noise` per
+    coordinate."""
     rng = np.random.default_rng(seed)
     grid = np.stack(np.meshgrid(np.arange(4.0), np.arange(4.0)), -1).reshape(-1, 2)[:markers] * 2
     rest = np.c_[grid, np.zeros(markers)]
     t = np.linspace(0.0, 2 * np.pi, frames)[:, None, None]
     wave = np.sin(t + 0.3 * rest[None, :, :1]) * np.array([0.0, 0.5, 0.3])  # skin moving
-    return rest[None] + wave + rng.normal(0.0, 0.02, (frames, markers, 3))
+    return rest[None] + wave + rng.normal(0.0, noise, (frames, markers, 3))
 
 
 def test_a_residual_shared_by_a_marker_moving_with_its_neighbours_is_a_gap_not_a_fault() -> None:
@@ -312,9 +313,7 @@ def test_a_noise_free_spike_against_the_neighbours_is_named_and_a_blink_easing_b
     as an eyelid marker alone on its lid does. The spike leaves a settled track and comes back
     to it, off the take's own motion; the blink steps two frames running each way and eases
     back, off that motion at its edges too."""
-    x = _skin()
-    x -= np.random.default_rng(0).normal(0.0, 0.02, x.shape)  # the noise _skin added, off
-    x = np.round(x, 12)
+    x = _skin(noise=0.0)
     x[30:33, 9] += [0.0, 0.5, 0.0]
     lid = np.array([0.45, 0.85, 0.9, 0.63, 0.34, 0.2, 0.1, 0.04])
     x[60 : 60 + lid.size, 5] -= lid[:, None] * [0.0, 1.0, 0.05]

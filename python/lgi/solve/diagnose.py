@@ -220,6 +220,13 @@ CUT_SHARE = 0.5
 """Share of the markers that, jumping at one frame, is reported as a cut in the take."""
 
 
+def _face_moves(flags: NDArray[np.bool_]) -> NDArray[np.bool_]:
+    """(F,) the frames where more than `FACE_SHARE` of the markers (and 3) are flagged at once
+    in `flags` (F, B): the face's own motion (a cut, a glitch of the head or of the
+    performance), not a marker's."""
+    return np.asarray(flags.sum(axis=1) > max(3, FACE_SHARE * flags.shape[1]))
+
+
 def _is_spike(
     track: NDArray[np.float64], first: int, last: int, skin: NDArray[np.float64] | None = None
 ) -> bool:
@@ -237,9 +244,7 @@ def _is_spike(
 
 
 def _track_ranges(
-    x: NDArray[np.float64],
-    size: float,
-    nearest: NDArray[np.int64],
+    x: NDArray[np.float64], size: float, nearest: NDArray[np.int64]
 ) -> dict[int, list[tuple[int, int]]]:
     """Per marker, the frame ranges it spends off its track: from a jump away to the jump
     back, read from the take alone, so an exact solve, whose residuals
@@ -268,8 +273,7 @@ def _track_ranges(
     # Many markers jumping together is the whole face moving (a cut, a tracking glitch of
     # the head), not a marker leaving its track: those frames are set aside.
     count = jumped.sum(axis=1)
-    together = count > max(3, FACE_SHARE * b)
-    jumped[together] = False
+    jumped[_face_moves(jumped)] = False
     # Reported only when most markers jump: a fast jaw opening moves a third of them.
     out: dict[int, list[tuple[int, int]]] = {
         -1: [(int(k), int(k)) for k in np.flatnonzero(count > CUT_SHARE * b)]
@@ -295,7 +299,7 @@ def _relative_jumps(steps: NDArray[np.float64], size: float) -> NDArray[np.bool_
     limit = max(_above_median(vals, JUMP_MADS), RELATIVE_JUMP_FLOOR * size)
     with np.errstate(invalid="ignore"):
         jumped: NDArray[np.bool_] = steps > limit
-    jumped[jumped.sum(axis=1) > max(3, FACE_SHARE * steps.shape[1])] = False
+    jumped[_face_moves(jumped)] = False
     return jumped
 
 
@@ -458,7 +462,7 @@ def _deviation_runs(
         limit = max(_above_median(vals, OUTLIER_MADS), FLOOR * size, NOISE_SIGMAS * noise)
         with np.errstate(invalid="ignore"):
             off[:, k] = col > limit
-    together = off.sum(axis=1) > max(3, FACE_SHARE * b)
+    together = _face_moves(off)
     out: dict[int, list[tuple[int, int]]] = {}
     for k in range(b):
         ranges = [(s, e) for s, e in _runs(off[:, k]) if not together[s : e + 1].any()]

@@ -94,16 +94,9 @@ def relative_steps(
         moved = x[q[:, None], nb] - x[p[:, None], nb]  # (S, N, 3), NaN where one is missing
         keep = both.any(axis=1)
         # The neighbours' median step: one faulty neighbour does not move the reference.
-        # Where all of them are seen (most steps) the plain median, the same values as the
-        # NaN-aware one that the rest need, at a fraction of its cost.
-        skin = np.full((p.size, 3), np.nan)
-        whole = both.all(axis=1)
-        skin[whole] = np.median(moved[whole], axis=1)
-        some = keep & ~whole
-        if some.any():
-            skin[some] = _median_seen(moved[some], both[some])
+        skin = _median_seen(moved[keep], both[keep])
         apart = (q - p)[keep] if per_frame else 1
-        steps[q[keep], k] = np.linalg.norm(own[keep] - skin[keep], axis=1) / apart
+        steps[q[keep], k] = np.linalg.norm(own[keep] - skin, axis=1) / apart
     return steps
 
 
